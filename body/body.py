@@ -1,0 +1,330 @@
+"""Rigid bodies made of blobs: one ``Body`` and the stacked arrays of many.
+
+Kinematics (SPEC section 3).  A body has a ``location`` (the origin of its
+reference frame, about which torques and angular velocities are taken), an
+``orientation`` quaternion ``q`` and the blob positions of its reference
+configuration ``r_ref`` (shape (n, 3)).  Blob ``i`` sits at
+``r_i = location + R(q) r_ref_i``.
+
+The geometric matrix ``K`` of one body (shape (3n, 6)) maps the body velocity
+``U = [v; w]`` to blob velocities ``v + w x (r_i - location)``; its transpose
+sums blob forces ``lambda_i`` into ``[sum lambda_i; sum (r_i - location) x
+lambda_i]``.
+
+For many bodies, ``BodyArrays`` holds every body in contiguous arrays (bodies
+in the order of the structure lines, blobs of a body next to each other) and
+the module functions ``K_dot`` and ``KT_dot`` apply ``K`` and ``K^T`` to all
+bodies at once with array operations, without a Python loop over bodies.
+"""
+import numpy as np
+
+from quaternion_integrator.quaternion import Quaternion, rotation_matrices
+
+
+class Body:
+    """One rigid body.
+
+    Parameters
+    ----------
+    location : array_like, shape (3,)
+        Origin of the body frame in the lab frame.
+    orientation : Quaternion or array_like, shape (4,)
+        Scalar-first orientation quaternion.
+    reference_configuration : array_like, shape (n, 3)
+        Blob positions in the body frame (location 0, quaternion (1,0,0,0)).
+    blob_radius : float
+        Hydrodynamic radius ``a`` of every blob of the body.
+
+    Attributes
+    ----------
+    ID : str
+        Name of the structure type (from the ``.clones`` file name).
+    slip_reference : ndarray, shape (n, 3) or None
+        Active slip on each blob in the body frame (None means no slip).
+    body_length : float
+        Largest distance between two reference blobs plus ``2a``; the length
+        scale of random finite differences.
+    """
+
+    def __init__(self, location, orientation, reference_configuration, blob_radius):
+        self.location = np.array(location, dtype=float).reshape(3)
+        if not isinstance(orientation, Quaternion):
+            orientation = Quaternion(orientation)
+        self.orientation = orientation
+        self.reference_configuration = np.array(reference_configuration, dtype=float).reshape(-1, 3)
+        self.Nblobs = self.reference_configuration.shape[0]
+        self.blob_radius = float(blob_radius)
+        self.ID = None
+        self.slip_reference = None
+        self.body_length = None
+
+    def rotation_matrix(self, orientation=None):
+        """``R(q)``, shape (3, 3), of ``orientation`` (default: the body's)."""
+        orientation = self.orientation if orientation is None else orientation
+        return orientation.rotation_matrix()
+
+    def get_r_vectors(self, location=None, orientation=None):
+        """Blob positions in the lab frame, shape (n, 3).
+
+        ``location`` and ``orientation`` default to the body's own; passing
+        them gives the blobs of a displaced copy without changing the body.
+        """
+        location = self.location if location is None else np.asarray(location, dtype=float)
+        rotation = self.rotation_matrix(orientation)
+        return location + self.reference_configuration @ rotation.T
+
+    def calc_K_matrix(self, location=None, orientation=None):
+        """Geometric matrix ``K``, shape (3n, 6): block row ``[I | -[r_i - location]_x]``."""
+        location = self.location if location is None else np.asarray(location, dtype=float)
+        r_vectors = self.get_r_vectors(location, orientation)
+        return K_matrices(r_vectors[None, :, :], location[None, :])[0]
+
+    def calc_body_length(self):
+        """Largest distance between two reference blobs plus ``2a`` (``2a`` for one blob)."""
+        self.body_length = reference_body_length(self.reference_configuration, self.blob_radius)
+        return self.body_length
+
+    def check_function(self, location=None, orientation=None):
+        """True when the configuration is valid: no blob centre below the wall ``z = 0``."""
+        return bool(np.all(self.get_r_vectors(location, orientation)[:, 2] >= 0.0))
+
+    def calc_slip(self):
+        """Active slip on the blobs in the lab frame, shape (n, 3) (zeros without slip)."""
+        if self.slip_reference is None:
+            return np.zeros((self.Nblobs, 3))
+        return self.slip_reference @ self.rotation_matrix().T
+
+
+def reference_body_length(reference_configuration, blob_radius):
+    """Largest pairwise distance of the reference blobs (shape (n, 3)) plus ``2 a``."""
+    ref = np.asarray(reference_configuration, dtype=float).reshape(-1, 3)
+    if ref.shape[0] < 2:
+        return 2.0 * blob_radius
+    diff = ref[:, None, :] - ref[None, :, :]
+    return float(np.sqrt(np.max(np.einsum('ijk,ijk->ij', diff, diff)))) + 2.0 * blob_radius
+
+
+class BodyArrays:
+    """All bodies of a problem as contiguous arrays.
+
+    Bodies are grouped by structure type (one ``structure`` line of the input
+    file), in input order; inside a type they follow the ``.clones`` file.
+    All bodies of one type share their reference configuration.
+
+    Attributes
+    ----------
+    locations : ndarray, shape (Nb, 3)
+    orientations : ndarray, shape (Nb, 4)
+        Scalar-first quaternions.
+    reference_blobs : ndarray, shape (N, 3)
+        Body-frame position of every blob, blobs of body 0 first.
+    blob_body_index : ndarray of int, shape (N,)
+        Body that owns each blob.
+    blob_offsets : ndarray of int, shape (Nb + 1,)
+        Blobs of body ``k`` are ``blob_offsets[k]:blob_offsets[k+1]``.
+    type_slices : list of (slice, slice)
+        For each structure type, the slice of its bodies and of its blobs.
+    type_blobs : list of int
+        Blobs per body of each structure type.
+    reference_slip : ndarray, shape (N, 3)
+        Body-frame slip of every blob (zeros where no slip file was given).
+    blob_radius : float
+    """
+
+    def __init__(self, locations, orientations, reference_per_type, bodies_per_type,
+                 blob_radius, reference_slip_per_type=None):
+        self.locations = np.array(locations, dtype=float).reshape(-1, 3)
+        self.orientations = np.array(orientations, dtype=float).reshape(-1, 4)
+        self.blob_radius = float(blob_radius)
+        reference_per_type = [np.asarray(r, dtype=float).reshape(-1, 3) for r in reference_per_type]
+        bodies_per_type = [int(n) for n in bodies_per_type]
+        if sum(bodies_per_type) != self.locations.shape[0]:
+            raise ValueError('bodies_per_type does not add up to the number of locations')
+        if reference_slip_per_type is None:
+            reference_slip_per_type = [None] * len(reference_per_type)
+        self.type_blobs = [r.shape[0] for r in reference_per_type]
+        blobs_per_body = np.repeat(self.type_blobs, bodies_per_type)
+        self.blob_offsets = np.concatenate(([0], np.cumsum(blobs_per_body))).astype(int)
+        self.blob_body_index = np.repeat(np.arange(self.locations.shape[0]), blobs_per_body)
+        self.reference_blobs = np.concatenate(
+            [np.tile(r, (n, 1)) for r, n in zip(reference_per_type, bodies_per_type)]) \
+            if bodies_per_type else np.zeros((0, 3))
+        slips = []
+        for ref, slip, n in zip(reference_per_type, reference_slip_per_type, bodies_per_type):
+            slip = np.zeros_like(ref) if slip is None else np.asarray(slip, dtype=float).reshape(-1, 3)
+            slips.append(np.tile(slip, (n, 1)))
+        self.reference_slip = np.concatenate(slips) if slips else np.zeros((0, 3))
+        self.type_slices = []
+        body_start = 0
+        for n_blobs, n_bodies in zip(self.type_blobs, bodies_per_type):
+            blob_start = self.blob_offsets[body_start]
+            self.type_slices.append((slice(body_start, body_start + n_bodies),
+                                     slice(blob_start, blob_start + n_blobs * n_bodies)))
+            body_start += n_bodies
+
+    @property
+    def num_bodies(self):
+        return self.locations.shape[0]
+
+    @property
+    def num_blobs(self):
+        return self.reference_blobs.shape[0]
+
+    def rotation_matrices(self):
+        """``R(q_k)`` of every body, shape (Nb, 3, 3)."""
+        return rotation_matrices(self.orientations)
+
+    def blob_positions(self):
+        """Lab-frame positions of all blobs, shape (N, 3)."""
+        return blob_positions(self.locations, self.orientations, self.reference_blobs,
+                              self.blob_body_index)
+
+    def lab_frame_slip(self):
+        """Reference slip rotated into the lab frame, shape (N, 3)."""
+        rot = self.rotation_matrices()[self.blob_body_index]
+        return np.einsum('nij,nj->ni', rot, self.reference_slip)
+
+    def K_dot(self, r_vectors, body_velocities):
+        """``K U`` for all bodies: blob velocities, shape (N, 3); see ``K_dot``."""
+        return K_dot(r_vectors, self.locations, self.blob_body_index, body_velocities)
+
+    def KT_dot(self, r_vectors, blob_forces):
+        """``K^T lambda`` for all bodies, shape (Nb, 6); see ``KT_dot``."""
+        return KT_dot(r_vectors, self.locations, self.blob_offsets, self.blob_body_index, blob_forces)
+
+    def check_positions(self, r_vectors=None):
+        """Indices of the bodies with a blob centre below the wall (empty when valid)."""
+        r_vectors = self.blob_positions() if r_vectors is None else r_vectors
+        return np.unique(self.blob_body_index[r_vectors[:, 2] < 0.0])
+
+
+def blob_positions(locations, orientations, reference_blobs, blob_body_index):
+    """Lab-frame blob positions of many bodies.
+
+    Parameters
+    ----------
+    locations : ndarray, shape (Nb, 3)
+    orientations : ndarray, shape (Nb, 4)
+    reference_blobs : ndarray, shape (N, 3)
+        Body-frame position of each blob.
+    blob_body_index : ndarray of int, shape (N,)
+
+    Returns
+    -------
+    ndarray, shape (N, 3): ``location_k + R(q_k) r_ref_i`` for the body ``k`` of blob ``i``.
+    """
+    rot = rotation_matrices(orientations)[blob_body_index]
+    return np.asarray(locations)[blob_body_index] + np.einsum('nij,nj->ni', rot, reference_blobs)
+
+
+def K_dot(r_vectors, locations, blob_body_index, body_velocities):
+    """Apply the block-diagonal ``K`` of all bodies to their velocities.
+
+    Parameters
+    ----------
+    r_vectors : ndarray, shape (N, 3)
+        Blob positions.
+    locations : ndarray, shape (Nb, 3)
+        Body locations (tracking points).
+    blob_body_index : ndarray of int, shape (N,)
+    body_velocities : ndarray, shape (Nb, 6) or (6 Nb,)
+        ``[v_x v_y v_z w_x w_y w_z]`` per body.
+
+    Returns
+    -------
+    ndarray, shape (N, 3): ``v_k + w_k x (r_i - location_k)`` for every blob.
+    """
+    velocities = np.asarray(body_velocities, dtype=float).reshape(-1, 6)[blob_body_index]
+    arms = r_vectors - np.asarray(locations)[blob_body_index]
+    return velocities[:, :3] + np.cross(velocities[:, 3:], arms)
+
+
+def KT_dot(r_vectors, locations, blob_offsets, blob_body_index, blob_forces):
+    """Apply ``K^T`` of all bodies: sum blob forces into body forces and torques.
+
+    Parameters
+    ----------
+    r_vectors : ndarray, shape (N, 3)
+    locations : ndarray, shape (Nb, 3)
+    blob_offsets : ndarray of int, shape (Nb + 1,)
+        Blobs of body ``k`` are ``blob_offsets[k]:blob_offsets[k+1]`` (every
+        body has at least one blob).
+    blob_body_index : ndarray of int, shape (N,)
+    blob_forces : ndarray, shape (N, 3) or (3N,)
+
+    Returns
+    -------
+    ndarray, shape (Nb, 6): ``[sum_i f_i, sum_i (r_i - location_k) x f_i]`` per body.
+    """
+    forces = np.asarray(blob_forces, dtype=float).reshape(-1, 3)
+    arms = r_vectors - np.asarray(locations)[blob_body_index]
+    per_blob = np.concatenate((forces, np.cross(arms, forces)), axis=1)
+    return np.add.reduceat(per_blob, np.asarray(blob_offsets)[:-1], axis=0)
+
+
+def K_blocks(arms):
+    """Blocks ``[I | -[d]_x]`` of ``K`` for lever arms ``d`` (shape (..., 3)); returns shape (..., 3, 6)."""
+    arms = np.asarray(arms, dtype=float)
+    K = np.zeros(arms.shape[:-1] + (3, 6))
+    K[..., 0, 0] = K[..., 1, 1] = K[..., 2, 2] = 1.0
+    # w x d = -d x w: the block is minus the cross-product matrix of d.
+    K[..., 0, 4] = arms[..., 2]
+    K[..., 0, 5] = -arms[..., 1]
+    K[..., 1, 3] = -arms[..., 2]
+    K[..., 1, 5] = arms[..., 0]
+    K[..., 2, 3] = arms[..., 1]
+    K[..., 2, 4] = -arms[..., 0]
+    return K
+
+
+def K_matrices(r_vectors, locations):
+    """Dense ``K`` of several bodies with the same number of blobs.
+
+    Parameters
+    ----------
+    r_vectors : ndarray, shape (nb, n, 3)
+        Blob positions of each body.
+    locations : ndarray, shape (nb, 3)
+
+    Returns
+    -------
+    ndarray, shape (nb, 3n, 6): block row ``i`` is ``[I | -[r_i - location]_x]``.
+    """
+    r_vectors = np.asarray(r_vectors, dtype=float)
+    nb, n, _ = r_vectors.shape
+    arms = r_vectors - np.asarray(locations, dtype=float)[:, None, :]
+    return K_blocks(arms).reshape(nb, 3 * n, 6)
+
+
+def K_dense(r_vectors, locations, blob_body_index):
+    """Global block-diagonal ``K`` of all bodies as a dense matrix, shape (3N, 6 Nb)."""
+    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    n, nb = r_vectors.shape[0], locations.shape[0]
+    blocks = K_blocks(r_vectors - locations[blob_body_index])
+    K = np.zeros((n, 3, nb, 6))
+    K[np.arange(n), :, blob_body_index, :] = blocks
+    return K.reshape(3 * n, 6 * nb)
+
+
+def bodies_to_arrays(bodies, types_of_bodies=None):
+    """Build ``BodyArrays`` from a list of ``Body`` objects.
+
+    Bodies of one structure type must be consecutive and share the same
+    reference configuration object (as the input readers create them).
+    ``types_of_bodies`` (list of int per type) gives the number of bodies of
+    each type; by default consecutive bodies with the same ``ID`` form a type.
+    """
+    if types_of_bodies is None:
+        types_of_bodies = []
+        previous = object()
+        for b in bodies:
+            if b.ID != previous or not types_of_bodies:
+                types_of_bodies.append(0)
+                previous = b.ID
+            types_of_bodies[-1] += 1
+    starts = np.concatenate(([0], np.cumsum(types_of_bodies)))[:-1].astype(int)
+    references = [bodies[s].reference_configuration for s in starts]
+    slips = [bodies[s].slip_reference for s in starts]
+    return BodyArrays([b.location for b in bodies], [b.orientation.entries for b in bodies],
+                      references, types_of_bodies, bodies[0].blob_radius if bodies else 1.0, slips)

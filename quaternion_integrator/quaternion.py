@@ -1,0 +1,118 @@
+"""Unit quaternions that describe the orientation of a rigid body.
+
+Convention (SPEC section 3): scalar first, ``q = (s, p1, p2, p3)``.  The
+rotation matrix ``R(q)`` maps a vector of the body's reference frame to the
+lab frame, and ``from_rotation(phi) * q`` rotates an orientation ``q`` by the
+lab-frame rotation vector ``phi`` (angle ``|phi|`` in radians about
+``phi/|phi|``).
+
+This module sits on the lowest floor: it imports only numpy.
+"""
+import numpy as np
+
+
+class Quaternion:
+    """A quaternion ``s + p1 i + p2 j + p3 k`` stored scalar first.
+
+    Attributes
+    ----------
+    entries : ndarray, shape (4,)
+        ``[s, p1, p2, p3]``.  Orientation quaternions have unit norm, but the
+        class does not renormalise (the time steppers of the published code
+        never did).
+    s : float
+        Scalar part.
+    p : ndarray, shape (3,)
+        Vector part.
+    """
+
+    def __init__(self, entries):
+        entries = np.asarray(entries, dtype=float).reshape(-1)
+        if entries.shape != (4,):
+            raise ValueError('a quaternion needs 4 numbers (s, p1, p2, p3), got %d' % entries.size)
+        self.entries = entries.copy()
+
+    @property
+    def s(self):
+        return self.entries[0]
+
+    @property
+    def p(self):
+        return self.entries[1:4]
+
+    def __mul__(self, other):
+        """Hamilton product ``(s,p)*(t,q) = (s t - p.q, s q + t p + p x q)``."""
+        s, p = self.s, self.p
+        t, q = other.s, other.p
+        scalar = s * t - np.dot(p, q)
+        vector = s * q + t * p + np.cross(p, q)
+        return Quaternion(np.concatenate(([scalar], vector)))
+
+    def __repr__(self):
+        return 'Quaternion(%r)' % (self.entries.tolist(),)
+
+    def __str__(self):
+        return '[ %f, %f, %f, %f ]' % tuple(self.entries)
+
+    @staticmethod
+    def from_rotation(phi):
+        """Quaternion of the rotation by the vector ``phi`` (shape (3,), radians).
+
+        Returns ``(cos(|phi|/2), sin(|phi|/2) phi/|phi|)``, the identity when
+        ``|phi| == 0``.
+        """
+        phi = np.asarray(phi, dtype=float).reshape(3)
+        angle = np.linalg.norm(phi)
+        if angle == 0.0:
+            return Quaternion([1.0, 0.0, 0.0, 0.0])
+        return Quaternion(np.concatenate(([np.cos(angle / 2.0)], np.sin(angle / 2.0) * phi / angle)))
+
+    def rotation_matrix(self):
+        """Rotation matrix ``R(q)``, shape (3, 3) (SPEC section 3)."""
+        return rotation_matrices(self.entries[None, :])[0]
+
+    def inverse(self):
+        """Multiplicative inverse ``conj(q) / |q|^2`` (the conjugate for unit quaternions)."""
+        norm2 = np.dot(self.entries, self.entries)
+        return Quaternion(np.concatenate(([self.s], -self.p)) / norm2)
+
+    def rotation_angle(self):
+        """Rotation vector ``phi`` with ``from_rotation(phi) == q`` (up to sign), shape (3,)."""
+        s = np.clip(self.s, -1.0, 1.0)
+        sin_half = np.linalg.norm(self.p)
+        if sin_half == 0.0:
+            return np.zeros(3)
+        angle = 2.0 * np.arctan2(sin_half, s)
+        return angle * self.p / sin_half
+
+    def normalized(self):
+        """The same orientation with unit norm."""
+        return Quaternion(self.entries / np.linalg.norm(self.entries))
+
+
+def rotation_matrices(quaternions):
+    """Rotation matrices of many quaternions at once.
+
+    Parameters
+    ----------
+    quaternions : array_like, shape (Nb, 4)
+        Scalar-first quaternions (not renormalised here).
+
+    Returns
+    -------
+    ndarray, shape (Nb, 3, 3)
+        ``R(q_k)`` for every row ``k``.
+    """
+    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    s, p1, p2, p3 = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    rot = np.empty((q.shape[0], 3, 3))
+    rot[:, 0, 0] = p1 * p1 + s * s - 0.5
+    rot[:, 0, 1] = p1 * p2 - s * p3
+    rot[:, 0, 2] = p1 * p3 + s * p2
+    rot[:, 1, 0] = p2 * p1 + s * p3
+    rot[:, 1, 1] = p2 * p2 + s * s - 0.5
+    rot[:, 1, 2] = p2 * p3 - s * p1
+    rot[:, 2, 0] = p3 * p1 - s * p2
+    rot[:, 2, 1] = p3 * p2 + s * p1
+    rot[:, 2, 2] = p3 * p3 + s * s - 0.5
+    return 2.0 * rot
