@@ -1,0 +1,211 @@
+"""Reader of the input file of the scripts: typed options with defaults.
+
+Format (SPEC section 1.1): one option per line, ``name value``; everything
+after a ``#`` is a comment; blank lines are skipped; a repeated option
+replaces the earlier one, except ``structure``, of which every line is kept
+(one per body type, in order).
+
+Unlike the published code, every value is checked when it is read: an
+unknown option, a value of the wrong type or a malformed ``structure`` line
+raises ``utils.UserInputError`` naming the file, the line and what was
+expected.  Options that only later versions of the published code know are
+refused as unsupported rather than silently ignored (SPEC decision 9).
+"""
+import difflib
+import os
+from collections import namedtuple
+
+from utils import UserInputError
+
+
+# name -> (kind, default).  Kinds: str, int, float, floats3, grid9, bool, optional_str, optional_int.
+OPTION_TABLE = {
+    'scheme': ('str', 'deterministic_forward_euler'),
+    'n_steps': ('int', 0),
+    'initial_step': ('int', 0),
+    'n_save': ('int', 1),
+    'n_relaxation': ('int', 0),
+    'dt': ('float', 0.0),
+    'eta': ('float', 1.0),
+    'g': ('float', 1.0),
+    'blob_radius': ('float', 1.0),
+    'tracer_radius': ('float', 0.0),
+    'kT': ('float', 1.0),
+    'output_name': ('str', 'run'),
+    'random_state': ('optional_str', None),
+    'seed': ('optional_int', None),
+    'repulsion_strength_wall': ('float', 1.0),
+    'debye_length_wall': ('float', 1.0),
+    'repulsion_strength': ('float', 1.0),
+    'debye_length': ('float', 1.0),
+    'mobility_blobs_implementation': ('str', 'python'),
+    'mobility_vector_prod_implementation': ('str', 'python'),
+    'blob_blob_force_implementation': ('str', 'None'),
+    'body_body_force_torque_implementation': ('str', 'None'),
+    'solver_tolerance': ('float', 1e-8),
+    'rf_delta': ('float', 1e-3),
+    'save_clones': ('str', 'one_file_per_step'),
+    'periodic_length': ('floats3', (0.0, 0.0, 0.0)),
+    'omega_one_roller': ('floats3', (0.0, 0.0, 0.0)),
+    'free_kinematics': ('bool', True),
+    'domain': ('str', 'single_wall'),
+    'update_PC': ('int', 1),
+    'plot_velocity_field': ('grid9', None),
+    'force_file': ('optional_str', None),
+    'velocity_file': ('optional_str', None),
+    'save_body_mobility': ('bool', False),
+    'save_blobs_mobility': ('bool', False),
+    'save_velocities': ('bool', False),
+    'slip_file': ('optional_str', None),
+    'structure_names': ('optional_str', None),
+}
+
+# Options of later versions of the published code that this package does not implement.
+UNSUPPORTED_LATER_OPTIONS = (
+    'tilt_angle', 'obstacle', 'articulated', 'repulsion_strength_firm', 'firm_delta',
+    'hydro_interactions', 'call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
+    'green_particles', 'cells', 'domType', 'Lub_Cut', 'zmin', 'zmax',
+    'nonlinear_solver_tolerance', 'slip_length', 'plot_velocity_field_shell',
+    'save_HydroGrid_cells', 'hydrodynamic_radius', 'mu', 'vacf', 'stiffness_wall',
+)
+
+StructureSpec = namedtuple('StructureSpec', ['vertex_file', 'clones_file', 'slip_file', 'ID', 'where'])
+StructureSpec.__doc__ = """One ``structure`` line: file names (relative to the working directory),
+the structure ID (clones file name without directory and ``.clones``) and
+``where`` ("file, line n") for error messages."""
+
+
+class Options:
+    """Typed options of one input file.
+
+    Every name of ``OPTION_TABLE`` is an attribute (defaults filled in);
+    ``structures`` is the list of ``StructureSpec`` in input order;
+    ``input_file`` the path read; ``where(name)`` says on which line an
+    option was set ("<file>, line <n>", or "<file> (default)").
+    """
+
+    def __init__(self, input_file, values, lines, structures):
+        self.input_file = input_file
+        self._lines = dict(lines)
+        self.structures = list(structures)
+        for name, (kind, default) in OPTION_TABLE.items():
+            setattr(self, name, values.get(name, default))
+
+    def where(self, name):
+        """Location of option ``name`` for messages."""
+        if name in self._lines:
+            return '%s, line %d' % (self.input_file, self._lines[name])
+        return '%s (option %s not given, default used)' % (self.input_file, name)
+
+    def is_set(self, name):
+        """True when the input file gave option ``name``."""
+        return name in self._lines
+
+    def as_dict(self):
+        """Option values by name (structures excluded)."""
+        return {name: getattr(self, name) for name in OPTION_TABLE}
+
+
+def _convert(kind, name, value, where):
+    """Convert the text ``value`` of option ``name`` to its type or raise UserInputError."""
+    words = value.split()
+
+    def fail(expected):
+        raise UserInputError("%s: option '%s' expects %s, got '%s'" % (where, name, expected, value))
+
+    if kind in ('str', 'optional_str'):
+        if len(words) != 1:
+            fail('one word (no spaces)')
+        return words[0]
+    if kind in ('int', 'optional_int'):
+        if len(words) != 1:
+            fail('one integer')
+        try:
+            return int(words[0])
+        except ValueError:
+            fail('an integer')
+    if kind == 'float':
+        if len(words) != 1:
+            fail('one number')
+        try:
+            return float(words[0])
+        except ValueError:
+            fail('a number')
+    if kind == 'bool':
+        if len(words) != 1 or words[0] not in ('True', 'False'):
+            fail('True or False')
+        return words[0] == 'True'
+    if kind == 'floats3':
+        try:
+            numbers = tuple(float(w) for w in words)
+        except ValueError:
+            fail('three numbers')
+        if len(numbers) != 3:
+            fail('three numbers')
+        return numbers
+    if kind == 'grid9':
+        expected = 'nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...)'
+        if len(words) != 9:
+            fail(expected)
+        try:
+            grid = []
+            for axis in range(3):
+                low, high, cells = float(words[3 * axis]), float(words[3 * axis + 1]), int(words[3 * axis + 2])
+                if cells < 1 or not high > low:
+                    fail(expected)
+                grid.append((low, high, cells))
+        except ValueError:
+            fail(expected)
+        return tuple(grid)
+    raise AssertionError('unknown option kind %r' % kind)
+
+
+def structure_id_from_clones(clones_path):
+    """Structure ID: the clones file name without directory and ``.clones`` suffix."""
+    base = os.path.basename(clones_path)
+    return base[:-len('.clones')] if base.endswith('.clones') else os.path.splitext(base)[0]
+
+
+def parse_input_text(text, input_file='<input>'):
+    """Parse the text of an input file into ``Options`` (see module docstring)."""
+    values, lines, structures = {}, {}, []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split('#', 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split(None, 1)
+        name = parts[0]
+        where = '%s, line %d' % (input_file, number)
+        if len(parts) < 2:
+            raise UserInputError("%s: option '%s' has no value; write '%s <value>'" % (where, name, name))
+        value = parts[1].strip()
+        if name == 'structure':
+            files = value.split()
+            if len(files) not in (2, 3):
+                raise UserInputError(
+                    "%s: 'structure' expects two or three file names (vertex clones [slip]), got %d: '%s'"
+                    % (where, len(files), value))
+            slip = files[2] if len(files) == 3 else None
+            structures.append(StructureSpec(files[0], files[1], slip,
+                                            structure_id_from_clones(files[1]), where))
+            continue
+        if name in UNSUPPORTED_LATER_OPTIONS:
+            raise UserInputError(
+                "%s: option '%s' belongs to a later version of the published code and is unsupported "
+                "here; remove the line (see doc/static_problems.md for the options we support)" % (where, name))
+        if name not in OPTION_TABLE:
+            close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure'], n=1)
+            hint = " (did you mean '%s'?)" % close[0] if close else ''
+            raise UserInputError("%s: unknown option '%s'%s" % (where, name, hint))
+        values[name] = _convert(OPTION_TABLE[name][0], name, value, where)
+        lines[name] = number
+    return Options(input_file, values, lines, structures)
+
+
+def read_input_file(path):
+    """Read and validate the input file at ``path``; returns ``Options``."""
+    if not os.path.isfile(path):
+        raise UserInputError("input file '%s' not found (give it with --input-file)" % path)
+    with open(path, 'r') as f:
+        text = f.read()
+    return parse_input_text(text, path)

@@ -1,0 +1,146 @@
+"""Readers and writers of the structure files and of per-body data files.
+
+Formats (SPEC section 1.3); in every file ``#`` starts a comment and blank
+lines are skipped.
+
+* ``.vertex``: first line the number of blobs ``n`` (more numbers may follow
+  on that line and are ignored); then ``n`` lines ``x y z``, the blob
+  positions in the body frame.
+* ``.clones``: first line the number of bodies; then one line per body
+  ``x y z s p1 p2 p3`` (location and scalar-first quaternion, normalised
+  when read).
+* ``.slip``: first line the number of blobs; then ``n`` lines ``ux uy uz``,
+  the active slip of each blob in the body frame.
+* force file (scheme ``mobility``): one line per body ``Fx Fy Fz Tx Ty Tz``.
+* velocity file (scheme ``resistance``): one line per body ``vx vy vz wx wy wz``.
+
+Every reader raises ``utils.UserInputError`` naming the file and line and
+what was expected when a file is missing or malformed.
+"""
+import os
+
+import numpy as np
+
+from utils import UserInputError
+
+
+def _meaningful_lines(path, kind, referenced_from=None):
+    """(line number, tokens) of the non-empty lines of ``path`` after removing comments."""
+    if not os.path.isfile(path):
+        origin = ' (named in %s)' % referenced_from if referenced_from else ''
+        raise UserInputError("%s file '%s' not found%s; check the path, which is relative to the "
+                             "directory the script runs in (%s)" % (kind, path, origin, os.getcwd()))
+    rows = []
+    with open(path, 'r') as f:
+        for number, raw in enumerate(f, start=1):
+            tokens = raw.split('#', 1)[0].split()
+            if tokens:
+                rows.append((number, tokens))
+    return rows
+
+
+def _parse_row(path, number, tokens, columns, expected):
+    """First ``columns`` numbers of one line, or UserInputError."""
+    if len(tokens) < columns:
+        raise UserInputError("%s, line %d: expected %s (%d numbers), found %d value(s): '%s'"
+                             % (path, number, expected, columns, len(tokens), ' '.join(tokens)))
+    try:
+        return [float(t) for t in tokens[:columns]]
+    except ValueError:
+        raise UserInputError("%s, line %d: expected %s (%d numbers), cannot read '%s' as numbers"
+                             % (path, number, expected, columns, ' '.join(tokens[:columns])))
+
+
+def _read_counted_table(path, kind, columns, expected, referenced_from, exact_count):
+    """Read a file whose first line is a count followed by rows of ``columns`` numbers.
+
+    Returns an array of shape (count, columns).  ``exact_count``: more rows
+    than announced is an error (otherwise the extra rows are ignored, as the
+    published reader of ``.clones`` files does).
+    """
+    rows = _meaningful_lines(path, kind, referenced_from)
+    if not rows:
+        raise UserInputError("%s file '%s' is empty: its first line must hold the number of %s"
+                             % (kind, path, 'rows'))
+    number, tokens = rows[0]
+    try:
+        count = int(tokens[0])
+    except ValueError:
+        raise UserInputError("%s, line %d: the first line of a %s file must start with an integer count, "
+                             "found '%s'" % (path, number, kind, tokens[0]))
+    if count < 1:
+        raise UserInputError("%s, line %d: the count must be a positive integer, found %d" % (path, number, count))
+    data = rows[1:]
+    if len(data) < count:
+        raise UserInputError("%s: the first line announces %d %s but the file has only %d"
+                             % (path, count, expected + ' line(s)', len(data)))
+    if exact_count and len(data) > count:
+        raise UserInputError("%s, line %d: the first line announces %d %s but the file has %d; "
+                             "fix the count" % (path, data[count][0], count, expected + ' line(s)', len(data)))
+    table = [_parse_row(path, n, t, columns, expected) for n, t in data[:count]]
+    # Rows past the count are still checked so that a typo there is reported.
+    for n, t in data[count:]:
+        _parse_row(path, n, t, columns, expected)
+    return np.array(table, dtype=float)
+
+
+def read_vertex_file(path, referenced_from=None):
+    """Blob positions of the reference configuration, shape (n, 3)."""
+    return _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+
+
+def read_clones_file(path, referenced_from=None):
+    """Body locations, shape (Nb, 3), and normalised quaternions, shape (Nb, 4)."""
+    table = _read_counted_table(path, 'clones', 7, 'body location and quaternion x y z s p1 p2 p3',
+                                referenced_from, exact_count=False)
+    norms = np.linalg.norm(table[:, 3:], axis=1)
+    if np.any(norms == 0.0):
+        raise UserInputError("%s: body %d has a zero quaternion; give a unit quaternion s p1 p2 p3"
+                             % (path, int(np.argmax(norms == 0.0))))
+    return table[:, :3].copy(), table[:, 3:] / norms[:, None]
+
+
+def read_slip_file(path, referenced_from=None):
+    """Active slip of every blob in the body frame, shape (n, 3)."""
+    return _read_counted_table(path, 'slip', 3, 'blob slip ux uy uz', referenced_from, exact_count=True)
+
+
+def read_body_table(path, num_bodies, kind, referenced_from=None):
+    """Force (or velocity) file: one line of six numbers per body, shape (Nb, 6).
+
+    ``kind`` is 'force' or 'velocity' (it names what each line holds in messages).
+    """
+    expected = 'Fx Fy Fz Tx Ty Tz' if kind == 'force' else 'vx vy vz wx wy wz'
+    rows = _meaningful_lines(path, kind, referenced_from)
+    table = []
+    for number, tokens in rows:
+        if len(tokens) != 6:
+            raise UserInputError("%s, line %d: expected six numbers %s for one body, found %d value(s)"
+                                 % (path, number, expected, len(tokens)))
+        table.append(_parse_row(path, number, tokens, 6, expected))
+    if len(table) != num_bodies:
+        raise UserInputError("%s: expected one line per body (%d bodies in the structures), found %d lines"
+                             % (path, num_bodies, len(table)))
+    return np.array(table, dtype=float).reshape(num_bodies, 6)
+
+
+def write_vertex_file(path, reference_configuration, comment=None):
+    """Write blob positions (shape (n, 3)) as a ``.vertex`` file with full precision."""
+    blobs = np.asarray(reference_configuration, dtype=float).reshape(-1, 3)
+    with open(path, 'w') as f:
+        if comment:
+            for line in comment.splitlines():
+                f.write('# %s\n' % line)
+        f.write('%d\n' % blobs.shape[0])
+        for x, y, z in blobs:
+            f.write('%s %s %s\n' % (repr(float(x)), repr(float(y)), repr(float(z))))
+
+
+def write_clones_file(path, locations, orientations):
+    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision)."""
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
+    with open(path, 'w') as f:
+        f.write('%d\n' % locations.shape[0])
+        for row in np.concatenate((locations, orientations), axis=1):
+            f.write(' '.join(repr(float(v)) for v in row) + '\n')

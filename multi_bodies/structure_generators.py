@@ -1,0 +1,195 @@
+"""Generators of the example rigid bodies, written as ``.vertex`` files.
+
+* Icosahedral shells (spheres): the 12 vertices of an icosahedron, refined by
+  repeated midpoint subdivision of its triangles with the new vertices pushed
+  onto the sphere, giving 12, 42, 162, 642, 2562, ... blobs.  The blob
+  radius is half the smallest distance between two blobs, and the shell is
+  scaled so that its translational mobility far from walls (Rotne-Prager-
+  Yamakawa blobs) is that of a sphere of hydrodynamic radius 1:
+  ``mu_t = 1 / (6 pi eta)``.
+* The boomerang of the manual: an apex at the origin and two straight arms
+  along +x and +y with equally spaced blobs (15 blobs, spacing 0.3).
+* A straight rod of equally spaced blobs along x, centred at the origin.
+
+Command line (run from the repository root or anywhere the package is
+importable)::
+
+    python -m multi_bodies.structure_generators shell --blobs 42 --output multi_bodies/Structures
+    python -m multi_bodies.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
+    python -m multi_bodies.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
+
+Each command prints the file it wrote and the blob radius to use with it.
+"""
+import argparse
+import os
+import sys
+
+import numpy as np
+
+if __package__ in (None, ''):
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from multi_bodies.structure_files import write_vertex_file  # noqa: E402
+
+
+def icosahedron_vertices():
+    """Unit icosahedron with a vertex at the north pole, shape (12, 3).
+
+    Order: north pole, upper ring (azimuths 72, 144, ..., 360 degrees),
+    lower ring (azimuths 36 + 72 k degrees), south pole.
+    """
+    ring_z = 1.0 / np.sqrt(5.0)
+    ring_rho = 2.0 / np.sqrt(5.0)
+    upper = np.deg2rad(72.0 * np.arange(1, 6))
+    lower = np.deg2rad(36.0 + 72.0 * np.arange(0, 5))
+    vertices = [[0.0, 0.0, 1.0]]
+    vertices += [[ring_rho * np.cos(t), ring_rho * np.sin(t), ring_z] for t in upper]
+    vertices += [[ring_rho * np.cos(t), ring_rho * np.sin(t), -ring_z] for t in lower]
+    vertices += [[0.0, 0.0, -1.0]]
+    return np.array(vertices)
+
+
+def _icosahedron_faces(vertices):
+    """Triangles (index triples) of the icosahedron: triples of mutually nearest vertices."""
+    dist = np.linalg.norm(vertices[:, None, :] - vertices[None, :, :], axis=2)
+    edge = np.min(dist[dist > 0])
+    adjacent = np.abs(dist - edge) < 1e-9 * edge
+    faces = []
+    n = vertices.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                if adjacent[i, j] and adjacent[j, k] and adjacent[i, k]:
+                    faces.append((i, j, k))
+    return faces
+
+
+def icosahedral_shell(num_blobs):
+    """Unit-radius shell of ``num_blobs`` points (12, 42, 162, 642, 2562, ...), shape (n, 3)."""
+    valid = [12]
+    while valid[-1] < num_blobs:
+        valid.append(4 * valid[-1] - 6)
+    if valid[-1] != num_blobs:
+        raise ValueError('an icosahedral shell has 12, 42, 162, 642, 2562, ... blobs, not %d' % num_blobs)
+    vertices = [tuple(v) for v in icosahedron_vertices()]
+    faces = _icosahedron_faces(np.array(vertices))
+    for _ in range(len(valid) - 1):
+        midpoint_index = {}
+        new_faces = []
+
+        def midpoint(i, j):
+            key = (min(i, j), max(i, j))
+            if key not in midpoint_index:
+                m = np.add(vertices[i], vertices[j])
+                vertices.append(tuple(m / np.linalg.norm(m)))
+                midpoint_index[key] = len(vertices) - 1
+            return midpoint_index[key]
+
+        for i, j, k in faces:
+            ij, jk, ki = midpoint(i, j), midpoint(j, k), midpoint(k, i)
+            new_faces += [(i, ij, ki), (j, jk, ij), (k, ki, jk), (ij, jk, ki)]
+        faces = new_faces
+    return np.array(vertices)
+
+
+def smallest_distance(points):
+    """Smallest distance between two of the points (shape (n, 3))."""
+    points = np.asarray(points, dtype=float)
+    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
+    dist[np.diag_indices_from(dist)] = np.inf
+    return float(np.min(dist))
+
+
+def bulk_translational_mobility(reference_blobs, blob_radius, eta=1.0):
+    """Translational mobility of a rigid blob body far from walls (RPY blobs), ``trace(N_tt)/3``.
+
+    Uses ``mobility.rotne_prager_tensor``; the body is tracked at the origin.
+    """
+    import mobility
+    from body.body import K_matrices
+    blobs = np.asarray(reference_blobs, dtype=float)
+    M = mobility.rotne_prager_tensor(blobs, eta, blob_radius)
+    K = K_matrices(blobs[None], np.zeros((1, 3)))[0]
+    resistance = K.T @ np.linalg.solve(M, K)
+    body_mobility = np.linalg.inv(resistance)
+    return float(np.trace(body_mobility[:3, :3]) / 3.0)
+
+
+def calibrated_shell(num_blobs):
+    """Shell of hydrodynamic radius 1: returns (blobs shape (n, 3), blob_radius, shell_radius Rg).
+
+    The blob radius is half the smallest blob distance; the shell radius is
+    chosen so that the bulk translational mobility is ``1/(6 pi eta)``.  All
+    lengths scale together, so the mobility of the unit shell gives the scale.
+    """
+    unit = icosahedral_shell(num_blobs)
+    unit_blob_radius = 0.5 * smallest_distance(unit)
+    mu_unit = bulk_translational_mobility(unit, unit_blob_radius)
+    hydrodynamic_radius_unit = 1.0 / (6.0 * np.pi * mu_unit)
+    scale = 1.0 / hydrodynamic_radius_unit
+    return unit * scale, unit_blob_radius * scale, scale
+
+
+def boomerang(arm_blobs=7, spacing=0.3):
+    """Boomerang: apex at the origin, arms of ``arm_blobs`` blobs along +x and +y, shape (2 arm_blobs + 1, 3).
+
+    Order as in the published file: x arm from the tip inwards, apex, y arm outwards.
+    """
+    steps = spacing * np.arange(arm_blobs, 0, -1)
+    x_arm = np.column_stack((steps, np.zeros(arm_blobs), np.zeros(arm_blobs)))
+    y_arm = np.column_stack((np.zeros(arm_blobs), steps[::-1], np.zeros(arm_blobs)))
+    return np.concatenate((x_arm, [[0.0, 0.0, 0.0]], y_arm))
+
+
+def rod(num_blobs, spacing):
+    """Straight rod of ``num_blobs`` blobs along x, centred at the origin, shape (n, 3)."""
+    x = spacing * (np.arange(num_blobs) - 0.5 * (num_blobs - 1))
+    return np.column_stack((x, np.zeros(num_blobs), np.zeros(num_blobs)))
+
+
+def _format_number(value):
+    return ('%.4f' % value).replace('.', '_')
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description='Write .vertex files of example rigid bodies.')
+    sub = parser.add_subparsers(dest='kind', required=True)
+    p_shell = sub.add_parser('shell', help='icosahedral shell of hydrodynamic radius 1')
+    p_shell.add_argument('--blobs', type=int, required=True, help='12, 42, 162, 642, 2562, ...')
+    p_boom = sub.add_parser('boomerang', help='two perpendicular arms meeting at the origin')
+    p_boom.add_argument('--arm-blobs', type=int, default=7)
+    p_boom.add_argument('--spacing', type=float, default=0.3)
+    p_rod = sub.add_parser('rod', help='straight rod along x')
+    p_rod.add_argument('--blobs', type=int, required=True)
+    p_rod.add_argument('--spacing', type=float, required=True)
+    for p in (p_shell, p_boom, p_rod):
+        p.add_argument('--output', default='.', help='folder for the .vertex file (default: .)')
+    args = parser.parse_args(argv)
+
+    command = 'python -m multi_bodies.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    if args.kind == 'shell':
+        blobs, blob_radius, radius = calibrated_shell(args.blobs)
+        name = 'shell_N_%d_Rg_%s_Rh_1.vertex' % (args.blobs, _format_number(radius))
+        note = ('icosahedral shell, %d blobs, shell radius Rg = %.12g, hydrodynamic radius 1\n'
+                'use blob_radius %.12g' % (args.blobs, radius, blob_radius))
+    elif args.kind == 'boomerang':
+        blobs = boomerang(args.arm_blobs, args.spacing)
+        blob_radius = None
+        name = 'boomerang_N_%d.vertex' % blobs.shape[0]
+        note = 'boomerang, %d blobs per arm, spacing %g' % (args.arm_blobs, args.spacing)
+    else:
+        blobs = rod(args.blobs, args.spacing)
+        blob_radius = None
+        name = 'rod_N_%d.vertex' % args.blobs
+        note = 'rod along x, %d blobs, spacing %g' % (args.blobs, args.spacing)
+    os.makedirs(args.output, exist_ok=True)
+    path = os.path.join(args.output, name)
+    write_vertex_file(path, blobs, comment='made by: %s\n%s' % (command, note))
+    print('wrote %s (%d blobs)' % (path, blobs.shape[0]))
+    if blob_radius is not None:
+        print('blob_radius %.12g' % blob_radius)
+    return path
+
+
+if __name__ == '__main__':
+    main()
