@@ -1,0 +1,243 @@
+"""Mobility and resistance problems of many rigid bodies (SPEC sections 4.2 to 4.4).
+
+Unknowns of the mobility problem: blob constraint forces ``lambda`` (3N) and
+body velocities ``U`` (6 Nb).  The saddle-point system is::
+
+    [ M   -K ] [lambda]   [ slip ]
+    [-K^T  0 ] [  U   ] = [ -F   ]
+
+with ``M`` the blob mobility (any matrix-free product ``M f``), ``K`` the
+rigid-body kinematics, ``F`` the force-torque of every body (Nb, 6) flattened.
+Its solution is ``U = N (F - K^T M^{-1} slip)`` with the body mobility
+``N = (K^T M^{-1} K)^+``.
+
+Iterative path: GMRES (SciPy) on the saddle-point operator, preconditioned
+by the exact inverse of the single-body systems (block-diagonal over bodies).
+The per-body dense blocks are built once per configuration, factorised by
+Cholesky and kept; bodies of one structure type are processed together with
+numpy's stacked linear algebra, so applying the preconditioner has no Python
+loop over bodies.
+
+Dense path: the full blob matrix, ``N = pinv(K^T M^{-1} K)`` and the
+resistance problem ``lambda = M^{-1} (slip + K U)``, ``[F; T] = K^T lambda``.
+"""
+from collections import namedtuple
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from body.body import K_dense, K_matrices
+
+GMRES_RESTART = 60
+GMRES_MAXITER = 1000
+
+SolveResult = namedtuple('SolveResult', ['lambda_blobs', 'velocities', 'iterations', 'converged', 'info',
+                                         'residual'])
+SolveResult.__doc__ = """Result of an iterative mobility solve.
+
+lambda_blobs : ndarray (N, 3), blob constraint forces.
+velocities : ndarray (Nb, 6), ``[v, w]`` per body.
+iterations : int, GMRES inner iterations (callbacks).
+converged : bool.
+info : int, SciPy's GMRES flag (0 converged, > 0 iterations done without convergence).
+residual : float, ``|b - A x| / |b|`` of the returned solution (true residual).
+"""
+
+
+def saddle_point_operator(body_arrays, r_vectors, mobility_product, eta, blob_radius,
+                          periodic_length=(0.0, 0.0, 0.0)):
+    """The saddle-point matrix ``A`` as a SciPy LinearOperator of size 3N + 6Nb.
+
+    Parameters
+    ----------
+    body_arrays : body.body.BodyArrays
+    r_vectors : ndarray, shape (N, 3)
+        Blob positions.
+    mobility_product : callable
+        ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)``, the
+        matrix-free ``M f`` of a backend (``mobility.mobility_vector_product``).
+    eta, blob_radius : float
+    periodic_length : sequence of 3 floats
+        Passed to the product (pseudo-periodic boxes, SPEC decision 5).
+
+    ``A [lambda; U] = [M lambda - K U; -K^T lambda]``.
+    """
+    n_blob_unknowns = 3 * body_arrays.num_blobs
+    size = n_blob_unknowns + 6 * body_arrays.num_bodies
+    periodic_length = np.asarray(periodic_length, dtype=float)
+
+    def matvec(x):
+        x = np.asarray(x, dtype=float).reshape(-1)
+        lambda_blobs = x[:n_blob_unknowns]
+        velocities = x[n_blob_unknowns:]
+        slip_part = (mobility_product(r_vectors, lambda_blobs, eta, blob_radius, periodic_length)
+                     - body_arrays.K_dot(r_vectors, velocities).reshape(-1))
+        force_part = -body_arrays.KT_dot(r_vectors, lambda_blobs).reshape(-1)
+        return np.concatenate((slip_part, force_part))
+
+    return spla.LinearOperator((size, size), matvec=matvec, dtype=float)
+
+
+class BlockDiagonalPreconditioner:
+    """Exact inverse of the saddle-point system of each body alone.
+
+    For body k with dense blob mobility ``M_k`` (wall included, no periodic
+    images) and ``K_k``: ``N_k = pinv(K_k^T M_k^{-1} K_k)``; applied to
+    ``[s; f]`` it returns ``U_k = -N_k (f_k + K_k^T M_k^{-1} s_k)`` and
+    ``lambda_k = M_k^{-1} (s_k + K_k U_k)``.
+
+    Attributes (one entry per structure type; ``nb`` bodies of ``n`` blobs)
+    -----------------------------------------------------------------------
+    cholesky_factors : list of ndarray (nb, 3n, 3n) or None
+        Lower Cholesky factors ``M_k = L_k L_k^T`` (None where Cholesky
+        failed and a plain inverse was used).
+    inverse_mobilities : list of ndarray (nb, 3n, 3n)
+    body_mobilities : list of ndarray (nb, 6, 6)
+    """
+
+    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius):
+        self.body_arrays = body_arrays
+        self.cholesky_factors = []
+        self.inverse_mobilities = []
+        self.inverse_mobility_times_K = []
+        self.K = []
+        self.body_mobilities = []
+        for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
+            nb = bodies.stop - bodies.start
+            r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
+            # Building the dense blocks calls the backend once per body (set-up only).
+            M_blocks = np.stack([blob_mobility_matrix(r_body, eta, blob_radius) for r_body in r_type])
+            try:
+                L = np.linalg.cholesky(M_blocks)
+                L_inv = np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape))
+                M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
+            except np.linalg.LinAlgError:
+                L = None
+                M_inv = np.linalg.inv(M_blocks)
+            K = K_matrices(r_type, body_arrays.locations[bodies])
+            M_inv_K = np.matmul(M_inv, K)
+            resistance = np.matmul(np.swapaxes(K, 1, 2), M_inv_K)
+            self.cholesky_factors.append(L)
+            self.inverse_mobilities.append(M_inv)
+            self.inverse_mobility_times_K.append(M_inv_K)
+            self.K.append(K)
+            self.body_mobilities.append(np.linalg.pinv(resistance))
+        n_blob_unknowns = 3 * body_arrays.num_blobs
+        size = n_blob_unknowns + 6 * body_arrays.num_bodies
+        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+
+    def apply(self, x):
+        """Apply the preconditioner to ``x = [s (3N); f (6 Nb)]``; returns the same layout."""
+        x = np.asarray(x, dtype=float).reshape(-1)
+        n_blob_unknowns = 3 * self.body_arrays.num_blobs
+        slip = x[:n_blob_unknowns].reshape(-1, 3)
+        force = x[n_blob_unknowns:].reshape(-1, 6)
+        lambda_out = np.empty_like(slip)
+        velocity_out = np.empty_like(force)
+        for (bodies, blobs), M_inv, M_inv_K, K, N in zip(
+                self.body_arrays.type_slices, self.inverse_mobilities, self.inverse_mobility_times_K,
+                self.K, self.body_mobilities):
+            nb = bodies.stop - bodies.start
+            s = slip[blobs].reshape(nb, -1, 1)
+            lambda_tilde = np.matmul(M_inv, s)
+            U = -np.matmul(N, force[bodies][:, :, None] + np.matmul(np.swapaxes(K, 1, 2), lambda_tilde))
+            lambda_out[blobs] = (lambda_tilde + np.matmul(M_inv_K, U)).reshape(-1, 3)
+            velocity_out[bodies] = U[:, :, 0]
+        return np.concatenate((lambda_out.reshape(-1), velocity_out.reshape(-1)))
+
+
+def mobility_rhs(force_torque, slip):
+    """Right-hand side ``[slip (3N); -F (6 Nb)]`` from force-torque (Nb, 6) or (2Nb, 3) and slip (N, 3)."""
+    return np.concatenate((np.asarray(slip, dtype=float).reshape(-1),
+                           -np.asarray(force_torque, dtype=float).reshape(-1)))
+
+
+def solve_mobility_problem(operator, preconditioner, rhs, num_blobs, tolerance, x0=None,
+                           restart=GMRES_RESTART, maxiter=GMRES_MAXITER, print_residual=False):
+    """Solve ``A x = rhs`` by preconditioned GMRES (relative tolerance, ``atol = 0``).
+
+    Parameters
+    ----------
+    operator : LinearOperator from ``saddle_point_operator``
+    preconditioner : BlockDiagonalPreconditioner or LinearOperator or None
+    rhs : ndarray, shape (3N + 6Nb,)
+    num_blobs : int
+        N, to split the solution into ``lambda`` and ``U``.
+    tolerance : float
+        GMRES stops when ``|r| <= tolerance |rhs|`` (SciPy's ``rtol``).
+    x0 : ndarray or None
+        Initial guess (zeros by default).
+
+    Returns
+    -------
+    SolveResult
+    """
+    rhs = np.asarray(rhs, dtype=float).reshape(-1)
+    if isinstance(preconditioner, BlockDiagonalPreconditioner):
+        preconditioner = preconditioner.operator
+    iterations = [0]
+
+    def count(residual_norm):
+        iterations[0] += 1
+        if print_residual:
+            print('gmres = %d %s' % (iterations[0], residual_norm))
+
+    rhs_norm = np.linalg.norm(rhs)
+    if rhs_norm == 0.0:
+        solution, info = np.zeros_like(rhs), 0
+    else:
+        solution, info = spla.gmres(operator, rhs, x0=x0, rtol=tolerance, atol=0.0, restart=restart,
+                                    maxiter=maxiter, M=preconditioner, callback=count,
+                                    callback_type='legacy')
+    residual = 0.0 if rhs_norm == 0.0 else float(np.linalg.norm(rhs - operator.matvec(solution)) / rhs_norm)
+    n_blob_unknowns = 3 * num_blobs
+    return SolveResult(solution[:n_blob_unknowns].reshape(-1, 3),
+                       solution[n_blob_unknowns:].reshape(-1, 6),
+                       iterations[0], info == 0, int(info), residual)
+
+
+def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
+    """Dense blob mobility of all blobs, shape (3N, 3N)."""
+    return blob_mobility_matrix(np.asarray(r_vectors, dtype=float).reshape(-1, 3), eta, blob_radius)
+
+
+def dense_body_mobility(body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius):
+    """Body mobility of the whole system by dense algebra.
+
+    Returns
+    -------
+    body_mobility : ndarray, shape (6 Nb, 6 Nb)
+        ``N = pinv(K^T M^{-1} K)``: maps ``[F_0, T_0, F_1, ...]`` to ``[v_0, w_0, v_1, ...]``
+        (torques and angular velocities about each body's location).
+    slip_mobility : ndarray, shape (6 Nb, 3N)
+        ``N K^T M^{-1}`` (body velocities are ``-slip_mobility @ slip`` for slip alone).
+    """
+    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
+    K = K_dense(r_vectors, body_arrays.locations, body_arrays.blob_body_index)
+    M_inv = np.linalg.inv(M)
+    body_mobility = np.linalg.pinv(K.T @ M_inv @ K)
+    return body_mobility, body_mobility @ K.T @ M_inv
+
+
+def dense_mobility_velocities(body_arrays, r_vectors, force_torque, slip, blob_mobility_matrix, eta,
+                              blob_radius):
+    """Body velocities (Nb, 6) by dense algebra: ``U = N (F - K^T M^{-1} slip)``."""
+    body_mobility, slip_mobility = dense_body_mobility(body_arrays, r_vectors, blob_mobility_matrix, eta,
+                                                       blob_radius)
+    U = body_mobility @ np.asarray(force_torque, dtype=float).reshape(-1) \
+        - slip_mobility @ np.asarray(slip, dtype=float).reshape(-1)
+    return U.reshape(-1, 6)
+
+
+def solve_resistance_problem(body_arrays, r_vectors, body_velocities, slip, blob_mobility_matrix, eta,
+                             blob_radius):
+    """Forces and torques that move the bodies with the given velocities (SPEC 4.4).
+
+    ``lambda = M^{-1} (slip + K U)`` by a dense solve, ``[F; T] = K^T lambda``.
+
+    Returns (force_torque (Nb, 6), lambda_blobs (N, 3)).
+    """
+    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
+    blob_velocities = np.asarray(slip, dtype=float).reshape(-1, 3) + body_arrays.K_dot(r_vectors, body_velocities)
+    lambda_blobs = np.linalg.solve(M, blob_velocities.reshape(-1)).reshape(-1, 3)
+    return body_arrays.KT_dot(r_vectors, lambda_blobs), lambda_blobs

@@ -1,0 +1,184 @@
+"""Default physics of the many-body problem: forces, torques and slip (SPEC section 7).
+
+Each hook is a module-level function that receives the keyword arguments
+``g, repulsion_strength_wall, debye_length_wall, repulsion_strength,
+debye_length, periodic_length, blob_radius, blob_mass`` (extra keywords are
+ignored), so that a user file can later replace any of them by rebinding the
+attribute of this module.  The aggregating functions look the hooks up in
+this module's namespace at call time, so a replacement takes effect.
+
+All defaults are vectorised over blobs and bodies (no Python loop over them);
+the all-pairs sums are done in row chunks to bound memory.
+
+Shapes: blob positions ``r_vectors`` (N, 3); blob forces (N, 3);
+force-torque arrays (2 Nb, 3) with rows ``F_0, T_0, F_1, T_1, ...`` (the
+published layout), equivalently (Nb, 6) after reshaping.
+"""
+import numpy as np
+
+from utils import UserInputError
+
+PAIR_CHUNK_ELEMENTS = 4_000_000  # pairs per chunk in the all-pairs sums (memory ~ 100 MB)
+
+
+def minimum_image(displacements, periodic_length):
+    """Minimum-image convention on periodic axes (SPEC section 8).
+
+    ``displacements`` has shape (..., 3); for each axis with ``L > 0``,
+    ``r -= trunc(r/L + 0.5 sign(r)) L`` (round half away from zero).
+    """
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    if not np.any(L > 0):
+        return displacements
+    r = np.array(displacements, dtype=float, copy=True)
+    for axis in np.nonzero(L > 0)[0]:
+        r[..., axis] -= np.trunc(r[..., axis] / L[axis] + 0.5 * np.sign(r[..., axis])) * L[axis]
+    return r
+
+
+def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0,
+                         blob_radius=1.0, blob_mass=1.0, **kwargs):
+    """Gravity and soft wall repulsion on every blob, shape (N, 3).
+
+    Gravity ``(0, 0, -g blob_mass)``; the wall potential
+    ``U = eps + eps (a - z)/b`` for ``z < a`` and ``eps exp(-(z - a)/b)``
+    otherwise gives ``f_z = (eps/b) exp(-(z - a)/b)`` (``eps/b`` below ``a``),
+    with ``eps = repulsion_strength_wall``, ``b = debye_length_wall``, ``a = blob_radius``.
+    """
+    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+    z = r_vectors[:, 2]
+    eps, b, a = repulsion_strength_wall, debye_length_wall, blob_radius
+    forces = np.zeros_like(r_vectors)
+    forces[:, 2] = -g * blob_mass + np.where(z > a, (eps / b) * np.exp(-(z - a) / b), eps / b)
+    return forces
+
+
+def calc_one_blob_forces(r_vectors, **kwargs):
+    """Sum of one-blob forces (the ``blob_external_forces`` hook), shape (N, 3)."""
+    return blob_external_forces(r_vectors, **kwargs)
+
+
+def blob_blob_force(r, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0, **kwargs):
+    """Soft repulsion of one blob pair, vectorised over pairs.
+
+    ``r`` (shape (..., 3)) points from blob i to blob j; returns the force on
+    blob i, shape (..., 3): ``-(eps/b) exp(-(|r| - 2a)/b) r/|r|`` for
+    ``|r| > 2a`` and ``-(eps/b) r/|r|`` otherwise.
+    """
+    eps, b, d = repulsion_strength, debye_length, 2.0 * blob_radius
+    distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
+    magnitude = np.where(distance > d, (eps / b) * np.exp(-(distance - d) / b), eps / b)
+    return -(magnitude / distance)[..., None] * r
+
+
+def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), **kwargs):
+    """Forces of all blob pairs (the ``blob_blob_force`` hook), shape (N, 3).
+
+    Pairs use the minimum image on periodic axes; every pair is counted once
+    per blob, so blob i receives ``sum_{j != i} f(r_j - r_i)``.
+    """
+    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+    n = r_vectors.shape[0]
+    forces = np.zeros_like(r_vectors)
+    rows = max(1, PAIR_CHUNK_ELEMENTS // max(n, 1))
+    for start in range(0, n, rows):
+        stop = min(n, start + rows)
+        r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)
+        pair = blob_blob_force(r, periodic_length=periodic_length, **kwargs)
+        pair[np.arange(stop - start), np.arange(start, stop)] = 0.0
+        forces[start:stop] = pair.sum(axis=1)
+    return forces
+
+
+def body_body_force_torque(r, repulsion_strength=1.0, debye_length=1.0, **kwargs):
+    """Yukawa force of one body pair, vectorised over pairs.
+
+    ``r`` (shape (..., 3)) points from body i to body j.  Returns
+    ``(force on i, torque on i)``, each of shape (..., 3): force
+    ``-(eps/b + eps/|r|) exp(-|r|/b) r/|r|^2``, torque zero.
+    """
+    eps, b = repulsion_strength, debye_length
+    distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
+    magnitude = (eps / b + eps / distance) * np.exp(-distance / b) / distance ** 2
+    return -magnitude[..., None] * r, np.zeros_like(r)
+
+
+def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), **kwargs):
+    """Force and torque of all body pairs (the ``body_body_force_torque`` hook), shape (2 Nb, 3).
+
+    Body j receives the opposite of the force and torque body i receives from the pair.
+    """
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    nb = locations.shape[0]
+    r = minimum_image(locations[None, :, :] - locations[:, None, :], periodic_length)
+    upper = np.triu(np.ones((nb, nb), dtype=bool), k=1)
+    force, torque = body_body_force_torque(r[upper], periodic_length=periodic_length, **kwargs)
+    i_index, j_index = np.nonzero(upper)
+    result = np.zeros((nb, 2, 3))
+    np.add.at(result[:, 0], i_index, force)
+    np.add.at(result[:, 0], j_index, -force)
+    np.add.at(result[:, 1], i_index, torque)
+    np.add.at(result[:, 1], j_index, -torque)
+    return result.reshape(2 * nb, 3)
+
+
+def bodies_external_force_torque(bodies, r_vectors, **kwargs):
+    """External force and torque on each body (default zero), shape (2 Nb, 3)."""
+    return np.zeros((2 * len(bodies), 3))
+
+
+def set_slip_by_ID(body, slip, **kwargs):
+    """Give ``body`` its reference-frame slip (shape (n, 3) or None for no slip)."""
+    body.slip_reference = None if slip is None else np.asarray(slip, dtype=float).reshape(-1, 3)
+
+
+def blob_blob_force_calculator(implementation):
+    """The all-pairs blob force function for ``blob_blob_force_implementation``.
+
+    'None' -> None (no blob-blob forces); 'python' -> ``calc_blob_blob_forces``.
+    The compiled force kernels are not part of this build yet.
+    """
+    if implementation == 'None':
+        return None
+    if implementation == 'python':
+        return lambda r_vectors, **kw: calc_blob_blob_forces(r_vectors, **kw)
+    if implementation in ('C++', 'pycuda'):
+        raise UserInputError("blob_blob_force_implementation '%s' is not available in this build; "
+                             "use python or None" % implementation)
+    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None or python" % implementation)
+
+
+def body_body_force_calculator(implementation):
+    """'None' -> None; 'python' -> ``calc_body_body_forces_torques``."""
+    if implementation == 'None':
+        return None
+    if implementation == 'python':
+        return lambda locations, **kw: calc_body_body_forces_torques(locations, **kw)
+    raise UserInputError("body_body_force_torque_implementation '%s' is unknown; use None or python"
+                         % implementation)
+
+
+def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_blob_forces=None,
+                                           body_body_forces=None, **kwargs):
+    """Total force and torque on every body, shape (2 Nb, 3) (SPEC section 7).
+
+    Parameters
+    ----------
+    bodies : list of Body
+        Passed to ``bodies_external_force_torque``.
+    body_arrays : body.body.BodyArrays
+        The same bodies as arrays (for ``K^T`` and the body locations).
+    r_vectors : ndarray, shape (N, 3)
+    blob_blob_forces, body_body_forces : callables or None
+        From ``blob_blob_force_calculator`` and ``body_body_force_calculator``.
+    **kwargs
+        The physics keywords (g, repulsion_strength_wall, ..., blob_mass).
+    """
+    blob_forces = calc_one_blob_forces(r_vectors, **kwargs)
+    if blob_blob_forces is not None:
+        blob_forces = blob_forces + blob_blob_forces(r_vectors, **kwargs)
+    force_torque = body_arrays.KT_dot(r_vectors, blob_forces).reshape(-1, 3)
+    force_torque = force_torque + bodies_external_force_torque(bodies, r_vectors, **kwargs)
+    if body_body_forces is not None:
+        force_torque = force_torque + body_body_forces(body_arrays.locations, **kwargs)
+    return force_torque
