@@ -15,6 +15,7 @@ Command line (run from the repository root or anywhere the package is
 importable)::
 
     python -m multi_bodies.structure_generators shell --blobs 42 --output multi_bodies/Structures
+    python -m multi_bodies.structure_generators shell --blobs 12 --shell-radius 1 --output multi_bodies/Structures
     python -m multi_bodies.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
     python -m multi_bodies.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
 
@@ -156,6 +157,9 @@ def main(argv=None):
     sub = parser.add_subparsers(dest='kind', required=True)
     p_shell = sub.add_parser('shell', help='icosahedral shell of hydrodynamic radius 1')
     p_shell.add_argument('--blobs', type=int, required=True, help='12, 42, 162, 642, 2562, ...')
+    p_shell.add_argument('--shell-radius', type=float, default=None,
+                         help='place the blobs on a sphere of this radius instead of calibrating '
+                              'the hydrodynamic radius to 1')
     p_boom = sub.add_parser('boomerang', help='two perpendicular arms meeting at the origin')
     p_boom.add_argument('--arm-blobs', type=int, default=7)
     p_boom.add_argument('--spacing', type=float, default=0.3)
@@ -167,7 +171,13 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     command = 'python -m multi_bodies.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
-    if args.kind == 'shell':
+    if args.kind == 'shell' and args.shell_radius is not None:
+        blobs = icosahedral_shell(args.blobs) * args.shell_radius
+        blob_radius = 0.5 * smallest_distance(blobs)
+        name = 'shell_N_%d_Rg_%s.vertex' % (args.blobs, ('%g' % args.shell_radius).replace('.', '_'))
+        note = ('icosahedral shell, %d blobs, shell radius Rg = %.12g (not calibrated)\n'
+                'half the nearest-neighbour distance is %.12g' % (args.blobs, args.shell_radius, blob_radius))
+    elif args.kind == 'shell':
         blobs, blob_radius, radius = calibrated_shell(args.blobs)
         name = 'shell_N_%d_Rg_%s_Rh_1.vertex' % (args.blobs, _format_number(radius))
         note = ('icosahedral shell, %d blobs, shell radius Rg = %.12g, hydrodynamic radius 1\n'

@@ -1,0 +1,61 @@
+"""Fluid velocity on a rectilinear grid, written as a legacy VTK file (SPEC section 2.3).
+
+The grid option ``x0 x1 Nx y0 y1 Ny z0 z1 Nz`` splits the box into
+``Nx Ny Nz`` cells; the velocity is computed at the cell centres (x fastest,
+then y, then z) as the flow of the blob constraint forces ``lambda``:
+``u(x) = M_source_target(x, r_blobs) lambda`` with sources of radius ``a``
+and targets of radius ``tracer_radius`` (0 gives the point velocity).
+
+pyvista is imported only when a file is written.
+"""
+import numpy as np
+
+
+def grid_edges(grid):
+    """Cell edges along x, y, z: tuple of three arrays of length N_axis + 1.
+
+    ``grid`` is ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz)).
+    """
+    return tuple(np.linspace(low, high, cells + 1) for low, high, cells in grid)
+
+
+def cell_centres(grid):
+    """Cell centres ``x0 + d (i + 1/2)``, shape (Nx Ny Nz, 3), x fastest."""
+    centres_1d = [low + (high - low) / cells * (np.arange(cells) + 0.5) for low, high, cells in grid]
+    zz, yy, xx = np.meshgrid(centres_1d[2], centres_1d[1], centres_1d[0], indexing='ij')
+    return np.column_stack((xx.ravel(), yy.ravel(), zz.ravel()))
+
+
+def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, eta, source_target_product,
+                   periodic_length=(0.0, 0.0, 0.0)):
+    """Fluid velocity at the cell centres, shape (Nx Ny Nz, 3), x fastest.
+
+    Parameters
+    ----------
+    grid : ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz))
+    r_vectors : ndarray (N, 3), blob positions (sources).
+    lambda_blobs : ndarray (N, 3), blob constraint forces.
+    blob_radius, tracer_radius, eta : float
+    source_target_product : callable
+        ``f(source_r, target_r, force, radius_source, radius_target, eta, periodic_length) -> (3 Nt,)``
+        (``mobility.source_target_product(name)``).
+    """
+    targets = cell_centres(grid)
+    velocity = source_target_product(np.asarray(r_vectors, dtype=float).reshape(-1, 3), targets,
+                                     np.asarray(lambda_blobs, dtype=float).reshape(-1), blob_radius,
+                                     tracer_radius, eta, periodic_length)
+    return np.asarray(velocity).reshape(-1, 3)
+
+
+def write_velocity_field_vtk(path, grid, velocity):
+    """Write the velocity (shape (Nx Ny Nz, 3), x fastest) on the grid as a legacy ASCII VTK file.
+
+    The file is a rectilinear grid whose cell data ``velocity`` holds one
+    vector per cell; ParaView, VisIt and ``pyvista.read`` open it.
+    """
+    import pyvista
+    x_edges, y_edges, z_edges = grid_edges(grid)
+    mesh = pyvista.RectilinearGrid(x_edges, y_edges, z_edges)
+    mesh.cell_data['velocity'] = np.asarray(velocity, dtype=float).reshape(-1, 3)
+    mesh.save(path, binary=False)
+    return path
