@@ -1,0 +1,369 @@
+// C++ backend of the blob mobility products (pybind11 module mobility._mobility_cpp).
+//
+// Thin loops over blob pairs around the formulas of blob_pair_kernels.h:
+// positions are scaled by 1/a and stored as separate x, y, z arrays so the
+// inner loop over sources vectorises; OpenMP splits targets across threads.
+// The trans-trans product visits each unordered pair once and adds both
+// M_ij f_j and M_ji f_i = M_ij^T f_i (the mobility is symmetric), into
+// per-thread accumulators that are summed at the end.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include "blob_pair_kernels.h"
+
+namespace py = pybind11;
+using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+namespace {
+
+int max_threads() {
+#ifdef _OPENMP
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+int thread_id() {
+#ifdef _OPENMP
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+
+// Blobs as separate coordinate arrays, in units of `scale`, with the wall
+// regularisation applied when asked: z_eff = max(z, radius), vector damped by
+// min(z / radius, 1).
+struct Blobs {
+  std::size_t n = 0;
+  std::vector<double> x, y, z, vx, vy, vz, damping, radius;
+};
+
+std::size_t count_rows(const Array &r, const char *name) {
+  if (r.ndim() == 2 && r.shape(1) == 3) return static_cast<std::size_t>(r.shape(0));
+  if (r.ndim() == 1 && r.shape(0) % 3 == 0) return static_cast<std::size_t>(r.shape(0) / 3);
+  throw std::invalid_argument(std::string(name) + " must have shape (N, 3) or (3N,)");
+}
+
+Blobs make_blobs(const Array &r, const Array *vector, const std::vector<double> &radius, double scale, bool wall,
+                 const char *name) {
+  Blobs b;
+  b.n = count_rows(r, name);
+  if (vector != nullptr && static_cast<std::size_t>(vector->size()) != 3 * b.n)
+    throw std::invalid_argument("vector size must be 3 times the number of blobs");
+  const double *rp = r.data();
+  const double *vp = vector ? vector->data() : nullptr;
+  b.x.resize(b.n), b.y.resize(b.n), b.z.resize(b.n), b.damping.assign(b.n, 1.0), b.radius = radius;
+  if (vp) b.vx.resize(b.n), b.vy.resize(b.n), b.vz.resize(b.n);
+  const double inv = 1.0 / scale;
+  for (std::size_t i = 0; i < b.n; ++i) {
+    double zi = rp[3 * i + 2];
+    if (wall) {
+      const double rad = radius[i];
+      if (zi < rad) {
+        b.damping[i] = rad > 0.0 ? zi / rad : 0.0;
+        zi = rad;
+      }
+    }
+    b.x[i] = rp[3 * i] * inv;
+    b.y[i] = rp[3 * i + 1] * inv;
+    b.z[i] = zi * inv;
+    if (vp) {
+      b.vx[i] = vp[3 * i] * b.damping[i];
+      b.vy[i] = vp[3 * i + 1] * b.damping[i];
+      b.vz[i] = vp[3 * i + 2] * b.damping[i];
+    }
+  }
+  return b;
+}
+
+std::vector<double> periodic_lengths(const Array &L, double scale, bool wall) {
+  if (L.size() != 3) throw std::invalid_argument("periodic_length needs three numbers");
+  std::vector<double> out(3);
+  for (int k = 0; k < 3; ++k) {
+    if (L.data()[k] < 0.0) throw std::invalid_argument("periodic_length entries must be >= 0");
+    out[k] = L.data()[k] / scale;
+  }
+  if (wall && out[2] > 0.0) throw std::invalid_argument("periodic_length along z must be 0 with a wall at z = 0");
+  return out;
+}
+
+// Shifts of the neighbour boxes -L, 0, +L along each periodic axis.
+std::vector<double> image_shifts(const std::vector<double> &L) {
+  std::vector<double> shifts;
+  const int nx = L[0] > 0 ? 1 : 0, ny = L[1] > 0 ? 1 : 0, nz = L[2] > 0 ? 1 : 0;
+  for (int i = -nx; i <= nx; ++i)
+    for (int j = -ny; j <= ny; ++j)
+      for (int k = -nz; k <= nz; ++k) {
+        shifts.push_back(i * L[0]);
+        shifts.push_back(j * L[1]);
+        shifts.push_back(k * L[2]);
+      }
+  return shifts;
+}
+
+Array flat_result(const std::vector<double> &ux, const std::vector<double> &uy, const std::vector<double> &uz,
+                  const std::vector<double> &damping, double factor) {
+  const std::size_t n = ux.size();
+  Array out(static_cast<py::ssize_t>(3 * n));
+  double *o = out.mutable_data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double f = factor * damping[i];
+    o[3 * i] = ux[i] * f;
+    o[3 * i + 1] = uy[i] * f;
+    o[3 * i + 2] = uz[i] * f;
+  }
+  return out;
+}
+
+// Trans-trans product, each unordered pair once.
+template <bool Wall, bool Periodic>
+void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
+                                 std::vector<double> &uy, std::vector<double> &uz) {
+  const std::size_t n = b.n;
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3;
+  const int threads = max_threads();
+  std::vector<double> acc(static_cast<std::size_t>(threads) * 3 * n, 0.0);
+  const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data();
+  const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
+#pragma omp parallel
+  {
+    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
+    double *ay = ax + n, *az = ay + n;
+#pragma omp for schedule(dynamic, 16)
+    for (std::size_t i = 0; i < n; ++i) {
+      const double xi = x[i], yi = y[i], zi = z[i], fxi = fx[i], fyi = fy[i], fzi = fz[i];
+      double uxi = 0.0, uyi = 0.0, uzi = 0.0;
+      // the blob with itself and with its own periodic images
+      for (std::size_t s = 0; s < n_shifts; ++s)
+        rmb::trans_times_force_pair<Wall>(shifts[3 * s], shifts[3 * s + 1], shifts[3 * s + 2], zi, zi, fxi, fyi, fzi,
+                                          uxi, uyi, uzi);
+      for (std::size_t s = 0; s < n_shifts; ++s) {
+        const double sx = shifts[3 * s], sy = shifts[3 * s + 1], sz = shifts[3 * s + 2];
+#pragma omp simd reduction(+ : uxi, uyi, uzi)
+        for (std::size_t j = i + 1; j < n; ++j) {
+          double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+          if (Periodic) {
+            rx = rmb::minimum_image(rx, Lx) + sx;
+            ry = rmb::minimum_image(ry, Ly) + sy;
+            rz = rmb::minimum_image(rz, Lz) + sz;
+          }
+          double usx = 0.0, usy = 0.0, usz = 0.0;
+          rmb::trans_times_force_pair_both<Wall>(rx, ry, rz, zi, z[j], fx[j], fy[j], fz[j], fxi, fyi, fzi, uxi, uyi,
+                                                 uzi, usx, usy, usz);
+          ax[j] += usx;
+          ay[j] += usy;
+          az[j] += usz;
+        }
+      }
+      ax[i] += uxi;
+      ay[i] += uyi;
+      az[i] += uzi;
+    }
+  }
+  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
+  for (int t = 0; t < threads; ++t) {
+    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
+    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
+  }
+}
+
+using PairFunction = void (*)(double, double, double, double, double, double, double, double, double &, double &,
+                              double &);
+
+// Generic target-by-target sum for the roller couplings.
+template <PairFunction Pair, bool Periodic>
+void one_sided_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L, std::vector<double> &ux,
+                   std::vector<double> &uy, std::vector<double> &uz) {
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3, ns = s.n;
+  ux.assign(t.n, 0.0), uy.assign(t.n, 0.0), uz.assign(t.n, 0.0);
+  const double *x = s.x.data(), *y = s.y.data(), *z = s.z.data();
+  const double *vx = s.vx.data(), *vy = s.vy.data(), *vz = s.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
+#pragma omp parallel for schedule(static)
+  for (std::size_t i = 0; i < t.n; ++i) {
+    const double xi = t.x[i], yi = t.y[i], zi = t.z[i];
+    double a = 0.0, b = 0.0, c = 0.0;
+    for (std::size_t k = 0; k < n_shifts; ++k) {
+      const double sx = shifts[3 * k], sy = shifts[3 * k + 1], sz = shifts[3 * k + 2];
+#pragma omp simd reduction(+ : a, b, c)
+      for (std::size_t j = 0; j < ns; ++j) {
+        double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+        if (Periodic) {
+          rx = rmb::minimum_image(rx, Lx) + sx;
+          ry = rmb::minimum_image(ry, Ly) + sy;
+          rz = rmb::minimum_image(rz, Lz) + sz;
+        }
+        Pair(rx, ry, rz, zi, z[j], vx[j], vy[j], vz[j], a, b, c);
+      }
+    }
+    ux[i] = a, uy[i] = b, uz[i] = c;
+  }
+}
+
+template <bool Wall>
+Array blob_product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
+                   const Array &periodic_length) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  Blobs b = make_blobs(r, &vector, std::vector<double>(n, a), a, Wall, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, a, Wall);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
+  std::vector<double> ux, uy, uz;
+  double power = 1.0;
+  {
+    py::gil_scoped_release release;
+    if (kind == "trans_times_force") {
+      if (periodic)
+        trans_times_force_symmetric<Wall, true>(b, L, ux, uy, uz);
+      else
+        trans_times_force_symmetric<Wall, false>(b, L, ux, uy, uz);
+    } else if (kind == "trans_times_torque") {
+      power = 2.0;
+      if (periodic)
+        one_sided_sum<rmb::trans_times_torque_pair<Wall>, true>(b, b, L, ux, uy, uz);
+      else
+        one_sided_sum<rmb::trans_times_torque_pair<Wall>, false>(b, b, L, ux, uy, uz);
+    } else if (kind == "rot_times_force") {
+      power = 2.0;
+      if (periodic)
+        one_sided_sum<rmb::rot_times_force_pair<Wall>, true>(b, b, L, ux, uy, uz);
+      else
+        one_sided_sum<rmb::rot_times_force_pair<Wall>, false>(b, b, L, ux, uy, uz);
+    } else if (kind == "rot_times_torque") {
+      power = 3.0;
+      if (periodic)
+        one_sided_sum<rmb::rot_times_torque_pair<Wall>, true>(b, b, L, ux, uy, uz);
+      else
+        one_sided_sum<rmb::rot_times_torque_pair<Wall>, false>(b, b, L, ux, uy, uz);
+    } else {
+      throw std::invalid_argument("unknown product " + kind);
+    }
+  }
+  return flat_result(ux, uy, uz, b.damping, 1.0 / (8.0 * M_PI * eta * std::pow(a, power)));
+}
+
+Array product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
+              const Array &periodic_length, bool wall) {
+  return wall ? blob_product<true>(kind, r, vector, eta, a, periodic_length)
+              : blob_product<false>(kind, r, vector, eta, a, periodic_length);
+}
+
+std::vector<double> radii_vector(const Array &radius, std::size_t n, const char *name) {
+  if (radius.size() == 1) return std::vector<double>(n, radius.data()[0]);
+  if (static_cast<std::size_t>(radius.size()) != n)
+    throw std::invalid_argument(std::string(name) + " must be a number or have one entry per blob");
+  return std::vector<double>(radius.data(), radius.data() + n);
+}
+
+template <bool Wall, bool Periodic>
+void source_target_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L, std::vector<double> &ux,
+                       std::vector<double> &uy, std::vector<double> &uz) {
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3;
+  ux.assign(t.n, 0.0), uy.assign(t.n, 0.0), uz.assign(t.n, 0.0);
+#pragma omp parallel for schedule(static)
+  for (std::size_t i = 0; i < t.n; ++i) {
+    double a = 0.0, b = 0.0, c = 0.0;
+    for (std::size_t k = 0; k < n_shifts; ++k)
+      for (std::size_t j = 0; j < s.n; ++j) {
+        double rx = t.x[i] - s.x[j], ry = t.y[i] - s.y[j], rz = t.z[i] - s.z[j];
+        if (Periodic) {
+          rx = rmb::minimum_image(rx, L[0]) + shifts[3 * k];
+          ry = rmb::minimum_image(ry, L[1]) + shifts[3 * k + 1];
+          rz = rmb::minimum_image(rz, L[2]) + shifts[3 * k + 2];
+        }
+        rmb::source_target_pair<Wall>(rx, ry, rz, t.z[i], s.z[j], t.radius[i], s.radius[j], s.vx[j], s.vy[j], s.vz[j],
+                                      a, b, c);
+      }
+    ux[i] = a, uy[i] = b, uz[i] = c;
+  }
+}
+
+Array source_target(const Array &source, const Array &target, const Array &force, const Array &radius_source,
+                    const Array &radius_target, double eta, const Array &periodic_length, bool wall) {
+  if (!(eta > 0.0)) throw std::invalid_argument("viscosity must be positive");
+  const std::size_t ns = count_rows(source, "source positions"), nt = count_rows(target, "target positions");
+  const Blobs s = make_blobs(source, &force, radii_vector(radius_source, ns, "radius_source"), 1.0, wall, "source");
+  const Blobs t = make_blobs(target, nullptr, radii_vector(radius_target, nt, "radius_target"), 1.0, wall, "target");
+  const std::vector<double> L = periodic_lengths(periodic_length, 1.0, wall);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
+  std::vector<double> ux, uy, uz;
+  {
+    py::gil_scoped_release release;
+    if (wall)
+      periodic ? source_target_sum<true, true>(t, s, L, ux, uy, uz) : source_target_sum<true, false>(t, s, L, ux, uy, uz);
+    else
+      periodic ? source_target_sum<false, true>(t, s, L, ux, uy, uz)
+               : source_target_sum<false, false>(t, s, L, ux, uy, uz);
+  }
+  return flat_result(ux, uy, uz, t.damping, 1.0 / (8.0 * M_PI * eta));
+}
+
+template <bool Wall>
+void fill_dense(const Blobs &b, const std::vector<double> &L, double factor, double *M) {
+  const std::size_t n = b.n, cols = 3 * n;
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3;
+#pragma omp parallel for schedule(static)
+  for (std::size_t i = 0; i < n; ++i) {
+    double block[9], sum[9];
+    for (std::size_t j = 0; j < n; ++j) {
+      for (int k = 0; k < 9; ++k) sum[k] = 0.0;
+      for (std::size_t s = 0; s < n_shifts; ++s) {
+        const double rx = rmb::minimum_image(b.x[i] - b.x[j], L[0]) + shifts[3 * s];
+        const double ry = rmb::minimum_image(b.y[i] - b.y[j], L[1]) + shifts[3 * s + 1];
+        const double rz = rmb::minimum_image(b.z[i] - b.z[j], L[2]) + shifts[3 * s + 2];
+        rmb::trans_trans_block<Wall>(rx, ry, rz, b.z[i], b.z[j], block);
+        for (int k = 0; k < 9; ++k) sum[k] += block[k];
+      }
+      const double f = factor * b.damping[i] * b.damping[j];
+      for (int p = 0; p < 3; ++p)
+        for (int q = 0; q < 3; ++q) M[(3 * i + p) * cols + 3 * j + q] = sum[3 * p + q] * f;
+    }
+  }
+}
+
+Array dense_trans_trans(const Array &r, double eta, double a, const Array &periodic_length, bool wall) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, nullptr, std::vector<double>(n, a), a, wall, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, a, wall);
+  Array M({static_cast<py::ssize_t>(3 * n), static_cast<py::ssize_t>(3 * n)});
+  double *m = M.mutable_data();
+  const double factor = 1.0 / (8.0 * M_PI * eta * a);
+  {
+    py::gil_scoped_release release;
+    wall ? fill_dense<true>(b, L, factor, m) : fill_dense<false>(b, L, factor, m);
+  }
+  return M;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_mobility_cpp, m) {
+  m.doc() = "C++ (OpenMP) blob mobility products; formulas in blob_pair_kernels.h";
+  m.def("product", &product, py::arg("kind"), py::arg("r_vectors"), py::arg("vector"), py::arg("eta"), py::arg("a"),
+        py::arg("periodic_length"), py::arg("wall"),
+        "Blob product of `kind` (trans_times_force, trans_times_torque, rot_times_force, rot_times_torque); "
+        "r_vectors (N, 3), vector (3N,), returns (3N,).");
+  m.def("source_target", &source_target, py::arg("source"), py::arg("target"), py::arg("force"),
+        py::arg("radius_source"), py::arg("radius_target"), py::arg("eta"), py::arg("periodic_length"),
+        py::arg("wall"), "Velocity (3Nt,) at targets from forces on sources of given radii.");
+  m.def("dense_trans_trans", &dense_trans_trans, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
+        py::arg("periodic_length"), py::arg("wall"), "Dense (3N, 3N) blob mobility.");
+  m.def("max_threads", &max_threads, "Number of OpenMP threads the kernels use.");
+}

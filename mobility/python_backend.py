@@ -1,0 +1,280 @@
+"""NumPy backend: matrix-free blob mobility products with bounded memory.
+
+Pairs are processed in chunks of targets so that no array larger than about
+``PAIRS_PER_CHUNK`` pairs is ever built, at any number of blobs.  Chunks are
+independent and NumPy releases the GIL inside its loops, so two chunks run
+at once on two threads.
+
+All public functions take ``r_vectors: (N, 3)`` (or a flat (3N,) array),
+vectors flat (3N,) or (N, 3), and return flat (3N,) arrays, in the units of
+the caller (velocity = mobility x force).
+"""
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from . import pair_formulas as pf
+
+PAIRS_PER_CHUNK = 1 << 17
+_THREADS = max(1, min(2, os.cpu_count() or 1))
+
+
+def as_positions(r_vectors, name='r_vectors'):
+    """Return ``r_vectors`` as a C-contiguous float64 (N, 3) array."""
+    r = np.ascontiguousarray(r_vectors, dtype=np.float64)
+    if r.ndim == 1:
+        if r.size % 3:
+            raise ValueError('%s has %d entries; expected 3 per blob' % (name, r.size))
+        r = r.reshape(-1, 3)
+    if r.ndim != 2 or r.shape[1] != 3:
+        raise ValueError('%s must have shape (N, 3), got %s' % (name, r.shape))
+    return r
+
+
+def as_blob_vectors(vector, n_blobs, name='vector'):
+    """Return a per-blob vector as a float64 (N, 3) array, checking its size."""
+    v = np.ascontiguousarray(vector, dtype=np.float64).reshape(-1)
+    if v.size != 3 * n_blobs:
+        raise ValueError('%s has %d entries; expected 3 per blob (%d)' % (name, v.size, 3 * n_blobs))
+    return v.reshape(n_blobs, 3)
+
+
+def as_periodic_length(periodic_length):
+    """Return the periodic box lengths (3,) as floats (0 = not periodic)."""
+    if periodic_length is None:
+        return np.zeros(3)
+    L = np.asarray(periodic_length, dtype=np.float64).reshape(-1)
+    if L.size != 3:
+        raise ValueError('periodic_length needs three numbers (Lx, Ly, Lz), got %d' % L.size)
+    if np.any(L < 0):
+        raise ValueError('periodic_length entries must be >= 0, got %s' % (L,))
+    return L
+
+
+def image_shifts(periodic_length):
+    """Shifts (K, 3) of the neighbour boxes -L, 0, +L along each periodic axis."""
+    axes = [(-1.0, 0.0, 1.0) if L > 0 else (0.0,) for L in periodic_length]
+    grid = np.array(np.meshgrid(*axes, indexing='ij')).reshape(3, -1).T
+    return grid * periodic_length
+
+
+def minimum_image(d, L):
+    """Apply the minimum-image convention in place on a displacement component.
+
+    ``d -= trunc(d/L + 0.5 sign(d)) L`` (round half away from zero), as SPEC §8.
+    """
+    if L > 0:
+        d -= np.trunc(d / L + 0.5 * np.sign(d)) * L
+    return d
+
+
+def wall_regularisation(r, radius):
+    """Raised positions and damping factors for blobs closer to the wall than their radius.
+
+    Returns ``(r_eff (N, 3), damping (N,))`` with ``z_eff = max(z, radius)`` and
+    ``damping = min(z / radius, 1)`` (Balboa, Delmotte and Donev 2017).
+    """
+    r_eff = r.copy()
+    r_eff[:, 2] = np.maximum(r[:, 2], radius)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        damping = np.where(r[:, 2] >= radius, 1.0, r[:, 2] / radius)
+    return r_eff, damping
+
+
+def _chunks(n_targets, n_sources):
+    rows = max(1, PAIRS_PER_CHUNK // max(1, n_sources))
+    return [(i, min(i + rows, n_targets)) for i in range(0, n_targets, rows)]
+
+
+def pair_sum(targets, sources, vectors, periodic_length, pair_function, extra_target=None, extra_source=None):
+    """Sum ``pair_function`` over all source images for every target.
+
+    targets: (Nt, 3), sources: (Ns, 3), vectors: (Ns, 3), all in the units the
+    pair function expects.  ``pair_function(rx, ry, rz, zt, zs, [bt, bs,] vx, vy, vz)``
+    receives arrays of shape (targets in chunk, Ns) and returns three (chunk,)
+    sums.  Optional per-target and per-source scalars (radii) are passed as
+    ``extra_target`` (Nt,) and ``extra_source`` (Ns,).  Returns (Nt, 3).
+    """
+    L = periodic_length
+    shifts = image_shifts(L)
+    result = np.zeros((targets.shape[0], 3))
+    sx, sy, sz = (sources[:, k][None, :] for k in range(3))
+    vx, vy, vz = (vectors[:, k][None, :] for k in range(3))
+    es = None if extra_source is None else extra_source[None, :]
+
+    def work(bounds):
+        lo, hi = bounds
+        t = targets[lo:hi]
+        dx = minimum_image(t[:, 0:1] - sx, L[0])
+        dy = minimum_image(t[:, 1:2] - sy, L[1])
+        dz = minimum_image(t[:, 2:3] - sz, L[2])
+        zt = t[:, 2:3]
+        extra = () if extra_target is None else (extra_target[lo:hi, None], es)
+        for shift in shifts:
+            ux, uy, uz = pair_function(dx + shift[0], dy + shift[1], dz + shift[2], zt, sz, *extra, vx, vy, vz)
+            result[lo:hi, 0] += ux
+            result[lo:hi, 1] += uy
+            result[lo:hi, 2] += uz
+
+    chunks = _chunks(targets.shape[0], sources.shape[0])
+    if len(chunks) > 1 and _THREADS > 1:
+        with ThreadPoolExecutor(_THREADS) as pool:
+            list(pool.map(work, chunks))
+    else:
+        for bounds in chunks:
+            work(bounds)
+    return result
+
+
+def _blob_product(pair_function, r_vectors, vector, eta, a, periodic_length, wall, radius_power):
+    """Shared driver of the four equal-radius products (see the public functions)."""
+    r = as_positions(r_vectors)
+    v = as_blob_vectors(vector, r.shape[0])
+    L = as_periodic_length(periodic_length)
+    if wall and L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
+    if wall:
+        r_eff, damping = wall_regularisation(r, a)
+        v = v * damping[:, None]
+    else:
+        r_eff, damping = r, None
+    scaled = r_eff / a
+    u = pair_sum(scaled, scaled, v, L / a, lambda *args: pair_function(*args, wall=wall))
+    if damping is not None:
+        u *= damping[:, None]
+    return (u / (8.0 * np.pi * eta * a ** radius_power)).reshape(-1)
+
+
+def single_wall_mobility_trans_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
+    """Blob velocities (3N,) from blob forces with the Rotne-Prager-Blake tensor."""
+    return _blob_product(pf.trans_times_force_pairs, r_vectors, force, eta, a, periodic_length, True, 1)
+
+
+def no_wall_mobility_trans_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
+    """Blob velocities (3N,) from blob forces with the free-space RPY tensor."""
+    return _blob_product(pf.trans_times_force_pairs, r_vectors, force, eta, a, periodic_length, False, 1)
+
+
+def single_wall_mobility_trans_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
+    """Blob velocities (3N,) from blob torques, with the wall."""
+    return _blob_product(pf.trans_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, True, 2)
+
+
+def no_wall_mobility_trans_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
+    """Blob velocities (3N,) from blob torques in free space."""
+    return _blob_product(pf.trans_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, False, 2)
+
+
+def single_wall_mobility_rot_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
+    """Blob angular velocities (3N,) from blob forces, with the wall."""
+    return _blob_product(pf.rot_times_force_pairs, r_vectors, force, eta, a, periodic_length, True, 2)
+
+
+def no_wall_mobility_rot_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
+    """Blob angular velocities (3N,) from blob forces in free space."""
+    return _blob_product(pf.rot_times_force_pairs, r_vectors, force, eta, a, periodic_length, False, 2)
+
+
+def single_wall_mobility_rot_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
+    """Blob angular velocities (3N,) from blob torques, with the wall."""
+    return _blob_product(pf.rot_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, True, 3)
+
+
+def no_wall_mobility_rot_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
+    """Blob angular velocities (3N,) from blob torques in free space."""
+    return _blob_product(pf.rot_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, False, 3)
+
+
+def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):
+    source = as_positions(source_r, 'source positions')
+    target = as_positions(target_r, 'target positions')
+    f = as_blob_vectors(force, source.shape[0], 'force')
+    a_s = np.broadcast_to(np.asarray(radius_source, dtype=np.float64), (source.shape[0],)).copy()
+    b_t = np.broadcast_to(np.asarray(radius_target, dtype=np.float64), (target.shape[0],)).copy()
+    L = as_periodic_length(periodic_length)
+    if wall and L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
+    damping_t = None
+    if wall:
+        source, damping_s = _regularise_radii(source, a_s)
+        target, damping_t = _regularise_radii(target, b_t)
+        f = f * damping_s[:, None]
+
+    def pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz):
+        return pf.trans_times_force_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz, wall)
+
+    u = pair_sum(target, source, f, L, pairs, extra_target=b_t, extra_source=a_s)
+    if damping_t is not None:
+        u *= damping_t[:, None]
+    return (u / (8.0 * np.pi * eta)).reshape(-1)
+
+
+def _regularise_radii(r, radii):
+    """Per-blob version of wall_regularisation: z_eff = max(z, radius), damping = min(z/radius, 1).
+
+    A point target (radius 0) is undamped above the wall and gets zero velocity below it.
+    """
+    r_eff = r.copy()
+    r_eff[:, 2] = np.maximum(r[:, 2], radii)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        damping = np.where(r[:, 2] >= radii, 1.0, np.where(radii > 0, r[:, 2] / radii, 0.0))
+    return r_eff, damping
+
+
+def single_wall_mobility_source_target(source_r, target_r, force, radius_source, radius_target, eta,
+                                       periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets of radius ``radius_target`` from forces on sources, with the wall."""
+    return _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, True)
+
+
+def no_wall_mobility_source_target(source_r, target_r, force, radius_source, radius_target, eta,
+                                   periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets of radius ``radius_target`` from forces on sources, free space."""
+    return _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, False)
+
+
+# ---------------------------------------------------------------------------
+# Dense matrices (small systems, dense-algebra schemes, preconditioner blocks)
+
+def _dense_trans_trans(r_vectors, eta, a, wall, periodic_length):
+    r = as_positions(r_vectors)
+    n = r.shape[0]
+    L = as_periodic_length(periodic_length)
+    if wall:
+        r_eff, damping = wall_regularisation(r, a)
+    else:
+        r_eff, damping = r, np.ones(n)
+    s = r_eff / a
+    La = L / a
+    M = np.zeros((n, 3, n, 3))
+    dx = minimum_image(s[:, 0:1] - s[None, :, 0], La[0])
+    dy = minimum_image(s[:, 1:2] - s[None, :, 1], La[1])
+    dz = minimum_image(s[:, 2:3] - s[None, :, 2], La[2])
+    zt, zs = s[:, 2:3], s[None, :, 2]
+    eye = np.eye(3)
+    for shift in image_shifts(La):
+        rx, ry, rz = dx + shift[0], dy + shift[1], dz + shift[2]
+        c_iso, c_rr = pf.rpy_trans_trans(rx, ry, rz)
+        rv = np.stack((rx, ry, rz), axis=-1)
+        block = c_iso[..., None, None] * eye + c_rr[..., None, None] * rv[..., :, None] * rv[..., None, :]
+        if wall:
+            ex, ey, ez, f1, f2, f3, f4, f5 = pf.wall_trans_trans(rx, ry, zt, zs)
+            e = np.stack((ex, ey, ez), axis=-1)
+            block += f1[..., None, None] * eye + f2[..., None, None] * e[..., :, None] * e[..., None, :]
+            block[..., :, 2] += f3[..., None] * e
+            block[..., 2, :] += f4[..., None] * e
+            block[..., 2, 2] += f5
+        M += block.transpose(0, 2, 1, 3)
+    M *= (damping[:, None, None, None] * damping[None, None, :, None]) / (8.0 * np.pi * eta * a)
+    return M.reshape(3 * n, 3 * n)
+
+
+def rotne_prager_tensor(r_vectors, eta, a, periodic_length=(0, 0, 0)):
+    """Dense free-space RPY blob mobility, (3N, 3N)."""
+    return _dense_trans_trans(r_vectors, eta, a, False, periodic_length)
+
+
+def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
+    """Dense Rotne-Prager-Blake blob mobility with the wall regularisation, (3N, 3N)."""
+    return _dense_trans_trans(r_vectors, eta, a, True, periodic_length)

@@ -1,0 +1,62 @@
+"""Build script: compiles the C++ kernels with pybind11.
+
+`pip install -e .` builds everything on a machine with a C++ compiler.
+OpenMP is used when the compiler accepts -fopenmp; the build still succeeds
+without it (the kernels then run on one thread).  Set RMB_NATIVE=0 to build
+without -march=native (for a binary that must run on other processors).
+"""
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+from setuptools import setup
+from pybind11.setup_helpers import Pybind11Extension, build_ext
+
+
+def compiler_accepts(flags):
+    """True when the default C++ compiler builds a tiny program with `flags`."""
+    cxx = os.environ.get('CXX') or shutil.which('c++') or shutil.which('g++')
+    if cxx is None:
+        return False
+    with tempfile.TemporaryDirectory() as tmp:
+        source = os.path.join(tmp, 'probe.cpp')
+        with open(source, 'w') as f:
+            f.write('#include <omp.h>\nint main() { return omp_get_max_threads() > 0 ? 0 : 1; }\n'
+                    if '-fopenmp' in flags else 'int main() { return 0; }\n')
+        result = subprocess.run([cxx, source, '-o', os.path.join(tmp, 'probe')] + flags,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return result.returncode == 0
+
+
+compile_args = ['-O3', '-fno-math-errno', '-fno-trapping-math', '-ffp-contract=fast']
+link_args = []
+if sys.platform != 'win32':
+    if os.environ.get('RMB_NATIVE', '1') != '0' and compiler_accepts(['-march=native']):
+        compile_args.append('-march=native')
+    if compiler_accepts(['-fopenmp']):
+        compile_args.append('-fopenmp')
+        link_args.append('-fopenmp')
+    else:
+        print('setup.py: the compiler does not accept -fopenmp; building the kernels single-threaded')
+
+extensions = [
+    Pybind11Extension(
+        'mobility._mobility_cpp',
+        ['mobility/cpp/mobility_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
+]
+
+setup(
+    packages=['body', 'mobility', 'multi_bodies', 'quaternion_integrator',
+              'stochastic_forcing', 'many_bodyMCMC', 'boomerang', 'sphere'],
+    py_modules=['utils'],
+    package_data={'mobility': ['cpp/*.h', 'cuda/*.cu']},
+    ext_modules=extensions,
+    cmdclass={'build_ext': build_ext},
+)
