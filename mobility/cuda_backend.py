@@ -1,0 +1,146 @@
+"""CUDA backend (manual name ``pycuda``): the blob products on an NVIDIA GPU through CuPy.
+
+CuPy is imported when this module is imported, which the registry does only
+when a ``pycuda`` implementation is asked for; the package itself never
+needs CuPy.  The kernels (``cuda/mobility_kernels.cu``) include the same
+pair-formula header as the C++ backend and are compiled once per process by
+NVRTC.
+
+Inputs may be NumPy arrays (copied to the device and back) or CuPy arrays
+(kept on the device; the result is then a CuPy array), so a solver that
+holds its vectors on the GPU pays no host-device transfer per product.
+Computation is in double precision.
+"""
+import os
+
+import numpy as np
+import cupy as cp
+
+_KERNEL_SOURCE = os.path.join(os.path.dirname(__file__), 'cuda', 'mobility_kernels.cu')
+_HEADER_DIR = os.path.join(os.path.dirname(__file__), 'cpp')
+_KINDS = {'trans_times_force': 0, 'trans_times_torque': 1, 'rot_times_force': 2, 'rot_times_torque': 3,
+          'source_target': 4}
+_POWERS = {'trans_times_force': 1, 'trans_times_torque': 2, 'rot_times_force': 2, 'rot_times_torque': 3}
+THREADS_PER_BLOCK = 128
+_module = None
+
+
+def _kernel_name(kind, wall, periodic):
+    return 'blob_product_kernel<%d, %s, %s>' % (_KINDS[kind], 'true' if wall else 'false',
+                                                'true' if periodic else 'false')
+
+
+def _compiled_module():
+    global _module
+    if _module is None:
+        with open(_KERNEL_SOURCE) as f:
+            source = f.read()
+        names = [_kernel_name(k, w, p) for k in _KINDS for w in (True, False) for p in (True, False)]
+        _module = cp.RawModule(code=source, options=('-std=c++17', '-I' + _HEADER_DIR), name_expressions=names)
+        _module.compile()
+    return _module
+
+
+def check_usable():
+    """Raise RuntimeError unless a CUDA device is present and the kernels compile."""
+    if cp.cuda.runtime.getDeviceCount() < 1:
+        raise RuntimeError('no CUDA device found')
+    _compiled_module()
+
+
+def _split_count(n_target_blocks, n_sources):
+    """How many source ranges to split the sum into so that the GPU has enough blocks."""
+    sms = cp.cuda.Device().attributes['MultiProcessorCount']
+    wanted = max(1, -(-4 * sms // max(1, n_target_blocks)))
+    return int(min(wanted, max(1, -(-n_sources // THREADS_PER_BLOCK))))
+
+
+def _packed(r, radius, wall, scale):
+    """Device array (N, 4): x, y, z_eff (in units of scale) and radius; and the damping (N,)."""
+    r = cp.asarray(r, dtype=cp.float64).reshape(-1, 3)
+    radius = cp.broadcast_to(cp.asarray(radius, dtype=cp.float64), (r.shape[0],))
+    packed = cp.empty((r.shape[0], 4), dtype=cp.float64)
+    packed[:, :2] = r[:, :2] / scale
+    z = r[:, 2]
+    if wall:
+        damping = cp.where(z >= radius, 1.0, cp.where(radius > 0, z / cp.where(radius > 0, radius, 1.0), 0.0))
+        z = cp.maximum(z, radius)
+    else:
+        damping = cp.ones(r.shape[0])
+    packed[:, 2] = z / scale
+    packed[:, 3] = radius / scale
+    return packed, damping
+
+
+def _launch(kind, wall, targets, sources, vectors, L_scaled):
+    nt, ns = targets.shape[0], sources.shape[0]
+    periodic = bool(np.any(L_scaled > 0))
+    if wall and L_scaled[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
+    blocks_x = max(1, -(-nt // THREADS_PER_BLOCK))
+    splits = _split_count(blocks_x, ns)
+    out = cp.zeros((nt, 3), dtype=cp.float64)
+    kernel = _compiled_module().get_function(_kernel_name(kind, wall, periodic))
+    kernel((blocks_x, splits), (THREADS_PER_BLOCK,),
+           (targets, np.int32(nt), sources, vectors, np.int32(ns), np.float64(L_scaled[0]),
+            np.float64(L_scaled[1]), np.float64(L_scaled[2]), out),
+           shared_mem=2 * THREADS_PER_BLOCK * 32)
+    return out
+
+
+def _periodic(periodic_length):
+    L = np.asarray((0, 0, 0) if periodic_length is None else periodic_length, dtype=np.float64).reshape(3)
+    if np.any(L < 0):
+        raise ValueError('periodic_length entries must be >= 0')
+    return L
+
+
+def _to_caller(result, like):
+    return result if isinstance(like, cp.ndarray) else cp.asnumpy(result)
+
+
+def _make_product(kind, wall):
+    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+        positions, damping = _packed(r_vectors, a, wall, a)
+        v = cp.zeros((positions.shape[0], 4), dtype=cp.float64)
+        v[:, :3] = cp.asarray(vector, dtype=cp.float64).reshape(-1, 3) * damping[:, None]
+        u = _launch(kind, wall, positions, positions, v, _periodic(periodic_length) / a)
+        u *= damping[:, None] / (8.0 * np.pi * eta * a ** _POWERS[kind])
+        return _to_caller(u.reshape(-1), r_vectors)
+    product.__name__ = '%s_mobility_%s' % ('single_wall' if wall else 'no_wall', kind)
+    product.__doc__ = 'CUDA %s product %s; r_vectors (N, 3), vector (3N,) -> (3N,).' % (
+        'wall' if wall else 'free-space', kind)
+    return product
+
+
+single_wall_mobility_trans_times_force = _make_product('trans_times_force', True)
+no_wall_mobility_trans_times_force = _make_product('trans_times_force', False)
+single_wall_mobility_trans_times_torque = _make_product('trans_times_torque', True)
+no_wall_mobility_trans_times_torque = _make_product('trans_times_torque', False)
+single_wall_mobility_rot_times_force = _make_product('rot_times_force', True)
+no_wall_mobility_rot_times_force = _make_product('rot_times_force', False)
+single_wall_mobility_rot_times_torque = _make_product('rot_times_torque', True)
+no_wall_mobility_rot_times_torque = _make_product('rot_times_torque', False)
+
+
+def _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, wall):
+    sources, damping_s = _packed(source, radius_source, wall, 1.0)
+    targets, damping_t = _packed(target, radius_target, wall, 1.0)
+    v = cp.empty((sources.shape[0], 4), dtype=cp.float64)
+    v[:, :3] = cp.asarray(force, dtype=cp.float64).reshape(-1, 3) * damping_s[:, None]
+    v[:, 3] = sources[:, 3]
+    u = _launch('source_target', wall, targets, sources, v, _periodic(periodic_length))
+    u *= damping_t[:, None] / (8.0 * np.pi * eta)
+    return _to_caller(u.reshape(-1), target)
+
+
+def single_wall_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                       periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets from forces on sources of given radii, with the wall (GPU)."""
+    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, True)
+
+
+def no_wall_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                   periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets from forces on sources of given radii, free space (GPU)."""
+    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, False)
