@@ -298,3 +298,40 @@ def test_shipped_examples_run(tmp_path, monkeypatch):
     assert np.loadtxt(run_dir / 'data' / 'run.velocities.dat').shape == (3, 6)
     assert (run_dir / 'data' / 'run.velocity_field.vtk').exists()
     assert (run_dir / 'data' / 'run.inputfile').read_text() == (run_dir / 'inputfile.dat').read_text()
+
+
+# ------------------------------------------------------------------ default physics (SPEC section 7)
+def test_default_forces_follow_the_formulas():
+    from multi_bodies import multi_bodies_functions as mbf
+    r = np.array([[0.0, 0.0, 0.1], [0.3, 0.0, 2.0], [0.3, 0.2, 2.0]])
+    f = mbf.blob_external_forces(r, g=2.0, repulsion_strength_wall=3.0, debye_length_wall=0.5, blob_radius=0.25)
+    np.testing.assert_allclose(f[:, 2], [-2 + 6.0, -2 + 6.0 * np.exp(-(2 - 0.25) / 0.5),
+                                         -2 + 6.0 * np.exp(-(2 - 0.25) / 0.5)])
+    pair = mbf.calc_blob_blob_forces(r, repulsion_strength=1.5, debye_length=0.7, blob_radius=0.25)
+    np.testing.assert_allclose(pair.sum(axis=0), 0, atol=1e-14)           # action = reaction
+    # Blobs 1 and 2 overlap (0.2 < 2a): force magnitude eps/b, pushing 2 away from 1 along +y.
+    d02 = r[2] - r[0]
+    expected_on_2 = 1.5 / 0.7 * np.array([0, 1.0, 0]) + 1.5 / 0.7 * np.exp(
+        -(np.linalg.norm(d02) - 0.5) / 0.7) * d02 / np.linalg.norm(d02)
+    np.testing.assert_allclose(pair[2], expected_on_2, rtol=1e-13)
+    # Minimum image: blobs 0.2 apart through the periodic boundary of a box of 10.
+    periodic = mbf.calc_blob_blob_forces(np.array([[0.1, 0, 5], [9.9, 0, 5]]), periodic_length=(10, 0, 0),
+                                         repulsion_strength=1.0, debye_length=1.0, blob_radius=0.25)
+    assert periodic[0, 0] > 0 and periodic[1, 0] < 0
+    bb = mbf.calc_body_body_forces_torques(np.array([[0, 0, 0], [2.0, 0, 0]]), repulsion_strength=1.0,
+                                           debye_length=1.0).reshape(-1, 6)
+    magnitude = (1.0 + 0.5) * np.exp(-2.0) / 2.0
+    np.testing.assert_allclose(bb, [[-magnitude, 0, 0, 0, 0, 0], [magnitude, 0, 0, 0, 0, 0]], rtol=1e-14)
+
+
+def test_hooks_can_be_replaced():
+    from multi_bodies import multi_bodies_functions as mbf
+    arrays = bodies_to_arrays(boomerang_bodies(2))
+    r = arrays.blob_positions()
+    original = mbf.blob_external_forces
+    try:
+        mbf.blob_external_forces = lambda r_vectors, **kw: np.tile([1.0, 0, 0], (len(r_vectors), 1))
+        ft = mbf.force_torque_calculator_sort_by_bodies([None, None], arrays, r)
+    finally:
+        mbf.blob_external_forces = original
+    np.testing.assert_allclose(ft.reshape(-1, 6)[:, 0], [15.0, 15.0])
