@@ -13,7 +13,7 @@ from multi_bodies import structure_generators as gen
 from utils import UserInputError
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REFERENCE = os.path.join(REPO_ROOT, '..', 'shared', 'reference')
+REFERENCE = os.environ.get('RMB_REFERENCE_DIR', os.path.join(REPO_ROOT, '..', 'shared', 'reference'))
 SCRIPT = os.path.join(REPO_ROOT, 'multi_bodies', 'multi_bodies_utilities.py')
 needs_reference = pytest.mark.skipif(not os.path.isdir(REFERENCE),
                                      reason='reference data ../shared/reference not present')

@@ -18,7 +18,7 @@ from multi_bodies import structure_generators as gen
 from multi_bodies.structure_files import read_vertex_file
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REFERENCE = os.path.abspath(os.path.join(REPO_ROOT, '..', 'shared', 'reference'))
+REFERENCE = os.path.abspath(os.environ.get('RMB_REFERENCE_DIR', os.path.join(REPO_ROOT, '..', 'shared', 'reference')))
 HAVE_REFERENCE = os.path.isdir(REFERENCE)
 needs_reference = pytest.mark.skipif(not HAVE_REFERENCE, reason='reference data ../shared/reference not present')
 
@@ -108,15 +108,20 @@ ROUNDTRIP_VELOCITY = ('velocity_file run.velocity.dat',
                       'velocity_file ' + os.path.join(MOB_RES, 'A_mobility_python', 'run.velocity.dat'))
 MOB_RES_CASES = ['A_mobility_python', 'A_mobility_C++', 'A_mobility_numba', 'A_mobility_python_blobsC++',
                  'A_mobility_python_gravity', 'A_resistance_python', 'A_resistance_C++',
-                 'A_resistance_roundtrip_python']
+                 'A_resistance_roundtrip_python', 'A_mobility_pycuda']
+# Cases run with another implementation than the published run, compared with that run's outputs.
+DERIVED_CASES = {'A_mobility_pycuda': ('A_mobility_python', [
+    ('mobility_vector_prod_implementation python', 'mobility_vector_prod_implementation pycuda')])}
 
 
 @needs_reference
-@pytest.mark.parametrize('case', MOB_RES_CASES)
+@pytest.mark.parametrize('case', [pytest.param(c, marks=pytest.mark.gpu) if 'pycuda' in c else c
+                                  for c in MOB_RES_CASES])
 def test_mobility_and_resistance_match_published(case, tmp_path, monkeypatch):
-    folder = os.path.join(MOB_RES, case)
+    published_case, extra = DERIVED_CASES.get(case, (case, []))
+    folder = os.path.join(MOB_RES, published_case)
     input_path = rewrite_reference_input(os.path.join(folder, 'run.inputfile'), str(tmp_path),
-                                         [FORCE_FILE, ROUNDTRIP_VELOCITY])
+                                         [FORCE_FILE, ROUNDTRIP_VELOCITY] + extra)
     text = open(input_path).read()
     for line in text.splitlines():
         if line.startswith('mobility_') and not implementation_usable(line.split()[1]):
