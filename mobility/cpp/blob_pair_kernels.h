@@ -32,10 +32,17 @@
 
 namespace rmb {
 
-// Free RPY trans-trans: M = c_iso I + c_rr r r^T (r unnormalised).
-RMB_HD void rpy_trans_trans(double rx, double ry, double rz, double &c_iso, double &c_rr) {
-  const double r2 = rx * rx + ry * ry + rz * rz;
-  const double rinv = r2 > 0.0 ? RMB_RSQRT(r2) : 0.0;
+// 1/sqrt(r2) (0 when r2 == 0) and 1/sqrt(R2) (R2 > 0, the image distance).
+// (Sharing one division between the two, or a Newton-refined single-precision
+// estimate, measured no faster on the CPU: the loop is bound by arithmetic.)
+RMB_HD void two_reciprocal_sqrts(double r2, double R2, double &rinv, double &Rinv) {
+  rinv = r2 > 0.0 ? RMB_RSQRT(r2) : 0.0;
+  Rinv = RMB_RSQRT(R2);
+}
+
+// Free RPY trans-trans: M = c_iso I + c_rr r r^T (r unnormalised), given
+// r2 = |r|^2 and rinv = 1/|r| (0 at r = 0).
+RMB_HD void rpy_trans_trans_coefficients(double r2, double rinv, double &c_iso, double &c_rr) {
   const double rinv2 = rinv * rinv;
   const double r = r2 * rinv;
   const bool far = r2 >= 4.0;
@@ -43,36 +50,46 @@ RMB_HD void rpy_trans_trans(double rx, double ry, double rz, double &c_iso, doub
   c_rr = far ? rinv * rinv2 * (1.0 - 2.0 * rinv2) : 0.125 * rinv;
 }
 
-// Swan-Brady wall correction to trans-trans:
+RMB_HD void rpy_trans_trans(double rx, double ry, double rz, double &c_iso, double &c_rr) {
+  const double r2 = rx * rx + ry * ry + rz * rz;
+  rpy_trans_trans_coefficients(r2, r2 > 0.0 ? RMB_RSQRT(r2) : 0.0, c_iso, c_rr);
+}
+
+// Swan-Brady wall correction to trans-trans,
 //   dM_ab = f1 d_ab + f2 e_a e_b + f3 e_a d_bz + f4 d_az e_b + f5 d_az d_bz,
-// e the unit vector from the source's image to the target.  Written with
-// p = zs/|R| = h_hat e_z so that one reciprocal square root is the only
-// division.
+// e the unit vector from the source's image to the target, rewritten in the
+// unnormalised image vector R = (rx, ry, zt + zs) with u = 1/|R|^2,
+// w = Rz^2 u, q = zt zs u, h = zs (PERFORMANCE.md, design rule 2):
+//   f1 = -P1/|R|, f2 e e^T = -u P2 R R^T/|R|, f3 e = u P3 R/|R|,
+//   f4 e = u P4 R/|R|, f5 = -P5/|R|, so that
+//   dM f = (1/|R|) [ -P1 f + u (P3 f_z - P2 R.f) R + (u P4 R.f - P5 f_z) z ].
+// One reciprocal square root is the only division.
 struct WallTT {
-  double ex, ey, ez, f1, f2, f3, f4, f5;
+  double Rz, Rinv, u, P1, P2, P3, P4, P5;
 };
 
+// Given the image vector's z component Rz = zt + zs and Rinv = 1/|R|.
+RMB_HD WallTT wall_trans_trans_coefficients(double Rz, double Rinv, double zt, double zs) {
+  WallTT c;
+  c.Rz = Rz;
+  c.Rinv = Rinv;
+  const double u = c.Rinv * c.Rinv;
+  const double w = c.Rz * c.Rz * u;
+  const double q = zt * zs * u;
+  const double h = zs;
+  c.u = u;
+  c.P1 = 1.0 + 2.0 * q + (2.0 / 3.0) * u * ((1.0 - 3.0 * w) - u * (1.0 - 5.0 * w));
+  c.P2 = 1.0 - 6.0 * q + u * (-2.0 * (1.0 - 5.0 * w) + (10.0 / 3.0) * u * (1.0 - 7.0 * w));
+  c.P3 = 2.0 * h * (1.0 - 6.0 * w + 6.0 * h * c.Rz * u) +
+         c.Rz * u * (-4.0 * (1.0 - 5.0 * w) + (20.0 / 3.0) * u * (2.0 - 7.0 * w));
+  c.P4 = 2.0 * h - (20.0 / 3.0) * c.Rz * u * u;
+  c.P5 = u * (4.0 * (h * h + w) + (4.0 / 3.0) * u * (2.0 - 15.0 * w));
+  return c;
+}
+
 RMB_HD WallTT wall_trans_trans(double rx, double ry, double zt, double zs) {
-  WallTT w;
   const double Rz = zt + zs;
-  const double Rinv = RMB_RSQRT(rx * rx + ry * ry + Rz * Rz);
-  const double Rinv2 = Rinv * Rinv;
-  const double Rinv3 = Rinv2 * Rinv;
-  const double Rinv5 = Rinv3 * Rinv2;
-  w.ex = rx * Rinv;
-  w.ey = ry * Rinv;
-  w.ez = Rz * Rinv;
-  const double ez = w.ez, ez2 = ez * ez;
-  const double p = zs * Rinv;
-  const double mix = p * ez - p * p;  // h_hat (1 - h_hat) e_z^2
-  const double one3 = 1.0 / 3.0, two3 = 2.0 / 3.0;
-  w.f1 = -one3 * (3.0 * (1.0 + 2.0 * mix) * Rinv + 2.0 * (1.0 - 3.0 * ez2) * Rinv3 - 2.0 * (1.0 - 5.0 * ez2) * Rinv5);
-  w.f2 = -one3 * (3.0 * (1.0 - 6.0 * mix) * Rinv - 6.0 * (1.0 - 5.0 * ez2) * Rinv3 + 10.0 * (1.0 - 7.0 * ez2) * Rinv5);
-  w.f3 = two3 * (3.0 * p * Rinv * (1.0 - 6.0 * ez2 + 6.0 * p * ez) - 6.0 * ez * (1.0 - 5.0 * ez2) * Rinv3
-                 + 10.0 * ez * (2.0 - 7.0 * ez2) * Rinv5);
-  w.f4 = two3 * (3.0 * p * Rinv - 10.0 * ez * Rinv5);
-  w.f5 = -(4.0 / 3.0) * (3.0 * p * p * Rinv + 3.0 * ez2 * Rinv3 + (2.0 - 15.0 * ez2) * Rinv5);
-  return w;
+  return wall_trans_trans_coefficients(Rz, RMB_RSQRT(rx * rx + ry * ry + Rz * Rz), zt, zs);
 }
 
 // u += M_tt(target, source) f.
@@ -86,23 +103,30 @@ RMB_HD void trans_times_force_pair(double rx, double ry, double rz, double zt, d
   uy += c_iso * fy + rf * ry;
   uz += c_iso * fz + rf * rz;
   if (Wall) {
-    const WallTT w = wall_trans_trans(rx, ry, zt, zs);
-    const double ef = w.ex * fx + w.ey * fy + w.ez * fz;
-    const double along_e = w.f2 * ef + w.f3 * fz;
-    ux += w.f1 * fx + along_e * w.ex;
-    uy += w.f1 * fy + along_e * w.ey;
-    uz += w.f1 * fz + along_e * w.ez + w.f4 * ef + w.f5 * fz;
+    const WallTT c = wall_trans_trans(rx, ry, zt, zs);
+    const double Rf = rx * fx + ry * fy + c.Rz * fz;
+    const double along = c.u * (c.P3 * fz - c.P2 * Rf);
+    ux += c.Rinv * (along * rx - c.P1 * fx);
+    uy += c.Rinv * (along * ry - c.P1 * fy);
+    uz += c.Rinv * (along * c.Rz - c.P1 * fz + c.u * c.P4 * Rf - c.P5 * fz);
   }
 }
 
 // Both halves of a pair at once, using the symmetry of the mobility:
-// u_t += M_ts f_s and u_s += M_ts^T f_t (the transpose swaps f3 and f4).
+// u_t += M_ts f_s and u_s += M_ts^T f_t (the transpose swaps P3 and P4).
 template <bool Wall>
 RMB_HD void trans_times_force_pair_both(double rx, double ry, double rz, double zt, double zs, double fsx,
                                         double fsy, double fsz, double ftx, double fty, double ftz, double &utx,
                                         double &uty, double &utz, double &usx, double &usy, double &usz) {
+  const double r2 = rx * rx + ry * ry + rz * rz;
+  const double Rz = zt + zs;
+  double rinv, Rinv;
+  if (Wall)
+    two_reciprocal_sqrts(r2, rx * rx + ry * ry + Rz * Rz, rinv, Rinv);
+  else
+    rinv = r2 > 0.0 ? RMB_RSQRT(r2) : 0.0;
   double c_iso, c_rr;
-  rpy_trans_trans(rx, ry, rz, c_iso, c_rr);
+  rpy_trans_trans_coefficients(r2, rinv, c_iso, c_rr);
   const double rfs = c_rr * (rx * fsx + ry * fsy + rz * fsz);
   const double rft = c_rr * (rx * ftx + ry * fty + rz * ftz);
   utx += c_iso * fsx + rfs * rx;
@@ -112,17 +136,17 @@ RMB_HD void trans_times_force_pair_both(double rx, double ry, double rz, double 
   usy += c_iso * fty + rft * ry;
   usz += c_iso * ftz + rft * rz;
   if (Wall) {
-    const WallTT w = wall_trans_trans(rx, ry, zt, zs);
-    const double efs = w.ex * fsx + w.ey * fsy + w.ez * fsz;
-    const double eft = w.ex * ftx + w.ey * fty + w.ez * ftz;
-    const double along_s = w.f2 * efs + w.f3 * fsz;
-    const double along_t = w.f2 * eft + w.f4 * ftz;
-    utx += w.f1 * fsx + along_s * w.ex;
-    uty += w.f1 * fsy + along_s * w.ey;
-    utz += w.f1 * fsz + along_s * w.ez + w.f4 * efs + w.f5 * fsz;
-    usx += w.f1 * ftx + along_t * w.ex;
-    usy += w.f1 * fty + along_t * w.ey;
-    usz += w.f1 * ftz + along_t * w.ez + w.f3 * eft + w.f5 * ftz;
+    const WallTT c = wall_trans_trans_coefficients(Rz, Rinv, zt, zs);
+    const double Rfs = rx * fsx + ry * fsy + c.Rz * fsz;
+    const double Rft = rx * ftx + ry * fty + c.Rz * ftz;
+    const double along_s = c.u * (c.P3 * fsz - c.P2 * Rfs);
+    const double along_t = c.u * (c.P4 * ftz - c.P2 * Rft);
+    utx += c.Rinv * (along_s * rx - c.P1 * fsx);
+    uty += c.Rinv * (along_s * ry - c.P1 * fsy);
+    utz += c.Rinv * (along_s * c.Rz - c.P1 * fsz + c.u * c.P4 * Rfs - c.P5 * fsz);
+    usx += c.Rinv * (along_t * rx - c.P1 * ftx);
+    usy += c.Rinv * (along_t * ry - c.P1 * fty);
+    usz += c.Rinv * (along_t * c.Rz - c.P1 * ftz + c.u * c.P3 * Rft - c.P5 * ftz);
   }
 }
 
@@ -135,15 +159,15 @@ RMB_HD void trans_trans_block(double rx, double ry, double rz, double zt, double
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) m[3 * a + b] = (a == b ? c_iso : 0.0) + c_rr * r[a] * r[b];
   if (Wall) {
-    const WallTT w = wall_trans_trans(rx, ry, zt, zs);
-    const double e[3] = {w.ex, w.ey, w.ez};
+    const WallTT c = wall_trans_trans(rx, ry, zt, zs);
+    const double R[3] = {rx, ry, c.Rz};
     for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) m[3 * a + b] += (a == b ? w.f1 : 0.0) + w.f2 * e[a] * e[b];
+      for (int b = 0; b < 3; ++b) m[3 * a + b] -= c.Rinv * ((a == b ? c.P1 : 0.0) + c.u * c.P2 * R[a] * R[b]);
     for (int a = 0; a < 3; ++a) {
-      m[3 * a + 2] += w.f3 * e[a];
-      m[6 + a] += w.f4 * e[a];
+      m[3 * a + 2] += c.Rinv * c.u * c.P3 * R[a];
+      m[6 + a] += c.Rinv * c.u * c.P4 * R[a];
     }
-    m[8] += w.f5;
+    m[8] -= c.Rinv * c.P5;
   }
 }
 
