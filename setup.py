@@ -50,6 +50,13 @@ extensions = [
         extra_link_args=link_args,
         cxx_std=17,
     ),
+    Pybind11Extension(
+        'multi_bodies._forces_cpp',
+        ['multi_bodies/cpp/forces_module.cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
 ]
 
 setup(

@@ -17,6 +17,15 @@ class UserInputError(ValueError):
     """
 
 
+class SimulationStopped(RuntimeError):
+    """A run cannot go on (invalid configuration, NaN, solver failure).
+
+    The scripts catch it after the files written so far are complete, print
+    the message (which names the step and what to change) and exit with
+    status 1.
+    """
+
+
 def fail_cleanly(main, *args, **kwargs):
     """Run ``main``; turn a UserInputError into a message and exit status 2."""
     try:

@@ -95,7 +95,9 @@ class BlockDiagonalPreconditioner:
     body_mobilities : list of ndarray (nb, 6, 6)
     """
 
-    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius):
+    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None):
+        """``stacked_mobility`` (optional): ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` that builds the
+        dense blocks of many bodies at once (``multi_bodies.system.stacked_dense_mobility``)."""
         self.body_arrays = body_arrays
         self.cholesky_factors = []
         self.inverse_mobilities = []
@@ -106,7 +108,10 @@ class BlockDiagonalPreconditioner:
             nb = bodies.stop - bodies.start
             r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
             # Building the dense blocks calls the backend once per body (set-up only).
-            M_blocks = np.stack([blob_mobility_matrix(r_body, eta, blob_radius) for r_body in r_type])
+            if stacked_mobility is not None:
+                M_blocks = stacked_mobility(r_type, eta, blob_radius)
+            else:
+                M_blocks = np.stack([blob_mobility_matrix(r_body, eta, blob_radius) for r_body in r_type])
             try:
                 L = np.linalg.cholesky(M_blocks)
                 L_inv = np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape))

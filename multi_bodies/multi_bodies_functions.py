@@ -72,12 +72,15 @@ def blob_blob_force(r, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0
     return -magnitude[..., None] * r
 
 
-def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), **kwargs):
+def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), pair_force=None, **kwargs):
     """Forces of all blob pairs (the ``blob_blob_force`` hook), shape (N, 3).
 
     Pairs use the minimum image on periodic axes; every pair is counted once
-    per blob, so blob i receives ``sum_{j != i} f(r_j - r_i)``.
+    per blob, so blob i receives ``sum_{j != i} f(r_j - r_i)``.  ``pair_force``
+    (default: this module's ``blob_blob_force``) is the law of one pair,
+    vectorised over pairs: ``pair_force(r (..., 3), **kwargs) -> (..., 3)``.
     """
+    pair_force = blob_blob_force if pair_force is None else pair_force
     r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
     n = r_vectors.shape[0]
     forces = np.zeros_like(r_vectors)
@@ -85,7 +88,7 @@ def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), **kwargs):
     for start in range(0, n, rows):
         stop = min(n, start + rows)
         r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)
-        pair = blob_blob_force(r, periodic_length=periodic_length, **kwargs)
+        pair = pair_force(r, periodic_length=periodic_length, **kwargs)
         pair[np.arange(stop - start), np.arange(start, stop)] = 0.0
         forces[start:stop] = np.einsum('ijk->ik', pair)
     return forces
@@ -104,16 +107,19 @@ def body_body_force_torque(r, repulsion_strength=1.0, debye_length=1.0, **kwargs
     return -magnitude[..., None] * r, np.zeros_like(r)
 
 
-def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), **kwargs):
+def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), pair_force_torque=None, **kwargs):
     """Force and torque of all body pairs (the ``body_body_force_torque`` hook), shape (2 Nb, 3).
 
-    Body j receives the opposite of the force and torque body i receives from the pair.
+    Body j receives the opposite of the force and torque body i receives from
+    the pair.  ``pair_force_torque`` (default: this module's
+    ``body_body_force_torque``) is vectorised over pairs.
     """
+    pair_force_torque = body_body_force_torque if pair_force_torque is None else pair_force_torque
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     nb = locations.shape[0]
     r = minimum_image(locations[None, :, :] - locations[:, None, :], periodic_length)
     upper = np.triu(np.ones((nb, nb), dtype=bool), k=1)
-    force, torque = body_body_force_torque(r[upper], periodic_length=periodic_length, **kwargs)
+    force, torque = pair_force_torque(r[upper], periodic_length=periodic_length, **kwargs)
     i_index, j_index = np.nonzero(upper)
     result = np.zeros((nb, 2, 3))
     np.add.at(result[:, 0], i_index, force)
@@ -133,30 +139,145 @@ def set_slip_by_ID(body, slip, **kwargs):
     body.slip_reference = None if slip is None else np.asarray(slip, dtype=float).reshape(-1, 3)
 
 
-def blob_blob_force_calculator(implementation):
+def preprocess(bodies, **kwargs):
+    """Called at the start of every time step with the list of Body objects (default: nothing)."""
+
+
+def postprocess(bodies, **kwargs):
+    """Called after every time step, before the validity check (default: nothing)."""
+
+
+def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=None):
     """The all-pairs blob force function for ``blob_blob_force_implementation``.
 
-    'None' -> None (no blob-blob forces); 'python' -> ``calc_blob_blob_forces``.
-    The compiled force kernels are not part of this build yet.
+    Returns None for 'None' (no blob-blob forces), else
+    ``f(r_vectors (N, 3), **physics_keywords) -> (N, 3)``:
+
+    * 'python': ``calc_blob_blob_forces`` with the pair law ``pair_force``
+      (default this module's ``blob_blob_force``; a user override goes here);
+    * 'C++': the OpenMP kernel of ``multi_bodies._forces_cpp`` (default law);
+    * 'pycuda': ``pycuda_forces`` if given (the function of a
+      ``forces_pycuda_user_defined.py``), else the CuPy kernel of
+      ``multi_bodies.forces_pycuda`` (imported only here).
     """
     if implementation == 'None':
         return None
     if implementation == 'python':
-        return lambda r_vectors, **kw: calc_blob_blob_forces(r_vectors, **kw)
-    if implementation in ('C++', 'pycuda'):
-        raise UserInputError("blob_blob_force_implementation '%s' is not available in this build; "
-                             "use python or None" % implementation)
-    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None or python" % implementation)
+        return lambda r_vectors, **kw: calc_blob_blob_forces(r_vectors, pair_force=pair_force, **kw)
+    if implementation == 'C++':
+        try:
+            from multi_bodies import _forces_cpp
+        except ImportError as err:
+            raise UserInputError("blob_blob_force_implementation C++: the extension multi_bodies._forces_cpp "
+                                 "is not built (%s); run 'pip install -e .' or use python" % err)
+
+        def cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0, debye_length=1.0,
+                       blob_radius=1.0, **kw):
+            return _forces_cpp.blob_blob_forces(np.asarray(r_vectors, dtype=float).reshape(-1, 3),
+                                                np.asarray(periodic_length, dtype=float).reshape(3),
+                                                float(repulsion_strength), float(debye_length), float(blob_radius))
+        return cpp_forces
+    if implementation == 'pycuda':
+        if pycuda_forces is not None:
+            return pycuda_forces
+        try:
+            from multi_bodies import forces_pycuda
+            forces_pycuda.check_usable()
+        except Exception as err:  # no CuPy, no GPU, compiler failure
+            raise UserInputError("blob_blob_force_implementation pycuda cannot run on this machine (%s: %s); "
+                                 "use C++ or python" % (type(err).__name__, err))
+        return forces_pycuda.calc_blob_blob_forces_pycuda
+    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ or pycuda"
+                         % implementation)
 
 
-def body_body_force_calculator(implementation):
-    """'None' -> None; 'python' -> ``calc_body_body_forces_torques``."""
+def body_body_force_calculator(implementation, pair_force_torque=None):
+    """'None' -> None; 'python' -> ``calc_body_body_forces_torques`` with the pair law ``pair_force_torque``."""
     if implementation == 'None':
         return None
     if implementation == 'python':
-        return lambda locations, **kw: calc_body_body_forces_torques(locations, **kw)
+        return lambda locations, **kw: calc_body_body_forces_torques(locations, pair_force_torque=pair_force_torque,
+                                                                     **kw)
     raise UserInputError("body_body_force_torque_implementation '%s' is unknown; use None or python"
                          % implementation)
+
+
+# ---------------------------------------------------------------------------------------------- overrides
+HOOK_NAMES = ('blob_external_forces', 'blob_blob_force', 'body_body_force_torque', 'bodies_external_force_torque',
+              'set_slip_by_ID', 'preprocess', 'postprocess')
+USER_FILE = 'user_defined_functions.py'
+USER_PYCUDA_FILE = 'forces_pycuda_user_defined.py'
+
+
+class PhysicsHooks:
+    """The physics hooks of one run: this module's defaults, some replaced by the user's files.
+
+    Attributes are the functions of ``HOOK_NAMES`` plus
+    ``calc_blob_blob_forces_pycuda`` (None unless a ``forces_pycuda_user_defined.py``
+    supplied it); ``overridden`` lists what the user's files replaced and
+    ``sources`` the files read.
+    """
+
+    def __init__(self):
+        for name in HOOK_NAMES:
+            setattr(self, name, globals()[name])
+        self.calc_blob_blob_forces_pycuda = None
+        self.overridden = []
+        self.sources = []
+
+    def is_default(self, name):
+        return name not in self.overridden
+
+
+def _import_file(path, module_name):
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as err:
+        raise UserInputError('%s: could not be imported (%s: %s); fix the file or remove it from the run directory'
+                             % (path, type(err).__name__, err))
+    return module
+
+
+def load_user_hooks(directory='.'):
+    """Physics hooks for a run in ``directory``, with the user's overrides.
+
+    If ``directory/user_defined_functions.py`` exists it is imported, and every
+    function of ``HOOK_NAMES`` it defines replaces the default (the manual's
+    singular name ``blob_external_force`` is accepted for
+    ``blob_external_forces``).  Conventions, all vectorised:
+    ``blob_external_forces(r_vectors (N,3), **kw) -> (N,3)``;
+    ``blob_blob_force(r (...,3), **kw) -> (...,3)`` (r from blob i to blob j,
+    force on i); ``body_body_force_torque(r (...,3), **kw) -> (force, torque)``;
+    ``bodies_external_force_torque(bodies, r_vectors, **kw) -> (2Nb, 3)``;
+    ``set_slip_by_ID(body, slip)``; ``preprocess(bodies)``; ``postprocess(bodies)``.
+    If ``directory/forces_pycuda_user_defined.py`` exists, its
+    ``calc_blob_blob_forces_pycuda(r_vectors, **kw) -> (N, 3)`` is used by
+    ``blob_blob_force_implementation pycuda``.
+    """
+    import os
+    hooks = PhysicsHooks()
+    path = os.path.join(directory, USER_FILE)
+    if os.path.isfile(path):
+        module = _import_file(path, 'user_defined_functions')
+        hooks.sources.append(path)
+        aliases = {'blob_external_force': 'blob_external_forces'}
+        for name in list(HOOK_NAMES) + list(aliases):
+            if callable(getattr(module, name, None)):
+                target = aliases.get(name, name)
+                setattr(hooks, target, getattr(module, name))
+                hooks.overridden.append(target)
+    path = os.path.join(directory, USER_PYCUDA_FILE)
+    if os.path.isfile(path):
+        module = _import_file(path, 'forces_pycuda_user_defined')
+        hooks.sources.append(path)
+        if not callable(getattr(module, 'calc_blob_blob_forces_pycuda', None)):
+            raise UserInputError('%s must define calc_blob_blob_forces_pycuda(r_vectors, **kwargs)' % path)
+        hooks.calc_blob_blob_forces_pycuda = module.calc_blob_blob_forces_pycuda
+        hooks.overridden.append('calc_blob_blob_forces_pycuda')
+    return hooks
 
 
 def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_blob_forces=None,
