@@ -10,6 +10,7 @@
 #include <pybind11/pybind11.h>
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -126,6 +127,22 @@ Array flat_result(const std::vector<double> &ux, const std::vector<double> &uy, 
   return out;
 }
 
+#if defined(__AVX512F__)
+inline rmb::double8 load8(const double *p) {
+  rmb::double8 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline void store8(double *p, rmb::double8 v) { std::memcpy(p, &v, sizeof v); }
+
+inline double horizontal_sum(rmb::double8 v) {
+  double sum = 0.0;
+  for (int k = 0; k < 8; ++k) sum += v[k];
+  return sum;
+}
+#endif
+
 // Trans-trans product, each unordered pair once.
 template <bool Wall, bool Periodic>
 void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
@@ -150,10 +167,33 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
       for (std::size_t s = 0; s < n_shifts; ++s)
         rmb::trans_times_force_pair<Wall>(shifts[3 * s], shifts[3 * s + 1], shifts[3 * s + 2], zi, zi, fxi, fyi, fzi,
                                           uxi, uyi, uzi);
+      std::size_t j_first = i + 1;
+#if defined(__AVX512F__)
+      if (!Periodic) {
+        // eight sources at a time in explicit vectors (see blob_pair_kernels.h)
+        using V = rmb::double8;
+        const V vxi = V{} + xi, vyi = V{} + yi, vzi = V{} + zi, vfxi = V{} + fxi, vfyi = V{} + fyi,
+                vfzi = V{} + fzi;
+        V vux{}, vuy{}, vuz{};
+        for (; j_first + 8 <= n; j_first += 8) {
+          const std::size_t j = j_first;
+          V usx{}, usy{}, usz{};
+          rmb::trans_times_force_pair_both<Wall, V>(vxi - load8(x + j), vyi - load8(y + j), vzi - load8(z + j), vzi,
+                                                    load8(z + j), load8(fx + j), load8(fy + j), load8(fz + j), vfxi,
+                                                    vfyi, vfzi, vux, vuy, vuz, usx, usy, usz);
+          store8(ax + j, load8(ax + j) + usx);
+          store8(ay + j, load8(ay + j) + usy);
+          store8(az + j, load8(az + j) + usz);
+        }
+        uxi += horizontal_sum(vux);
+        uyi += horizontal_sum(vuy);
+        uzi += horizontal_sum(vuz);
+      }
+#endif
       for (std::size_t s = 0; s < n_shifts; ++s) {
         const double sx = shifts[3 * s], sy = shifts[3 * s + 1], sz = shifts[3 * s + 2];
 #pragma omp simd reduction(+ : uxi, uyi, uzi)
-        for (std::size_t j = i + 1; j < n; ++j) {
+        for (std::size_t j = j_first; j < n; ++j) {
           double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
           if (Periodic) {
             rx = rmb::minimum_image(rx, Lx) + sx;
