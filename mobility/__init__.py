@@ -22,6 +22,7 @@ Shapes and units: ``r_vectors`` (N, 3) in length units, the wall at z = 0;
 same unit system.
 """
 from . import python_backend as _python
+from .product_names import PRODUCT_KINDS
 from .backends import (available_implementations, blob_mobility_matrix, blob_product, load_backend,
                        mobility_vector_product, source_target_product, split_implementation_name, usable_names)
 
@@ -69,7 +70,7 @@ def _public_source_target(domain):
 
 
 for _domain in ('single_wall', 'no_wall'):
-    for _kind in ('trans_times_force', 'trans_times_torque', 'rot_times_force', 'rot_times_torque'):
+    for _kind in PRODUCT_KINDS:
         _name = '%s_mobility_%s' % (_domain, _kind)
         globals()[_name] = _public_product(_domain, _kind)
         __all__.append(_name)

@@ -15,11 +15,12 @@ import importlib
 
 from utils import UserInputError
 
+from .product_names import PRODUCT_KINDS as _PRODUCT_KINDS
+
 _BACKEND_MODULES = {'python': 'mobility.python_backend',
                     'C++': 'mobility.cpp_backend',
                     'pycuda': 'mobility.cuda_backend'}
 _ALIASES = {'numba': 'C++'}
-_PRODUCT_KINDS = ('trans_times_force', 'trans_times_torque', 'rot_times_force', 'rot_times_torque')
 _loaded = {}
 _failures = {}
 

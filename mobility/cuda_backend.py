@@ -16,6 +16,8 @@ import os
 import numpy as np
 import cupy as cp
 
+from .product_names import product_functions, source_target_functions
+
 _KERNEL_SOURCE = os.path.join(os.path.dirname(__file__), 'cuda', 'mobility_kernels.cu')
 _HEADER_DIR = os.path.join(os.path.dirname(__file__), 'cpp')
 _KINDS = {'trans_times_force': 0, 'trans_times_torque': 1, 'rot_times_force': 2, 'rot_times_torque': 3,
@@ -107,20 +109,7 @@ def _make_product(kind, wall):
         u = _launch(kind, wall, positions, positions, v, _periodic(periodic_length) / a)
         u *= damping[:, None] / (8.0 * np.pi * eta * a ** _POWERS[kind])
         return _to_caller(u.reshape(-1), r_vectors)
-    product.__name__ = '%s_mobility_%s' % ('single_wall' if wall else 'no_wall', kind)
-    product.__doc__ = 'CUDA %s product %s; r_vectors (N, 3), vector (3N,) -> (3N,).' % (
-        'wall' if wall else 'free-space', kind)
     return product
-
-
-single_wall_mobility_trans_times_force = _make_product('trans_times_force', True)
-no_wall_mobility_trans_times_force = _make_product('trans_times_force', False)
-single_wall_mobility_trans_times_torque = _make_product('trans_times_torque', True)
-no_wall_mobility_trans_times_torque = _make_product('trans_times_torque', False)
-single_wall_mobility_rot_times_force = _make_product('rot_times_force', True)
-no_wall_mobility_rot_times_force = _make_product('rot_times_force', False)
-single_wall_mobility_rot_times_torque = _make_product('rot_times_torque', True)
-no_wall_mobility_rot_times_torque = _make_product('rot_times_torque', False)
 
 
 def _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, wall):
@@ -134,13 +123,5 @@ def _source_target(source, target, force, radius_source, radius_target, eta, per
     return _to_caller(u.reshape(-1), target)
 
 
-def single_wall_mobility_source_target(source, target, force, radius_source, radius_target, eta,
-                                       periodic_length=(0, 0, 0)):
-    """Velocity (3Nt,) at targets from forces on sources of given radii, with the wall (GPU)."""
-    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, True)
-
-
-def no_wall_mobility_source_target(source, target, force, radius_source, radius_target, eta,
-                                   periodic_length=(0, 0, 0)):
-    """Velocity (3Nt,) at targets from forces on sources of given radii, free space (GPU)."""
-    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, False)
+globals().update(product_functions(_make_product, 'CUDA'))
+globals().update(source_target_functions(_source_target, 'CUDA'))

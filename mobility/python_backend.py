@@ -15,6 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import pair_formulas as pf
+from .product_names import product_functions, source_target_functions
 
 PAIRS_PER_CHUNK = 1 << 17
 _THREADS = max(1, min(2, os.cpu_count() or 1))
@@ -146,44 +147,21 @@ def _blob_product(pair_function, r_vectors, vector, eta, a, periodic_length, wal
     return (u / (8.0 * np.pi * eta * a ** radius_power)).reshape(-1)
 
 
-def single_wall_mobility_trans_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
-    """Blob velocities (3N,) from blob forces with the Rotne-Prager-Blake tensor."""
-    return _blob_product(pf.trans_times_force_pairs, r_vectors, force, eta, a, periodic_length, True, 1)
+_PAIR_FUNCTIONS = {'trans_times_force': (pf.trans_times_force_pairs, 1),
+                   'trans_times_torque': (pf.trans_times_torque_pairs, 2),
+                   'rot_times_force': (pf.rot_times_force_pairs, 2),
+                   'rot_times_torque': (pf.rot_times_torque_pairs, 3)}
 
 
-def no_wall_mobility_trans_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
-    """Blob velocities (3N,) from blob forces with the free-space RPY tensor."""
-    return _blob_product(pf.trans_times_force_pairs, r_vectors, force, eta, a, periodic_length, False, 1)
+def _make_product(kind, wall):
+    pair_function, radius_power = _PAIR_FUNCTIONS[kind]
+
+    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+        return _blob_product(pair_function, r_vectors, vector, eta, a, periodic_length, wall, radius_power)
+    return product
 
 
-def single_wall_mobility_trans_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
-    """Blob velocities (3N,) from blob torques, with the wall."""
-    return _blob_product(pf.trans_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, True, 2)
-
-
-def no_wall_mobility_trans_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
-    """Blob velocities (3N,) from blob torques in free space."""
-    return _blob_product(pf.trans_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, False, 2)
-
-
-def single_wall_mobility_rot_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
-    """Blob angular velocities (3N,) from blob forces, with the wall."""
-    return _blob_product(pf.rot_times_force_pairs, r_vectors, force, eta, a, periodic_length, True, 2)
-
-
-def no_wall_mobility_rot_times_force(r_vectors, force, eta, a, periodic_length=(0, 0, 0)):
-    """Blob angular velocities (3N,) from blob forces in free space."""
-    return _blob_product(pf.rot_times_force_pairs, r_vectors, force, eta, a, periodic_length, False, 2)
-
-
-def single_wall_mobility_rot_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
-    """Blob angular velocities (3N,) from blob torques, with the wall."""
-    return _blob_product(pf.rot_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, True, 3)
-
-
-def no_wall_mobility_rot_times_torque(r_vectors, torque, eta, a, periodic_length=(0, 0, 0)):
-    """Blob angular velocities (3N,) from blob torques in free space."""
-    return _blob_product(pf.rot_times_torque_pairs, r_vectors, torque, eta, a, periodic_length, False, 3)
+globals().update(product_functions(_make_product, 'NumPy'))
 
 
 def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):
@@ -222,16 +200,7 @@ def _regularise_radii(r, radii):
     return r_eff, damping
 
 
-def single_wall_mobility_source_target(source_r, target_r, force, radius_source, radius_target, eta,
-                                       periodic_length=(0, 0, 0)):
-    """Velocity (3Nt,) at targets of radius ``radius_target`` from forces on sources, with the wall."""
-    return _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, True)
-
-
-def no_wall_mobility_source_target(source_r, target_r, force, radius_source, radius_target, eta,
-                                   periodic_length=(0, 0, 0)):
-    """Velocity (3Nt,) at targets of radius ``radius_target`` from forces on sources, free space."""
-    return _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, False)
+globals().update(source_target_functions(_source_target, 'NumPy'))
 
 
 # ---------------------------------------------------------------------------
