@@ -260,7 +260,8 @@ def run(options, print_residual=False):
         raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
     if options.domain not in ('single_wall', 'no_wall'):
         raise utils.UserInputError("%s: domain must be single_wall or no_wall" % options.where('domain'))
-    hooks = multi_bodies_functions.load_user_hooks(os.getcwd())
+    hooks = multi_bodies_functions.load_user_hooks(
+        os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
     if hooks.overridden:
         print('user-defined physics from %s: %s' % (', '.join(hooks.sources), ', '.join(hooks.overridden)))
     bodies, types = read_bodies(options, hooks)

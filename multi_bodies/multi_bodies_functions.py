@@ -241,7 +241,7 @@ def _import_file(path, module_name):
     return module
 
 
-def load_user_hooks(directory='.'):
+def load_user_hooks(directory='.', load_pycuda=True):
     """Physics hooks for a run in ``directory``, with the user's overrides.
 
     If ``directory/user_defined_functions.py`` exists it is imported, and every
@@ -270,7 +270,7 @@ def load_user_hooks(directory='.'):
                 setattr(hooks, target, getattr(module, name))
                 hooks.overridden.append(target)
     path = os.path.join(directory, USER_PYCUDA_FILE)
-    if os.path.isfile(path):
+    if load_pycuda and os.path.isfile(path):
         module = _import_file(path, 'forces_pycuda_user_defined')
         hooks.sources.append(path)
         if not callable(getattr(module, 'calc_blob_blob_forces_pycuda', None)):

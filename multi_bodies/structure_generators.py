@@ -148,6 +148,21 @@ def rod(num_blobs, spacing):
     return np.column_stack((x, np.zeros(num_blobs), np.zeros(num_blobs)))
 
 
+def squirmer_slip(blobs, B1=1.0, beta=0.0, axis=(1.0, 0.0, 0.0)):
+    """Tangential slip of a squirmer on a shell of blobs (body frame), shape (n, 3).
+
+    With ``n`` the unit vector from the centre to a blob and ``cos t = n . e``
+    (``e`` the swimming axis): ``u = B1 (1 + beta cos t) (cos t n - e)``,
+    i.e. ``B1 (1 + beta cos t) sin t`` along the polar direction, pushing the
+    fluid backwards; in free space the sphere swims along ``e`` at ``2 B1 / 3``.
+    """
+    n = np.asarray(blobs, dtype=float)
+    n = n / np.linalg.norm(n, axis=1)[:, None]
+    e = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    cos_t = n @ e
+    return (B1 * (1.0 + beta * cos_t))[:, None] * (cos_t[:, None] * n - e)
+
+
 def _format_number(value):
     return ('%.4f' % value).replace('.', '_')
 
@@ -166,7 +181,11 @@ def main(argv=None):
     p_rod = sub.add_parser('rod', help='straight rod along x')
     p_rod.add_argument('--blobs', type=int, required=True)
     p_rod.add_argument('--spacing', type=float, required=True)
-    for p in (p_shell, p_boom, p_rod):
+    p_slip = sub.add_parser('squirmer-slip', help='slip file of a squirmer on a calibrated shell')
+    p_slip.add_argument('--blobs', type=int, required=True, help='12, 42, 162, ... blobs of the shell')
+    p_slip.add_argument('--B1', type=float, default=1.0, help='first squirming mode (swimming speed 2 B1/3)')
+    p_slip.add_argument('--beta', type=float, default=0.0, help='B2/B1 (pusher < 0 < puller)')
+    for p in (p_shell, p_boom, p_rod, p_slip):
         p.add_argument('--output', default='.', help='folder for the .vertex file (default: .)')
     args = parser.parse_args(argv)
 
@@ -182,6 +201,14 @@ def main(argv=None):
         name = 'shell_N_%d_Rg_%s_Rh_1.vertex' % (args.blobs, _format_number(radius))
         note = ('icosahedral shell, %d blobs, shell radius Rg = %.12g, hydrodynamic radius 1\n'
                 'use blob_radius %.12g' % (args.blobs, radius, blob_radius))
+    elif args.kind == 'squirmer-slip':
+        shell, _, radius = calibrated_shell(args.blobs)
+        blobs = squirmer_slip(shell, args.B1, args.beta)
+        blob_radius = None
+        name = 'shell_N_%d_Rg_%s_Rh_1_squirmer_B1_%s.slip' % (args.blobs, _format_number(radius),
+                                                              ('%g' % args.B1).replace('.', '_'))
+        note = ('squirmer slip (body frame, axis +x), B1 = %g, beta = %g, for shell_N_%d_Rg_%s_Rh_1.vertex'
+                % (args.B1, args.beta, args.blobs, _format_number(radius)))
     elif args.kind == 'boomerang':
         blobs = boomerang(args.arm_blobs, args.spacing)
         blob_radius = None
