@@ -236,22 +236,47 @@ def test_far_field_tends_to_oseen():
         assert np.max(np.abs(M - oseen)) < 2.0 / distance ** 3
 
 
-def test_backends_agree_on_large_random_systems():
+def large_random_system(n, periodic_length, seed):
+    rng = np.random.default_rng(seed)
+    a = 0.25
+    box = np.sqrt(n / 0.5) if periodic_length[0] == 0 else periodic_length[0]
+    r = np.column_stack([rng.uniform(0, box, n), rng.uniform(0, box, n), rng.uniform(0.2 * a, 5, n)])
+    return r, rng.standard_normal(3 * n), a
+
+
+@pytest.mark.parametrize('n, periodic_length, kinds', [
+    (2000, (0.0, 0.0, 0.0), ['trans_times_force']),
+    (2000, (40.0, 35.0, 0.0), ['trans_times_force']),
+    (600, (8.0, 7.0, 0.0), PRODUCT_KINDS),
+    (600, (0.0, 0.0, 0.0), PRODUCT_KINDS)])
+def test_backends_agree_on_large_random_systems(n, periodic_length, kinds):
     """Python and C++ against each other on thousands of blobs, wall and free, periodic and not."""
     if not backends.is_usable('C++'):
         pytest.skip('C++ backend not built')
-    rng = np.random.default_rng(11)
-    a = 0.25
-    for n, L in ((2000, (0.0, 0.0, 0.0)), (600, (8.0, 7.0, 0.0))):
-        box = np.sqrt(n / 0.5) if L[0] == 0 else L[0]
-        r = np.column_stack([rng.uniform(0, box, n), rng.uniform(0, box, n), rng.uniform(0.2 * a, 5, n)])
-        f = rng.standard_normal(3 * n)
-        for suffix in ('', '_no_wall'):
-            kinds = PRODUCT_KINDS if n <= 600 else ['trans_times_force']
-            for kind in kinds:
-                u_py = mobility.blob_product('python' + suffix, kind)(r, f, 1.0, a, L)
-                u_cpp = mobility.blob_product('C++' + suffix, kind)(r, f, 1.0, a, L)
-                assert relative_error(u_cpp, u_py) < 1e-12, (n, L, suffix, kind)
+    r, f, a = large_random_system(n, periodic_length, 11)
+    for suffix in ('', '_no_wall'):
+        for kind in kinds:
+            u_py = mobility.blob_product('python' + suffix, kind)(r, f, 1.0, a, periodic_length)
+            u_cpp = mobility.blob_product('C++' + suffix, kind)(r, f, 1.0, a, periodic_length)
+            assert relative_error(u_cpp, u_py) < 1e-12, (suffix, kind)
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize('periodic_length', [(0.0, 0.0, 0.0), (60.0, 50.0, 0.0)])
+def test_gpu_agrees_with_cpp_on_large_systems(periodic_length):
+    for name in ('pycuda', 'C++'):
+        if not backends.is_usable(name):
+            pytest.skip('%s backend not usable here: %s' % (name, backends.available_implementations()[name]))
+    r, f, a = large_random_system(5000, periodic_length, 12)
+    for suffix in ('', '_no_wall'):
+        for kind in PRODUCT_KINDS:
+            u_gpu = mobility.blob_product('pycuda' + suffix, kind)(r, f, 1.0, a, periodic_length)
+            u_cpp = mobility.blob_product('C++' + suffix, kind)(r, f, 1.0, a, periodic_length)
+            assert relative_error(u_gpu, u_cpp) < GPU_TOLERANCE, (suffix, kind)
+        targets = r[::7] + 0.1
+        v_gpu = mobility.source_target_product('pycuda' + suffix)(r, targets, f, a, 0.05, 1.0, periodic_length)
+        v_cpp = mobility.source_target_product('C++' + suffix)(r, targets, f, a, 0.05, 1.0, periodic_length)
+        assert relative_error(v_gpu, v_cpp) < GPU_TOLERANCE, suffix
 
 
 def test_python_backend_memory_stays_bounded():
@@ -308,3 +333,21 @@ def test_gpu_keeps_device_arrays_on_device(backend):
     assert isinstance(u_device, cp.ndarray)
     u_host = mobility.mobility_vector_product('python')(r, f, 1.0, 0.5)
     assert relative_error(cp.asnumpy(u_device), u_host) < GPU_TOLERANCE
+
+
+@pytest.mark.parametrize('periodic_length', [(0.0, 0.0, 0.0), (8.0, 7.0, 0.0)])
+def test_source_target_backends_agree(periodic_length):
+    """Velocity-field product: C++ equals python for point and finite tracers, above and below a."""
+    if not backends.is_usable('C++'):
+        pytest.skip('C++ backend not built')
+    r, f, a = large_random_system(400, periodic_length, 13)
+    rng = np.random.default_rng(14)
+    targets = np.column_stack([rng.uniform(0, 8, 300), rng.uniform(0, 7, 300), rng.uniform(0.01, 3, 300)])
+    for tracer_radius in (0.0, 0.1, rng.uniform(0.0, 0.5, 300)):
+        for suffix in ('', '_no_wall'):
+            v_py = mobility.source_target_product('python' + suffix)(r, targets, f, a, tracer_radius, 1.0,
+                                                                      periodic_length)
+            v_cpp = mobility.source_target_product('C++' + suffix)(r, targets, f, a, tracer_radius, 1.0,
+                                                                    periodic_length)
+            assert np.all(np.isfinite(v_cpp))
+            assert relative_error(v_cpp, v_py) < 1e-12, (suffix, tracer_radius)
