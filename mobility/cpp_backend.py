@@ -16,8 +16,9 @@ def _L(periodic_length):
 
 
 def _make_product(kind, wall):
-    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
-        return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(a), _L(periodic_length), wall)
+    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
+        return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(a), _L(periodic_length), wall,
+                            precision)
     return product
 
 

@@ -9,7 +9,9 @@ NVRTC.
 Inputs may be NumPy arrays (copied to the device and back) or CuPy arrays
 (kept on the device; the result is then a CuPy array), so a solver that
 holds its vectors on the GPU pays no host-device transfer per product.
-Computation is in double precision.
+Computation is in double precision; ``precision='single'`` runs the pair
+formulas of ``M f`` in float (positions are subtracted and sums kept in
+double), about twice as fast on the GPU with errors near 1e-6.
 """
 import os
 
@@ -27,9 +29,10 @@ THREADS_PER_BLOCK = 128
 _module = None
 
 
-def _kernel_name(kind, wall, periodic):
-    return 'blob_product_kernel<%d, %s, %s>' % (_KINDS[kind], 'true' if wall else 'false',
-                                                'true' if periodic else 'false')
+def _kernel_name(kind, wall, periodic, precision='double'):
+    return 'blob_product_kernel<%d, %s, %s, %s>' % (_KINDS[kind], 'true' if wall else 'false',
+                                                    'true' if periodic else 'false',
+                                                    'float' if precision == 'single' else 'double')
 
 
 def _compiled_module():
@@ -38,6 +41,7 @@ def _compiled_module():
         with open(_KERNEL_SOURCE) as f:
             source = f.read()
         names = [_kernel_name(k, w, p) for k in _KINDS for w in (True, False) for p in (True, False)]
+        names += [_kernel_name('trans_times_force', w, p, 'single') for w in (True, False) for p in (True, False)]
         _module = cp.RawModule(code=source, options=('-std=c++17', '-I' + _HEADER_DIR), name_expressions=names)
         _module.compile()
     return _module
@@ -74,7 +78,7 @@ def _packed(r, radius, wall, scale):
     return packed, damping
 
 
-def _launch(kind, wall, targets, sources, vectors, L_scaled):
+def _launch(kind, wall, targets, sources, vectors, L_scaled, precision='double'):
     nt, ns = targets.shape[0], sources.shape[0]
     periodic = bool(np.any(L_scaled > 0))
     if wall and L_scaled[2] > 0:
@@ -82,7 +86,11 @@ def _launch(kind, wall, targets, sources, vectors, L_scaled):
     blocks_x = max(1, -(-nt // THREADS_PER_BLOCK))
     splits = _split_count(blocks_x, ns)
     out = cp.zeros((nt, 3), dtype=cp.float64)
-    kernel = _compiled_module().get_function(_kernel_name(kind, wall, periodic))
+    if precision not in ('double', 'single'):
+        raise ValueError("precision must be 'double' or 'single', got %r" % (precision,))
+    if precision == 'single' and kind != 'trans_times_force':
+        raise ValueError('single precision is available for trans_times_force only')
+    kernel = _compiled_module().get_function(_kernel_name(kind, wall, periodic, precision))
     kernel((blocks_x, splits), (THREADS_PER_BLOCK,),
            (targets, np.int32(nt), sources, vectors, np.int32(ns), np.float64(L_scaled[0]),
             np.float64(L_scaled[1]), np.float64(L_scaled[2]), out),
@@ -102,11 +110,11 @@ def _to_caller(result, like):
 
 
 def _make_product(kind, wall):
-    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+    def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
         positions, damping = _packed(r_vectors, a, wall, a)
         v = cp.zeros((positions.shape[0], 4), dtype=cp.float64)
         v[:, :3] = cp.asarray(vector, dtype=cp.float64).reshape(-1, 3) * damping[:, None]
-        u = _launch(kind, wall, positions, positions, v, _periodic(periodic_length) / a)
+        u = _launch(kind, wall, positions, positions, v, _periodic(periodic_length) / a, precision)
         u *= damping[:, None] / (8.0 * np.pi * eta * a ** _POWERS[kind])
         return _to_caller(u.reshape(-1), r_vectors)
     return product

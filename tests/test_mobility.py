@@ -351,3 +351,26 @@ def test_source_target_backends_agree(periodic_length):
                                                                     periodic_length)
             assert np.all(np.isfinite(v_cpp))
             assert relative_error(v_cpp, v_py) < 1e-12, (suffix, tracer_radius)
+
+
+@pytest.mark.parametrize('name', ['C++', 'C++_no_wall', 'pycuda', 'pycuda_no_wall'])
+def test_single_precision_product_is_accurate_to_float_rounding(name):
+    """Single precision: relative error against double between 1e-9 and 1e-5
+    (float rounding, eps = 6e-8, over sums of a few thousand pairs) -- and
+    not zero, so the option really changes the arithmetic."""
+    backend = name.split('_')[0]
+    if not backends.is_usable(backend):
+        pytest.skip('%s backend not usable here: %s' % (backend, backends.available_implementations()[backend]))
+    for periodic_length in ((0.0, 0.0, 0.0), (40.0, 35.0, 0.0)):
+        r, f, a = large_random_system(2000, periodic_length, 15)
+        double = mobility.mobility_vector_product(name)(r, f, 1.0, a, periodic_length)
+        single = mobility.mobility_vector_product(name, precision='single')(r, f, 1.0, a, periodic_length)
+        error = relative_error(single, double)
+        assert 1e-9 < error < 1e-5, (periodic_length, error)
+
+
+def test_single_precision_is_refused_where_not_offered():
+    with pytest.raises(UserInputError, match='compiled backends'):
+        mobility.mobility_vector_product('python', precision='single')
+    with pytest.raises(UserInputError, match='precision must be'):
+        mobility.mobility_vector_product('python', precision='half')

@@ -41,6 +41,21 @@ namespace rmb {
 // division or square root, which would otherwise take a quarter of the time.
 RMB_HD double reciprocal_sqrt(double x) { return RMB_RSQRT(x); }
 
+// Single precision (an option of the compiled backends; differences of
+// positions are still taken in double before the pair formula).
+#ifdef __CUDACC__
+RMB_HD float reciprocal_sqrt(float x) { return rsqrtf(x); }
+#else
+inline float reciprocal_sqrt(float x) { return 1.0f / std::sqrt(x); }
+#endif
+
+// A constant in the working precision `Real` (double, float or double8), so
+// that single-precision formulas are not promoted to double.
+template <class Real>
+RMB_HD Real lit(double x) {
+  return static_cast<Real>(Real{} + x);
+}
+
 #if defined(__AVX512F__) && !defined(__CUDACC__)
 }  // namespace rmb
 #include <immintrin.h>
@@ -58,7 +73,7 @@ inline double8 reciprocal_sqrt(double8 x) {
 // 1/sqrt(r2) (0 when r2 == 0) and 1/sqrt(R2) (R2 > 0, the image distance).
 template <class Real>
 RMB_HD void two_reciprocal_sqrts(Real r2, Real R2, Real &rinv, Real &Rinv) {
-  rinv = r2 > 0.0 ? reciprocal_sqrt(r2) : Real{};
+  rinv = r2 > lit<Real>(0.0) ? reciprocal_sqrt(r2) : Real{};
   Rinv = reciprocal_sqrt(R2);
 }
 
@@ -66,11 +81,12 @@ RMB_HD void two_reciprocal_sqrts(Real r2, Real R2, Real &rinv, Real &Rinv) {
 // r2 = |r|^2 and rinv = 1/|r| (0 at r = 0).
 template <class Real>
 RMB_HD void rpy_trans_trans_coefficients(Real r2, Real rinv, Real &c_iso, Real &c_rr) {
+  const Real one = lit<Real>(1.0);
   const Real rinv2 = rinv * rinv;
   const Real r = r2 * rinv;
-  const auto far = r2 >= 4.0;
-  c_iso = far ? rinv * (1.0 + (2.0 / 3.0) * rinv2) : (4.0 / 3.0) * (1.0 - (9.0 / 32.0) * r);
-  c_rr = far ? rinv * rinv2 * (1.0 - 2.0 * rinv2) : 0.125 * rinv;
+  const auto far = r2 >= lit<Real>(4.0);
+  c_iso = far ? rinv * (one + lit<Real>(2.0 / 3.0) * rinv2) : lit<Real>(4.0 / 3.0) * (one - lit<Real>(9.0 / 32.0) * r);
+  c_rr = far ? rinv * rinv2 * (one - lit<Real>(2.0) * rinv2) : lit<Real>(0.125) * rinv;
 }
 
 RMB_HD void rpy_trans_trans(double rx, double ry, double rz, double &c_iso, double &c_rr) {
@@ -103,11 +119,14 @@ RMB_HD WallTT<Real> wall_trans_trans_coefficients(Real Rz, Real Rinv, Real zt, R
   const Real q = zt * zs * u;
   const Real h = zs;
   c.u = u;
-  c.P1 = 1.0 + 2.0 * q + (2.0 / 3.0) * u * ((1.0 - 3.0 * w) - u * (1.0 - 5.0 * w));
-  c.P2 = 1.0 - 6.0 * q + u * (-2.0 * (1.0 - 5.0 * w) + (10.0 / 3.0) * u * (1.0 - 7.0 * w));
-  c.P3 = 2.0 * h * (1.0 - 6.0 * w + 6.0 * h * Rz * u) + Rz * u * (-4.0 * (1.0 - 5.0 * w) + (20.0 / 3.0) * u * (2.0 - 7.0 * w));
-  c.P4 = 2.0 * h - (20.0 / 3.0) * Rz * u * u;
-  c.P5 = u * (4.0 * (h * h + w) + (4.0 / 3.0) * u * (2.0 - 15.0 * w));
+  const Real one = lit<Real>(1.0), two = lit<Real>(2.0);
+  const Real one_5w = one - lit<Real>(5.0) * w;
+  c.P1 = one + two * q + lit<Real>(2.0 / 3.0) * u * ((one - lit<Real>(3.0) * w) - u * one_5w);
+  c.P2 = one - lit<Real>(6.0) * q + u * (-two * one_5w + lit<Real>(10.0 / 3.0) * u * (one - lit<Real>(7.0) * w));
+  c.P3 = two * h * (one - lit<Real>(6.0) * w + lit<Real>(6.0) * h * Rz * u) +
+         Rz * u * (lit<Real>(-4.0) * one_5w + lit<Real>(20.0 / 3.0) * u * (two - lit<Real>(7.0) * w));
+  c.P4 = two * h - lit<Real>(20.0 / 3.0) * Rz * u * u;
+  c.P5 = u * (lit<Real>(4.0) * (h * h + w) + lit<Real>(4.0 / 3.0) * u * (two - lit<Real>(15.0) * w));
   return c;
 }
 
@@ -145,7 +164,7 @@ RMB_HD TransTransBlock<Real> trans_trans_coefficients(Real rx, Real ry, Real rz,
     b.a4 = Rinv_u * w.P4;
     b.a5 = Rinv * w.P5;
   } else {
-    rinv = r2 > 0.0 ? reciprocal_sqrt(r2) : Real{};
+    rinv = r2 > lit<Real>(0.0) ? reciprocal_sqrt(r2) : Real{};
     rpy_trans_trans_coefficients(r2, rinv, b.A, b.c_rr);
   }
   return b;
@@ -172,10 +191,10 @@ RMB_HD void apply_trans_trans(const TransTransBlock<Real> &b, Real rx, Real ry, 
 }
 
 // u += M_tt(target, source) f.
-template <bool Wall>
-RMB_HD void trans_times_force_pair(double rx, double ry, double rz, double zt, double zs, double fx, double fy,
-                                   double fz, double &ux, double &uy, double &uz) {
-  const TransTransBlock<double> b = trans_trans_coefficients<Wall>(rx, ry, rz, zt, zs);
+template <bool Wall, class Real = double>
+RMB_HD void trans_times_force_pair(Real rx, Real ry, Real rz, Real zt, Real zs, Real fx, Real fy, Real fz, Real &ux,
+                                   Real &uy, Real &uz) {
+  const TransTransBlock<Real> b = trans_trans_coefficients<Wall>(rx, ry, rz, zt, zs);
   apply_trans_trans<Wall, false>(b, rx, ry, rz, fx, fy, fz, ux, uy, uz);
 }
 

@@ -13,6 +13,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #ifdef _OPENMP
@@ -144,7 +145,7 @@ inline double horizontal_sum(rmb::double8 v) {
 #endif
 
 // Trans-trans product, each unordered pair once.
-template <bool Wall, bool Periodic>
+template <bool Wall, bool Periodic, class Real>
 void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
                                  std::vector<double> &uy, std::vector<double> &uz) {
   const std::size_t n = b.n;
@@ -169,7 +170,7 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
                                           uxi, uyi, uzi);
       std::size_t j_first = i + 1;
 #if defined(__AVX512F__)
-      if (!Periodic) {
+      if (!Periodic && std::is_same<Real, double>::value) {
         // eight sources at a time in explicit vectors (see blob_pair_kernels.h)
         using V = rmb::double8;
         const V vxi = V{} + xi, vyi = V{} + yi, vzi = V{} + zi, vfxi = V{} + fxi, vfyi = V{} + fyi,
@@ -200,9 +201,14 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
             ry = rmb::minimum_image(ry, Ly) + sy;
             rz = rmb::minimum_image(rz, Lz) + sz;
           }
-          double usx = 0.0, usy = 0.0, usz = 0.0;
-          rmb::trans_times_force_pair_both<Wall>(rx, ry, rz, zi, z[j], fx[j], fy[j], fz[j], fxi, fyi, fzi, uxi, uyi,
-                                                 uzi, usx, usy, usz);
+          // positions are subtracted in double; the pair formula runs in Real
+          Real utx{}, uty{}, utz{}, usx{}, usy{}, usz{};
+          rmb::trans_times_force_pair_both<Wall, Real>(Real(rx), Real(ry), Real(rz), Real(zi), Real(z[j]), Real(fx[j]),
+                                                       Real(fy[j]), Real(fz[j]), Real(fxi), Real(fyi), Real(fzi), utx,
+                                                       uty, utz, usx, usy, usz);
+          uxi += utx;
+          uyi += uty;
+          uzi += utz;
           ax[j] += usx;
           ay[j] += usy;
           az[j] += usz;
@@ -256,7 +262,12 @@ void one_sided_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L,
 
 template <bool Wall>
 Array blob_product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
-                   const Array &periodic_length) {
+                   const Array &periodic_length, const std::string &precision) {
+  if (precision != "double" && precision != "single")
+    throw std::invalid_argument("precision must be 'double' or 'single', got '" + precision + "'");
+  const bool single = precision == "single";
+  if (single && kind != "trans_times_force")
+    throw std::invalid_argument("single precision is available for trans_times_force only");
   if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
   const std::size_t n = count_rows(r, "r_vectors");
   Blobs b = make_blobs(r, &vector, std::vector<double>(n, a), a, Wall, "r_vectors");
@@ -267,10 +278,12 @@ Array blob_product(const std::string &kind, const Array &r, const Array &vector,
   {
     py::gil_scoped_release release;
     if (kind == "trans_times_force") {
-      if (periodic)
-        trans_times_force_symmetric<Wall, true>(b, L, ux, uy, uz);
+      if (single)
+        periodic ? trans_times_force_symmetric<Wall, true, float>(b, L, ux, uy, uz)
+                 : trans_times_force_symmetric<Wall, false, float>(b, L, ux, uy, uz);
       else
-        trans_times_force_symmetric<Wall, false>(b, L, ux, uy, uz);
+        periodic ? trans_times_force_symmetric<Wall, true, double>(b, L, ux, uy, uz)
+                 : trans_times_force_symmetric<Wall, false, double>(b, L, ux, uy, uz);
     } else if (kind == "trans_times_torque") {
       power = 2.0;
       if (periodic)
@@ -297,9 +310,9 @@ Array blob_product(const std::string &kind, const Array &r, const Array &vector,
 }
 
 Array product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
-              const Array &periodic_length, bool wall) {
-  return wall ? blob_product<true>(kind, r, vector, eta, a, periodic_length)
-              : blob_product<false>(kind, r, vector, eta, a, periodic_length);
+              const Array &periodic_length, bool wall, const std::string &precision) {
+  return wall ? blob_product<true>(kind, r, vector, eta, a, periodic_length, precision)
+              : blob_product<false>(kind, r, vector, eta, a, periodic_length, precision);
 }
 
 std::vector<double> radii_vector(const Array &radius, std::size_t n, const char *name) {
@@ -397,9 +410,10 @@ Array dense_trans_trans(const Array &r, double eta, double a, const Array &perio
 PYBIND11_MODULE(_mobility_cpp, m) {
   m.doc() = "C++ (OpenMP) blob mobility products; formulas in blob_pair_kernels.h";
   m.def("product", &product, py::arg("kind"), py::arg("r_vectors"), py::arg("vector"), py::arg("eta"), py::arg("a"),
-        py::arg("periodic_length"), py::arg("wall"),
+        py::arg("periodic_length"), py::arg("wall"), py::arg("precision") = "double",
         "Blob product of `kind` (trans_times_force, trans_times_torque, rot_times_force, rot_times_torque); "
-        "r_vectors (N, 3), vector (3N,), returns (3N,).");
+        "r_vectors (N, 3), vector (3N,), returns (3N,). precision: double, or single (trans_times_force only; "
+        "pair formulas in float, sums in double).");
   m.def("source_target", &source_target, py::arg("source"), py::arg("target"), py::arg("force"),
         py::arg("radius_source"), py::arg("radius_target"), py::arg("eta"), py::arg("periodic_length"),
         py::arg("wall"), "Velocity (3Nt,) at targets from forces on sources of given radii.");

@@ -20,10 +20,18 @@ struct __align__(32) Packed4 {
   double x, y, z, w;
 };
 
-template <int Kind, bool Wall>
+template <int Kind, bool Wall, class Real>
 __device__ __forceinline__ void pair_dispatch(double rx, double ry, double rz, double zt, double zs, double bt,
                                               Packed4 v, double &ux, double &uy, double &uz) {
-  if (Kind == 0) rmb::trans_times_force_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
+  if (Kind == 0) {
+    // Real = float: the pair formula in single precision, sums in double
+    Real a = 0, b = 0, c = 0;
+    rmb::trans_times_force_pair<Wall, Real>(Real(rx), Real(ry), Real(rz), Real(zt), Real(zs), Real(v.x), Real(v.y),
+                                            Real(v.z), a, b, c);
+    ux += a;
+    uy += b;
+    uz += c;
+  }
   if (Kind == 1) rmb::trans_times_torque_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
   if (Kind == 2) rmb::rot_times_force_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
   if (Kind == 3) rmb::rot_times_torque_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
@@ -32,8 +40,9 @@ __device__ __forceinline__ void pair_dispatch(double rx, double ry, double rz, d
 
 // Kind: 0 trans_times_force, 1 trans_times_torque, 2 rot_times_force,
 // 3 rot_times_torque, 4 source_target (unequal radii; target radius in
-// targets[i].w, source radius in vectors[j].w).
-template <int Kind, bool Wall, bool Periodic>
+// targets[i].w, source radius in vectors[j].w).  Real: the precision of the
+// pair formula of kind 0 (double, or float); the others are double only.
+template <int Kind, bool Wall, bool Periodic, class Real>
 __global__ void blob_product_kernel(const Packed4 *__restrict__ targets, int n_targets,
                                     const Packed4 *__restrict__ sources, const Packed4 *__restrict__ vectors,
                                     int n_sources, double Lx, double Ly, double Lz, double *__restrict__ out) {
@@ -69,9 +78,9 @@ __global__ void blob_product_kernel(const Packed4 *__restrict__ targets, int n_t
           for (int bx = -nx; bx <= nx; ++bx)
             for (int by = -ny; by <= ny; ++by)
               for (int bz = -nz; bz <= nz; ++bz)
-                pair_dispatch<Kind, Wall>(rx + bx * Lx, ry + by * Ly, rz + bz * Lz, t.z, s.z, t.w, v, ux, uy, uz);
+                pair_dispatch<Kind, Wall, Real>(rx + bx * Lx, ry + by * Ly, rz + bz * Lz, t.z, s.z, t.w, v, ux, uy, uz);
         } else {
-          pair_dispatch<Kind, Wall>(rx, ry, rz, t.z, s.z, t.w, v, ux, uy, uz);
+          pair_dispatch<Kind, Wall, Real>(rx, ry, rz, t.z, s.z, t.w, v, ux, uy, uz);
         }
       }
     }
