@@ -267,7 +267,7 @@ class System:
             return np.zeros((self.num_bodies, 6))
         result = body_solver.solve_mobility_problem(operator, preconditioner, rhs / norm, self.num_blobs,
                                                     self.tolerance, x0=self.first_guess,
-                                                    maxiter=body_solver.GMRES_MAXITER,
+                                                    maxiter=body_solver.GMRES_MAXITER, true_residual=False,
                                                     print_residual=self.print_residual)
         self.last_iterations = result.iterations
         self.gmres_iterations += result.iterations

@@ -1,12 +1,12 @@
 // C++ blob-blob soft repulsion (pybind11 module multi_bodies._forces_cpp).
 //
 // Force on blob i from blob j, with r = r_j - r_i (minimum image on the
-// periodic axes, SPEC section 8) and d = 2a:
+// periodic axes, SPEC section 8; the image of r_i - r_j is minus that of
+// r_j - r_i, so each pair is visited once) and d = 2a:
 //   f_i = -(eps/b) exp(-(|r| - d)/b) r/|r|   for |r| > d,
 //   f_i = -(eps/b) r/|r|                     otherwise,
-// |r| floored by machine epsilon.  Each target blob sums over all sources
-// (no reduction between threads, so OpenMP splits targets freely and the sum
-// order is the same on any number of threads).  Edit blob_pair_force below to
+// |r| floored by machine epsilon.  OpenMP splits the rows i of the pair
+// triangle; every thread has its own force accumulator.  Edit blob_pair_force below to
 // change the law of the C++ backend (then rebuild with pip install -e .).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -39,6 +39,22 @@ inline double blob_pair_force(double distance, double eps_over_b, double inv_b, 
   return eps_over_b * std::exp(-overlap_free * inv_b) / distance;
 }
 
+int max_threads_available() {
+#ifdef _OPENMP
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+int this_thread() {
+#ifdef _OPENMP
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+
 Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
                        double debye_length, double blob_radius) {
   if (!(r_vectors.ndim() == 2 && r_vectors.shape(1) == 3) && !(r_vectors.ndim() == 1 && r_vectors.shape(0) % 3 == 0))
@@ -56,12 +72,15 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
   double *out = result.mutable_data();
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
+    const int threads = max_threads_available();
+    // Each unordered pair is visited once; thread t adds into its own accumulator, summed at the end.
+    std::vector<double> accumulators(static_cast<std::size_t>(threads) * 3 * n, 0.0);
+#pragma omp parallel for schedule(dynamic, 16)
     for (long i = 0; i < n; ++i) {
+      double *acc = accumulators.data() + static_cast<std::size_t>(this_thread()) * 3 * n;
       double fx = 0.0, fy = 0.0, fz = 0.0;
       const double xi = x[i], yi = y[i], zi = z[i];
-      for (long j = 0; j < n; ++j) {
-        if (j == i) continue;
+      for (long j = i + 1; j < n; ++j) {
         const double rx = minimum_image(x[j] - xi, Lx);
         const double ry = minimum_image(y[j] - yi, Ly);
         const double rz = minimum_image(z[j] - zi, Lz);
@@ -69,8 +88,15 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
         if (distance < DBL_EPSILON) distance = DBL_EPSILON;
         const double m = blob_pair_force(distance, eps_over_b, inv_b, contact);
         fx -= m * rx, fy -= m * ry, fz -= m * rz;
+        acc[3 * j] += m * rx, acc[3 * j + 1] += m * ry, acc[3 * j + 2] += m * rz;
       }
-      out[3 * i] = fx, out[3 * i + 1] = fy, out[3 * i + 2] = fz;
+      acc[3 * i] += fx, acc[3 * i + 1] += fy, acc[3 * i + 2] += fz;
+    }
+#pragma omp parallel for schedule(static)
+    for (long k = 0; k < 3 * n; ++k) {
+      double sum = 0.0;
+      for (int t = 0; t < threads; ++t) sum += accumulators[static_cast<std::size_t>(t) * 3 * n + k];
+      out[k] = sum;
     }
   }
   return result;
