@@ -35,6 +35,15 @@ int max_threads() {
 #endif
 }
 
+// Below this many pair evaluations a product runs on one thread: starting a
+// parallel region costs more than it saves, and on a busy machine a team of
+// threads waiting for a descheduled member costs milliseconds.
+constexpr double kMinPairsForThreads = 1e5;
+
+bool worth_threads(std::size_t targets, std::size_t sources) {
+  return static_cast<double>(targets) * static_cast<double>(sources) > kMinPairsForThreads;
+}
+
 int thread_id() {
 #ifdef _OPENMP
   return omp_get_thread_num();
@@ -156,7 +165,7 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
   const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data();
   const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
   const double Lx = L[0], Ly = L[1], Lz = L[2];
-#pragma omp parallel
+#pragma omp parallel if (worth_threads(n, n / 2 * n_shifts))
   {
     double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
     double *ay = ax + n, *az = ay + n;
@@ -239,7 +248,7 @@ void one_sided_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L,
   const double *x = s.x.data(), *y = s.y.data(), *z = s.z.data();
   const double *vx = s.vx.data(), *vy = s.vy.data(), *vz = s.vz.data();
   const double Lx = L[0], Ly = L[1], Lz = L[2];
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (worth_threads(t.n, ns * n_shifts))
   for (std::size_t i = 0; i < t.n; ++i) {
     const double xi = t.x[i], yi = t.y[i], zi = t.z[i];
     double a = 0.0, b = 0.0, c = 0.0;
@@ -328,7 +337,7 @@ void source_target_sum(const Blobs &t, const Blobs &s, const std::vector<double>
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
   ux.assign(t.n, 0.0), uy.assign(t.n, 0.0), uz.assign(t.n, 0.0);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (worth_threads(t.n, s.n * n_shifts))
   for (std::size_t i = 0; i < t.n; ++i) {
     double a = 0.0, b = 0.0, c = 0.0;
     for (std::size_t k = 0; k < n_shifts; ++k)
@@ -371,7 +380,7 @@ void fill_dense(const Blobs &b, const std::vector<double> &L, double factor, dou
   const std::size_t n = b.n, cols = 3 * n;
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (worth_threads(n, n * n_shifts))
   for (std::size_t i = 0; i < n; ++i) {
     double block[9], sum[9];
     for (std::size_t j = 0; j < n; ++j) {

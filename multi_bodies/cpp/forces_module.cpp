@@ -75,7 +75,9 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
     const int threads = max_threads_available();
     // Each unordered pair is visited once; thread t adds into its own accumulator, summed at the end.
     std::vector<double> accumulators(static_cast<std::size_t>(threads) * 3 * n, 0.0);
-#pragma omp parallel for schedule(dynamic, 16)
+    // one thread for small systems: a parallel region costs more than ~1e5 pairs
+    const bool use_threads = static_cast<double>(n) * n > 2e5;
+#pragma omp parallel for schedule(dynamic, 16) if (use_threads)
     for (long i = 0; i < n; ++i) {
       double *acc = accumulators.data() + static_cast<std::size_t>(this_thread()) * 3 * n;
       double fx = 0.0, fy = 0.0, fz = 0.0;
@@ -92,7 +94,7 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
       }
       acc[3 * i] += fx, acc[3 * i + 1] += fy, acc[3 * i + 2] += fz;
     }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (use_threads)
     for (long k = 0; k < 3 * n; ++k) {
       double sum = 0.0;
       for (int t = 0; t < threads; ++t) sum += accumulators[static_cast<std::size_t>(t) * 3 * n + k];
