@@ -23,7 +23,7 @@ same unit system.
 """
 from . import python_backend as _python
 from .product_names import PRODUCT_KINDS
-from .backends import (available_implementations, blob_mobility_matrix, blob_product, load_backend,
+from .backends import (available_implementations, blob_mobility_matrix, blob_product,
                        mobility_vector_product, source_target_product, split_implementation_name, usable_names)
 
 __all__ = ['rotne_prager_tensor', 'single_wall_fluid_mobility', 'available_implementations',

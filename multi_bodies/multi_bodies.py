@@ -43,67 +43,16 @@ except ImportError:
 
 import numpy as np  # noqa: E402
 
-import mobility  # noqa: E402
 import utils  # noqa: E402
-from body.body import Body, bodies_to_arrays  # noqa: E402
+from body.body import bodies_to_arrays  # noqa: E402
 from multi_bodies import multi_bodies_functions  # noqa: E402
 from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies.structure_files import read_clones_file, read_slip_file, read_vertex_file  # noqa: E402
+from multi_bodies.run_setup import clones_name, read_bodies, write_bodies_info  # noqa: E402
 from multi_bodies.system import make_system  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 
 # ------------------------------------------------------------------ set-up
-def clones_name(output_name, structure_id, step):
-    """Name of one snapshot file: ``output_name.ID.<step zero-padded to 8>.clones``."""
-    return '%s.%s.%s.clones' % (output_name, structure_id, str(step).zfill(8))
-
-
-def read_bodies(options, hooks):
-    """Bodies of every ``structure`` line (restart files when ``initial_step > 0``).
-
-    Returns (list of Body, list of (ID, bodies of that type)).  The slip of
-    each body is set by the ``set_slip_by_ID`` hook.
-    """
-    if not options.structures:
-        raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
-                                   % options.input_file)
-    bodies, types = [], []
-    for spec in options.structures:
-        clones = spec.clones_file
-        if options.initial_step > 0:
-            clones = clones_name(options.output_name, spec.ID, options.initial_step)
-            if not os.path.isfile(clones):
-                raise utils.UserInputError(
-                    '%s: initial_step %d restarts from %s, which does not exist; restart from a saved step '
-                    '(save_clones one_file_per_step writes one file per saved step)'
-                    % (options.where('initial_step'), options.initial_step, clones))
-        reference = read_vertex_file(spec.vertex_file, spec.where)
-        locations, orientations = read_clones_file(clones, spec.where)
-        slip = None
-        if spec.slip_file is not None:
-            slip = read_slip_file(spec.slip_file, spec.where)
-            if slip.shape[0] != reference.shape[0]:
-                raise utils.UserInputError('%s: slip file %s has %d blobs but vertex file %s has %d'
-                                           % (spec.where, spec.slip_file, slip.shape[0], spec.vertex_file,
-                                              reference.shape[0]))
-        if 'rollers' in options.scheme and reference.shape[0] != 1:
-            raise utils.UserInputError('%s: roller schemes need single-blob bodies, but %s has %d blobs'
-                                       % (spec.where, spec.vertex_file, reference.shape[0]))
-        print('Creating structures = %s' % clones)
-        body_length = None
-        for location, orientation in zip(locations, orientations):
-            body = Body(location, orientation, reference, options.blob_radius)
-            body.ID = spec.ID
-            hooks.set_slip_by_ID(body, slip)
-            if body_length is None:
-                body_length = body.calc_body_length()
-            body.body_length = body_length
-            bodies.append(body)
-        types.append((spec.ID, locations.shape[0]))
-    return bodies, types
-
-
 def make_generator(options):
     """The run's random generator (SPEC decision 7): restored from ``random_state``, else seeded by ``seed``.
 
@@ -127,16 +76,6 @@ def make_generator(options):
         bit_generator.state = state
         return np.random.Generator(bit_generator)
     return np.random.default_rng(options.seed)
-
-
-def write_bodies_info(path, types, num_blobs):
-    """``.bodies_info``: number of body types, their names, bodies per type, bodies, blobs."""
-    with open(path, 'w') as f:
-        f.write('num_of_body_types  %d\n' % len(types))
-        f.write('body_names         %s\n' % str([name for name, _ in types]))
-        f.write('body_types         %s\n' % str([count for _, count in types]))
-        f.write('num_bodies         %d\n' % sum(count for _, count in types))
-        f.write('num_blobs          %d\n' % num_blobs)
 
 
 # ------------------------------------------------------------------ output while running
@@ -264,7 +203,7 @@ def run(options, print_residual=False):
         os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
     if hooks.overridden:
         print('user-defined physics from %s: %s' % (', '.join(hooks.sources), ', '.join(hooks.overridden)))
-    bodies, types = read_bodies(options, hooks)
+    bodies, types = read_bodies(options, hooks.set_slip_by_ID, single_blob_bodies='rollers' in options.scheme)
     body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)

@@ -38,12 +38,12 @@ import numpy as np  # noqa: E402
 
 import mobility  # noqa: E402
 import utils  # noqa: E402
-from body.body import Body, bodies_to_arrays  # noqa: E402
+from body.body import bodies_to_arrays  # noqa: E402
 from multi_bodies import body_solver  # noqa: E402
 from multi_bodies import multi_bodies_functions  # noqa: E402
 from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies.structure_files import (read_body_table, read_clones_file, read_slip_file,  # noqa: E402
-                                          read_vertex_file)
+from multi_bodies.run_setup import read_bodies, write_bodies_info  # noqa: E402
+from multi_bodies.structure_files import read_body_table  # noqa: E402
 
 SCHEMES = ('body_mobility', 'mobility', 'resistance')
 WALL_FREE_SUFFIX = '_no_wall'
@@ -56,49 +56,6 @@ def backend(options, option_name, registry):
         return registry(name)
     except utils.UserInputError as err:
         raise utils.UserInputError('%s: %s: %s' % (options.where(option_name), option_name, err))
-
-
-def read_bodies(options):
-    """Create the bodies of every ``structure`` line.
-
-    Returns (list of Body, list of (ID, number of bodies) per structure type).
-    """
-    if not options.structures:
-        raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
-                                   % options.input_file)
-    bodies, types = [], []
-    for spec in options.structures:
-        reference = read_vertex_file(spec.vertex_file, spec.where)
-        locations, orientations = read_clones_file(spec.clones_file, spec.where)
-        slip = None
-        if spec.slip_file is not None:
-            slip = read_slip_file(spec.slip_file, spec.where)
-            if slip.shape[0] != reference.shape[0]:
-                raise utils.UserInputError('%s: slip file %s has %d blobs but vertex file %s has %d'
-                                           % (spec.where, spec.slip_file, slip.shape[0], spec.vertex_file,
-                                              reference.shape[0]))
-        print('Creating structures = ', spec.clones_file)
-        body_length = None
-        for location, orientation in zip(locations, orientations):
-            body = Body(location, orientation, reference, options.blob_radius)
-            body.ID = spec.ID
-            multi_bodies_functions.set_slip_by_ID(body, slip)
-            if body_length is None:
-                body_length = body.calc_body_length()
-            body.body_length = body_length
-            bodies.append(body)
-        types.append((spec.ID, locations.shape[0]))
-    return bodies, types
-
-
-def write_bodies_info(path, types, num_blobs):
-    """Write ``.bodies_info``: body types, their names, bodies per type, totals."""
-    with open(path, 'w') as f:
-        f.write('num_of_body_types  %d\n' % len(types))
-        f.write('body_names         %s\n' % str([name for name, _ in types]))
-        f.write('body_types         %s\n' % str([count for _, count in types]))
-        f.write('num_bodies         %d\n' % sum(count for _, count in types))
-        f.write('num_blobs          %d\n' % num_blobs)
 
 
 def check_above_wall(options, body_arrays, r_vectors, implementations):
@@ -227,7 +184,7 @@ def main(argv=None):
         raise utils.UserInputError('%s: blob_radius and eta must be positive' % options.input_file)
     if options.tracer_radius < 0:
         raise utils.UserInputError('%s: tracer_radius must be >= 0' % options.where('tracer_radius'))
-    bodies, types = read_bodies(options)
+    bodies, types = read_bodies(options, multi_bodies_functions.set_slip_by_ID)
 
     output_dir = os.path.dirname(options.output_name)
     if output_dir:

@@ -23,7 +23,6 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 import mobility
-from body.body import K_matrices
 from mobility import pair_formulas as pf
 from multi_bodies import body_solver
 from multi_bodies import multi_bodies_functions as mbf
