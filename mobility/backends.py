@@ -125,6 +125,9 @@ def blob_product(name, kind):
 def blob_mobility_matrix(name):
     """Return ``f(r_vectors (N,3), eta, a, periodic_length=(0,0,0)) -> (3N, 3N)`` for ``name``.
 
+    The function also takes a stack of bodies ``(nb, n, 3)`` and returns their
+    blocks ``(nb, 3n, 3n)`` (each body alone; used by the preconditioner).
+
     Dense matrices are built by the CPU backends only (manual option
     ``mobility_blobs_implementation``: python, C++, and their _no_wall forms).
     """

@@ -31,11 +31,19 @@ globals().update(product_functions(_make_product, 'C++'))
 globals().update(source_target_functions(_source_target, 'C++'))
 
 
+def _dense(r_vectors, eta, a, periodic_length, wall):
+    r = np.asarray(r_vectors, dtype=np.float64)
+    if r.ndim == 3 and r.shape[2] == 3:  # a stack of bodies: one block each
+        return np.stack([_ext.dense_trans_trans(body, float(eta), float(a), _L(periodic_length), wall) for body in r])
+    return _ext.dense_trans_trans(r, float(eta), float(a), _L(periodic_length), wall)
+
+
 def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
-    """Dense (3N, 3N) Rotne-Prager-Blake mobility with the wall regularisation."""
-    return _ext.dense_trans_trans(r_vectors, float(eta), float(a), _L(periodic_length), True)
+    """Dense Rotne-Prager-Blake mobility with the wall regularisation: (N, 3) -> (3N, 3N),
+    or a stack of bodies (nb, n, 3) -> (nb, 3n, 3n)."""
+    return _dense(r_vectors, eta, a, periodic_length, True)
 
 
 def rotne_prager_tensor(r_vectors, eta, a, periodic_length=(0, 0, 0)):
-    """Dense (3N, 3N) free-space RPY mobility."""
-    return _ext.dense_trans_trans(r_vectors, float(eta), float(a), _L(periodic_length), False)
+    """Dense free-space RPY mobility: (N, 3) -> (3N, 3N), or (nb, n, 3) -> (nb, 3n, 3n)."""
+    return _dense(r_vectors, eta, a, periodic_length, False)

@@ -97,7 +97,7 @@ class BlockDiagonalPreconditioner:
 
     def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None):
         """``stacked_mobility`` (optional): ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` that builds the
-        dense blocks of many bodies at once (``multi_bodies.system.stacked_dense_mobility``)."""
+        dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks)."""
         self.body_arrays = body_arrays
         self.cholesky_factors = []
         self.inverse_mobilities = []

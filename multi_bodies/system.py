@@ -23,7 +23,6 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 import mobility
-from mobility import pair_formulas as pf
 from multi_bodies import body_solver
 from multi_bodies import multi_bodies_functions as mbf
 from quaternion_integrator.quaternion import Quaternion
@@ -61,48 +60,6 @@ def resolve_implementation(name, kind='vector_product', log=None):
                 log('%s: auto chose %s (fastest usable here; order %s)' % (kind, chosen, ', '.join(order)))
             return chosen
     raise UserInputError('no usable backend for %s' % name)
-
-
-def stacked_dense_mobility(name):
-    """Dense blob mobilities of many bodies at once, for the preconditioner blocks.
-
-    Returns ``f(r_stack (nb, n, 3), eta, a) -> (nb, 3n, 3n)``.  For the python
-    backend the blocks of all bodies are built in one vectorised pass of the
-    published pair formulas; for the other CPU backends the backend's dense
-    matrix is called per body.  No periodic images (SPEC 4.3).
-    """
-    matrix = mobility.blob_mobility_matrix(name)
-    backend, wall = mobility.backends.split_implementation_name(name)
-    if backend != 'python':
-        return lambda r_stack, eta, a: np.stack([matrix(r, eta, a) for r in r_stack])
-
-    def stacked(r_stack, eta, a):
-        r = np.asarray(r_stack, dtype=float)
-        nb, n, _ = r.shape
-        z = r[..., 2]
-        if wall:
-            with np.errstate(divide='ignore', invalid='ignore'):
-                damping = np.where(z >= a, 1.0, z / a)
-            z = np.maximum(z, a)
-        else:
-            damping = np.ones_like(z)
-        x, y, z = r[..., 0] / a, r[..., 1] / a, z / a
-        rx = x[:, :, None] - x[:, None, :]
-        ry = y[:, :, None] - y[:, None, :]
-        rz = z[:, :, None] - z[:, None, :]
-        c_iso, c_rr = pf.rpy_trans_trans(rx, ry, rz)
-        rv = np.stack((rx, ry, rz), axis=-1)
-        block = c_iso[..., None, None] * np.eye(3) + c_rr[..., None, None] * rv[..., :, None] * rv[..., None, :]
-        if wall:
-            ex, ey, ez, f1, f2, f3, f4, f5 = pf.wall_trans_trans(rx, ry, z[:, :, None], z[:, None, :])
-            e = np.stack((ex, ey, ez), axis=-1)
-            block += f1[..., None, None] * np.eye(3) + f2[..., None, None] * e[..., :, None] * e[..., None, :]
-            block[..., :, 2] += f3[..., None] * e
-            block[..., 2, :] += f4[..., None] * e
-            block[..., 2, 2] += f5
-        block *= (damping[:, :, None, None, None] * damping[:, None, :, None, None]) / (8.0 * np.pi * eta * a)
-        return block.transpose(0, 1, 3, 2, 4).reshape(nb, 3 * n, 3 * n)
-    return stacked
 
 
 def check_finite(values, what):
@@ -155,7 +112,7 @@ class System:
         self.vector_product_name, self.blobs_name = vector_product_name, blobs_name
         self.mobility_product = mobility.mobility_vector_product(vector_product_name)
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
-        self.stacked_mobility = stacked_dense_mobility(blobs_name)
+        self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
         self.blob_blob_forces = mbf.blob_blob_force_calculator(
             blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda)
         self.body_body_forces = mbf.body_body_force_calculator(body_body_name,

@@ -374,3 +374,18 @@ def test_single_precision_is_refused_where_not_offered():
         mobility.mobility_vector_product('python', precision='single')
     with pytest.raises(UserInputError, match='precision must be'):
         mobility.mobility_vector_product('python', precision='half')
+
+
+@pytest.mark.parametrize('name', ['python', 'C++', 'python_no_wall', 'C++_no_wall'])
+def test_dense_matrix_of_a_stack_equals_each_body_alone(name):
+    """Preconditioner blocks: a stack (nb, n, 3) gives each body's own matrix."""
+    backend = name.split('_')[0]
+    if not backends.is_usable(backend):
+        pytest.skip('%s backend not usable here' % backend)
+    rng = np.random.default_rng(21)
+    stack = np.stack([random_configuration(rng, 9, 0.4) for _ in range(5)])
+    blocks = mobility.blob_mobility_matrix(name)(stack, 1.1, 0.4)
+    for body, block in zip(stack, blocks):
+        reference = (mobility.single_wall_fluid_mobility if not name.endswith('_no_wall')
+                     else mobility.rotne_prager_tensor)(body, 1.1, 0.4)
+        assert relative_error(block, reference) < 1e-14
