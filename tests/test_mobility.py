@@ -389,3 +389,15 @@ def test_dense_matrix_of_a_stack_equals_each_body_alone(name):
         reference = (mobility.single_wall_fluid_mobility if not name.endswith('_no_wall')
                      else mobility.rotne_prager_tensor)(body, 1.1, 0.4)
         assert relative_error(block, reference) < 1e-14
+
+
+def test_fluid_velocity_vanishes_on_the_wall(backend):
+    """No-slip: the velocity at point tracers on z = 0 is zero whatever the forces
+    (the image system of Blake 1971 cancels the free-space flow there)."""
+    rng = np.random.default_rng(22)
+    sources = np.column_stack([rng.uniform(0, 5, 20), rng.uniform(0, 5, 20), rng.uniform(0.5, 3, 20)])
+    forces = rng.standard_normal(60)
+    on_wall = np.column_stack([rng.uniform(-2, 7, 30), rng.uniform(-2, 7, 30), np.zeros(30)])
+    velocity = mobility.source_target_product(backend)(sources, on_wall, forces, 0.5, 0.0, 1.0)
+    near = mobility.source_target_product(backend)(sources, on_wall + [0, 0, 0.5], forces, 0.5, 0.0, 1.0)
+    assert np.max(np.abs(velocity)) < 1e-12 * np.max(np.abs(near))
