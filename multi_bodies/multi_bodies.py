@@ -245,8 +245,8 @@ def run(options, print_residual=False):
     except utils.SimulationStopped as err:
         if progress.bar:
             sys.stdout.write('\n')
-        print('error: run stopped: %s. Snapshots up to the last saved step are complete; .info and .time '
-              'are written.' % err, file=sys.stderr)
+        print('error: run stopped: %s%s Snapshots up to the last saved step are complete; .info and .time '
+              'are written.' % (str(err).rstrip('.'), '.'), file=sys.stderr)
         status = 1
     finally:
         elapsed = time.perf_counter() - start
