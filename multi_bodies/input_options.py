@@ -199,7 +199,25 @@ def parse_input_text(text, input_file='<input>'):
             raise UserInputError("%s: unknown option '%s'%s" % (where, name, hint))
         values[name] = _convert(OPTION_TABLE[name][0], name, value, where)
         lines[name] = number
-    return Options(input_file, values, lines, structures)
+    options = Options(input_file, values, lines, structures)
+    check_periodic_box(options)
+    return options
+
+
+def check_periodic_box(options):
+    """A periodic z axis needs free space: above a wall it has no meaning (SPEC §8)."""
+    if options.periodic_length[2] <= 0:
+        return
+    implementations = (options.mobility_vector_prod_implementation, options.mobility_blobs_implementation)
+    wall = any(not name.endswith('_no_wall') for name in implementations)
+    if 'rollers' in options.scheme and options.domain != 'no_wall':
+        wall = True
+    if wall:
+        raise UserInputError(
+            "%s: periodic_length along z is %g, but the simulation has a wall at z = 0; set the third value to 0, "
+            "or choose free space (mobility implementations ending in _no_wall%s)"
+            % (options.where('periodic_length'), options.periodic_length[2],
+               ', domain no_wall' if 'rollers' in options.scheme else ''))
 
 
 def read_input_file(path):

@@ -65,8 +65,12 @@ structure c.vertex dir/d.clones e.slip
     ('\nstructure only_one.vertex\n', ['line 2', 'two or three file names']),
     ('tilt_angle 0.3\n', ['line 1', 'tilt_angle', 'unsupported']),
     ('domType RPB\n', ['line 1', 'unsupported']),
+    ('eta 1\nperiodic_length 4 4 4\n', ['line 2', 'along z', 'wall at z = 0', '_no_wall']),
+    ('scheme deterministic_adams_bashforth_rollers\nmobility_vector_prod_implementation C++_no_wall\n'
+     'mobility_blobs_implementation python_no_wall\nperiodic_length 4 4 4\n', ['line 4', 'domain no_wall']),
 ])
 def test_bad_options_name_file_and_line(text, fragments):
+    """Each mistake gets one message naming the file, the line and the fix."""
     with pytest.raises(UserInputError) as err:
         parse_input_text(text, 'in.dat')
     for fragment in fragments:
@@ -201,3 +205,9 @@ def test_rod_and_generator_command(tmp_path):
     np.testing.assert_allclose(rod[:, 0], [-0.75, -0.25, 0.25, 0.75])
     path = gen.main(['rod', '--blobs', '4', '--spacing', '0.5', '--output', str(tmp_path)])
     np.testing.assert_allclose(read_vertex_file(path), rod)
+
+
+def test_periodic_z_is_accepted_in_free_space():
+    options = parse_input_text('mobility_vector_prod_implementation C++_no_wall\n'
+                               'mobility_blobs_implementation python_no_wall\nperiodic_length 4 4 4\n', 'in.dat')
+    assert tuple(options.periodic_length) == (4.0, 4.0, 4.0)
