@@ -200,8 +200,19 @@ def parse_input_text(text, input_file='<input>'):
         values[name] = _convert(OPTION_TABLE[name][0], name, value, where)
         lines[name] = number
     options = Options(input_file, values, lines, structures)
+    check_ranges(options)
     check_periodic_box(options)
     return options
+
+
+def check_ranges(options):
+    """Values that parse but make no sense: caught here, with the line, not deep in a solver."""
+    if not 0.0 < options.solver_tolerance < 1.0:
+        raise UserInputError('%s: solver_tolerance is a relative tolerance between 0 and 1 (e.g. 1e-8), got %g'
+                             % (options.where('solver_tolerance'), options.solver_tolerance))
+    if options.tracer_radius < 0.0:
+        raise UserInputError('%s: tracer_radius must be >= 0 (0 gives the point velocity), got %g'
+                             % (options.where('tracer_radius'), options.tracer_radius))
 
 
 def check_periodic_box(options):

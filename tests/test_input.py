@@ -66,6 +66,8 @@ structure c.vertex dir/d.clones e.slip
     ('tilt_angle 0.3\n', ['line 1', 'tilt_angle', 'unsupported']),
     ('domType RPB\n', ['line 1', 'unsupported']),
     ('eta 1\nperiodic_length 4 4 4\n', ['line 2', 'along z', 'wall at z = 0', '_no_wall']),
+    ('solver_tolerance 0\n', ['line 1', 'between 0 and 1']),
+    ('tracer_radius -0.5\n', ['line 1', 'tracer_radius must be >= 0']),
     ('scheme deterministic_adams_bashforth_rollers\nmobility_vector_prod_implementation C++_no_wall\n'
      'mobility_blobs_implementation python_no_wall\nperiodic_length 4 4 4\n', ['line 4', 'domain no_wall']),
 ])
