@@ -85,10 +85,33 @@ def format_clones(locations, orientations):
     return '%d\n' % rows.shape[0] + ''.join(' '.join(repr(float(v)) for v in row) + '\n' for row in rows)
 
 
+def multistep_state_name(output_name, step):
+    """File with the previous velocities of Adams-Bashforth at a saved step (for exact restarts)."""
+    return '%s.previous_velocities.%s.dat' % (output_name, str(step).zfill(8))
+
+
+def restore_multistep_state(options, scheme):
+    """On a restart, give a two-step scheme the velocities of the step before ``initial_step``.
+
+    Without that file (runs saved by the published code, or ``one_file``
+    mode) the first step after the restart is a forward Euler step, as in
+    the published code.
+    """
+    if options.initial_step <= 0 or not hasattr(scheme, 'previous_velocities'):
+        return
+    path = multistep_state_name(options.output_name, options.initial_step)
+    if os.path.isfile(path):
+        scheme.previous_velocities = np.loadtxt(path, ndmin=2)
+        print('%s continues from the velocities saved in %s' % (options.scheme, path))
+    else:
+        print('%s restarts with one forward Euler step (%s not found)' % (options.scheme, path))
+
+
 class SnapshotWriter:
     """Writes the configuration of every structure type at the saved steps."""
 
-    def __init__(self, options, types, system):
+    def __init__(self, options, types, system, scheme=None):
+        self.scheme = scheme
         if options.save_clones not in ('one_file_per_step', 'one_file'):
             raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
                                        % (options.where('save_clones'), options.save_clones))
@@ -111,6 +134,11 @@ class SnapshotWriter:
                     f.write(text)
         if self.options.save_blobs_mobility or self.options.save_body_mobility:
             self.save_mobilities(step)
+        previous = getattr(self.scheme, 'previous_velocities', None)
+        if previous is not None:  # what a two-step scheme needs to continue exactly from this step
+            path = multistep_state_name(self.options.output_name, step)
+            np.savetxt(path + '.part', np.asarray(previous).reshape(len(previous), -1), fmt='%.17g')
+            os.replace(path + '.part', path)
 
     def save_mobilities(self, step):
         from multi_bodies import body_solver
@@ -224,7 +252,8 @@ def run(options, print_residual=False):
     with open(options.output_name + '.random_state', 'wb') as f:
         pickle.dump(rng.bit_generator.state, f)
     write_bodies_info(options.output_name + '.bodies_info', types, body_arrays.num_blobs)
-    writer = SnapshotWriter(options, types, system)
+    writer = SnapshotWriter(options, types, system, scheme)
+    restore_multistep_state(options, scheme)
 
     first, last = options.initial_step, options.n_steps
     progress = Progress(options.scheme, first, last)

@@ -95,15 +95,17 @@ def boomerang_scene(tmp_path, scheme='deterministic_forward_euler', n_steps=4, e
     return tmp_path / 'input.dat'
 
 
-def test_restart_continues_exactly(tmp_path, monkeypatch):
-    """20 steps at once equal 10 + 10 steps through initial_step (SPEC decision 4)."""
+@pytest.mark.parametrize('scheme', ['deterministic_forward_euler', 'deterministic_adams_bashforth'])
+def test_restart_continues_exactly(tmp_path, monkeypatch, scheme):
+    """20 steps at once equal 10 + 10 steps through initial_step (SPEC decision 4); Adams-Bashforth
+    continues from the previous velocities saved with the snapshot."""
     whole, split = tmp_path / 'whole', tmp_path / 'split'
     whole.mkdir(), split.mkdir()
-    boomerang_scene(whole, n_steps=20)
-    boomerang_scene(split, n_steps=10)
+    boomerang_scene(whole, scheme=scheme, n_steps=20)
+    boomerang_scene(split, scheme=scheme, n_steps=10)
     assert run_script(whole, 'input.dat', monkeypatch) == 0
     assert run_script(split, 'input.dat', monkeypatch) == 0
-    boomerang_scene(split, n_steps=20, extra={'initial_step': 10})
+    boomerang_scene(split, scheme=scheme, n_steps=20, extra={'initial_step': 10})
     assert run_script(split, 'input.dat', monkeypatch) == 0
     a = read_trajectory(whole, 'run', 'boomerang')
     b = read_trajectory(split, 'run', 'boomerang')
