@@ -235,22 +235,23 @@ class System:
                                     % (self.tolerance, result.iterations, result.residual))
         return result.velocities * norm
 
-    def deterministic_velocities(self):
-        """Velocities (Nb, 6) of the current configuration under its forces and slip (iterative)."""
+    def current_forces_and_slip(self):
+        """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) of the current configuration, checked finite."""
         r_vectors = self.blob_positions()
         force_torque = self.forces_torques(r_vectors)
         slip = self.slip() if self.has_slip else np.zeros_like(r_vectors)
         check_finite(force_torque, 'forces and torques')
         check_finite(slip, 'slip')
+        return r_vectors, force_torque, slip
+
+    def deterministic_velocities(self):
+        """Velocities (Nb, 6) of the current configuration under its forces and slip (iterative)."""
+        r_vectors, force_torque, slip = self.current_forces_and_slip()
         return self.solve_mobility(force_torque, slip, r_vectors)
 
     def dense_velocities(self):
         """Velocities (Nb, 6) by dense algebra: ``N (F - K^T M^{-1} slip)``, ``M`` from the blobs backend."""
-        r_vectors = self.blob_positions()
-        force_torque = self.forces_torques(r_vectors)
-        slip = self.slip() if self.has_slip else np.zeros_like(r_vectors)
-        check_finite(force_torque, 'forces and torques')
-        check_finite(slip, 'slip')
+        r_vectors, force_torque, slip = self.current_forces_and_slip()
         return body_solver.dense_mobility_velocities(self.arrays, r_vectors, force_torque, slip,
                                                      self.blob_mobility_matrix, self.eta, self.blob_radius)
 

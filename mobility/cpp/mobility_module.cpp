@@ -269,6 +269,16 @@ void one_sided_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L,
   }
 }
 
+// The roller couplings of blobs with themselves, with or without periodic images.
+template <PairFunction Pair>
+void one_sided_sum_any_box(bool periodic, const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
+                           std::vector<double> &uy, std::vector<double> &uz) {
+  if (periodic)
+    one_sided_sum<Pair, true>(b, b, L, ux, uy, uz);
+  else
+    one_sided_sum<Pair, false>(b, b, L, ux, uy, uz);
+}
+
 template <bool Wall>
 Array blob_product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
                    const Array &periodic_length, const std::string &precision) {
@@ -295,22 +305,13 @@ Array blob_product(const std::string &kind, const Array &r, const Array &vector,
                  : trans_times_force_symmetric<Wall, false, double>(b, L, ux, uy, uz);
     } else if (kind == "trans_times_torque") {
       power = 2.0;
-      if (periodic)
-        one_sided_sum<rmb::trans_times_torque_pair<Wall>, true>(b, b, L, ux, uy, uz);
-      else
-        one_sided_sum<rmb::trans_times_torque_pair<Wall>, false>(b, b, L, ux, uy, uz);
+      one_sided_sum_any_box<rmb::trans_times_torque_pair<Wall>>(periodic, b, L, ux, uy, uz);
     } else if (kind == "rot_times_force") {
       power = 2.0;
-      if (periodic)
-        one_sided_sum<rmb::rot_times_force_pair<Wall>, true>(b, b, L, ux, uy, uz);
-      else
-        one_sided_sum<rmb::rot_times_force_pair<Wall>, false>(b, b, L, ux, uy, uz);
+      one_sided_sum_any_box<rmb::rot_times_force_pair<Wall>>(periodic, b, L, ux, uy, uz);
     } else if (kind == "rot_times_torque") {
       power = 3.0;
-      if (periodic)
-        one_sided_sum<rmb::rot_times_torque_pair<Wall>, true>(b, b, L, ux, uy, uz);
-      else
-        one_sided_sum<rmb::rot_times_torque_pair<Wall>, false>(b, b, L, ux, uy, uz);
+      one_sided_sum_any_box<rmb::rot_times_torque_pair<Wall>>(periodic, b, L, ux, uy, uz);
     } else {
       throw std::invalid_argument("unknown product " + kind);
     }
