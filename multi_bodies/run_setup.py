@@ -5,17 +5,16 @@ here writes simulation output other than the file it is asked to write.
 """
 import os
 
+import numpy as np
+
 import utils
 from body.body import Body
+from multi_bodies.run_output import (RESTART_SUFFIX, clones_name, config_name, read_config_snapshot,  # noqa: F401
+                                     write_bodies_info)
 from multi_bodies.structure_files import read_clones_file, read_slip_file, read_vertex_file
 
 
-def clones_name(output_name, structure_id, step):
-    """Name of a saved snapshot: ``output_name.ID.<step, 8 digits>.clones`` (SPEC §2.1)."""
-    return '%s.%s.%s.clones' % (output_name, structure_id, str(step).zfill(8))
-
-
-def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
+def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
     """Bodies of every ``structure`` line (restart snapshots when ``initial_step > 0``).
 
     Parameters
@@ -24,6 +23,10 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
     set_slip_by_ID : callable ``(body, slip (n, 3) or None)``, the slip hook
     single_blob_bodies : bool
         Refuse structures of more than one blob (roller schemes).
+    restart_record : dict or None
+        With ``save_clones one_file`` and ``initial_step > 0``, the record of
+        ``output_name.restart`` at that step: it says where the snapshot
+        starts in each ``.config`` file.
 
     Returns (list of Body, list of (ID, number of bodies) per structure type).
     """
@@ -33,7 +36,18 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
     bodies, types = [], []
     for spec in options.structures:
         clones = spec.clones_file
-        if getattr(options, 'initial_step', 0) > 0:
+        snapshot = None
+        restart_step = getattr(options, 'initial_step', 0)
+        if restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
+            clones = config_name(options.output_name, spec.ID)
+            offsets = (restart_record or {}).get('config_offsets') or {}
+            if spec.ID not in offsets or not os.path.isfile(clones):
+                raise utils.UserInputError(
+                    '%s: initial_step %d restarts a save_clones one_file run, but %s%s has no record of step %d '
+                    'for %s; restart from a saved step' % (options.where('initial_step'), restart_step,
+                                                          options.output_name, RESTART_SUFFIX, restart_step, clones))
+            snapshot = read_config_snapshot(clones, offsets[spec.ID])
+        elif restart_step > 0:
             clones = clones_name(options.output_name, spec.ID, options.initial_step)
             if not os.path.isfile(clones):
                 raise utils.UserInputError(
@@ -41,7 +55,11 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
                     '(save_clones one_file_per_step writes one file per saved step)'
                     % (options.where('initial_step'), options.initial_step, clones))
         reference = read_vertex_file(spec.vertex_file, spec.where)
-        locations, orientations = read_clones_file(clones, spec.where)
+        if snapshot is None:
+            locations, orientations = read_clones_file(clones, spec.where)
+        else:
+            locations, orientations = snapshot
+            orientations = orientations / np.linalg.norm(orientations, axis=1)[:, None]
         slip = None
         if spec.slip_file is not None:
             slip = read_slip_file(spec.slip_file, spec.where)
@@ -64,13 +82,3 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
     return bodies, types
-
-
-def write_bodies_info(path, types, num_blobs):
-    """``.bodies_info``: number of body types, their names, bodies per type, bodies, blobs."""
-    with open(path, 'w') as f:
-        f.write('num_of_body_types  %d\n' % len(types))
-        f.write('body_names         %s\n' % str([name for name, _ in types]))
-        f.write('body_types         %s\n' % str([count for _, count in types]))
-        f.write('num_bodies         %d\n' % sum(count for _, count in types))
-        f.write('num_blobs          %d\n' % num_blobs)

@@ -127,6 +127,17 @@ class System:
         self.first_guess = None
         self.roller_torque_guess = None
 
+    # -------------------------------------------------------------- counters for .info
+    def counters(self, scheme=None):
+        """Counters of the run for ``.info`` (published names first), as a dict name -> int."""
+        return {'invalid_configuration_count': getattr(scheme, 'invalid_configurations', 0),
+                'deterministic_iterations_count': self.gmres_iterations,
+                'stochastic_iterations_count': 0}
+
+    def set_counters(self, counters):
+        """Continue the counts of an earlier segment of the run (restart)."""
+        self.gmres_iterations = int(counters.get('deterministic_iterations_count', 0))
+
     # -------------------------------------------------------------- state
     @property
     def num_bodies(self):

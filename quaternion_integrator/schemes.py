@@ -86,6 +86,15 @@ class Scheme:
     def accept(self, velocities):
         """Called when a step is accepted, with the velocities the scheme computed."""
 
+    def get_history(self):
+        """What the scheme carries from step to step (saved with each snapshot for exact restarts)."""
+        return {'invalid_configurations': self.invalid_configurations}
+
+    def set_history(self, history):
+        """Continue from ``get_history()`` of an earlier run (None: start afresh)."""
+        if history:
+            self.invalid_configurations = int(history.get('invalid_configurations', 0))
+
     def step(self, system, step_index, rng=None):
         """Advance ``system`` by one step; returns the velocities used (Nb, 6) (rollers: (Nb, 3))."""
         old_locations, old_orientations = system.get_state()
@@ -139,6 +148,16 @@ class AdamsBashforthMixin:
     def accept(self, velocities):
         self.previous_velocities = np.array(velocities, copy=True)
 
+    def get_history(self):
+        history = super().get_history()
+        history['previous_velocities'] = None if self.previous_velocities is None else self.previous_velocities.copy()
+        return history
+
+    def set_history(self, history):
+        super().set_history(history)
+        if history and history.get('previous_velocities') is not None:
+            self.previous_velocities = np.array(history['previous_velocities'], copy=True)
+
 
 class DeterministicAdamsBashforth(AdamsBashforthMixin, DeterministicForwardEuler):
     name = 'deterministic_adams_bashforth'
@@ -169,7 +188,7 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
 
 
-def make_scheme(name, dt):
+def make_scheme(name, dt, options=None):
     """The scheme object for the manual's name ``name`` with time step ``dt``.
 
     Raises UserInputError for a stochastic scheme (not implemented yet) or an

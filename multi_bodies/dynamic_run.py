@@ -1,0 +1,220 @@
+"""One dynamic run from validated options: the library function behind ``multi_bodies.py`` (floor 3).
+
+``run_dynamics(options)`` is what the dynamic script, the ensemble runner
+and the tests call: it sets the run up, writes every output through
+``multi_bodies.run_output`` and returns the exit status (0 done, 1 stopped
+by the simulation, 130/143 stopped by SIGINT/SIGTERM).  User mistakes raise
+``utils.UserInputError`` before the first byte is written.
+
+Exact restarts (SPEC decision 11): every save appends a record to
+``output_name.restart`` with the generator state, the scheme history and the
+counters; ``initial_step k`` picks the record of step k up, so the restarted
+run continues bit for bit the trajectory of an uninterrupted one.
+"""
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+
+import utils
+from body.body import bodies_to_arrays
+from multi_bodies import multi_bodies_functions
+from multi_bodies import run_output
+from multi_bodies.run_setup import read_bodies
+from multi_bodies.system import make_system
+from quaternion_integrator.schemes import make_scheme
+
+SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+class _StopRequest:
+    """Set by SIGINT/SIGTERM; the time loop stops after the step (and write) in progress."""
+
+    def __init__(self):
+        self.signal_number = None
+        self._previous = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in SIGNAL_EXIT_STATUS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signal_number, frame):
+        if self.signal_number is not None:  # a second signal: stop at once
+            raise KeyboardInterrupt
+        self.signal_number = signal_number
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+
+def has_wall(options, system):
+    """False when no hydrodynamics sees a wall (``*_no_wall`` backends, or rollers in ``domain no_wall``)."""
+    if 'rollers' in options.scheme:
+        return options.domain != 'no_wall'
+    return not (system.vector_product_name.endswith('_no_wall') and system.blobs_name.endswith('_no_wall'))
+
+
+def check_start(options, system, types):
+    """Refuse a start with a blob centre below the wall (runs with a wall only)."""
+    if not system.check_wall:
+        return
+    invalid = system.invalid_bodies()
+    if invalid.size:
+        first = int(invalid[0])
+        start = 0
+        for (structure_id, count), spec in zip(types, options.structures):
+            if first < start + count:
+                raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
+                                           '%d bodies are affected. Move the bodies up in the clones file.'
+                                           % (spec.where, first - start, structure_id, invalid.size))
+            start += count
+
+
+def check_options(options):
+    """Ranges the dynamic run needs, checked before anything is written."""
+    for name in ('blob_radius', 'eta'):
+        if not getattr(options, name) > 0:
+            raise utils.UserInputError('%s: %s must be positive' % (options.where(name), name))
+    if options.n_save < 1:
+        raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
+    if options.n_steps < 0:
+        raise utils.UserInputError('%s: n_steps must be >= 0, got %d' % (options.where('n_steps'), options.n_steps))
+    if options.initial_step < 0:
+        raise utils.UserInputError('%s: initial_step must be >= 0, got %d'
+                                   % (options.where('initial_step'), options.initial_step))
+    if options.domain not in ('single_wall', 'no_wall'):
+        raise utils.UserInputError("%s: domain must be single_wall or no_wall" % options.where('domain'))
+    if options.save_clones not in ('one_file_per_step', 'one_file'):
+        raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
+                                   % (options.where('save_clones'), options.save_clones))
+
+
+class DynamicRun:
+    """Everything a dynamic run holds once it is set up (no file written yet).
+
+    Attributes: options, hooks, bodies, types, system, scheme, rng,
+    restart (the record of ``initial_step`` or None).
+    """
+
+    def __init__(self, options, print_residual=False, log=print):
+        self.options, self.log = options, log
+        check_options(options)
+        self.scheme = make_scheme(options.scheme, options.dt, options)
+        self.hooks = multi_bodies_functions.load_user_hooks(
+            os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
+        if self.hooks.overridden:
+            log('user-defined physics from %s: %s' % (', '.join(self.hooks.sources), ', '.join(self.hooks.overridden)))
+        self.restart = None
+        if options.initial_step > 0:
+            self.restart = run_output.restart_record(options.output_name, options.initial_step)
+        bodies, types = read_bodies(options, self.hooks.set_slip_by_ID,
+                                    single_blob_bodies='rollers' in options.scheme,
+                                    restart_record=self.restart)
+        self.bodies, self.types = bodies, types
+        body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+        slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
+        body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
+        self.system = make_system(options, bodies, body_arrays, self.hooks, print_residual=print_residual, log=log)
+        log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
+            'blob_blob_force_implementation = %s' % (self.system.vector_product_name, self.system.blobs_name,
+                                                     options.blob_blob_force_implementation))
+        self.system.check_wall = has_wall(options, self.system)
+        check_start(options, self.system, types)
+        self.rng = run_output.make_generator(options)
+        self.rng_from_restart = False
+        if self.restart is not None and self.restart.get('state'):
+            state = self.restart['state']
+            if state.get('rng') is not None:
+                self.rng.bit_generator.state = state['rng']
+                self.rng_from_restart = True
+            self.scheme.set_history(state.get('scheme'))
+            self.system.set_counters(state.get('counters') or {})
+        elif options.initial_step > 0:
+            log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
+                'multistep schemes restart with one first-order step (as the published code does)'
+                % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
+        run_output.prepare_output_directory(options.output_name, options.where('output_name'))
+
+    # -------------------------------------------------------------- output helpers
+    def restart_state(self):
+        return {'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
+                'counters': self.system.counters(self.scheme)}
+
+    def write_info(self, extra_lines=()):
+        run_output.write_info(self.options.output_name + '.info', self.system.counters(self.scheme), extra_lines)
+
+    def run(self):
+        """The time loop; returns the exit status."""
+        options, system, scheme = self.options, self.system, self.scheme
+        restart = options.initial_step > 0
+        run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
+        if not restart:
+            run_output.save_random_state(options.output_name + '.random_state', self.rng)
+        run_output.write_bodies_info(options.output_name + '.bodies_info', self.types, system.num_blobs)
+        writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
+                                           options.where('save_clones'), restart=restart)
+        first, last = options.initial_step, options.n_steps
+        progress = run_output.Progress(options.scheme, first, last)
+        status, step, stopped_line = 0, first, None
+        start = time.perf_counter()
+
+        def save(index):
+            writer.save(index, system.arrays.locations, system.arrays.orientations, self.restart_state())
+            self.write_info()
+            progress.at_save(index, scheme.invalid_configurations)
+
+        with _StopRequest() as stop:
+            try:
+                for step in range(first, last):
+                    if step % options.n_save == 0:
+                        save(step)
+                    scheme.step(system, step, self.rng)
+                    progress.after_step(step, system.last_iterations, scheme.invalid_configurations)
+                    if stop.signal_number is not None:
+                        step += 1
+                        break
+                else:
+                    step = last
+                    if last > first and last % options.n_save == 0:
+                        save(last)
+                if stop.signal_number is not None:
+                    name = signal.Signals(stop.signal_number).name
+                    stopped_line = 'run stopped by %s at step %d (last saved step %d)' % (
+                        name, step, ((step - 1) // options.n_save) * options.n_save if step > first else first)
+                    status = SIGNAL_EXIT_STATUS[stop.signal_number]
+                if last <= first:
+                    self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
+            except utils.SimulationStopped as err:
+                progress.close()
+                self.log_error('error: run stopped: %s. Snapshots up to the last saved step are complete; .info '
+                               'and .time are written.' % str(err).rstrip('.'))
+                stopped_line = 'run stopped at step %d: %s' % (step, str(err).rstrip('.'))
+                status = 1
+            except KeyboardInterrupt:
+                stopped_line = 'run interrupted at step %d' % step
+                status = 130
+            finally:
+                progress.close()
+                elapsed = time.perf_counter() - start
+                run_output.append_time(options.output_name + '.time', elapsed, restart=restart,
+                                       note=('restart segment, steps %d to %d' % (first, step)) if restart else None)
+                self.write_info([stopped_line] if stopped_line else [])
+        if stopped_line and status != 1:
+            self.log_error('%s; outputs are complete up to the last saved step; restart with initial_step '
+                           'set to that step' % stopped_line)
+        return status
+
+    def log_error(self, text):
+        import sys
+        print(text, file=sys.stderr, flush=True)
+
+
+def run_dynamics(options, print_residual=False, log=print):
+    """Set up and run the dynamics of validated ``options``; returns the exit status."""
+    return DynamicRun(options, print_residual=print_residual, log=log).run()
