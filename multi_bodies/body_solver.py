@@ -45,7 +45,7 @@ residual : float, ``|b - A x| / |b|`` of the returned solution (true residual).
 
 
 def saddle_point_operator(body_arrays, r_vectors, mobility_product, eta, blob_radius,
-                          periodic_length=(0.0, 0.0, 0.0)):
+                          periodic_length=(0.0, 0.0, 0.0), locations=None):
     """The saddle-point matrix ``A`` as a SciPy LinearOperator of size 3N + 6Nb.
 
     Parameters
@@ -59,23 +59,77 @@ def saddle_point_operator(body_arrays, r_vectors, mobility_product, eta, blob_ra
     eta, blob_radius : float
     periodic_length : sequence of 3 floats
         Passed to the product (pseudo-periodic boxes, SPEC decision 5).
+    locations : ndarray (Nb, 3) or None
+        Body locations of the configuration (default: ``body_arrays.locations``).
 
-    ``A [lambda; U] = [M lambda - K U; -K^T lambda]``.
+    ``A [lambda; U] = [M lambda - K U; -K^T lambda]``.  The operator is a
+    value: it copies the blob positions and locations it is built at, so a
+    later change of the bodies does not change its product.
     """
-    n_blob_unknowns = 3 * body_arrays.num_blobs
-    size = n_blob_unknowns + 6 * body_arrays.num_bodies
-    periodic_length = np.asarray(periodic_length, dtype=float)
+    locations = body_arrays.locations if locations is None else locations
+    return MobilityProblem(body_arrays, np.array(locations, dtype=float), None, mobility_product, eta, blob_radius,
+                           periodic_length, r_vectors=r_vectors).operator
 
-    def matvec(x):
+
+class MobilityProblem:
+    """The saddle-point problem of all bodies at one configuration (a value: it copies what it is built at).
+
+    Parameters
+    ----------
+    body_arrays : body.body.BodyArrays
+        Only its fixed structure is used (reference blobs, blob-body index,
+        offsets); its live locations and orientations are not read later.
+    locations : (Nb, 3); orientations : (Nb, 4) or None (then ``r_vectors`` must be given)
+    mobility_product : callable ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)``
+    eta, blob_radius : float; periodic_length : (3,) floats
+    r_vectors : (N, 3) or None, blob positions (computed from the configuration when None)
+
+    Attributes: ``locations``, ``orientations``, ``r_vectors`` (copies),
+    ``operator`` (SciPy LinearOperator of size 3N + 6Nb), ``size``.
+    """
+
+    def __init__(self, body_arrays, locations, orientations, mobility_product, eta, blob_radius,
+                 periodic_length=(0.0, 0.0, 0.0), r_vectors=None):
+        from body.body import blob_positions
+        self.body_arrays = body_arrays
+        self.locations = np.array(locations, dtype=float).reshape(-1, 3)
+        self.orientations = None if orientations is None else np.array(orientations, dtype=float).reshape(-1, 4)
+        if r_vectors is None:
+            r_vectors = blob_positions(self.locations, self.orientations, body_arrays.reference_blobs,
+                                       body_arrays.blob_body_index)
+        self.r_vectors = np.array(r_vectors, dtype=float).reshape(-1, 3)
+        self.mobility_product = mobility_product
+        self.eta, self.blob_radius = float(eta), float(blob_radius)
+        self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3).copy()
+        self.num_blobs = self.r_vectors.shape[0]
+        self.num_bodies = self.locations.shape[0]
+        self.size = 3 * self.num_blobs + 6 * self.num_bodies
+        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
+
+    def M_dot(self, blob_forces):
+        """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
+        return np.asarray(self.mobility_product(self.r_vectors, np.asarray(blob_forces, dtype=float).reshape(-1),
+                                                self.eta, self.blob_radius, self.periodic_length)).reshape(-1)
+
+    def K_dot(self, body_velocities):
+        """``K U``: blob velocities (N, 3) of body velocities (Nb, 6) or (6Nb,)."""
+        from body.body import K_dot
+        return K_dot(self.r_vectors, self.locations, self.body_arrays.blob_body_index, body_velocities)
+
+    def KT_dot(self, blob_forces):
+        """``K^T lambda``: force-torque (Nb, 6) of blob forces (N, 3) or (3N,)."""
+        from body.body import KT_dot
+        return KT_dot(self.r_vectors, self.locations, self.body_arrays.blob_offsets,
+                      self.body_arrays.blob_body_index, blob_forces)
+
+    def matvec(self, x):
+        """``A [lambda; U] = [M lambda - K U; -K^T lambda]``."""
         x = np.asarray(x, dtype=float).reshape(-1)
-        lambda_blobs = x[:n_blob_unknowns]
-        velocities = x[n_blob_unknowns:]
-        slip_part = (mobility_product(r_vectors, lambda_blobs, eta, blob_radius, periodic_length)
-                     - body_arrays.K_dot(r_vectors, velocities).reshape(-1))
-        force_part = -body_arrays.KT_dot(r_vectors, lambda_blobs).reshape(-1)
+        n3 = 3 * self.num_blobs
+        lambda_blobs, velocities = x[:n3], x[n3:]
+        slip_part = self.M_dot(lambda_blobs) - self.K_dot(velocities).reshape(-1)
+        force_part = -self.KT_dot(lambda_blobs).reshape(-1)
         return np.concatenate((slip_part, force_part))
-
-    return spla.LinearOperator((size, size), matvec=matvec, dtype=float)
 
 
 class BlockDiagonalPreconditioner:
@@ -95,10 +149,16 @@ class BlockDiagonalPreconditioner:
     body_mobilities : list of ndarray (nb, 6, 6)
     """
 
-    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None):
+    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
+                 locations=None):
         """``stacked_mobility`` (optional): ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` that builds the
-        dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks)."""
+        dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks).
+        ``locations`` (Nb, 3): body locations of the configuration (default ``body_arrays.locations``);
+        the preconditioner copies what it needs, so it stays valid when the bodies move."""
         self.body_arrays = body_arrays
+        locations = np.array(body_arrays.locations if locations is None else locations, dtype=float)
+        self.locations = locations
+        self.inverse_cholesky_factors = []
         self.cholesky_factors = []
         self.inverse_mobilities = []
         self.inverse_mobility_times_K = []
@@ -117,9 +177,10 @@ class BlockDiagonalPreconditioner:
                 L_inv = np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape))
                 M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
             except np.linalg.LinAlgError:
-                L = None
+                L = L_inv = None
                 M_inv = np.linalg.inv(M_blocks)
-            K = K_matrices(r_type, body_arrays.locations[bodies])
+            self.inverse_cholesky_factors.append(L_inv)
+            K = K_matrices(r_type, locations[bodies])
             M_inv_K = np.matmul(M_inv, K)
             resistance = np.matmul(np.swapaxes(K, 1, 2), M_inv_K)
             self.cholesky_factors.append(L)
@@ -130,6 +191,30 @@ class BlockDiagonalPreconditioner:
         n_blob_unknowns = 3 * body_arrays.num_blobs
         size = n_blob_unknowns + 6 * body_arrays.num_bodies
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+
+    def _blockwise(self, vector, factors):
+        """Apply per-body dense blocks ``factors`` (list per type, (nb, 3n, 3n) or None = identity) to (3N,)."""
+        vector = np.asarray(vector, dtype=float).reshape(-1, 3)
+        out = vector.copy()
+        for (bodies, blobs), F in zip(self.body_arrays.type_slices, factors):
+            if F is None:
+                continue
+            nb = bodies.stop - bodies.start
+            out[blobs] = np.matmul(F, vector[blobs].reshape(nb, -1, 1)).reshape(-1, 3)
+        return out.reshape(-1)
+
+    def L_dot(self, vector):
+        """``L v`` with the block lower Cholesky factors ``M_k = L_k L_k^T``; vector (3N,)."""
+        return self._blockwise(vector, self.cholesky_factors)
+
+    def L_inv_dot(self, vector):
+        """``L^{-1} v``; vector (3N,)."""
+        return self._blockwise(vector, self.inverse_cholesky_factors)
+
+    def L_inv_T_dot(self, vector):
+        """``L^{-T} v``; vector (3N,)."""
+        return self._blockwise(vector, [None if F is None else np.swapaxes(F, 1, 2)
+                                        for F in self.inverse_cholesky_factors])
 
     def apply(self, x):
         """Apply the preconditioner to ``x = [s (3N); f (6 Nb)]``; returns the same layout."""

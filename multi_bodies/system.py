@@ -122,21 +122,41 @@ class System:
         self.slip_functions = any(callable(getattr(b, 'function_slip', None)) for b in bodies)
         self.has_slip = self.slip_functions or bool(np.any(body_arrays.reference_slip))
         self.check_wall = True
-        self.gmres_iterations = 0
+        self.gmres_iterations = 0          # every GMRES iteration (the published deterministic_iterations_count)
+        self.gmres_stochastic_iterations = 0  # of those: noise and random-finite-difference solves
+        self.lanczos_iterations = 0
+        self.lanczos_not_converged = 0
+        self.solves = {'deterministic': 0, 'stochastic': 0}
         self.last_iterations = 0
         self.first_guess = None
         self.roller_torque_guess = None
 
     # -------------------------------------------------------------- counters for .info
     def counters(self, scheme=None):
-        """Counters of the run for ``.info`` (published names first), as a dict name -> int."""
+        """Counters of the run for ``.info`` (published names first), as a dict name -> int.
+
+        ``deterministic_iterations_count``: GMRES iterations of every mobility
+        solve (as the published code counts them); ``stochastic_iterations_count``:
+        Lanczos iterations.  Then the split of the GMRES count, solves per
+        kind and Lanczos calls that did not converge.
+        """
         return {'invalid_configuration_count': getattr(scheme, 'invalid_configurations', 0),
                 'deterministic_iterations_count': self.gmres_iterations,
-                'stochastic_iterations_count': 0}
+                'stochastic_iterations_count': self.lanczos_iterations,
+                'gmres_iterations_deterministic_solves': self.gmres_iterations - self.gmres_stochastic_iterations,
+                'gmres_iterations_noise_and_rfd_solves': self.gmres_stochastic_iterations,
+                'deterministic_solves_count': self.solves['deterministic'],
+                'noise_and_rfd_solves_count': self.solves['stochastic'],
+                'lanczos_not_converged_count': self.lanczos_not_converged}
 
     def set_counters(self, counters):
         """Continue the counts of an earlier segment of the run (restart)."""
         self.gmres_iterations = int(counters.get('deterministic_iterations_count', 0))
+        self.lanczos_iterations = int(counters.get('stochastic_iterations_count', 0))
+        self.gmres_stochastic_iterations = int(counters.get('gmres_iterations_noise_and_rfd_solves', 0))
+        self.solves['deterministic'] = int(counters.get('deterministic_solves_count', 0))
+        self.solves['stochastic'] = int(counters.get('noise_and_rfd_solves_count', 0))
+        self.lanczos_not_converged = int(counters.get('lanczos_not_converged_count', 0))
 
     # -------------------------------------------------------------- state
     @property
@@ -212,39 +232,123 @@ class System:
         return np.concatenate([np.asarray(s, dtype=float).reshape(-1, 3) for s in slips])
 
     # -------------------------------------------------------------- mobility problem
-    def solve_mobility(self, force_torque, slip, r_vectors=None):
-        """Body velocities (Nb, 6) from force-torque (Nb, 6) and slip (N, 3) by preconditioned GMRES.
+    def mobility_problem(self, locations=None, orientations=None):
+        """The saddle-point problem at a configuration (default: the current one), a value.
 
-        As SPEC 4.2: the right-hand side is normalised, the previous
-        normalised solution is the initial guess; raises SimulationStopped
-        when GMRES does not converge.
+        locations (Nb, 3), orientations (Nb, 4); returns body_solver.MobilityProblem.
         """
-        r_vectors = self.blob_positions() if r_vectors is None else r_vectors
-        operator = body_solver.saddle_point_operator(self.arrays, r_vectors, self.mobility_product, self.eta,
-                                                     self.blob_radius, self.periodic_length)
-        preconditioner = body_solver.BlockDiagonalPreconditioner(self.arrays, r_vectors, self.blob_mobility_matrix,
-                                                                 self.eta, self.blob_radius,
-                                                                 stacked_mobility=self.stacked_mobility)
-        rhs = body_solver.mobility_rhs(force_torque, slip)
-        norm = np.linalg.norm(rhs)
+        locations = self.arrays.locations if locations is None else locations
+        orientations = self.arrays.orientations if orientations is None else orientations
+        return body_solver.MobilityProblem(self.arrays, locations, orientations, self.mobility_product, self.eta,
+                                           self.blob_radius, self.periodic_length)
+
+    def build_preconditioner(self, problem):
+        """Block-diagonal preconditioner (and Lanczos factors) at the configuration of ``problem``."""
+        return body_solver.BlockDiagonalPreconditioner(self.arrays, problem.r_vectors, self.blob_mobility_matrix,
+                                                       self.eta, self.blob_radius,
+                                                       stacked_mobility=self.stacked_mobility,
+                                                       locations=problem.locations)
+
+    def solve(self, problem, slip=None, force_torque=None, noise_slip=None, noise_force=None, rhs=None,
+              preconditioner=None, guess=None, keep_guess=False, kind='deterministic'):
+        """One mobility solve with every input explicit (SPEC §4.2).
+
+        Right-hand side ``[slip - noise_slip; -(F + noise_force)]`` (or ``rhs``
+        (3N + 6Nb,) as given); slip (N, 3), force_torque (Nb, 6), noise_slip
+        (3N,), noise_force (Nb, 6), each None for zero.
+
+        preconditioner : BlockDiagonalPreconditioner or None (then one is built at ``problem``)
+        guess : None (zeros), 'deterministic' (the stored normalised solution of the last
+            deterministic solve, SPEC §4.2), or an array (3N + 6Nb,) of the normalised system
+        keep_guess : store the normalised solution as the next deterministic guess
+        kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters
+
+        Returns body_solver.SolveResult with velocities (Nb, 6) and lambda (N, 3)
+        of the un-normalised system; raises SimulationStopped when GMRES fails.
+        """
+        n3, nb6 = 3 * problem.num_blobs, 6 * problem.num_bodies
+        if rhs is None:
+            rhs = np.zeros(n3 + nb6)
+            if slip is not None:
+                rhs[:n3] += np.asarray(slip, dtype=float).reshape(-1)
+            if noise_slip is not None:
+                rhs[:n3] -= np.asarray(noise_slip, dtype=float).reshape(-1)
+            if force_torque is not None:
+                rhs[n3:] -= np.asarray(force_torque, dtype=float).reshape(-1)
+            if noise_force is not None:
+                rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
+        else:
+            rhs = np.asarray(rhs, dtype=float).reshape(-1)
+        self.solves[kind] += 1
+        norm = float(np.linalg.norm(rhs))
         if self.first_guess is None or self.first_guess.shape != rhs.shape:
             self.first_guess = np.zeros_like(rhs)
         if norm == 0.0:
-            self.last_iterations = 0
-            return np.zeros((self.num_bodies, 6))
-        result = body_solver.solve_mobility_problem(operator, preconditioner, rhs / norm, self.num_blobs,
-                                                    self.tolerance, x0=self.first_guess,
-                                                    maxiter=body_solver.GMRES_MAXITER, true_residual=False,
-                                                    print_residual=self.print_residual)
-        self.last_iterations = result.iterations
+            if kind == 'deterministic':
+                self.last_iterations = 0
+            return body_solver.SolveResult(np.zeros((problem.num_blobs, 3)), np.zeros((problem.num_bodies, 6)),
+                                           0, True, 0, 0.0)
+        if isinstance(guess, str):
+            x0 = self.first_guess
+        else:
+            x0 = guess
+        if preconditioner is None:
+            preconditioner = self.build_preconditioner(problem)
+        result = body_solver.solve_mobility_problem(problem.operator, preconditioner, rhs / norm, problem.num_blobs,
+                                                    self.tolerance, x0=x0, maxiter=body_solver.GMRES_MAXITER,
+                                                    true_residual=False, print_residual=self.print_residual)
         self.gmres_iterations += result.iterations
-        solution = np.concatenate((result.lambda_blobs.reshape(-1), result.velocities.reshape(-1)))
-        self.first_guess = solution
+        if kind == 'deterministic':
+            self.last_iterations = result.iterations
+        else:
+            self.gmres_stochastic_iterations += result.iterations
+        if keep_guess:
+            self.first_guess = np.concatenate((result.lambda_blobs.reshape(-1), result.velocities.reshape(-1)))
         if not result.converged:
             raise SimulationStopped('GMRES did not converge to solver_tolerance %g in %d iterations (relative '
                                     'residual %.3e); try a larger solver_tolerance or check the configuration'
                                     % (self.tolerance, result.iterations, result.residual))
-        return result.velocities * norm
+        return result._replace(lambda_blobs=result.lambda_blobs * norm, velocities=result.velocities * norm)
+
+    def solve_mobility(self, force_torque, slip, r_vectors=None):
+        """Body velocities (Nb, 6) of the current configuration from force-torque (Nb, 6) and slip (N, 3).
+
+        The deterministic solve of SPEC 4.2: normalised right-hand side, the
+        previous normalised solution as initial guess, a preconditioner built
+        at the current configuration.  Raises SimulationStopped when GMRES
+        does not converge.
+        """
+        problem = self.mobility_problem()
+        return self.solve(problem, slip=slip, force_torque=force_torque, guess='deterministic',
+                          keep_guess=True).velocities
+
+    def lanczos_noise(self, problem, z, factor, preconditioner=None):
+        """``factor * M^{1/2} z`` at the configuration of ``problem`` (3N,), counted for ``.info``.
+
+        With a preconditioner the Lanczos iteration runs on ``L^{-1} M L^{-T}``
+        and the result is multiplied by ``L`` (covariance ``M``; SPEC decision 1).
+        A Lanczos call that does not converge is counted and warned about once per call.
+        """
+        from stochastic_forcing import lanczos_square_root
+        if preconditioner is None:
+            matvec, L_mult = problem.M_dot, None
+        else:
+            def matvec(v):
+                return preconditioner.L_inv_dot(problem.M_dot(preconditioner.L_inv_T_dot(v)))
+            L_mult = preconditioner.L_dot
+        result = lanczos_square_root(matvec, z, self.tolerance, factor=factor, L_mult=L_mult,
+                                     print_residual=self.print_residual)
+        self._count_lanczos(result)
+        return result.noise
+
+    def _count_lanczos(self, result):
+        self.lanczos_iterations += result.iterations
+        if not result.converged:
+            self.lanczos_not_converged += 1
+            import warnings
+            warnings.warn('Lanczos did not converge to solver_tolerance %g in %d iterations (last relative change '
+                          '%.3e); the noise is approximate (counted in .info as lanczos_not_converged_count)'
+                          % (self.tolerance, result.iterations, result.relative_change), RuntimeWarning)
 
     def current_forces_and_slip(self):
         """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) of the current configuration, checked finite."""
@@ -294,6 +398,32 @@ class System:
         if np.any(torques != 0):
             velocity = velocity + self.roller_product('trans_times_torque')(r_vectors, torques, eta, a, L)
         return np.asarray(velocity).reshape(-1, 3)
+
+    def roller_noise(self, r_vectors, z, factor):
+        """``factor * M_UF^{1/2} z`` of single-blob rollers at blob positions (N, 3) (Lanczos, no preconditioner)."""
+        from stochastic_forcing import lanczos_square_root
+        product = self.roller_product('trans_times_force')
+        a, eta, L = self.blob_radius, self.eta, self.periodic_length
+        result = lanczos_square_root(lambda v: np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1), z,
+                                     self.tolerance, factor=factor, print_residual=self.print_residual)
+        self._count_lanczos(result)
+        return result.noise.reshape(-1, 3)
+
+    def roller_drift(self, r_vectors, W, kT, delta):
+        """Thermal drift ``kT div M_UF`` of rollers by a random finite difference (SPEC 5.2), shape (N, 3).
+
+        ``(kT/(delta a)) [M_UF(r + delta a W/2) W - M_UF(r - delta a W/2) W]`` with W (3N,) ~ N(0, 1);
+        zero without a wall (the free-space RPY tensor is divergence free).
+        """
+        if self.domain == 'no_wall' or kT == 0:
+            return np.zeros_like(r_vectors)
+        product = self.roller_product('trans_times_force')
+        a, eta, L = self.blob_radius, self.eta, self.periodic_length
+        W = np.asarray(W, dtype=float).reshape(-1)
+        step = (0.5 * delta * a) * W.reshape(-1, 3)
+        plus = np.asarray(product(r_vectors + step, W, eta, a, L)).reshape(-1, 3)
+        minus = np.asarray(product(r_vectors - step, W, eta, a, L)).reshape(-1, 3)
+        return (kT / (delta * a)) * (plus - minus)
 
     def _prescribed_spin_torques(self, r_vectors, forces):
         a, eta, L = self.blob_radius, self.eta, self.periodic_length

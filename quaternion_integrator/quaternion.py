@@ -116,3 +116,21 @@ def rotation_matrices(quaternions):
     rot[:, 2, 1] = p3 * p2 + s * p1
     rot[:, 2, 2] = p3 * p3 + s * s - 0.5
     return 2.0 * rot
+
+
+def rotate_quaternions(orientations, rotation_vectors):
+    """``from_rotation(phi_k) * q_k`` for every body at once.
+
+    orientations: (Nb, 4) scalar-first; rotation_vectors: (Nb, 3) lab-frame
+    rotation vectors (radians).  Returns (Nb, 4); not renormalised.
+    """
+    q = np.asarray(orientations, dtype=float).reshape(-1, 4)
+    phi = np.asarray(rotation_vectors, dtype=float).reshape(-1, 3)
+    angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
+    safe = np.where(angle > 0, angle, 1.0)
+    s = np.cos(0.5 * angle)
+    p = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
+    t, v = q[:, 0], q[:, 1:]
+    scalar = s * t - np.einsum('ij,ij->i', p, v)
+    vector = s[:, None] * v + t[:, None] * p + np.cross(p, v)
+    return np.column_stack((scalar, vector))

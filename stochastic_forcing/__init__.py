@@ -1,0 +1,3 @@
+"""Brownian noise: ``M^{1/2} z`` (Lanczos, Cholesky, symmetric eigen roots) and random finite differences."""
+from .stochastic_forcing import (LANCZOS_MAX_ITERATIONS, LanczosResult, cholesky_root, lanczos_square_root,  # noqa: F401
+                                 rfd_configuration, symmetric_root, symmetric_root_matrix)
