@@ -350,6 +350,31 @@ class System:
                           '%.3e); the noise is approximate (counted in .info as lanczos_not_converged_count)'
                           % (self.tolerance, result.iterations, result.relative_change), RuntimeWarning)
 
+    def dense_matrices(self, locations, orientations, inverse=True):
+        """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
+
+        ``M`` from the blobs backend, ``N = pinv(K^T M^{-1} K, rcond=1e-14)`` (SPEC §3).
+        """
+        from body.body import K_dense, blob_positions
+        r = blob_positions(locations, orientations, self.arrays.reference_blobs, self.arrays.blob_body_index)
+        M = body_solver.dense_blob_mobility(r, self.blob_mobility_matrix, self.eta, self.blob_radius)
+        K = K_dense(r, locations, self.arrays.blob_body_index)
+        if not inverse:
+            return M, None, K, None
+        M_inv = np.linalg.inv(M)
+        N = np.linalg.pinv(K.T @ M_inv @ K, rcond=1e-14)
+        return M, M_inv, K, 0.5 * (N + N.T)
+
+    def solver_state(self):
+        """Initial guesses carried between solves (saved with snapshots for exact restarts)."""
+        return {'first_guess': None if self.first_guess is None else self.first_guess.copy(),
+                'roller_torque_guess': None if self.roller_torque_guess is None else self.roller_torque_guess.copy()}
+
+    def set_solver_state(self, state):
+        if state:
+            self.first_guess = state.get('first_guess')
+            self.roller_torque_guess = state.get('roller_torque_guess')
+
     def current_forces_and_slip(self):
         """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) of the current configuration, checked finite."""
         r_vectors = self.blob_positions()

@@ -22,6 +22,7 @@ step and the bodies.  NaN velocities raise ``utils.SimulationStopped``.
 """
 import numpy as np
 
+from quaternion_integrator.quaternion import rotate_quaternions as _rotate_quaternions
 from utils import SimulationStopped, UserInputError
 
 __all__ = ['InvalidConfiguration', 'make_scheme', 'SCHEMES', 'STOCHASTIC_SCHEMES', 'euler_update']
@@ -41,16 +42,7 @@ class InvalidConfiguration(SimulationStopped):
 
 def rotate_quaternions(orientations, rotation_vectors):
     """``from_rotation(phi_k) * q_k`` for every body; orientations (Nb, 4), rotation_vectors (Nb, 3)."""
-    q = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    phi = np.asarray(rotation_vectors, dtype=float).reshape(-1, 3)
-    angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
-    safe = np.where(angle > 0, angle, 1.0)
-    s = np.cos(0.5 * angle)
-    p = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
-    t, v = q[:, 0], q[:, 1:]
-    scalar = s * t - np.einsum('ij,ij->i', p, v)
-    vector = s[:, None] * v + t[:, None] * p + np.cross(p, v)
-    return np.column_stack((scalar, vector))
+    return _rotate_quaternions(orientations, rotation_vectors)
 
 
 def euler_update(locations, orientations, velocities, dt):
@@ -180,7 +172,13 @@ SCHEMES = {cls.name: cls for cls in (DeterministicForwardEuler, DeterministicFor
                                      DeterministicAdamsBashforth, DeterministicForwardEulerRollers,
                                      DeterministicAdamsBashforthRollers)}
 
-# Schemes of the manual that a later issue implements.
+def _all_schemes():
+    from quaternion_integrator.stochastic_schemes import STOCHASTIC_SCHEME_CLASSES
+    schemes = dict(SCHEMES)
+    schemes.update({cls.name: cls for cls in STOCHASTIC_SCHEME_CLASSES})
+    return schemes
+
+
 STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
                       'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
@@ -191,12 +189,13 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
 def make_scheme(name, dt, options=None):
     """The scheme object for the manual's name ``name`` with time step ``dt``.
 
-    Raises UserInputError for a stochastic scheme (not implemented yet) or an
-    unknown name (the message lists the known ones).
+    ``options`` (the input options) gives the stochastic schemes ``kT``,
+    ``rf_delta`` and ``update_PC``.  Raises UserInputError for an unknown
+    name (the message lists the known ones).
     """
+    schemes = _all_schemes()
     if name in SCHEMES:
         return SCHEMES[name](dt)
-    if name in STOCHASTIC_SCHEMES:
-        raise UserInputError("scheme '%s' is a stochastic scheme of the manual that is not implemented yet in "
-                             "this package; use one of: %s" % (name, ', '.join(SCHEMES)))
-    raise UserInputError("unknown scheme '%s'; known schemes: %s" % (name, ', '.join(SCHEMES)))
+    if name in schemes:
+        return schemes[name](dt, options)
+    raise UserInputError("unknown scheme '%s'; known schemes: %s" % (name, ', '.join(schemes)))

@@ -293,9 +293,9 @@ def test_non_converged_solve_stops_the_run(tmp_path, monkeypatch, capsys):
     assert 'did not converge' in capsys.readouterr().err
 
 
-@pytest.mark.parametrize('scheme, expected', [('stochastic_Slip_Trapz', 'not implemented yet'),
+@pytest.mark.parametrize('scheme, expected', [('stochastic_Slip_Trapzz', 'unknown scheme'),
                                               ('deterministic_forward_eler', 'unknown scheme')])
-def test_unknown_or_stochastic_scheme_is_a_clear_error(scheme, expected, tmp_path, monkeypatch, capsys):
+def test_unknown_scheme_is_a_clear_error(scheme, expected, tmp_path, monkeypatch, capsys):
     boomerang_scene(tmp_path, scheme=scheme)
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exit_info:

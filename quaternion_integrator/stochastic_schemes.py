@@ -1,0 +1,570 @@
+"""Brownian time-stepping schemes of the manual (SPEC §5.1 and §5.2), floor 4.
+
+Each scheme integrates the overdamped Langevin equation of rigid bodies
+above a wall (Delong, Balboa Usabiaga and Donev, J. Chem. Phys. 143, 144107,
+2015; Sprinkle, Balboa Usabiaga, Patankar and Donev, J. Chem. Phys. 147,
+244103, 2017; rollers: Balboa Usabiaga et al., J. Chem. Phys. 146, 134104,
+2017)::
+
+    dq = N F dt + kT (div_q N) dt + sqrt(2 kT) N^{1/2} dW
+
+(for active bodies the slip adds ``-N K^T M^{-1} slip``).  The schemes
+differ in how the noise ``N^{1/2} W`` and the thermal drift ``kT div N`` are
+produced: by Lanczos on the blob mobility and random finite differences
+(iterative schemes), or by dense algebra (``*_dense_algebra``, ``Fixman``,
+``*_DLA``).
+
+A scheme is made by ``make_scheme(name, dt, options)`` and advanced by
+``scheme.step(system, step_index, rng)``; the random numbers come only from
+``rng`` (``numpy.random.Generator``), drawn in a fixed order stated in each
+scheme, so a run is a function of its input and its generator state.
+
+Invalid configurations: a step (or predictor, or midpoint) that puts a blob
+centre below the wall is rejected, the state restored, the rejection counted
+and printed, and the step retried with fresh noise.  More than
+``max_consecutive_rejections`` rejections in a row stop the run with a
+message naming the step and the bodies.
+
+Shapes: body velocities (Nb, 6) ``[v, w]``; locations (Nb, 3); quaternions
+(Nb, 4); blob vectors flat (3N,) or (N, 3); roller velocities (N, 3).
+"""
+import numpy as np
+
+from stochastic_forcing import rfd_configuration, symmetric_root_matrix
+from utils import SimulationStopped, UserInputError
+from quaternion_integrator.schemes import Scheme, euler_update
+
+MAX_CONSECUTIVE_REJECTIONS = 100
+
+
+class TooManyRejections(SimulationStopped):
+    """Too many invalid configurations in a row."""
+
+    def __init__(self, step, bodies, scheme, count):
+        self.step, self.bodies = step, [int(b) for b in bodies]
+        shown = ', '.join(str(b) for b in self.bodies[:10]) + (' ...' if len(self.bodies) > 10 else '')
+        super().__init__('step %d of %s: %d trial configurations in a row put a blob centre below the wall '
+                         '(last: body %s); lower dt, or strengthen the wall repulsion (repulsion_strength_wall, '
+                         'debye_length_wall)' % (step, scheme, count, shown))
+
+
+class _Rejected(Exception):
+    """Internal: the trial configuration of an attempt is invalid; ``bodies`` are the culprits."""
+
+    def __init__(self, bodies):
+        super().__init__()
+        self.bodies = bodies
+
+
+class StochasticScheme(Scheme):
+    """Common machinery: parameters, retry loop, cached preconditioner, RFD drift, history for restarts.
+
+    Parameters (from the input options): ``kT``, ``rf_delta`` (delta of the
+    random finite differences), ``update_PC`` (rebuild the preconditioner
+    every ``update_PC`` steps, SPEC §4.3).
+    """
+    dense = False
+
+    def __init__(self, dt, options=None):
+        super().__init__(dt)
+        self.kT = float(getattr(options, 'kT', 1.0))
+        self.delta = float(getattr(options, 'rf_delta', 1e-3))
+        self.update_PC = int(getattr(options, 'update_PC', 1))
+        if self.kT < 0:
+            raise UserInputError('kT must be >= 0, got %g' % self.kT)
+        if not self.delta > 0:
+            raise UserInputError('rf_delta must be positive, got %g' % self.delta)
+        if self.update_PC < 1:
+            raise UserInputError('update_PC must be at least 1, got %d' % self.update_PC)
+        self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
+        self._preconditioner = None
+        self._preconditioner_step = None
+        self._preconditioner_configuration = None
+        self.previous_velocities = None
+        self.last_velocities = None
+
+    # -------------------------------------------------------------- history (exact restarts)
+    def get_history(self):
+        history = super().get_history()
+        history['previous_velocities'] = None if self.previous_velocities is None else self.previous_velocities.copy()
+        history['preconditioner_step'] = self._preconditioner_step
+        history['preconditioner_configuration'] = self._preconditioner_configuration
+        return history
+
+    def set_history(self, history):
+        super().set_history(history)
+        if not history:
+            return
+        if history.get('previous_velocities') is not None:
+            self.previous_velocities = np.array(history['previous_velocities'], copy=True)
+        self._preconditioner_step = history.get('preconditioner_step')
+        self._preconditioner_configuration = history.get('preconditioner_configuration')
+        self._preconditioner = None  # rebuilt at the saved configuration when first needed
+
+    # -------------------------------------------------------------- helpers
+    def preconditioner(self, system, step_index, problem):
+        """The block-diagonal preconditioner, rebuilt at ``problem`` every ``update_PC`` steps."""
+        rebuild = self._preconditioner_step is None or (
+            step_index % self.update_PC == 0 and self._preconditioner_step != step_index)
+        if rebuild:
+            self._preconditioner = system.build_preconditioner(problem)
+            self._preconditioner_step = step_index
+            self._preconditioner_configuration = (problem.locations.copy(), problem.orientations.copy())
+        elif self._preconditioner is None:  # after a restart: the configuration it was built at
+            self._preconditioner = system.build_preconditioner(
+                system.mobility_problem(*self._preconditioner_configuration))
+        return self._preconditioner
+
+    @staticmethod
+    def body_lengths(system):
+        return np.array([getattr(b, 'body_length', 1.0) for b in system.bodies], dtype=float)
+
+    def check(self, system):
+        """Raise _Rejected when the current configuration has a blob centre below the wall."""
+        invalid = system.invalid_bodies()
+        if invalid.size:
+            raise _Rejected(invalid)
+
+    def rfd_drift(self, system, locations, orientations, W, preconditioner):
+        """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
+
+        W (Nb, 6) ~ N(0, 1); translations are displaced by ``delta * body_length * W_t``
+        and ``W~`` has the translational part divided by the body length.
+        The second solve is for the difference (right-hand side
+        ``b - A+ y-``), so the solver tolerance applies to the drift itself.
+        Returns (Nb, 6).
+        """
+        lengths = self.body_lengths(system)
+        W = np.asarray(W, dtype=float).reshape(-1, 6)
+        W_tilde = W.copy()
+        W_tilde[:, :3] /= lengths[:, None]
+        minus = system.mobility_problem(*rfd_configuration(locations, orientations, W, -0.5 * self.delta, lengths))
+        plus = system.mobility_problem(*rfd_configuration(locations, orientations, W, 0.5 * self.delta, lengths))
+        y_minus = system.solve(minus, force_torque=W_tilde, preconditioner=preconditioner, kind='stochastic')
+        x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
+        rhs = np.concatenate((np.zeros(3 * system.num_blobs), -W_tilde.reshape(-1))) - plus.matvec(x_minus)
+        y = system.solve(plus, rhs=rhs, preconditioner=preconditioner, kind='stochastic')
+        return (self.kT / self.delta) * y.velocities
+
+    def noise_factor(self, dt_fraction=1.0):
+        """``sqrt(2 kT / (dt_fraction dt))``."""
+        return np.sqrt(2.0 * self.kT / (dt_fraction * self.dt))
+
+    # -------------------------------------------------------------- the step
+    def attempt(self, system, step_index, rng, old):
+        """One try of the step from ``old`` (locations, orientations); sets the new state or raises _Rejected.
+
+        Returns the velocities used (Nb, 6) (rollers (N, 3)).
+        """
+        raise NotImplementedError
+
+    def step(self, system, step_index, rng=None):
+        """Advance one step, retrying with fresh noise while the trial configuration is invalid."""
+        if rng is None:
+            raise UserInputError('%s needs a random generator' % self.name)
+        old = system.get_state()
+        rejections = 0
+        while True:
+            system.preprocess()
+            try:
+                used = self.attempt(system, step_index, rng, old)
+                if not np.all(np.isfinite(used)):
+                    system.set_state(*old)
+                    raise SimulationStopped('step %d of %s: the velocities are not finite (NaN or inf); check the '
+                                            'forces (user-defined functions), the time step and the configuration'
+                                            % (step_index, self.name))
+                system.postprocess()
+                self.check(system)
+            except _Rejected as rejected:
+                system.set_state(*old)
+                self.invalid_configurations += 1
+                rejections += 1
+                print('Invalid configuration number %d (step %d, bodies %s)'
+                      % (self.invalid_configurations, step_index,
+                         ', '.join(str(int(b)) for b in rejected.bodies[:5])))
+                if rejections >= self.max_consecutive_rejections:
+                    raise TooManyRejections(step_index, rejected.bodies, self.name, rejections)
+                continue
+            self.accept_step()
+            self.last_velocities = used
+            return used
+
+    def accept_step(self):
+        """Called once when a step is accepted (multistep schemes store their history here)."""
+        if getattr(self, '_pending_previous', None) is not None:
+            self.previous_velocities = self._pending_previous
+            self._pending_previous = None
+
+    def multistep(self, current, noise_part):
+        """Adams-Bashforth combination: first step ``current + noise``, later ``1.5 current - 0.5 previous + noise``."""
+        self._pending_previous = np.array(current, copy=True)
+        if self.previous_velocities is None:
+            return current + noise_part
+        return 1.5 * current - 0.5 * self.previous_velocities + noise_part
+
+    def move(self, system, old, velocities, dt):
+        system.set_state(*euler_update(old[0], old[1], velocities, dt))
+
+
+# ====================================================================== rigid multiblob, iterative
+class StochasticFirstOrderRFD(StochasticScheme):
+    """Euler-Maruyama with Lanczos noise and a two-solve RFD drift (three solves, one Lanczos per step).
+
+    Draws: W_rfd (6 Nb), then z (3N).
+    """
+    name = 'stochastic_first_order_RFD'
+
+    def attempt(self, system, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * system.num_bodies)
+        z = rng.standard_normal(3 * system.num_blobs)
+        problem = system.mobility_problem(*old)
+        pc = self.preconditioner(system, step_index, problem)
+        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        _, force_torque, slip = system.current_forces_and_slip()
+        U = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=noise, preconditioner=pc,
+                         guess='deterministic', keep_guess=True).velocities
+        U = U + self.rfd_drift(system, old[0], old[1], W_rfd, pc)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticAdamsBashforth(StochasticScheme):
+    """Adams-Bashforth for the deterministic velocity plus Euler-Maruyama noise and RFD drift.
+
+    Draws: W_rfd (6 Nb), then z (3N).
+    """
+    name = 'stochastic_adams_bashforth'
+
+    def attempt(self, system, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * system.num_bodies)
+        z = rng.standard_normal(3 * system.num_blobs)
+        problem = system.mobility_problem(*old)
+        pc = self.preconditioner(system, step_index, problem)
+        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        U_s = system.solve(problem, noise_slip=noise, preconditioner=pc, kind='stochastic').velocities
+        _, force_torque, slip = system.current_forces_and_slip()
+        U_d = system.solve(problem, slip=slip, force_torque=force_torque, preconditioner=pc, guess='deterministic',
+                           keep_guess=True).velocities
+        U_s = U_s + self.rfd_drift(system, old[0], old[1], W_rfd, pc)
+        U = self.multistep(U_d, U_s)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticTractionEM(StochasticScheme):
+    """Traction Euler-Maruyama (Sprinkle et al. 2017): RFD on the traction, two solves and one Lanczos.
+
+    Draws: W_rfd (6 Nb), then z (3N).
+    """
+    name = 'stochastic_traction_EM'
+
+    def traction_terms(self, system, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * system.num_bodies).reshape(-1, 6)
+        lengths = self.body_lengths(system)
+        W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
+        problem = system.mobility_problem(*old)
+        pc = self.preconditioner(system, step_index, problem)
+        R = system.solve(problem, force_torque=W_s, preconditioner=pc, kind='stochastic')
+        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_rfd, self.delta, lengths))
+        lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
+        D_M = plus.M_dot(lam) - problem.M_dot(lam)
+        D_KT = plus.KT_dot(lam) - problem.KT_dot(lam)
+        D_K = (plus.K_dot(U_R) - problem.K_dot(U_R)).reshape(-1)
+        z = rng.standard_normal(3 * system.num_blobs)
+        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        return problem, pc, noise, (D_M - D_K) / self.delta, -D_KT / self.delta
+
+    def attempt(self, system, step_index, rng, old):
+        problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
+        _, force_torque, slip = system.current_forces_and_slip()
+        U = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=noise + drift_slip,
+                         noise_force=drift_force, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticTractionAB(StochasticTractionEM):
+    """Traction scheme with Adams-Bashforth for the deterministic part (untested in the published code).
+
+    Draws: W_rfd (6 Nb), then z (3N).
+    """
+    name = 'stochastic_traction_AB'
+
+    def attempt(self, system, step_index, rng, old):
+        problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
+        _, force_torque, slip = system.current_forces_and_slip()
+        U_new = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=drift_slip,
+                             noise_force=drift_force, preconditioner=pc, guess='deterministic',
+                             keep_guess=True).velocities
+        U_n = system.solve(problem, noise_slip=noise, preconditioner=pc, kind='stochastic').velocities
+        U = self.multistep(U_new, U_n)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticSlipTrapz(StochasticScheme):
+    """Trapezoidal slip scheme (Sprinkle et al. 2017), the manual's recommendation for many bodies.
+
+    Deterministically second order, weakly first order; three solves and one
+    Lanczos call per step.  Draws: W1 (3N), then W_s (3N).  The predictor
+    solve reuses the preconditioner built at q^n (``reuse_preconditioner``,
+    default True; the published code rebuilt it at the predictor, which
+    changes only the GMRES iterates, within the solver tolerance).
+    """
+    name = 'stochastic_Slip_Trapz'
+    reuse_preconditioner = True
+
+    def attempt(self, system, step_index, rng, old):
+        n3 = 3 * system.num_blobs
+        W1 = rng.standard_normal(n3)
+        W_s = rng.standard_normal(n3)
+        problem = system.mobility_problem(*old)
+        MW, KW = problem.M_dot(W_s), problem.KT_dot(W_s)
+        pc = self.preconditioner(system, step_index, problem)
+        n1 = system.lanczos_noise(problem, W1, self.noise_factor(), pc)
+        _, force_torque, slip = system.current_forces_and_slip()
+        first = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
+                             guess='deterministic', keep_guess=True)
+        U1 = first.velocities
+        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
+                           preconditioner=pc, kind='stochastic').velocities
+        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
+        c = 2.0 * self.kT / self.delta
+        slip_c = n1 + c * (plus.M_dot(W_s) - MW)
+        force_c = -c * (plus.KT_dot(W_s) - KW)
+        self.move(system, old, U1, self.dt)  # predictor
+        self.check(system)
+        _, force_p, slip_p = system.current_forces_and_slip()
+        predictor = system.mobility_problem()
+        U2 = system.solve(predictor, slip=slip_p, force_torque=force_p, noise_slip=slip_c, noise_force=force_c,
+                          preconditioner=pc if self.reuse_preconditioner else None, guess='deterministic',
+                          keep_guess=True).velocities
+        U = 0.5 * (U1 + U2)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticSlipMid(StochasticScheme):
+    """Midpoint slip scheme (untested in the published code): three solves and two Lanczos calls.
+
+    Draws: W1, W_s, W3 (3N each); W_c = W1 + W3.
+    """
+    name = 'stochastic_Slip_Mid'
+
+    def attempt(self, system, step_index, rng, old):
+        n3 = 3 * system.num_blobs
+        W1 = rng.standard_normal(n3)
+        W_s = rng.standard_normal(n3)
+        W3 = rng.standard_normal(n3)
+        problem = system.mobility_problem(*old)
+        MW, KW = problem.M_dot(W_s), problem.KT_dot(W_s)
+        pc = self.preconditioner(system, step_index, problem)
+        n1 = system.lanczos_noise(problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
+        n_c = system.lanczos_noise(problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
+        _, force_torque, slip = system.current_forces_and_slip()
+        U_m = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
+                           guess='deterministic', keep_guess=True).velocities
+        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
+                           preconditioner=pc, kind='stochastic').velocities
+        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
+        c = self.kT / self.delta
+        slip_c = n_c + c * (plus.M_dot(W_s) - MW)
+        force_c = -c * (plus.KT_dot(W_s) - KW)
+        self.move(system, old, U_m, 0.5 * self.dt)  # midpoint
+        self.check(system)
+        _, force_m, slip_m = system.current_forces_and_slip()
+        U = system.solve(system.mobility_problem(), slip=slip_m, force_torque=force_m, noise_slip=slip_c,
+                         noise_force=force_c, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
+        self.move(system, old, U, self.dt)
+        return U
+
+
+# ====================================================================== rigid multiblob, dense algebra
+class DenseScheme(StochasticScheme):
+    """Helpers of the dense-algebra schemes (cost O(N^3) per step; best for small systems)."""
+    dense = True
+
+    @staticmethod
+    def dense_velocity(system, matrices):
+        """``N (F - K^T M^{-1} slip)`` at the current configuration with the given dense matrices."""
+        M, M_inv, K, N = matrices
+        _, force_torque, slip = system.current_forces_and_slip()
+        return (N @ (force_torque.reshape(-1) - K.T @ (M_inv @ slip.reshape(-1)))).reshape(-1, 6)
+
+
+class StochasticFirstOrderRFDDense(DenseScheme):
+    """Euler-Maruyama with dense noise ``N^{1/2} z`` and a one-sided dense RFD drift.
+
+    Draws: W_rfd (6 Nb), then z (6 Nb).
+    """
+    name = 'stochastic_first_order_RFD_dense_algebra'
+
+    def attempt(self, system, step_index, rng, old):
+        nb6 = 6 * system.num_bodies
+        W_rfd = rng.standard_normal(nb6)
+        z = rng.standard_normal(nb6)
+        matrices = system.dense_matrices(*old)
+        N = matrices[3]
+        U = self.dense_velocity(system, matrices).reshape(-1)
+        U = U + self.noise_factor() * (symmetric_root_matrix(N) @ z)
+        lengths = self.body_lengths(system)
+        plus = rfd_configuration(old[0], old[1], W_rfd, self.delta, lengths)
+        N_plus = system.dense_matrices(*plus)[3]
+        W_tilde = W_rfd.reshape(-1, 6).copy()
+        W_tilde[:, :3] /= lengths[:, None]
+        U = (U + (self.kT / self.delta) * ((N_plus - N) @ W_tilde.reshape(-1))).reshape(-1, 6)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class Fixman(DenseScheme):
+    """Fixman's midpoint scheme with dense algebra (Delong et al. 2015).
+
+    Draws: W1 (6 Nb), then W2 (6 Nb); W_c = W1 + W2.
+    """
+    name = 'Fixman'
+
+    def attempt(self, system, step_index, rng, old):
+        nb6 = 6 * system.num_bodies
+        W1 = rng.standard_normal(nb6)
+        W2 = rng.standard_normal(nb6)
+        matrices = system.dense_matrices(*old)
+        N = matrices[3]
+        root = symmetric_root_matrix(N)
+        U_p = self.dense_velocity(system, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
+        corrector = np.linalg.pinv(N, rcond=1e-14) @ (np.sqrt(self.kT / self.dt) * (root @ (W1 + W2)))
+        self.move(system, old, U_p, 0.5 * self.dt)
+        self.check(system)
+        mid = system.get_state()
+        matrices_mid = system.dense_matrices(*mid)
+        U = self.dense_velocity(system, matrices_mid).reshape(-1) + matrices_mid[3] @ corrector
+        U = U.reshape(-1, 6)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+class StochasticSlipMidDLA(DenseScheme):
+    """Dense-algebra version of the midpoint slip scheme (same slip sign as the other dense schemes, SPEC decision 1).
+
+    Draws: W1, W_s, W3 (3N each); W_c = W1 + W3.
+    """
+    name = 'stochastic_Slip_Mid_DLA'
+
+    def attempt(self, system, step_index, rng, old):
+        n3 = 3 * system.num_blobs
+        W1 = rng.standard_normal(n3)
+        W_s = rng.standard_normal(n3)
+        W3 = rng.standard_normal(n3)
+        matrices = system.dense_matrices(*old)
+        M, M_inv, K, N = matrices
+        U_m = self.dense_velocity(system, matrices).reshape(-1)
+        W_R = N @ (K.T @ (M_inv @ W_s))
+        M_half = symmetric_root_matrix(M)
+        U_m = U_m + np.sqrt(4.0 * self.kT / self.dt) * (N @ (K.T @ (M_inv @ (M_half @ W1))))
+        plus = rfd_configuration(old[0], old[1], W_R.reshape(-1, 6), self.delta)
+        M_plus, _, K_plus, _ = system.dense_matrices(*plus, inverse=False)
+        D_M = M_plus @ W_s - M @ W_s
+        D_KT = K_plus.T @ W_s - K.T @ W_s
+        self.move(system, old, U_m.reshape(-1, 6), 0.5 * self.dt)
+        self.check(system)
+        mid = system.get_state()
+        matrices_mid = system.dense_matrices(*mid)
+        _, M_inv_mid, K_mid, N_mid = matrices_mid
+        c = self.kT / self.delta
+        U = self.dense_velocity(system, matrices_mid).reshape(-1) + N_mid @ (
+            -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
+        U = U.reshape(-1, 6)
+        self.move(system, old, U, self.dt)
+        return U
+
+
+# ====================================================================== rollers (SPEC §5.2)
+class StochasticRollerScheme(StochasticScheme):
+    """Single-blob rollers: only blob positions move; velocities (N, 3)."""
+    rollers = True
+
+    def stochastic_velocity(self, system, rng, r_vectors, dt_fraction=1.0, with_drift=True):
+        """Noise ``sqrt(2kT/(f dt)) M^{1/2} z`` plus (optionally) the RFD drift. Draws z (3N), then W (3N)."""
+        z = rng.standard_normal(3 * system.num_blobs)
+        velocity = system.roller_noise(r_vectors, z, self.noise_factor(dt_fraction))
+        if with_drift and self.kT > 0:
+            W = rng.standard_normal(3 * system.num_blobs)
+            velocity = velocity + system.roller_drift(r_vectors, W, self.kT, self.delta)
+        return velocity
+
+    def drift(self, system, rng, r_vectors):
+        """RFD drift alone (draws W (3N) first)."""
+        if self.kT == 0:
+            return np.zeros_like(r_vectors)
+        W = rng.standard_normal(3 * system.num_blobs)
+        return system.roller_drift(r_vectors, W, self.kT, self.delta)
+
+    def move(self, system, old, velocities, dt):
+        system.set_state(old[0] + dt * np.asarray(velocities).reshape(-1, 3), old[1])
+
+
+class StochasticFirstOrderRollers(StochasticRollerScheme):
+    """``r += dt (v_det + noise + drift)``.  Draws: z, W (3N each)."""
+    name = 'stochastic_first_order_rollers'
+
+    def attempt(self, system, step_index, rng, old):
+        r = system.blob_positions()
+        v = system.roller_velocities() + self.stochastic_velocity(system, rng, r)
+        self.move(system, old, v, self.dt)
+        return v
+
+
+class StochasticAdamsBashforthRollers(StochasticRollerScheme):
+    """Adams-Bashforth deterministic velocity plus noise and drift (the manual's recommendation for rollers)."""
+    name = 'stochastic_adams_bashforth_rollers'
+
+    def attempt(self, system, step_index, rng, old):
+        r = system.blob_positions()
+        v_det = system.roller_velocities()
+        v = self.multistep(v_det, self.stochastic_velocity(system, rng, r))
+        self.move(system, old, v, self.dt)
+        return v
+
+
+class StochasticMidPointRollers(StochasticRollerScheme):
+    """Midpoint: noise at r^n and at the midpoint, drift at r^n.  Draws: W (drift), z1, z2 (3N each)."""
+    name = 'stochastic_mid_point_rollers'
+
+    def attempt(self, system, step_index, rng, old):
+        r = system.blob_positions()
+        d = self.drift(system, rng, r)
+        s1 = self.stochastic_velocity(system, rng, r, dt_fraction=0.5, with_drift=False)
+        v_det = system.roller_velocities()
+        self.move(system, old, v_det + s1, 0.5 * self.dt)
+        self.check(system)
+        r_mid = system.blob_positions()
+        s2 = self.stochastic_velocity(system, rng, r_mid, dt_fraction=0.5, with_drift=False)
+        v = system.roller_velocities() + d + 0.5 * (s1 + s2)
+        self.move(system, old, v, self.dt)
+        return v
+
+
+class StochasticTrapezoidalRollers(StochasticRollerScheme):
+    """Trapezoidal: predictor ``r + dt (v1 + s)``, then the average of the two deterministic velocities.
+
+    Draws: W (drift), z (3N each).
+    """
+    name = 'stochastic_trapezoidal_rollers'
+
+    def attempt(self, system, step_index, rng, old):
+        r = system.blob_positions()
+        d = self.drift(system, rng, r)
+        s = self.stochastic_velocity(system, rng, r, with_drift=False)
+        v1 = system.roller_velocities()
+        self.move(system, old, v1 + s, self.dt)
+        self.check(system)
+        v = 0.5 * (v1 + system.roller_velocities()) + d + s
+        self.move(system, old, v, self.dt)
+        return v
+
+
+STOCHASTIC_SCHEME_CLASSES = (StochasticFirstOrderRFD, StochasticAdamsBashforth, StochasticFirstOrderRFDDense,
+                             StochasticTractionEM, Fixman, StochasticSlipTrapz, StochasticTractionAB,
+                             StochasticSlipMid, StochasticSlipMidDLA, StochasticFirstOrderRollers,
+                             StochasticAdamsBashforthRollers, StochasticMidPointRollers,
+                             StochasticTrapezoidalRollers)
