@@ -106,6 +106,46 @@ class MobilityProblem:
         self.size = 3 * self.num_blobs + 6 * self.num_bodies
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
+    def project_forces(self, force_torque):
+        """Remove from force-torque (Nb, 6) the part that no blob force can balance.
+
+        A body whose blobs cannot resist every rigid motion (a single blob: any
+        rotation about its location; blobs on a line: rotation about that line)
+        has a rank-deficient ``K``; its velocity along the null space of ``K``
+        is undetermined and the body mobility ``pinv(K^T M^{-1} K)`` gives it
+        zero.  A torque along that null space (random finite differences draw
+        such torques) would make the saddle-point system inconsistent, so it
+        is projected out, which gives the iterative solve the ``pinv`` answer.
+        Full-rank bodies are returned unchanged.
+        """
+        force_torque = np.asarray(force_torque, dtype=float).reshape(-1, 6)
+        projectors = self._range_projectors()
+        if not projectors:
+            return force_torque
+        out = force_torque.copy()
+        for bodies, P in projectors:
+            out[bodies] = np.matmul(P, force_torque[bodies][:, :, None])[:, :, 0]
+        return out
+
+    def _range_projectors(self):
+        if getattr(self, '_projectors', None) is None:
+            from body.body import K_matrices
+            self._projectors = []
+            for (bodies, blobs), n_blobs in zip(self.body_arrays.type_slices, self.body_arrays.type_blobs):
+                nb = bodies.stop - bodies.start
+                if nb == 0:
+                    continue
+                K = K_matrices(self.r_vectors[blobs].reshape(nb, n_blobs, 3), self.locations[bodies])
+                _, singular, Vt = np.linalg.svd(K, full_matrices=True)
+                scale = np.maximum(singular[:, :1], 1e-300)
+                rank = np.sum(singular > 1e-10 * scale, axis=1)
+                if np.all(rank == 6):
+                    continue
+                keep = (np.arange(6)[None, :] < rank[:, None]).astype(float)
+                V = np.swapaxes(Vt, 1, 2)
+                self._projectors.append((bodies, np.matmul(V * keep[:, None, :], Vt)))
+        return self._projectors
+
     def M_dot(self, blob_forces):
         """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
         return np.asarray(self.mobility_product(self.r_vectors, np.asarray(blob_forces, dtype=float).reshape(-1),

@@ -136,6 +136,13 @@ class DynamicRun:
             self.scheme.set_history(state.get('scheme'))
             self.system.set_counters(state.get('counters') or {})
             self.system.set_solver_state(state.get('solver'))
+            saved = state.get('locations'), state.get('orientations')
+            # The snapshot files hold the same numbers, but their quaternions are renormalised when read
+            # (SPEC 1.3); the record keeps them exactly as the uninterrupted run has them.
+            if saved[0] is not None and np.shape(saved[0]) == self.system.arrays.locations.shape and \
+                    np.allclose(saved[0], self.system.arrays.locations, rtol=0, atol=1e-12 * (
+                        1 + np.max(np.abs(saved[0])))):
+                self.system.set_state(saved[0], saved[1])
         elif options.initial_step > 0:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
@@ -144,7 +151,9 @@ class DynamicRun:
 
     # -------------------------------------------------------------- output helpers
     def restart_state(self):
-        return {'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
+        return {'locations': self.system.arrays.locations.copy(),
+                'orientations': self.system.arrays.orientations.copy(),
+                'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
                 'counters': self.system.counters(self.scheme), 'solver': self.system.solver_state()}
 
     def write_info(self, extra_lines=()):

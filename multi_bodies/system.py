@@ -126,6 +126,7 @@ class System:
         self.gmres_stochastic_iterations = 0  # of those: noise and random-finite-difference solves
         self.lanczos_iterations = 0
         self.lanczos_not_converged = 0
+        self.lanczos_max_iterations = 1000
         self.solves = {'deterministic': 0, 'stochastic': 0}
         self.last_iterations = 0
         self.first_guess = None
@@ -278,7 +279,9 @@ class System:
             if noise_force is not None:
                 rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
         else:
-            rhs = np.asarray(rhs, dtype=float).reshape(-1)
+            rhs = np.array(rhs, dtype=float).reshape(-1)
+        if problem.num_bodies:
+            rhs[n3:] = problem.project_forces(rhs[n3:]).reshape(-1)
         self.solves[kind] += 1
         norm = float(np.linalg.norm(rhs))
         if self.first_guess is None or self.first_guess.shape != rhs.shape:
@@ -336,8 +339,8 @@ class System:
             def matvec(v):
                 return preconditioner.L_inv_dot(problem.M_dot(preconditioner.L_inv_T_dot(v)))
             L_mult = preconditioner.L_dot
-        result = lanczos_square_root(matvec, z, self.tolerance, factor=factor, L_mult=L_mult,
-                                     print_residual=self.print_residual)
+        result = lanczos_square_root(matvec, z, self.tolerance, max_iterations=self.lanczos_max_iterations,
+                                     factor=factor, L_mult=L_mult, print_residual=self.print_residual)
         self._count_lanczos(result)
         return result.noise
 
@@ -430,7 +433,8 @@ class System:
         product = self.roller_product('trans_times_force')
         a, eta, L = self.blob_radius, self.eta, self.periodic_length
         result = lanczos_square_root(lambda v: np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1), z,
-                                     self.tolerance, factor=factor, print_residual=self.print_residual)
+                                     self.tolerance, max_iterations=self.lanczos_max_iterations, factor=factor,
+                                     print_residual=self.print_residual)
         self._count_lanczos(result)
         return result.noise.reshape(-1, 3)
 

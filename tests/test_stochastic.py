@@ -1,0 +1,450 @@
+"""Brownian noise, thermal drift and the stochastic schemes (issue: Brownian dynamics).
+
+Numbers asserted come from outside the code under test:
+* the dense symmetric square root and the blob mobility matrix (Lanczos);
+* the analytic derivative of the single-blob perpendicular mobility (RFD,
+  Swan and Brady 2007 self terms; VALIDATION T3);
+* Gibbs-Boltzmann statistics computed here by quadrature (heights), and the
+  exact identity D_par = kT <mu_par> for in-plane diffusion (VALIDATION T2).
+
+Statistical tolerances are stated where they are used; they come from the
+spread of per-body means of many independent bodies started from an exact
+equilibrium sample (no burn-in).  Each statistical test has a negative
+control (the drift switched off, or the 2017 transposed factor) that must
+fail the same check.
+"""
+import os
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+
+import mobility
+from body.body import Body, bodies_to_arrays
+from multi_bodies import multi_bodies_functions as mbf
+from multi_bodies import structure_generators as gen
+from multi_bodies.system import System
+from quaternion_integrator import stochastic_schemes
+from quaternion_integrator.schemes import make_scheme
+from stochastic_forcing import lanczos_square_root, symmetric_root
+
+CPP = 'C++' if mobility.backends.is_usable('C++') else 'python'
+RIGID_ITERATIVE = ['stochastic_first_order_RFD', 'stochastic_adams_bashforth', 'stochastic_traction_EM',
+                   'stochastic_traction_AB', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid']
+RIGID_DENSE = ['stochastic_first_order_RFD_dense_algebra', 'Fixman', 'stochastic_Slip_Mid_DLA']
+ROLLERS = ['stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers', 'stochastic_mid_point_rollers',
+           'stochastic_trapezoidal_rollers']
+
+# Scene of the Gibbs-Boltzmann tests: a = 1, eta = 1/(6 pi) (so mu0 = 1), kT = 1, weight g = 1 per blob,
+# wall eps = 2, b = 0.25.  Then <z> = 2.218, std 1.04, relaxation time (kT/g)^2/(kT <mu_perp>) ~ 2.
+A, ETA, KT, G, EPS_WALL, B_WALL = 1.0, 1.0 / (6.0 * np.pi), 1.0, 1.0, 2.0, 0.25
+
+
+class Opts:
+    """The few options a stochastic scheme reads."""
+
+    def __init__(self, kT=KT, rf_delta=1e-3, update_PC=1):
+        self.kT, self.rf_delta, self.update_PC = kT, rf_delta, update_PC
+
+
+def physics(**extra):
+    values = dict(g=G, repulsion_strength_wall=EPS_WALL, debye_length_wall=B_WALL, repulsion_strength=1.0,
+                  debye_length=1.0, periodic_length=np.zeros(3), blob_radius=A, blob_mass=1.0)
+    values.update(extra)
+    return values
+
+
+def make_system(bodies, types, vector_product=CPP, blobs='python', tolerance=1e-6, domain='single_wall'):
+    arrays = bodies_to_arrays(bodies, types)
+    system = System(bodies, arrays, mbf.load_user_hooks('/nonexistent'), physics(), ETA, A, tolerance,
+                    vector_product_name=vector_product, blobs_name=blobs, domain=domain)
+    return system
+
+
+def height_density(z):
+    """Unnormalised Gibbs-Boltzmann density of a single blob's height (gravity + soft wall)."""
+    U = G * z + np.where(z < A, EPS_WALL + EPS_WALL * (A - z) / B_WALL, EPS_WALL * np.exp(-(z - A) / B_WALL))
+    return np.exp(-U / KT)
+
+
+GRID = np.linspace(0.0, 25.0, 200001)
+CDF = np.cumsum(height_density(GRID))
+CDF /= CDF[-1]
+EXACT_MEAN = np.trapezoid(GRID * height_density(GRID), GRID) / np.trapezoid(height_density(GRID), GRID)
+HIST_EDGES = np.array([0.0, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 25.0])
+EXACT_BINS = np.diff(np.interp(HIST_EDGES, GRID, CDF))
+
+
+def equilibrium_blobs(n_bodies, seed, spacing=25.0):
+    """Single-blob bodies on a square lattice (far apart), heights drawn from the exact density."""
+    rng = np.random.default_rng(seed)
+    heights = np.interp(rng.random(n_bodies), CDF, GRID)
+    side = int(np.ceil(np.sqrt(n_bodies)))
+    ij = np.array([(i, j) for i in range(side) for j in range(side)][:n_bodies], dtype=float)
+    reference = np.zeros((1, 3))
+    bodies = []
+    for (i, j), h in zip(ij, heights):
+        body = Body(np.array([spacing * i, spacing * j, h]), np.array([1.0, 0, 0, 0]), reference, A)
+        body.ID = 'blob'
+        body.body_length = 2 * A
+        bodies.append(body)
+    return bodies
+
+
+def run_heights(scheme_name, n_bodies, n_steps, dt, seed, disable_drift=False, vector_product=CPP):
+    """Per-body time averages of z and of the histogram bins, and the in-plane displacements."""
+    bodies = equilibrium_blobs(n_bodies, seed)
+    system = make_system(bodies, [n_bodies], vector_product=vector_product)
+    scheme = make_scheme(scheme_name, dt, Opts())
+    if disable_drift:
+        if scheme.rollers:
+            system.roller_drift = lambda r, W, kT, delta: np.zeros_like(r)
+        else:
+            scheme.rfd_drift = lambda *args: np.zeros((n_bodies, 6))
+    rng = np.random.default_rng(seed + 1)
+    start = system.arrays.locations.copy()
+    z_sum = np.zeros(n_bodies)
+    bins = np.zeros((n_bodies, len(HIST_EDGES) - 1))
+    for step in range(n_steps):
+        scheme.step(system, step, rng)
+        z = system.arrays.locations[:, 2]
+        z_sum += z
+        bins[np.arange(n_bodies), np.clip(np.searchsorted(HIST_EDGES, z) - 1, 0, len(HIST_EDGES) - 2)] += 1
+    displacement = system.arrays.locations[:, :2] - start[:, :2]
+    return z_sum / n_steps, bins / n_steps, displacement, scheme
+
+
+def z_score(per_body, exact):
+    """(mean - exact) / standard error, the standard error from the spread of per-body values."""
+    per_body = np.asarray(per_body)
+    return (per_body.mean(axis=0) - exact) / (per_body.std(axis=0, ddof=1) / np.sqrt(per_body.shape[0]))
+
+
+# ====================================================================== Lanczos
+def random_blobs(n, seed):
+    rng = np.random.default_rng(seed)
+    side = int(np.ceil(n ** (1 / 3)))
+    grid = np.array([(i, j, k) for i in range(side) for j in range(side) for k in range(side)][:n], dtype=float)
+    return grid * 2.2 * A + rng.uniform(-0.3, 0.3, (n, 3)) + np.array([0, 0, 1.5 * A])
+
+
+def test_lanczos_equals_dense_symmetric_root():
+    """For the same z, Lanczos M^{1/2} z equals the dense principal root to the tolerance (100 blobs)."""
+    r = random_blobs(100, 1)
+    M = mobility.blob_mobility_matrix('python')(r, ETA, A)
+    z = np.random.default_rng(2).standard_normal(300)
+    result = lanczos_square_root(lambda v: M @ v, z, 1e-10)
+    assert result.converged and result.iterations < 100
+    exact = symmetric_root(M, z)
+    assert np.linalg.norm(result.noise - exact) / np.linalg.norm(exact) < 1e-8
+
+
+def covariance_z_scores(samples, M, probes):
+    """z-scores of a^T C a against a^T M a for probe directions a; C the sample covariance.
+
+    For Gaussian noise the variance estimate of a^T n has relative standard error sqrt(2/K).
+    """
+    K = samples.shape[0]
+    projected = samples @ probes.T
+    estimate = np.mean(projected ** 2, axis=0)
+    expected = np.einsum('ji,ik,jk->j', probes, M, probes)
+    return (estimate - expected) / (expected * np.sqrt(2.0 / K))
+
+
+def frobenius_statistic(samples, M):
+    """``|C - M|_F^2`` over its expected value for exact Gaussian noise of covariance M.
+
+    For K samples of N(0, M), ``E |C - M|_F^2 = (|M|_F^2 + tr(M)^2) / K``, so the statistic is close to 1
+    (its spread over seeds is a few per cent for these sizes); a covariance other than M adds
+    ``K |C_true - M|_F^2 / (|M|_F^2 + tr(M)^2)``.
+    """
+    K = samples.shape[0]
+    C = samples.T @ samples / K
+    return np.sum((C - M) ** 2) / ((np.sum(M ** 2) + np.trace(M) ** 2) / K)
+
+
+def probe_directions(M, seed, count=12):
+    rng = np.random.default_rng(seed)
+    random = rng.standard_normal((count, M.shape[0]))
+    eigenvalues, vectors = np.linalg.eigh(M)
+    probes = np.vstack([random, vectors[:, :3].T, vectors[:, -3:].T])
+    return probes / np.linalg.norm(probes, axis=1)[:, None]
+
+
+def test_lanczos_covariance_100_blobs():
+    """E[n n^T] = M on 100 blobs: 600 samples; |z| < 4.5 on 18 probe directions (relative SE
+    sqrt(2/600)) and the Frobenius statistic below 1.25."""
+    r = random_blobs(100, 3)
+    M = mobility.blob_mobility_matrix('python')(r, ETA, A)
+    rng = np.random.default_rng(4)
+    samples = np.array([lanczos_square_root(lambda v: M @ v, rng.standard_normal(300), 1e-4).noise
+                        for _ in range(600)])
+    assert np.max(np.abs(covariance_z_scores(samples, M, probe_directions(M, 5)))) < 4.5
+    assert frobenius_statistic(samples, M) < 1.25
+
+
+def multiblob_scene():
+    """Three boomerangs and two 12-blob shells at random orientations above the wall."""
+    rng = np.random.default_rng(6)
+    boomerang = gen.boomerang()  # 15 blobs, arms of 7 blobs spaced 0.3
+    shell = gen.calibrated_shell(12)[0]
+    bodies = []
+    for k, reference in enumerate([boomerang] * 3 + [shell] * 2):
+        q = rng.standard_normal(4)
+        body = Body(np.array([4.0 * k, 0.5 * k, 3.0]), q / np.linalg.norm(q), reference, 0.3)
+        body.ID = 'b%d' % (0 if k < 3 else 1)
+        bodies.append(body)
+    return bodies, [3, 2]
+
+
+def preconditioned_samples(system, problem, pc, rng, count, wrong_factor=False):
+    def matvec(v):
+        return pc.L_inv_dot(problem.M_dot(pc.L_inv_T_dot(v)))
+
+    if wrong_factor:  # the 2017 published code: multiplied by L^T instead of L
+        def L_mult(v):
+            return pc._blockwise(v, [None if F is None else np.swapaxes(F, 1, 2) for F in pc.cholesky_factors])
+    else:
+        L_mult = pc.L_dot
+    return np.array([lanczos_square_root(matvec, rng.standard_normal(3 * problem.num_blobs), 1e-4,
+                                         L_mult=L_mult).noise for _ in range(count)])
+
+
+def test_preconditioned_lanczos_covariance_multiblob():
+    """With the block Cholesky preconditioner the noise covariance is M; the 2017 transposed factor fails.
+
+    1000 samples on 5 multi-blob bodies (69 blobs): probes |z| < 4.5 and Frobenius statistic < 1.25 for
+    ours; the wrong factor gives a statistic above 1.6 (about 2.5 measured).
+    """
+    bodies, types = multiblob_scene()
+    system = make_system(bodies, types)
+    system.blob_radius = 0.3
+    system.eta = ETA
+    problem = system.mobility_problem()
+    pc = system.build_preconditioner(problem)
+    M = mobility.blob_mobility_matrix('python')(problem.r_vectors, ETA, 0.3)
+    probes = probe_directions(M, 7)
+    ours = preconditioned_samples(system, problem, pc, np.random.default_rng(8), 1000)
+    assert np.max(np.abs(covariance_z_scores(ours, M, probes))) < 4.5
+    assert frobenius_statistic(ours, M) < 1.25
+    wrong = preconditioned_samples(system, problem, pc, np.random.default_rng(8), 1000, wrong_factor=True)
+    assert frobenius_statistic(wrong, M) > 1.6
+
+
+def test_lanczos_non_convergence_is_reported():
+    """A Lanczos call stopped before the tolerance says so, and the System counts and warns."""
+    r = random_blobs(60, 9)
+    M = mobility.blob_mobility_matrix('python')(r, ETA, A)
+    result = lanczos_square_root(lambda v: M @ v, np.ones(180), 1e-14, max_iterations=3)
+    assert not result.converged and result.iterations == 3
+    bodies = equilibrium_blobs(40, 10, spacing=2.5)
+    system = make_system(bodies, [40], tolerance=1e-12)
+    system.lanczos_max_iterations = 3
+    with pytest.warns(RuntimeWarning, match='Lanczos did not converge'):
+        system.lanczos_noise(system.mobility_problem(), np.ones(120), 1.0)
+    assert system.counters()['lanczos_not_converged_count'] == 1
+
+
+def test_operator_is_a_value():
+    """An operator built at a configuration gives the same product after the bodies move."""
+    bodies, types = multiblob_scene()
+    system = make_system(bodies, types)
+    problem = system.mobility_problem()
+    x = np.random.default_rng(11).standard_normal(problem.size)
+    before = problem.matvec(x)
+    locations, orientations = system.get_state()
+    system.set_state(locations + 0.3, orientations[::-1])
+    np.testing.assert_array_equal(problem.matvec(x), before)
+    assert np.linalg.norm(system.mobility_problem().matvec(x) - before) > 1e-3 * np.linalg.norm(before)
+
+
+# ====================================================================== random finite differences
+def exact_perpendicular_drift(h):
+    """kT d mu_perp / dz of one blob at height h = z/a >= 1 (Swan-Brady self term), units kT mu0 / a."""
+    return (9 / h ** 2 - 12 / h ** 4 + 5 / h ** 6) / 8
+
+
+@pytest.mark.parametrize('delta', [1e-2, 1e-3, 1e-5])
+def test_roller_rfd_drift_of_one_blob(delta):
+    """VALIDATION T3: mean of the RFD estimator at h = 1.5a equals kT dmu_perp/dz (0.2586 kT mu0/a).
+
+    The estimator is averaged over 20,000 draws of one blob; its standard error is estimated from the
+    draws and the mean must be within 4 standard errors (plus the O(delta^2) truncation, < 1e-4 here).
+    delta from 1e-2 to 1e-5: truncation is invisible at this sampling error and round-off (eps/delta)
+    too; doc/stochastic_validation.md shows the study down to 1e-10, where round-off takes over.
+    """
+    bodies = equilibrium_blobs(1, 12)
+    bodies[0].location = np.array([0.0, 0.0, 1.5 * A])
+    system = make_system(bodies, [1])
+    r = np.array([[0.0, 0.0, 1.5 * A]])
+    rng = np.random.default_rng(13)
+    draws = np.array([system.roller_drift(r, rng.standard_normal(3), KT, delta)[0] for _ in range(20000)])
+    # (C++ backend: about 2 s for the 40,000 products)
+    mean, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(draws.shape[0])
+    exact = np.array([0.0, 0.0, exact_perpendicular_drift(1.5)])  # mu0 = 1, a = 1, kT = 1
+    assert np.all(np.abs(mean - exact) < 4 * se + 1e-4)
+    assert abs(exact[2] - 0.258573) < 1e-6
+
+
+def test_rigid_body_rfd_drift_of_one_blob():
+    """The two-solve RFD of the rigid schemes gives the same drift for a one-blob body (1,000 draws, 4 SE)."""
+    bodies = equilibrium_blobs(1, 14)
+    bodies[0].location = np.array([0.0, 0.0, 1.5 * A])
+    system = make_system(bodies, [1], tolerance=1e-10)
+    scheme = make_scheme('stochastic_first_order_RFD', 0.01, Opts(rf_delta=1e-4))
+    old = system.get_state()
+    pc = system.build_preconditioner(system.mobility_problem())
+    rng = np.random.default_rng(15)
+    draws = np.array([scheme.rfd_drift(system, old[0], old[1], rng.standard_normal((1, 6)), pc)[0]
+                      for _ in range(1000)])
+    mean, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(draws.shape[0])
+    exact = np.zeros(6)
+    exact[2] = exact_perpendicular_drift(1.5)
+    assert np.all(np.abs(mean - exact) < 4 * se + 1e-4), (mean, se)
+
+
+# ====================================================================== Gibbs-Boltzmann
+def assert_gibbs_boltzmann(z_means, bins, label):
+    """Mean height and histogram within 4 standard errors (SE from the spread of per-body means)."""
+    score = z_score(z_means, EXACT_MEAN)
+    bin_scores = z_score(bins, EXACT_BINS)
+    assert abs(score) < 4.0, '%s: <z> = %.4f (exact %.4f), z-score %.2f' % (label, z_means.mean(), EXACT_MEAN, score)
+    assert np.max(np.abs(bin_scores)) < 4.0, '%s: histogram z-scores %s' % (label, np.round(bin_scores, 2))
+
+
+GB_CASES = [(name, 150, 300, 0.01) for name in RIGID_ITERATIVE] + \
+           [(name, 30, 400, 0.01) for name in RIGID_DENSE] + [(name, 300, 400, 0.01) for name in ROLLERS]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('scheme_name, n_bodies, n_steps, dt', GB_CASES)
+def test_gibbs_boltzmann_heights(scheme_name, n_bodies, n_steps, dt):
+    """VALIDATION T1 (own parameters): single-blob heights keep the exact equilibrium distribution."""
+    vector_product = 'python' if scheme_name in RIGID_DENSE else CPP
+    z_means, bins, _, scheme = run_heights(scheme_name, n_bodies, n_steps, dt, seed=100,
+                                           vector_product=vector_product)
+    assert_gibbs_boltzmann(z_means, bins, scheme_name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('scheme_name', ['stochastic_Slip_Trapz', 'stochastic_adams_bashforth_rollers'])
+def test_gibbs_boltzmann_fails_without_drift(scheme_name):
+    """Negative control: the same runs with the thermal drift switched off leave the equilibrium."""
+    n_bodies = 150 if 'rollers' not in scheme_name else 300
+    z_means, bins, _, _ = run_heights(scheme_name, n_bodies, 300, 0.01, seed=100, disable_drift=True)
+    with pytest.raises(AssertionError):
+        assert_gibbs_boltzmann(z_means, bins, scheme_name + ' without drift')
+
+
+def test_in_plane_diffusion_equals_kT_mean_parallel_mobility():
+    """VALIDATION T2: MSD_x + MSD_y = 4 kT <mu_par> t in equilibrium (x has no drift), 300 rollers.
+
+    <mu_par> by quadrature over the exact height density; SE of the per-body (dx^2 + dy^2)/(4t) from
+    their spread; 4 SE.
+    """
+    M = mobility.blob_mobility_matrix('python')
+    z = np.linspace(1e-3, 20, 4000)
+    mu_par = np.array([M(np.array([[0, 0, h]]), ETA, A)[0, 0] for h in z])
+    density = height_density(z)
+    expected = KT * np.trapezoid(mu_par * density, z) / np.trapezoid(density, z)
+    n_steps, dt = 300, 0.01
+    _, _, displacement, _ = run_heights('stochastic_adams_bashforth_rollers', 300, n_steps, dt, seed=200)
+    per_body = np.sum(displacement ** 2, axis=1) / (4 * n_steps * dt)
+    score = (per_body.mean() - expected) / (per_body.std(ddof=1) / np.sqrt(per_body.size))
+    assert abs(score) < 4.0, (per_body.mean(), expected)
+
+
+# ====================================================================== reproducibility and exact restart
+def write_scene(tmp_path, scheme, n_steps, extra=None, initial_step=0):
+    bodies = equilibrium_blobs(6, 300) if 'rollers' in scheme else None
+    from multi_bodies.structure_files import write_clones_file, write_vertex_file
+    if 'rollers' in scheme:
+        write_vertex_file(tmp_path / 'blob.vertex', np.zeros((1, 3)))
+        write_clones_file(tmp_path / 'blobs.clones', np.array([b.location for b in bodies]),
+                          np.tile([1.0, 0, 0, 0], (len(bodies), 1)))
+        structure = 'structure blob.vertex blobs.clones'
+        radius = A
+    else:
+        reference = gen.boomerang()
+        write_vertex_file(tmp_path / 'boomerang.vertex', reference)
+        write_clones_file(tmp_path / 'boomerang.clones', np.array([[0, 0, 2.0], [3.0, 0.5, 2.5]]),
+                          np.array([[1.0, 0, 0, 0], [0.9, 0.1, 0.3, 0.2]]) / np.linalg.norm([0.9, 0.1, 0.3, 0.2]))
+        structure = 'structure boomerang.vertex boomerang.clones'
+        radius = 0.3
+    options = {'scheme': scheme, 'dt': 0.01, 'n_steps': n_steps, 'n_save': 2, 'eta': ETA, 'g': 0.2,
+               'blob_radius': radius, 'kT': 0.5, 'repulsion_strength_wall': 2.0, 'debye_length_wall': 0.25,
+               'mobility_vector_prod_implementation': CPP, 'mobility_blobs_implementation': 'python',
+               'solver_tolerance': 1e-6, 'output_name': 'run', 'update_PC': 3}
+    if initial_step:
+        options['initial_step'] = initial_step
+    options.update(extra or {})
+    text = '\n'.join('%s %s' % item for item in options.items()) + '\n' + structure + '\n'
+    (tmp_path / 'input.dat').write_text(text)
+
+
+def run_in(tmp_path, monkeypatch):
+    import importlib
+    script = importlib.import_module('multi_bodies.multi_bodies')
+    monkeypatch.chdir(tmp_path)
+    return script.main(['--input-file', 'input.dat'])
+
+
+def snapshots(folder, save_clones='one_file_per_step'):
+    if save_clones == 'one_file':
+        return {name: (folder / name).read_bytes() for name in sorted(os.listdir(folder)) if name.endswith('.config')}
+    return {name: (folder / name).read_bytes() for name in sorted(os.listdir(folder)) if name.endswith('.clones')
+            and name.startswith('run.')}
+
+
+@pytest.mark.parametrize('scheme', ['stochastic_Slip_Trapz', 'stochastic_adams_bashforth_rollers'])
+def test_same_seed_is_bit_identical_and_random_state_reproduces(scheme, tmp_path, monkeypatch):
+    runs = []
+    for k, extra in enumerate([{'seed': 5}, {'seed': 5}, None]):
+        folder = tmp_path / str(k)
+        folder.mkdir()
+        if extra is None:  # the state saved by the first run, and no seed
+            (folder / 'state.pickle').write_bytes((tmp_path / '0' / 'run.random_state').read_bytes())
+            extra = {'random_state': 'state.pickle'}
+        write_scene(folder, scheme, 6, extra)
+        assert run_in(folder, monkeypatch) == 0
+        runs.append(snapshots(folder))
+    assert len(runs[0]) == 4 and runs[0] == runs[1] == runs[2]
+    other = tmp_path / 'other'
+    other.mkdir()
+    write_scene(other, scheme, 6, {'seed': 6})
+    assert run_in(other, monkeypatch) == 0
+    assert snapshots(other) != runs[0]
+
+
+@pytest.mark.parametrize('save_clones', ['one_file_per_step', 'one_file'])
+@pytest.mark.parametrize('scheme', ['stochastic_Slip_Trapz', 'stochastic_adams_bashforth_rollers'])
+def test_restart_continues_bit_for_bit(scheme, save_clones, tmp_path, monkeypatch):
+    """10 steps in one run equal 4 + 6 steps with initial_step 4 (update_PC 3, so the restart needs the
+    saved preconditioner configuration, the solver guess, the generator and the Adams-Bashforth history)."""
+    whole, split = tmp_path / 'whole', tmp_path / 'split'
+    whole.mkdir()
+    split.mkdir()
+    extra = {'seed': 9, 'save_clones': save_clones}
+    write_scene(whole, scheme, 10, extra)
+    assert run_in(whole, monkeypatch) == 0
+    write_scene(split, scheme, 4, extra)
+    assert run_in(split, monkeypatch) == 0
+    write_scene(split, scheme, 10, extra, initial_step=4)
+    assert run_in(split, monkeypatch) == 0
+    assert snapshots(whole, save_clones) == snapshots(split, save_clones)
+    info_whole = (whole / 'run.info').read_text().splitlines()[:3]
+    info_split = (split / 'run.info').read_text().splitlines()[:3]
+    assert info_whole == info_split
+    assert len((split / 'run.time').read_text().splitlines()) == 2
+
+
+def test_every_manual_scheme_name_runs(tmp_path, monkeypatch):
+    """Every stochastic scheme name of the manual runs two steps of a boomerang pair (rollers: blobs)."""
+    for scheme in RIGID_ITERATIVE + RIGID_DENSE + ROLLERS:
+        folder = tmp_path / scheme
+        folder.mkdir()
+        write_scene(folder, scheme, 2, {'seed': 1})
+        assert run_in(folder, monkeypatch) == 0, scheme
+        info = (folder / 'run.info').read_text()
+        assert 'stochastic_iterations_count' in info
