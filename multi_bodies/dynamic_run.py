@@ -168,7 +168,8 @@ class DynamicRun:
             run_output.save_random_state(options.output_name + '.random_state', self.rng)
         run_output.write_bodies_info(options.output_name + '.bodies_info', self.types, system.num_blobs)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
-                                           options.where('save_clones'), restart=restart)
+                                           options.where('save_clones'), restart=restart,
+                                           restart_from=self.restart)
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)
         status, step, stopped_line = 0, first, None

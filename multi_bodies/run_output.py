@@ -237,9 +237,12 @@ class SnapshotWriter:
     types : list of (structure ID, number of bodies), in body order
     where : str, location of the save_clones option for messages
     restart : bool, this run continues an earlier one (``one_file`` series are appended to)
+    restart_from : dict or None, the restart record of the step the run continues from; ``one_file``
+        series are cut where that step's snapshot starts (it is written again, and later snapshots belong
+        to the abandoned continuation), so the files equal those of an uninterrupted run
     """
 
-    def __init__(self, output_name, save_clones, types, where='save_clones', restart=False):
+    def __init__(self, output_name, save_clones, types, where='save_clones', restart=False, restart_from=None):
         if save_clones not in ('one_file_per_step', 'one_file'):
             raise UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
                                  % (where, save_clones))
@@ -248,6 +251,11 @@ class SnapshotWriter:
         self._started = restart
         if not restart and os.path.exists(self.restart_path):
             os.remove(self.restart_path)
+        if restart and restart_from and save_clones == 'one_file':
+            for structure_id, offset in (restart_from.get('config_offsets') or {}).items():
+                path = config_name(output_name, structure_id)
+                if os.path.isfile(path) and os.path.getsize(path) > offset:
+                    os.truncate(path, offset)
 
     def save(self, step, locations, orientations, restart_state=None):
         """Write snapshot ``step`` of all structures; then append its restart record.
