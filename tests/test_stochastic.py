@@ -314,7 +314,7 @@ def assert_gibbs_boltzmann(z_means, bins, label):
 
 
 GB_CASES = [(name, 150, 300, 0.01) for name in RIGID_ITERATIVE] + \
-           [(name, 30, 400, 0.01) for name in RIGID_DENSE] + [(name, 300, 400, 0.01) for name in ROLLERS]
+           [(name, 16, 1000, 0.01) for name in RIGID_DENSE] + [(name, 300, 400, 0.01) for name in ROLLERS]
 
 
 @pytest.mark.slow
