@@ -44,11 +44,8 @@ except ImportError:
 import numpy as np  # noqa: E402
 
 import utils  # noqa: E402
-from body.body import bodies_to_arrays  # noqa: E402
-from multi_bodies import multi_bodies_functions  # noqa: E402
 from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies.run_setup import clones_name, read_bodies, write_bodies_info  # noqa: E402
-from multi_bodies.system import make_system  # noqa: E402
+from multi_bodies.run_setup import clones_name, prepare, write_bodies_info  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 
@@ -194,53 +191,14 @@ class Progress:
 
 
 # ------------------------------------------------------------------ the run
-def has_wall(options, system):
-    """False when no hydrodynamics sees a wall (``*_no_wall`` backends, or rollers in ``domain no_wall``)."""
-    if 'rollers' in options.scheme:
-        return options.domain != 'no_wall'
-    return not (system.vector_product_name.endswith('_no_wall') and system.blobs_name.endswith('_no_wall'))
-
-
-def check_start(options, system, types):
-    """Refuse a start with a blob centre below the wall (runs with a wall only)."""
-    if not system.check_wall:
-        return
-    invalid = system.invalid_bodies()
-    if invalid.size:
-        first = int(invalid[0])
-        start = 0
-        for (structure_id, count), spec in zip(types, options.structures):
-            if first < start + count:
-                raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
-                                           '%d bodies are affected. Move the bodies up in the clones file.'
-                                           % (spec.where, first - start, structure_id, invalid.size))
-            start += count
-
-
 def run(options, print_residual=False):
     """Run the dynamics of validated ``options``; returns the exit status (0, or 1 when stopped)."""
     scheme = make_scheme(options.scheme, options.dt)
-    for name in ('blob_radius', 'eta'):
-        if not getattr(options, name) > 0:
-            raise utils.UserInputError('%s: %s must be positive' % (options.where(name), name))
     if options.n_save < 1:
         raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
-    if options.domain not in ('single_wall', 'no_wall'):
-        raise utils.UserInputError("%s: domain must be single_wall or no_wall" % options.where('domain'))
-    hooks = multi_bodies_functions.load_user_hooks(
-        os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
-    if hooks.overridden:
-        print('user-defined physics from %s: %s' % (', '.join(hooks.sources), ', '.join(hooks.overridden)))
-    bodies, types = read_bodies(options, hooks.set_slip_by_ID, single_blob_bodies='rollers' in options.scheme)
-    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
-    slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
-    body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
-    system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=print)
-    print('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
-          'blob_blob_force_implementation = %s' % (system.vector_product_name, system.blobs_name,
-                                                   options.blob_blob_force_implementation))
-    system.check_wall = has_wall(options, system)
-    check_start(options, system, types)
+    # Shared with multi_bodies_utilities.py: checks, hooks, bodies, arrays, backends, System, start check.
+    setup = prepare(options, 'dynamics', print_residual=print_residual, log=print)
+    system, types, body_arrays = setup.system, setup.types, setup.body_arrays
 
     output_dir = os.path.dirname(options.output_name)
     if output_dir:
