@@ -434,3 +434,50 @@ def test_active_rods_example_runs_in_the_dynamics_in_both_styles(tmp_path, monke
     np.testing.assert_allclose(trajectories[1], trajectories[0], rtol=0, atol=1e-9)
     # Both rods turned counterclockwise about the wall normal: quaternion (cos t/2, 0, 0, sin t/2), t > 0.
     assert np.all(trajectories[0][:, 6] > 0)
+
+
+# ------------------------------------------------------------------ the manual's examples, both scripts and styles
+@pytest.mark.parametrize('script, input_name', [('static', 'inputfile_boomerang_suspension_mobility.dat'),
+                                                ('dynamic', 'inputfile_boomerang_suspension.dat')])
+def test_boomerang_suspension_example_gives_the_same_numbers_in_both_styles(script, input_name, tmp_path,
+                                                                            monkeypatch, capsys):
+    results = []
+    for style in ('package', 'published'):
+        folder = tmp_path / style
+        shutil.copytree(os.path.join(PACKAGE, 'examples', 'boomerang_suspension'), folder / 'examples' / 'x')
+        shutil.copytree(os.path.join(PACKAGE, 'Structures'), folder / 'Structures')
+        run_dir = folder / 'examples' / 'x' / ('' if style == 'package' else 'published_style')
+        text = (run_dir / input_name).read_text().replace('n_steps                                  200', 'n_steps 2')
+        text = text.replace('n_save                                   10', 'n_save 2')
+        (run_dir / input_name).write_text(text)
+        monkeypatch.chdir(run_dir)
+        main = STATIC.main if script == 'static' else DYNAMIC.main
+        assert main(['--input-file', input_name]) == 0
+        log = capsys.readouterr().out
+        for hook in ('blob_blob_force', 'body_body_force_torque'):
+            assert '%s replaced by' % hook in log
+        name = 'boomerang_suspension.velocities.dat' if script == 'static' else \
+            'boomerang_suspension.boomerang_suspension.00000002.clones'
+        results.append(np.loadtxt(run_dir / 'data' / name, skiprows=0 if script == 'static' else 1))
+    np.testing.assert_allclose(results[1], results[0], rtol=0, atol=1e-9 * np.abs(results[0]).max())
+
+
+def test_squirmer_example_runs_in_the_static_script(tmp_path, monkeypatch):
+    """The squirmer's slip file is used and turned with the body: in free space, without gravity, it swims along
+    its body axis R(q) e_x (the slip is axisymmetric about that axis, up to the icosahedral discretisation)."""
+    shutil.copytree(os.path.join(PACKAGE, 'examples', 'squirmer'), tmp_path / 'examples' / 'squirmer')
+    shutil.copytree(os.path.join(PACKAGE, 'Structures'), tmp_path / 'Structures')
+    monkeypatch.chdir(tmp_path / 'examples' / 'squirmer')
+    assert STATIC.main(['--input-file', 'inputfile_squirmer_mobility.dat']) == 0   # as shipped: wall and gravity
+    text = open('inputfile_squirmer_mobility.dat').read()
+    text = text.replace('g                                        0.5', 'g 0.0')
+    text = text.replace('implementation            python', 'implementation python_no_wall')
+    text = text.replace('implementation      auto', 'implementation python_no_wall')
+    open('free.dat', 'w').write(text)
+    assert STATIC.main(['--input-file', 'free.dat']) == 0
+    velocity = np.loadtxt('data/squirmer.velocities.dat')
+    rows = [line.split() for line in open('squirmer.clones') if line.strip() and not line.startswith('#')]
+    axis = rotation(np.array(rows[1][3:7], dtype=float))[:, 0]
+    angle = np.degrees(np.arccos(velocity[:3] @ axis / np.linalg.norm(velocity[:3])))
+    assert angle < 2.0 and np.linalg.norm(velocity[:3]) > 0.5, (angle, velocity)
+    assert np.linalg.norm(velocity[3:]) < 1e-3 * np.linalg.norm(velocity[:3])
