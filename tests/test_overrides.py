@@ -481,3 +481,44 @@ def test_squirmer_example_runs_in_the_static_script(tmp_path, monkeypatch):
     angle = np.degrees(np.arccos(velocity[:3] @ axis / np.linalg.norm(velocity[:3])))
     assert angle < 2.0 and np.linalg.norm(velocity[:3]) > 0.5, (angle, velocity)
     assert np.linalg.norm(velocity[3:]) < 1e-3 * np.linalg.norm(velocity[:3])
+
+
+def doc_examples():
+    """The two python blocks of the section 'The same override in both styles' of doc/overrides.md."""
+    text = open(os.path.join(os.path.dirname(PACKAGE), 'doc', 'overrides.md')).read()
+    section = text.split('## The same override in both styles')[1].split('\n## ')[0]
+    blocks = [block.split('```')[0] for block in section.split('```python\n')[1:]]
+    assert len(blocks) == 2
+    return blocks
+
+
+@pytest.mark.parametrize('style', [0, 1], ids=['package', 'published'])
+def test_the_documented_examples_run_and_agree_with_the_formula(style, body_mobility, tmp_path, monkeypatch):
+    """doc/overrides.md: wall spring plus location slip; U = N F - s by linearity (SPEC 4.2)."""
+    options = dict(BASE_OPTIONS, g=G)
+    velocity = (body_mobility @ expected_wall().reshape(-1)).reshape(-1, 6) + expected_slip_velocity()
+    scale = np.abs(velocity).max()
+    static, dynamic = tmp_path / 'static', tmp_path / 'dynamic'
+    write_scene(static, dict(options, scheme='mobility'), doc_examples()[style])
+    assert run_static(static, monkeypatch) == 0
+    np.testing.assert_allclose(np.loadtxt(static / 'run.force.dat'), expected_wall(), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(np.loadtxt(static / 'run.velocities.dat'), velocity, rtol=0, atol=1e-8 * scale)
+    write_scene(dynamic, dict(options, scheme='deterministic_forward_euler'), doc_examples()[style])
+    assert run_dynamic(dynamic, monkeypatch) == 0
+    start = np.loadtxt(dynamic / 'run.body.00000000.clones', skiprows=1)
+    end = np.loadtxt(dynamic / 'run.body.00000001.clones', skiprows=1)
+    np.testing.assert_allclose((end[:, :3] - start[:, :3]) / DT, velocity[:, :3], rtol=0, atol=1e-8 * scale)
+
+
+@pytest.mark.parametrize('script', ['static', 'dynamic'])
+def test_failing_set_slip_by_ID_stops_before_the_run(script, tmp_path, monkeypatch, capsys):
+    text = 'def set_slip_by_ID(body, slip):\n    return body.no_such_attribute\n'
+    write_scene(tmp_path, dict(BASE_OPTIONS, scheme='mobility' if script == 'static' else
+                               'deterministic_forward_euler'), text)
+    with pytest.raises(SystemExit) as exit_info:
+        (run_static if script == 'static' else run_dynamic)(tmp_path, monkeypatch)
+    assert exit_info.value.code == 2
+    message = capsys.readouterr().err
+    for word in ('set_slip_by_ID', 'user_defined_functions.py', 'line 2', 'AttributeError', 'no_such_attribute'):
+        assert word in message, (word, message)
+    assert not os.path.exists(tmp_path / 'run.inputfile')
