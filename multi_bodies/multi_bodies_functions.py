@@ -212,6 +212,11 @@ def active_body_slip(body, slip):
     return np.asarray(slip, dtype=float).reshape(-1, 3) @ body.orientation.rotation_matrix().T
 
 
+# Marks that let the set-up recognise these helpers in a user's slip functions (also in fresh module copies).
+default_zero_blobs.published_helper = 'default_zero_blobs'
+active_body_slip.published_helper = 'active_body_slip'
+
+
 def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=None, python_forces=None):
     """The all-pairs blob force function for ``blob_blob_force_implementation``.
 

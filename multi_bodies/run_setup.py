@@ -93,8 +93,7 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False):
 
 def _is_default_helper(function, name):
     """True when ``function`` is this package's ``multi_bodies_functions.<name>`` (or a fresh copy's)."""
-    return (getattr(function, '__name__', None) == name and mbf.function_file(function) is not None
-            and os.path.abspath(mbf.function_file(function)) == os.path.abspath(mbf.__file__))
+    return getattr(function, 'published_helper', None) == name
 
 
 def simplify_slip_function(body):

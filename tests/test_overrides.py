@@ -522,3 +522,27 @@ def test_failing_set_slip_by_ID_stops_before_the_run(script, tmp_path, monkeypat
     for word in ('set_slip_by_ID', 'user_defined_functions.py', 'line 2', 'AttributeError', 'no_such_attribute'):
         assert word in message, (word, message)
     assert not os.path.exists(tmp_path / 'run.inputfile')
+
+
+def test_published_default_slip_functions_give_the_slip_file(tmp_path, monkeypatch):
+    """partial(active_body_slip, slip=slip) and default_zero_blobs (the published default) equal a slip file."""
+    slip = np.array([[0.1, 0.0, 0.2], [0.0, -0.3, 0.0], [0.2, 0.1, 0.0], [0.0, 0.0, -0.1]])
+    text = PUBLISHED_HEADER + '''
+def set_slip_by_ID_new(body, slip):
+  if slip is not None:
+    body.function_slip = partial(active_body_slip, slip = slip)
+  else:
+    body.function_slip = default_zero_blobs
+multi_bodies_functions.set_slip_by_ID = set_slip_by_ID_new
+'''
+    results = []
+    for name, user in (('plain', None), ('published', text)):
+        folder = tmp_path / name
+        write_scene(folder, dict(BASE_OPTIONS, scheme='mobility'), user)
+        np.savetxt(folder / 'body.slip', slip, header='%d' % len(slip), comments='')
+        scene = (folder / 'input.dat').read_text().replace('body.clones\n', 'body.clones body.slip\n')
+        (folder / 'input.dat').write_text(scene)
+        assert run_static(folder, monkeypatch) == 0
+        results.append(np.loadtxt(folder / 'run.velocities.dat'))
+    assert np.abs(results[0]).max() > 0.01
+    np.testing.assert_allclose(results[1], results[0], rtol=1e-12, atol=1e-15)
