@@ -441,16 +441,17 @@ def _vectorises(function, samples, physics):
     ``blob_blob_force`` follows: vectorised over rows, or one row (3,) at a
     time.  A function that fails on the stack but not on rows is per row.
     """
-    try:
-        stacked = np.asarray(function(samples.copy(), **physics), dtype=float)
-    except Exception:
-        return False
-    if stacked.shape != samples.shape:
-        return False
-    try:
-        rows = np.array([np.asarray(function(row.copy(), **physics), dtype=float).reshape(3) for row in samples])
-    except Exception:
-        return True  # works on the stack only
+    with np.errstate(all='ignore'):
+        try:
+            stacked = np.asarray(function(samples.copy(), **physics), dtype=float)
+        except Exception:
+            return False
+        if stacked.shape != samples.shape:
+            return False
+        try:
+            rows = np.array([np.asarray(function(row.copy(), **physics), dtype=float).reshape(3) for row in samples])
+        except Exception:
+            return True  # works on the stack only
     return bool(np.allclose(stacked, rows, rtol=1e-10, atol=1e-300, equal_nan=True))
 
 
@@ -530,7 +531,7 @@ class PhysicsHooks:
             self.body_body_force_torque = function
             self.body_body_forces_python = self._body_pairs_adapter(function, per_pair)
             self._replaced('body_body_force_torque', function,
-                           'per pair, (r, quaternion_i, quaternion_j) -> (2, 3): a Python loop over body pairs'
+                           'per pair, (r, quaternion_i, quaternion_j) -> (2, 3): a Python loop over body pairs, slow'
                            if per_pair else 'vectorised over pairs, r (..., 3) -> (force, torque)')
         if 'bodies_external_force_torque' in found:
             function = found['bodies_external_force_torque']
@@ -599,7 +600,8 @@ class PhysicsHooks:
                     r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)[others]
                     pair = checked_array(call_user_function(function, hook, r, periodic_length=periodic_length, **kw),
                                          [r.shape], function, hook, 'the force on blob i of every pair')
-                    np.add.at(forces, start + np.nonzero(others)[0], pair)
+                    # Each row has exactly n - 1 other blobs, in order: sum them per row.
+                    forces[start:stop] = pair.reshape(stop - start, n - 1, 3).sum(axis=1)
                 return forces
             return vectorised_pairs
 
