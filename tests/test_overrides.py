@@ -119,6 +119,7 @@ def expected_slip_velocity():
     return np.concatenate((-s, np.zeros((2, 3))), axis=1)
 
 
+STYLES = ('package', 'published')
 PUBLISHED_HEADER = 'import multi_bodies_functions\nfrom multi_bodies_functions import *\n\n'
 PACKAGE_HEADER = 'import numpy as np\n\n'
 
@@ -154,7 +155,7 @@ def blob_blob_force_new(r, *args, **kwargs):
   distance = np.linalg.norm(r)
   return -%(c)r * r / distance**3
 multi_bodies_functions.blob_blob_force = blob_blob_force_new
-''', values=dict(c=PAIR_C), extra={}, hooks={'package': 'blob_blob_force', 'published': 'blob_blob_force'}),
+''', values=dict(c=PAIR_C), extra={}, hooks=dict.fromkeys(STYLES, 'blob_blob_force')),
     'spring': dict(
         options={'body_body_force_torque_implementation': 'python'},
         expected=expected_spring,
@@ -172,7 +173,7 @@ def body_body_force_torque_new(r, quaternion_i, quaternion_j, *args, **kwargs):
   force_torque[1] = %(t)r * np.cross(np.array([0.0, 0.0, 1.0]), r)
   return force_torque
 multi_bodies_functions.body_body_force_torque = body_body_force_torque_new
-''', values=dict(k=SPRING_K, l=SPRING_L, t=TWIST), extra={}, hooks={'package': 'body_body_force_torque', 'published': 'body_body_force_torque'}),
+''', values=dict(k=SPRING_K, l=SPRING_L, t=TWIST), extra={}, hooks=dict.fromkeys(STYLES, 'body_body_force_torque')),
     'external': dict(
         options={},
         expected=expected_external,
@@ -192,7 +193,7 @@ def bodies_external_force_torque_new(bodies, r_vectors, *args, **kwargs):
     force_torque[2 * k + 1, 2] = %(t)r * (k + 1)
   return force_torque
 multi_bodies_functions.bodies_external_force_torque = bodies_external_force_torque_new
-''', values=dict(c=EXT_C, t=EXT_TORQUE), extra={}, hooks={'package': 'bodies_external_force_torque', 'published': 'bodies_external_force_torque'}),
+''', values=dict(c=EXT_C, t=EXT_TORQUE), extra={}, hooks=dict.fromkeys(STYLES, 'bodies_external_force_torque')),
     'slip': dict(
         options={},
         expected=None,
@@ -217,7 +218,7 @@ def set_slip_by_ID_new(body):
   body.function_slip = uniform_slip
   return
 multi_bodies_functions.set_slip_by_ID = set_slip_by_ID_new
-''', values={}, extra={}, hooks={'package': 'set_slip_by_ID', 'published': 'set_slip_by_ID'}),
+''', values={}, extra={}, hooks=dict.fromkeys(STYLES, 'set_slip_by_ID')),
 }
 
 
@@ -426,7 +427,8 @@ def test_active_rods_example_runs_in_the_dynamics_in_both_styles(tmp_path, monke
         folder = tmp_path / style
         shutil.copytree(os.path.join(PACKAGE, 'examples', 'pair_active_rods'), folder)
         run_dir = folder if style == 'package' else folder / 'published_style'
-        text = (run_dir / 'inputfile_pair_active_rods.dat').read_text().replace('n_steps                                  20', 'n_steps 5')
+        text = (run_dir / 'inputfile_pair_active_rods.dat').read_text()
+        text = text.replace('n_steps                                  20', 'n_steps 5')
         (run_dir / 'inputfile_pair_active_rods.dat').write_text(text)
         monkeypatch.chdir(run_dir)
         assert DYNAMIC.main(['--input-file', 'inputfile_pair_active_rods.dat']) == 0
@@ -546,3 +548,27 @@ multi_bodies_functions.set_slip_by_ID = set_slip_by_ID_new
         results.append(np.loadtxt(folder / 'run.velocities.dat'))
     assert np.abs(results[0]).max() > 0.01
     np.testing.assert_allclose(results[1], results[0], rtol=1e-12, atol=1e-15)
+
+
+def test_bodies_have_the_published_attributes(tmp_path, monkeypatch):
+    """A published-style file reads location, orientation, Nblobs, blob_radius, ID, get_r_vectors, calc_rot_matrix:
+    the torque of blob forces f_i = (0, 0, 0.2 z_i) through calc_rot_matrix().T equals the sum of (r_i - loc) x f_i."""
+    text = PUBLISHED_HEADER + '''
+def bodies_external_force_torque_new(bodies, r_vectors, *args, **kwargs):
+  force_torque = np.zeros((2 * len(bodies), 3))
+  for k, b in enumerate(bodies):
+    assert b.ID == 'body' and b.Nblobs == 4 and b.blob_radius == kwargs.get('blob_radius')
+    r = b.get_r_vectors()
+    assert np.allclose(r, b.location + np.dot(b.reference_configuration, b.orientation.rotation_matrix().T))
+    f = np.zeros((b.Nblobs, 3))
+    f[:, 2] = 0.2 * r[:, 2]
+    force_torque[2 * k] = f.sum(axis=0)
+    force_torque[2 * k + 1] = np.dot(b.calc_rot_matrix().T, f.flatten())
+  return force_torque
+multi_bodies_functions.bodies_external_force_torque = bodies_external_force_torque_new
+'''
+    write_scene(tmp_path, dict(BASE_OPTIONS, scheme='mobility'), text)
+    assert run_static(tmp_path, monkeypatch) == 0
+    f = np.zeros(blob_positions().shape)
+    f[..., 2] = 0.2 * blob_positions()[..., 2]
+    np.testing.assert_allclose(np.loadtxt(tmp_path / 'run.force.dat'), sum_to_bodies(f), rtol=1e-12, atol=1e-15)
