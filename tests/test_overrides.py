@@ -572,3 +572,17 @@ multi_bodies_functions.bodies_external_force_torque = bodies_external_force_torq
     f = np.zeros(blob_positions().shape)
     f[..., 2] = 0.2 * blob_positions()[..., 2]
     np.testing.assert_allclose(np.loadtxt(tmp_path / 'run.force.dat'), sum_to_bodies(f), rtol=1e-12, atol=1e-15)
+
+
+def test_pycuda_user_file_with_auto_and_no_gpu_is_logged_as_unused(tmp_path, monkeypatch, capsys):
+    from multi_bodies import multi_bodies_functions as mbf
+    try:
+        mbf.blob_blob_force_calculator('pycuda')
+        pytest.skip('a GPU is usable here: auto would use the file')
+    except utils.UserInputError:
+        pass
+    write_scene(tmp_path, dict(BASE_OPTIONS, scheme='mobility', blob_blob_force_implementation='auto'))
+    shutil.copy(os.path.join(PACKAGE, 'examples', 'boomerang_suspension', 'forces_pycuda_user_defined.py'), tmp_path)
+    assert run_static(tmp_path, monkeypatch) == 0
+    log = capsys.readouterr().out
+    assert 'forces_pycuda_user_defined.py is not used: no GPU is usable here' in log
