@@ -41,9 +41,20 @@ class Body:
         Name of the structure type (from the ``.clones`` file name).
     slip_reference : ndarray, shape (n, 3) or None
         Active slip on each blob in the body frame (None means no slip).
+    function_slip : callable ``f(body) -> (n, 3)``
+        Lab-frame slip of the blobs (published attribute; ``calc_slip()``
+        calls it).  The default, :func:`reference_slip_in_lab_frame`, turns
+        ``slip_reference`` with the body; a user's ``set_slip_by_ID`` may set
+        another function.
     body_length : float
         Largest distance between two reference blobs plus ``2a``; the length
         scale of random finite differences.
+
+    The attributes that published override files read exist with the
+    published meaning: ``location``, ``orientation`` (a Quaternion with
+    ``rotation_matrix()``), ``Nblobs``, ``blob_radius``, ``ID``,
+    ``reference_configuration``, ``function_slip``, ``get_r_vectors()``,
+    ``calc_rot_matrix()``, ``calc_K_matrix()``, ``calc_slip()``.
     """
 
     def __init__(self, location, orientation, reference_configuration, blob_radius):
@@ -56,6 +67,7 @@ class Body:
         self.blob_radius = float(blob_radius)
         self.ID = None
         self.slip_reference = None
+        self.function_slip = reference_slip_in_lab_frame
         self.body_length = None
 
     def rotation_matrix(self, orientation=None):
@@ -73,6 +85,15 @@ class Body:
         rotation = self.rotation_matrix(orientation)
         return location + self.reference_configuration @ rotation.T
 
+    def calc_rot_matrix(self, location=None, orientation=None):
+        """The rotational block column of ``K``, shape (3n, 3) (published layout).
+
+        Block ``i`` is ``-[d_i]_x`` with the lever arm ``d_i = r_i - location``,
+        so that ``block_i w = w x d_i`` and ``block_i^T f = d_i x f`` (the
+        torque of a blob force about the location).
+        """
+        return self.calc_K_matrix(location, orientation)[:, 3:]
+
     def calc_K_matrix(self, location=None, orientation=None):
         """Geometric matrix ``K``, shape (3n, 6): block row ``[I | -[r_i - location]_x]``."""
         location = self.location if location is None else np.asarray(location, dtype=float)
@@ -89,10 +110,15 @@ class Body:
         return bool(np.all(self.get_r_vectors(location, orientation)[:, 2] >= 0.0))
 
     def calc_slip(self):
-        """Active slip on the blobs in the lab frame, shape (n, 3) (zeros without slip)."""
-        if self.slip_reference is None:
-            return np.zeros((self.Nblobs, 3))
-        return self.slip_reference @ self.rotation_matrix().T
+        """Active slip on the blobs in the lab frame, shape (n, 3): ``function_slip(self)`` (zeros without slip)."""
+        return self.function_slip(self)
+
+
+def reference_slip_in_lab_frame(body):
+    """Default ``function_slip``: the body-frame ``slip_reference`` turned by ``R(q)``, shape (n, 3); zeros if None."""
+    if body.slip_reference is None:
+        return np.zeros((body.Nblobs, 3))
+    return np.asarray(body.slip_reference, dtype=float).reshape(-1, 3) @ body.rotation_matrix().T
 
 
 def reference_body_length(reference_configuration, blob_radius):

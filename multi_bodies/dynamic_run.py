@@ -19,11 +19,8 @@ import time
 import numpy as np
 
 import utils
-from body.body import bodies_to_arrays
-from multi_bodies import multi_bodies_functions
 from multi_bodies import run_output
-from multi_bodies.run_setup import read_bodies
-from multi_bodies.system import make_system
+from multi_bodies.run_setup import prepare
 from quaternion_integrator.schemes import make_scheme
 
 SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
@@ -53,34 +50,8 @@ class _StopRequest:
         return False
 
 
-def has_wall(options, system):
-    """False when no hydrodynamics sees a wall (``*_no_wall`` backends, or rollers in ``domain no_wall``)."""
-    if 'rollers' in options.scheme:
-        return options.domain != 'no_wall'
-    return not (system.vector_product_name.endswith('_no_wall') and system.blobs_name.endswith('_no_wall'))
-
-
-def check_start(options, system, types):
-    """Refuse a start with a blob centre below the wall (runs with a wall only)."""
-    if not system.check_wall:
-        return
-    invalid = system.invalid_bodies()
-    if invalid.size:
-        first = int(invalid[0])
-        start = 0
-        for (structure_id, count), spec in zip(types, options.structures):
-            if first < start + count:
-                raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
-                                           '%d bodies are affected. Move the bodies up in the clones file.'
-                                           % (spec.where, first - start, structure_id, invalid.size))
-            start += count
-
-
 def check_options(options):
     """Ranges the dynamic run needs, checked before anything is written."""
-    for name in ('blob_radius', 'eta'):
-        if not getattr(options, name) > 0:
-            raise utils.UserInputError('%s: %s must be positive' % (options.where(name), name))
     if options.n_save < 1:
         raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
     if options.n_steps < 0:
@@ -88,8 +59,6 @@ def check_options(options):
     if options.initial_step < 0:
         raise utils.UserInputError('%s: initial_step must be >= 0, got %d'
                                    % (options.where('initial_step'), options.initial_step))
-    if options.domain not in ('single_wall', 'no_wall'):
-        raise utils.UserInputError("%s: domain must be single_wall or no_wall" % options.where('domain'))
     if options.save_clones not in ('one_file_per_step', 'one_file'):
         raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
                                    % (options.where('save_clones'), options.save_clones))
@@ -106,26 +75,12 @@ class DynamicRun:
         self.options, self.log = options, log
         check_options(options)
         self.scheme = make_scheme(options.scheme, options.dt, options)
-        self.hooks = multi_bodies_functions.load_user_hooks(
-            os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
-        if self.hooks.overridden:
-            log('user-defined physics from %s: %s' % (', '.join(self.hooks.sources), ', '.join(self.hooks.overridden)))
         self.restart = None
         if options.initial_step > 0:
             self.restart = run_output.restart_record(options.output_name, options.initial_step)
-        bodies, types = read_bodies(options, self.hooks.set_slip_by_ID,
-                                    single_blob_bodies='rollers' in options.scheme,
-                                    restart_record=self.restart)
-        self.bodies, self.types = bodies, types
-        body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
-        slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
-        body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
-        self.system = make_system(options, bodies, body_arrays, self.hooks, print_residual=print_residual, log=log)
-        log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
-            'blob_blob_force_implementation = %s' % (self.system.vector_product_name, self.system.blobs_name,
-                                                     options.blob_blob_force_implementation))
-        self.system.check_wall = has_wall(options, self.system)
-        check_start(options, self.system, types)
+        # Shared with multi_bodies_utilities.py: checks, hooks, bodies, arrays, backends, System, start check.
+        setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
+        self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
         self.rng = run_output.make_generator(options)
         self.rng_from_restart = False
         if self.restart is not None and self.restart.get('state'):

@@ -1,17 +1,36 @@
-"""Set-up shared by the two scripts: bodies from the ``structure`` lines, and ``.bodies_info``.
+"""Set-up shared by the two scripts: input checks, hooks, bodies, backends, the System, start checks.
 
-Library floor (ARCHITECTURE.md floor 3): the scripts call these; nothing
-here writes simulation output other than the file it is asked to write.
+Both ``multi_bodies.py`` (dynamics) and ``multi_bodies_utilities.py`` (static
+problems) call :func:`prepare`, in this order:
+
+1. checks of the options both scripts use (``blob_radius``, ``eta``, ``domain``);
+2. the physics hooks: this package's defaults, replaced by the user's
+   ``user_defined_functions.py`` (either style, doc/overrides.md) and
+   ``forces_pycuda_user_defined.py``; the log names every replaced hook and
+   every override that cannot take effect;
+3. the bodies of the ``structure`` lines, each given its slip by the
+   ``set_slip_by_ID`` hook;
+4. the bodies as arrays, and the System with the backends (``auto``
+   resolved to the fastest usable one, honouring overrides);
+5. the start check: no blob centre below the wall when the hydrodynamics
+   sees one.
+
+Library floor (ARCHITECTURE.md floor 3): nothing here writes simulation
+output other than the file it is asked to write.
 """
 import os
+from collections import namedtuple
+from functools import partial
 
 import numpy as np
 
 import utils
-from body.body import Body
+from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
+from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies.run_output import (RESTART_SUFFIX, clones_name, config_name, read_config_snapshot,  # noqa: F401
                                      write_bodies_info)
 from multi_bodies.structure_files import read_clones_file, read_slip_file, read_vertex_file
+from multi_bodies.system import make_system
 
 
 def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
@@ -21,6 +40,9 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
     ----------
     options : the validated input options
     set_slip_by_ID : callable ``(body, slip (n, 3) or None)``, the slip hook
+        (after it, a published ``default_zero_blobs`` or
+        ``partial(active_body_slip, slip=...)`` slip function becomes the
+        equivalent ``slip_reference``, so that the vectorised slip path is used)
     single_blob_bodies : bool
         Refuse structures of more than one blob (roller schemes).
     restart_record : dict or None
@@ -76,9 +98,130 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             body = Body(location, orientation, reference, options.blob_radius)
             body.ID = spec.ID
             set_slip_by_ID(body, slip)
+            simplify_slip_function(body)
             if body_length is None:
                 body_length = body.calc_body_length()
             body.body_length = body_length
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
     return bodies, types
+
+
+def _is_default_helper(function, name):
+    """True when ``function`` is this package's ``multi_bodies_functions.<name>`` (or a fresh copy's)."""
+    return getattr(function, 'published_helper', None) == name
+
+
+def simplify_slip_function(body):
+    """Turn the published constant-slip functions into ``slip_reference`` (same slip, vectorised path).
+
+    ``default_zero_blobs`` means no slip; ``partial(active_body_slip, slip=s)``
+    means the body-frame slip ``s`` turned with the body.  Any other
+    ``function_slip`` is kept and called per body at every solve.
+    """
+    function = body.function_slip
+    if function is reference_slip_in_lab_frame:
+        return
+    if _is_default_helper(function, 'default_zero_blobs'):
+        body.slip_reference = None
+        body.function_slip = reference_slip_in_lab_frame
+    elif isinstance(function, partial) and _is_default_helper(function.func, 'active_body_slip'):
+        slip = function.keywords.get('slip') if not function.args else function.args[0]
+        if len(function.args) + len(function.keywords) == 1 and slip is not None \
+                and np.asarray(slip).size == 3 * body.Nblobs:
+            body.slip_reference = np.asarray(slip, dtype=float).reshape(-1, 3)
+            body.function_slip = reference_slip_in_lab_frame
+
+
+RunSetup = namedtuple('RunSetup', ['hooks', 'bodies', 'types', 'body_arrays', 'system'])
+RunSetup.__doc__ = """What :func:`prepare` returns: the hooks, the Body list, (ID, count) per structure type,
+the BodyArrays and the System."""
+
+STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+
+
+def check_common_options(options):
+    """Options both scripts use: positive ``blob_radius`` and ``eta``, a known ``domain``."""
+    for name in ('blob_radius', 'eta'):
+        if not getattr(options, name) > 0:
+            raise utils.UserInputError('%s: %s must be positive, got %s' % (options.where(name), name,
+                                                                            getattr(options, name)))
+    if options.domain not in ('single_wall', 'no_wall'):
+        raise utils.UserInputError("%s: domain must be single_wall or no_wall, got '%s'"
+                                   % (options.where('domain'), options.domain))
+
+
+def load_hooks(options, directory, log=print):
+    """The run's hooks from ``directory`` (see ``multi_bodies_functions.load_user_hooks``), logged."""
+    implementation = options.blob_blob_force_implementation
+    hooks = mbf.load_user_hooks(directory, load_pycuda=implementation in ('pycuda', 'auto'),
+                                physics=mbf.physics_keywords(options))
+    if hooks.sources:
+        log('user-defined physics from %s' % ', '.join(hooks.sources))
+    for note in hooks.notes:
+        log('  ' + note)
+    return hooks
+
+
+def wall_is_seen(options, system, script):
+    """Whether the hydrodynamics of this run sees the wall (then no blob centre may start below it)."""
+    if 'rollers' in options.scheme:
+        return options.domain != 'no_wall'
+    names = [system.blobs_name]
+    if script == 'dynamics' or options.scheme == 'mobility':  # body_mobility and resistance use dense blocks only
+        names.append(system.vector_product_name)
+    return not all(name.endswith('_no_wall') for name in names)
+
+
+def check_start(options, system, types):
+    """Refuse a start with a blob centre below the wall (when the wall is seen), naming the structure line."""
+    if not system.check_wall:
+        return
+    invalid = system.invalid_bodies()
+    if invalid.size:
+        first = int(invalid[0])
+        start = 0
+        for (structure_id, count), spec in zip(types, options.structures):
+            if first < start + count:
+                raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
+                                           '%d bodies are affected. Move the bodies up in the clones file.'
+                                           % (spec.where, first - start, structure_id, invalid.size))
+            start += count
+
+
+def prepare(options, script, print_residual=False, log=print, directory=None, restart_record=None):
+    """Everything a run needs before its first solve; shared by both scripts.
+
+    Parameters
+    ----------
+    options : validated input options (``input_options.read_input_file``)
+    script : 'dynamics' (multi_bodies.py) or 'static' (multi_bodies_utilities.py)
+    print_residual : bool
+        Print every GMRES residual.
+    log : callable(str)
+        Where the set-up lines go (the scripts pass ``print``).
+    directory : str
+        Run directory holding the override files (default: the current one).
+
+    Returns a :data:`RunSetup`.  Raises ``utils.UserInputError`` (file, line
+    or option named) for any mistake found before the run starts, including
+    an override file that does not import and a ``set_slip_by_ID`` that fails.
+    """
+    check_common_options(options)
+    hooks = load_hooks(options, os.getcwd() if directory is None else directory, log)
+    try:
+        bodies, types = read_bodies(options, hooks.set_slip_by_ID,
+                                    single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
+                                    restart_record=restart_record)
+    except mbf.UserFunctionError as err:
+        raise utils.UserInputError(str(err))
+    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
+    body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
+    system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=log)
+    log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
+        'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
+        % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))
+    system.check_wall = wall_is_seen(options, system, script)
+    check_start(options, system, types)
+    return RunSetup(hooks, bodies, types, body_arrays, system)

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 import mobility
+from body.body import reference_slip_in_lab_frame
 from multi_bodies import body_solver
 from multi_bodies import multi_bodies_functions as mbf
 from quaternion_integrator.quaternion import Quaternion
@@ -113,13 +114,20 @@ class System:
         self.mobility_product = mobility.mobility_vector_product(vector_product_name)
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
         self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
+        self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
         self.blob_blob_forces = mbf.blob_blob_force_calculator(
-            blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda)
-        self.body_body_forces = mbf.body_body_force_calculator(body_body_name,
-                                                               pair_force_torque=hooks.body_body_force_torque)
+            blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda,
+            python_forces=hooks.blob_blob_forces_python)
+        self.body_body_forces = mbf.body_body_force_calculator(
+            body_body_name, pair_force_torque=hooks.body_body_force_torque,
+            python_forces_torques=hooks.body_body_forces_python)
         self.uses_bodies = any(not hooks.is_default(name) for name in
                                ('bodies_external_force_torque', 'preprocess', 'postprocess'))
-        self.slip_functions = any(callable(getattr(b, 'function_slip', None)) for b in bodies)
+        # Bodies whose slip is a user function (set by set_slip_by_ID); the others use the vectorised slip.
+        self.slip_function_bodies = [k for k, b in enumerate(bodies)
+                                     if getattr(b, 'function_slip', reference_slip_in_lab_frame)
+                                     is not reference_slip_in_lab_frame]
+        self.slip_functions = bool(self.slip_function_bodies)
         self.has_slip = self.slip_functions or bool(np.any(body_arrays.reference_slip))
         self.check_wall = True
         self.gmres_iterations = 0          # every GMRES iteration (the published deterministic_iterations_count)
@@ -219,18 +227,31 @@ class System:
             extra = self.hooks.bodies_external_force_torque(self.synced_bodies(), r_vectors, **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         if self.body_body_forces is not None:
-            force_torque = force_torque + self.body_body_forces(self.arrays.locations, **self.physics).reshape(-1, 6)
+            force_torque = force_torque + np.asarray(self.body_body_forces(
+                self.arrays.locations, self.arrays.orientations, **self.physics)).reshape(-1, 6)
         return force_torque
 
     def slip(self):
-        """Active slip of every blob in the lab frame, shape (N, 3)."""
+        """Active slip of every blob in the lab frame, shape (N, 3).
+
+        Bodies with the default slip use the vectorised rotation of the
+        reference slip; a body whose ``function_slip`` was set by the user's
+        ``set_slip_by_ID`` gets ``function_slip(body)`` (checked: shape
+        (Nblobs, 3), finite).
+        """
+        slip = self.arrays.lab_frame_slip()
         if not self.slip_functions:
-            return self.arrays.lab_frame_slip()
-        slips = []
-        for body in self.synced_bodies():
-            function = getattr(body, 'function_slip', None)
-            slips.append(function(body) if callable(function) else body.calc_slip())
-        return np.concatenate([np.asarray(s, dtype=float).reshape(-1, 3) for s in slips])
+            return slip
+        bodies = self.synced_bodies()
+        offsets = self.arrays.blob_offsets
+        for k in self.slip_function_bodies:
+            body = bodies[k]
+            function = body.function_slip
+            value = mbf.call_user_function(function, 'function_slip', body)
+            slip[offsets[k]:offsets[k + 1]] = mbf.checked_array(
+                value, [(body.Nblobs, 3), (3 * body.Nblobs,)], function, 'function_slip',
+                'the lab-frame slip of the %d blobs of body %d (%s)' % (body.Nblobs, k, body.ID))
+        return slip
 
     # -------------------------------------------------------------- mobility problem
     def mobility_problem(self, locations=None, orientations=None):
@@ -484,29 +505,77 @@ class System:
         return solution * norm
 
 
+def resolve_blob_blob_implementation(name, hooks, log=None):
+    """The ``blob_blob_force_implementation`` to use, given the user's overrides (``auto`` resolved).
+
+    ``auto`` honours the overrides: a ``forces_pycuda_user_defined.py`` with a
+    usable GPU gives pycuda; a replaced python ``blob_blob_force`` gives python
+    (the compiled kernels have their own law); otherwise the fastest usable
+    backend.  Overrides that cannot take effect with the chosen name are
+    logged.
+    """
+    pycuda_file = getattr(hooks, 'pycuda_file', None)
+    python_law = not hooks.is_default('blob_blob_force')
+    say = log if log is not None else (lambda text: None)
+    if name == 'auto':
+        if pycuda_file is not None:
+            try:
+                mbf.blob_blob_force_calculator('pycuda')
+                say('blob_blob_force_implementation: auto chose pycuda, to use %s' % pycuda_file)
+                return 'pycuda'
+            except UserInputError as err:
+                say('  %s is not used: no GPU is usable here (%s)' % (pycuda_file, err))
+        if python_law:
+            say('blob_blob_force_implementation: auto chose python, the only one that uses the replaced '
+                'blob_blob_force')
+            return 'python'
+        return resolve_implementation(name, 'forces', log)
+    if python_law and name != 'python':
+        say('  blob_blob_force from %s cannot take effect: blob_blob_force_implementation is %s%s; set '
+            'blob_blob_force_implementation python to use it'
+            % (', '.join(hooks.sources[:1]), name,
+               ' (no blob-blob forces)' if name == 'None' else ' (a compiled kernel with the default law)'))
+    if pycuda_file is not None and name != 'pycuda':
+        say('  %s is not used: blob_blob_force_implementation is %s' % (pycuda_file, name))
+    return name
+
+
 def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=None):
-    """A System from validated input ``Options`` (``auto`` backends resolved and logged)."""
+    """A System from validated input ``Options`` (``auto`` backends resolved and logged).
+
+    The user's ``forces_pycuda_user_defined.py`` is imported here when the
+    blob-blob forces run on pycuda (a clear error without a GPU), and the
+    overrides that cannot take effect with the chosen implementations are
+    logged (``log``, a callable taking one line).
+    """
     product = resolve_implementation(options.mobility_vector_prod_implementation, 'vector_product', log)
     blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log)
-    forces = resolve_implementation(options.blob_blob_force_implementation, 'forces', log)
-    physics = dict(g=options.g, repulsion_strength_wall=options.repulsion_strength_wall,
-                   debye_length_wall=options.debye_length_wall, repulsion_strength=options.repulsion_strength,
-                   debye_length=options.debye_length, periodic_length=np.array(options.periodic_length),
-                   blob_radius=options.blob_radius, blob_mass=1.0)
+    forces = resolve_blob_blob_implementation(options.blob_blob_force_implementation, hooks, log)
+    body_body = options.body_body_force_torque_implementation
+    if not hooks.is_default('body_body_force_torque') and body_body != 'python' and log is not None:
+        log('  body_body_force_torque from %s cannot take effect: body_body_force_torque_implementation is %s; '
+            'set it to python to use it' % (', '.join(hooks.sources[:1]), body_body))
+    physics = mbf.physics_keywords(options)
 
     def checked(option_name, build):
         try:
             return build()
         except UserInputError as err:
             raise UserInputError('%s: %s: %s' % (options.where(option_name), option_name, err))
+    if forces == 'pycuda' and getattr(hooks, 'pycuda_file', None) is not None \
+            and hooks.calc_blob_blob_forces_pycuda is None:
+        hooks.calc_blob_blob_forces_pycuda = checked('blob_blob_force_implementation',
+                                                     lambda: mbf.load_user_pycuda_forces(hooks.pycuda_file))
+        hooks.overridden.append('calc_blob_blob_forces_pycuda')
+        if log is not None:
+            log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)
     checked('mobility_vector_prod_implementation', lambda: mobility.mobility_vector_product(product))
     checked('mobility_blobs_implementation', lambda: mobility.blob_mobility_matrix(blobs))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
         forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda))
-    checked('body_body_force_torque_implementation',
-            lambda: mbf.body_body_force_calculator(options.body_body_force_torque_implementation))
+    checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
     return System(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
                   vector_product_name=product, blobs_name=blobs, blob_blob_name=forces,
-                  body_body_name=options.body_body_force_torque_implementation,
+                  body_body_name=body_body,
                   periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
                   free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual)
