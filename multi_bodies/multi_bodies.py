@@ -253,6 +253,9 @@ def run(options, print_residual=False):
         pickle.dump(rng.bit_generator.state, f)
     write_bodies_info(options.output_name + '.bodies_info', types, body_arrays.num_blobs)
     writer = SnapshotWriter(options, types, system, scheme)
+    if options.save_vtk:  # blob and body .vtp files and .pvd collections beside the snapshots (doc/visualisation.md)
+        from multi_bodies.vtk_output import AlsoWriteVtk
+        writer = AlsoWriteVtk(writer, options, types, system)
     restore_multistep_state(options, scheme)
 
     first, last = options.initial_step, options.n_steps
