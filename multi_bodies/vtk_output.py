@@ -43,6 +43,16 @@ _PVD_TAIL = '  </Collection>\n</VTKFile>\n'
 _PVD_ENTRY = '    <DataSet timestep="%s" group="" part="0" file="%s"/>\n'
 
 
+def require_pyvista(who):
+    """Stop with one clear message when pyvista is missing (``who`` names the option or script that needs it)."""
+    try:
+        import pyvista  # noqa: F401
+    except ImportError:
+        from utils import UserInputError
+        raise UserInputError('%s writes VTK files through pyvista, which is not installed; install it with '
+                             '"python3 -m pip install pyvista"' % who)
+
+
 def step_file_name(output_name, kind, step):
     """``output_name.<kind>.<step, 8 digits>.vtp``; ``kind`` is 'blobs' or 'bodies'."""
     return '%s.%s.%s.vtp' % (output_name, kind, str(step).zfill(8))
@@ -234,6 +244,7 @@ class AlsoWriteVtk:
     """
 
     def __init__(self, snapshot_writer, options, types, system):
+        require_pyvista('%s: save_vtk True' % options.where('save_vtk'))
         self.snapshot_writer, self.system = snapshot_writer, system
         self.series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
                                 options.dt, options.periodic_length, wrap_periodic=False,
