@@ -147,7 +147,7 @@ def read_clones_series(output_name, structure_id, steps=None):
         missing = [s for s in steps if s not in by_step]
         if missing:
             raise UserInputError('no snapshot %s.%s.%s.clones; saved steps are %s'
-                                 % (output_name, structure_id, str(missing[0]).zfill(8), _step_ranges(saved)))
+                                 % (output_name, structure_id, str(missing[0]).zfill(8), describe_steps(saved)))
         saved, paths = list(steps), [by_step[s] for s in steps]
     if not saved:
         raise UserInputError('no snapshot %s.%s.<step>.clones found (save_clones one_file_per_step); check '
@@ -196,7 +196,7 @@ def read_config_series(path):
     return np.stack([c[0] for c in configurations]), np.stack([c[1] for c in configurations])
 
 
-def _step_ranges(steps):
+def describe_steps(steps):
     """Short text of a sorted list of steps: '0, 1, ..., 10' style."""
     steps = list(steps)
     if len(steps) <= 6:

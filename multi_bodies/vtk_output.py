@@ -26,6 +26,10 @@ Coordinates are the simulation's own: the same length unit and origin (wall
 at ``z = 0``) as the ``.clones`` files and the velocity-field ``.vtk`` of the
 static script, so all of them open in one ParaView scene.
 
+``load_run`` and ``run_configurations`` read a saved run back (bodies of the
+input file, then every saved configuration) for ``clones_to_vtk.py`` and
+``render.py``.
+
 pyvista is imported only when a file is written.
 """
 import os
@@ -33,7 +37,11 @@ import re
 
 import numpy as np
 
-from body.body import K_dot
+import utils
+from body.body import K_dot, bodies_to_arrays
+from multi_bodies import multi_bodies_functions
+from multi_bodies.run_setup import read_bodies
+from multi_bodies.structure_files import read_body_table
 from quaternion_integrator.quaternion import rotation_matrices
 
 BLOBS = 'blobs'
@@ -258,3 +266,79 @@ class AlsoWriteVtk:
         if name in ('snapshot_writer', 'system', 'series'):
             raise AttributeError(name)
         return getattr(self.snapshot_writer, name)
+
+
+# ------------------------------------------------------------------ a saved run, read back (clones_to_vtk.py, render.py)
+STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+
+
+def load_run(options):
+    """Bodies of the input file: (BodyArrays with the slip of the slip files and hooks, types)."""
+    hooks = multi_bodies_functions.load_user_hooks(os.getcwd(), load_pycuda=False)
+    bodies, types = read_bodies(options, hooks.set_slip_by_ID)
+    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
+    body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
+    return body_arrays, types
+
+
+def saved_snapshots(options, types):
+    """Saved configurations of a dynamic or Monte Carlo run.
+
+    Returns steps (S,) and, for all bodies in input order, locations
+    (S, Nb, 3) and orientations (S, Nb, 4).
+    """
+    if options.save_clones == 'one_file':
+        series = []
+        for structure_id, count in types:
+            path = '%s.%s.config' % (options.output_name, structure_id)
+            series.append(utils.read_config_series(path))
+        snapshots = min(s[0].shape[0] for s in series)
+        steps = np.arange(snapshots) * options.n_save
+        series = [(loc[:snapshots], ori[:snapshots]) for loc, ori in series]
+    elif options.save_clones == 'one_file_per_step':
+        saved = [set(utils.clones_series_steps(options.output_name, structure_id)[0]) for structure_id, _ in types]
+        common = sorted(set.intersection(*saved))
+        if not common:
+            raise utils.UserInputError(
+                'no saved step with a snapshot %s.<ID>.<step>.clones of every structure (%s); check output_name '
+                'in %s and run from the folder the run was started in'
+                % (options.output_name, ', '.join(name for name, _ in types), options.input_file))
+        dropped = set.union(*saved) - set(common)
+        if dropped:
+            print('skipping %d step(s) not saved for every structure (a run stopped while saving?)' % len(dropped))
+        series = [utils.read_clones_series(options.output_name, structure_id, common)[1:]
+                  for structure_id, _ in types]
+        steps = np.array(common, dtype=int)
+    else:
+        raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
+                                   % (options.where('save_clones'), options.save_clones))
+    for (structure_id, count), (locations, _) in zip(types, series):
+        if locations.shape[1] != count:
+            raise utils.UserInputError('the snapshots of %s hold %d bodies but its clones file in %s has %d; '
+                                       'is this the input file of that run?'
+                                       % (structure_id, locations.shape[1], options.input_file, count))
+    return (steps, np.concatenate([s[0] for s in series], axis=1), np.concatenate([s[1] for s in series], axis=1))
+
+
+def static_velocities(options, num_bodies):
+    """Body velocities (Nb, 6) of a static problem, or None when the run has none to show."""
+    if options.scheme == 'mobility':
+        path = options.output_name + '.velocities.dat'
+        if os.path.isfile(path):
+            return read_body_table(path, num_bodies, 'velocity')
+        print('%s not found: the body files carry no velocities (run multi_bodies_utilities.py first)' % path)
+    if options.scheme == 'resistance' and options.velocity_file is not None:
+        return read_body_table(options.velocity_file, num_bodies, 'velocity', options.where('velocity_file'))
+    return None
+
+
+def run_configurations(options, body_arrays, types):
+    """Every saved configuration of the run of ``options``.
+
+    Static problems have one, step 0: the input configuration.  Returns
+    steps (S,), locations (S, Nb, 3) and orientations (S, Nb, 4).
+    """
+    if options.scheme in STATIC_SCHEMES:
+        return np.zeros(1, dtype=int), body_arrays.locations[None].copy(), body_arrays.orientations[None].copy()
+    return saved_snapshots(options, types)
