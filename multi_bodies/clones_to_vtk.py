@@ -39,11 +39,10 @@ except ImportError:
 import utils  # noqa: E402
 from multi_bodies.input_options import read_input_file  # noqa: E402
 from multi_bodies.vtk_output import (STATIC_SCHEMES, VtkSeries, collection_name, load_run,  # noqa: E402
-                                     require_pyvista, run_configurations, static_velocities)
+                                     run_configurations, static_velocities)
 
 def convert(options, wrap_periodic=False):
     """Write the VTK series of the run of ``options``; returns the number of steps written."""
-    require_pyvista('clones_to_vtk.py')
     body_arrays, types = load_run(options)
     series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
                        options.dt, options.periodic_length, wrap_periodic=wrap_periodic)

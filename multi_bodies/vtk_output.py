@@ -30,10 +30,14 @@ static script, so all of them open in one ParaView scene.
 input file, then every saved configuration) for ``clones_to_vtk.py`` and
 ``render.py``.
 
-pyvista is imported only when a file is written.
+The files are written with numpy alone, in VTK's XML PolyData format
+(binary appended data), which ParaView, VisIt and pyvista read: the option
+``save_vtk`` then costs no extra import (pyvista takes most of a second to
+import, longer than the whole example run of the manual).
 """
 import os
 import re
+from xml.sax.saxutils import escape
 
 import numpy as np
 
@@ -49,16 +53,6 @@ BODIES = 'bodies'
 _PVD_HEAD = '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n  <Collection>\n'
 _PVD_TAIL = '  </Collection>\n</VTKFile>\n'
 _PVD_ENTRY = '    <DataSet timestep="%s" group="" part="0" file="%s"/>\n'
-
-
-def require_pyvista(who):
-    """Stop with one clear message when pyvista is missing (``who`` names the option or script that needs it)."""
-    try:
-        import pyvista  # noqa: F401
-    except ImportError:
-        from utils import UserInputError
-        raise UserInputError('%s writes VTK files through pyvista, which is not installed; install it with '
-                             '"python3 -m pip install pyvista"' % who)
 
 
 def step_file_name(output_name, kind, step):
@@ -91,78 +85,149 @@ def periodic_shifts(locations, periodic_length):
     return shifts
 
 
-def _string_array(names, index):
-    return np.asarray(names, dtype=str)[np.asarray(index, dtype=int)]
+class StringArray:
+    """A string point array, encoded once for the VTK XML ``ascii`` format (character codes, 0 after each string).
+
+    ``names``: list of str; ``index``: (n,) int, the name of each point.
+    The structure of each blob never changes during a run, so a series
+    encodes it once and writes the same text at every step.
+    """
+
+    def __init__(self, names, index):
+        codes = [' '.join(str(c) for c in name.encode('utf-8')) + ' 0' for name in names]
+        index = np.asarray(index, dtype=int).reshape(-1)
+        self.count = index.shape[0]
+        self.text = ' '.join(codes[i] for i in index)
 
 
-def blob_polydata(r_vectors, blob_radius, blob_body_index, blob_structure_index, structure_names,
-                  blob_velocities=None, blob_slip=None):
-    """PolyData of the blobs: one vertex per blob and the arrays of the module docstring.
+def write_vtp(path, points, point_arrays):
+    """Write a VTK XML PolyData file: one vertex cell per point, and point arrays.
 
     Parameters
     ----------
-    r_vectors : (N, 3) lab-frame blob positions (length).
+    path : str
+    points : (n, 3) float coordinates.
+    point_arrays : list of (name, values): values of shape (n,) or (n, k),
+        stored as Float64 (floats) or Int64 (integers), or a ``StringArray``.
+
+    Numbers go in raw binary appended data (little-endian, UInt64 block
+    headers), strings inline as ``ascii``; this is the format that ParaView's
+    and VTK's ``vtkXMLPolyDataReader`` read.  Only numpy is needed to write.
+    """
+    points = np.ascontiguousarray(points, dtype='<f8').reshape(-1, 3)
+    count = points.shape[0]
+    vertices = np.arange(count, dtype='<i8')
+    blocks, xml, offset = [], [], 0
+
+    def appended(values, name, components, element='DataArray'):
+        nonlocal offset
+        values = np.ascontiguousarray(values)
+        vtk_type = 'Float64' if values.dtype.kind == 'f' else 'Int64'
+        values = values.astype('<f8' if vtk_type == 'Float64' else '<i8', copy=False)
+        data = values.tobytes()
+        blocks.append(np.uint64(len(data)).astype('<u8').tobytes())
+        blocks.append(data)
+        text = '<%s type="%s" Name="%s" NumberOfComponents="%d" format="appended" offset="%d"/>' % (
+            element, vtk_type, name, components, offset)
+        offset += 8 + len(data)
+        return text
+
+    xml.append('<PointData>')
+    for name, values in point_arrays:
+        if isinstance(values, StringArray):
+            if values.count != count:
+                raise ValueError('string array %s has %d values for %d points' % (name, values.count, count))
+            xml.append('<Array type="String" Name="%s" NumberOfTuples="%d" format="ascii">\n%s\n</Array>'
+                       % (name, count, values.text))
+        else:
+            values = np.asarray(values)
+            if values.shape[0] != count:
+                raise ValueError('array %s has %d values for %d points' % (name, values.shape[0], count))
+            xml.append(appended(values, name, 1 if values.ndim == 1 else values.shape[1]))
+    xml.append('</PointData>')
+    xml.append('<Points>%s</Points>' % appended(points, 'Points', 3))
+    xml.append('<Verts>%s%s</Verts>' % (appended(vertices, 'connectivity', 1), appended(vertices + 1, 'offsets', 1)))
+    head = ('<?xml version="1.0"?>\n<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" '
+            'header_type="UInt64">\n<PolyData>\n<Piece NumberOfPoints="%d" NumberOfVerts="%d" NumberOfLines="0" '
+            'NumberOfStrips="0" NumberOfPolys="0">\n' % (count, count))
+    tail = '</Piece>\n</PolyData>\n<AppendedData encoding="raw">\n_'
+    with open(path, 'wb') as f:
+        f.write((head + '\n'.join(xml) + '\n' + tail).encode('ascii'))
+        f.write(b''.join(blocks))
+        f.write(b'\n</AppendedData>\n</VTKFile>\n')
+    return path
+
+
+def blob_point_arrays(blob_radius, blob_body_index, blob_structure, blob_velocities=None, blob_slip=None):
+    """Point arrays of the blob file (see the module docstring).
+
+    Parameters
+    ----------
     blob_radius : float or (N,) blob radius ``a`` (length).
-    blob_body_index : (N,) int, body of each blob.
-    blob_structure_index : (N,) int, structure line of each blob.
-    structure_names : list of str, the structure IDs.
+    blob_body_index : (N,) int, body of each blob (0-based, all structures).
+    blob_structure : pair ``(structure_index (N,) int, StringArray of the structure IDs)``.
     blob_velocities : (N, 3) or None, blob velocities (length/time).
     blob_slip : (N, 3) or None, lab-frame active slip (length/time).
     """
-    import pyvista
-    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
-    mesh = pyvista.PolyData(r_vectors.copy())
-    mesh.point_data['radius'] = np.broadcast_to(np.asarray(blob_radius, dtype=float), (r_vectors.shape[0],)).copy()
-    mesh.point_data['body_index'] = np.asarray(blob_body_index, dtype=np.int64)
-    mesh.point_data['structure_index'] = np.asarray(blob_structure_index, dtype=np.int64)
-    mesh.point_data['structure'] = _string_array(structure_names, blob_structure_index)
+    structure_index, structure_names = blob_structure
+    count = np.asarray(blob_body_index).shape[0]
+    arrays = [('radius', np.broadcast_to(np.asarray(blob_radius, dtype=float), (count,))),
+              ('body_index', np.asarray(blob_body_index, dtype=np.int64)),
+              ('structure_index', np.asarray(structure_index, dtype=np.int64)),
+              ('structure', structure_names)]
     if blob_velocities is not None:
-        mesh.point_data['velocity'] = np.asarray(blob_velocities, dtype=float).reshape(-1, 3)
+        arrays.append(('velocity', np.asarray(blob_velocities, dtype=float).reshape(-1, 3)))
     if blob_slip is not None:
-        mesh.point_data['slip'] = np.asarray(blob_slip, dtype=float).reshape(-1, 3)
-    return mesh
+        arrays.append(('slip', np.asarray(blob_slip, dtype=float).reshape(-1, 3)))
+    return arrays
 
 
-def body_polydata(locations, orientations, body_structure_index, structure_names, body_velocities=None):
-    """PolyData of the bodies: one vertex per body location and the arrays of the module docstring.
+def body_point_arrays(orientations, body_structure, body_velocities=None):
+    """Point arrays of the body file: frame axes, quaternion, indices, structure, velocities.
 
-    Parameters
-    ----------
-    locations : (Nb, 3) body locations (length).
-    orientations : (Nb, 4) scalar-first unit quaternions.
-    body_structure_index : (Nb,) int, structure line of each body.
-    structure_names : list of str.
-    body_velocities : (Nb, 6) or None, ``[v, w]`` per body (length/time, radians/time).
+    ``orientations``: (Nb, 4) scalar-first unit quaternions; ``body_structure``:
+    pair ``(structure_index (Nb,), StringArray)``; ``body_velocities``: (Nb, 6)
+    ``[v, w]`` (length/time, radians/time) or None.
     """
-    import pyvista
-    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     rotations = rotation_matrices(orientations)
-    mesh = pyvista.PolyData(locations.copy())
-    for axis in range(3):
-        mesh.point_data['axis_%d' % (axis + 1)] = np.ascontiguousarray(rotations[:, :, axis])
-    mesh.point_data['quaternion'] = orientations.copy()
-    mesh.point_data['body_index'] = np.arange(locations.shape[0], dtype=np.int64)
-    mesh.point_data['structure_index'] = np.asarray(body_structure_index, dtype=np.int64)
-    mesh.point_data['structure'] = _string_array(structure_names, body_structure_index)
+    structure_index, structure_names = body_structure
+    arrays = [('axis_%d' % (axis + 1), rotations[:, :, axis]) for axis in range(3)]
+    arrays += [('quaternion', orientations), ('body_index', np.arange(orientations.shape[0], dtype=np.int64)),
+               ('structure_index', np.asarray(structure_index, dtype=np.int64)), ('structure', structure_names)]
     if body_velocities is not None:
         body_velocities = np.asarray(body_velocities, dtype=float).reshape(-1, 6)
-        mesh.point_data['velocity'] = body_velocities[:, :3].copy()
-        mesh.point_data['angular_velocity'] = body_velocities[:, 3:].copy()
-    return mesh
+        arrays += [('velocity', body_velocities[:, :3]), ('angular_velocity', body_velocities[:, 3:])]
+    return arrays
+
+
+def write_blob_file(path, r_vectors, blob_radius, blob_body_index, blob_structure_index, structure_names,
+                    blob_velocities=None, blob_slip=None):
+    """The blob ``.vtp`` of one step: r_vectors (N, 3), radius, body index, structure; optional velocity, slip."""
+    structure = (blob_structure_index, StringArray(structure_names, blob_structure_index))
+    return write_vtp(path, r_vectors, blob_point_arrays(blob_radius, blob_body_index, structure, blob_velocities,
+                                                        blob_slip))
+
+
+def write_body_file(path, locations, orientations, body_structure_index, structure_names, body_velocities=None):
+    """The body ``.vtp`` of one step: locations (Nb, 3), orientations (Nb, 4); optional velocities (Nb, 6)."""
+    structure = (body_structure_index, StringArray(structure_names, body_structure_index))
+    return write_vtp(path, locations, body_point_arrays(orientations, structure, body_velocities))
 
 
 class PvdCollection:
     """A ``.pvd`` file that stays valid after every added step (a stopped run leaves a readable file).
 
-    Each ``add`` writes one entry in place of the closing tags and writes them
-    again after it, so adding costs the same at any length of the run.
-    ``keep_before_step``: on opening an existing file, keep its entries of
-    steps before this one (a restart) and drop the rest; None starts a new file.
+    The file stays open; each ``add`` writes one entry in place of the
+    closing tags, writes them again after it and flushes, so adding costs the
+    same at any length of the run.  ``keep_before_step``: on opening an
+    existing file, keep its entries of steps before this one (a restart) and
+    drop the rest; None starts a new file.
     """
 
     def __init__(self, path, keep_before_step=None):
         self.path = path
+        self.folder = os.path.dirname(os.path.abspath(path))
         entries = []
         if keep_before_step is not None and os.path.isfile(path):
             with open(path, 'r') as f:
@@ -171,17 +236,28 @@ class PvdCollection:
                     step = re.search(r'\.(\d{8,})\.vtp$', found.group(2)) if found else None
                     if step and int(step.group(1)) < keep_before_step:
                         entries.append(line)
-        with open(path, 'w') as f:
-            f.write(_PVD_HEAD + ''.join(entries) + _PVD_TAIL)
+        head = (_PVD_HEAD + ''.join(entries)).encode('utf-8')
+        self.file = open(path, 'wb')
+        self.file.write(head + _PVD_TAIL.encode('ascii'))
+        self.file.flush()
+        self.tail_at = len(head)
 
     def add(self, time, file_path):
         """Add the file ``file_path`` (stored relative to the ``.pvd``'s folder) at simulation ``time``."""
-        relative = os.path.relpath(os.path.abspath(file_path), os.path.dirname(os.path.abspath(self.path)))
-        with open(self.path, 'r+') as f:
-            f.seek(0, os.SEEK_END)
-            f.seek(f.tell() - len(_PVD_TAIL))
-            f.write(_PVD_ENTRY % (repr(float(time)), relative.replace(os.sep, '/')) + _PVD_TAIL)
-            f.truncate()
+        absolute = os.path.abspath(file_path)
+        if os.path.dirname(absolute) == self.folder:
+            relative = os.path.basename(absolute)
+        else:
+            relative = os.path.relpath(absolute, self.folder).replace(os.sep, '/')
+        entry = (_PVD_ENTRY % (repr(float(time)), escape(relative, {'"': '&quot;'}))).encode('utf-8')
+        self.file.seek(self.tail_at)
+        self.file.write(entry + _PVD_TAIL.encode('ascii'))
+        self.file.truncate()
+        self.file.flush()
+        self.tail_at += len(entry)
+
+    def close(self):
+        self.file.close()
 
 
 class VtkSeries:
@@ -207,6 +283,9 @@ class VtkSeries:
         self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3)
         self.wrap_periodic = bool(wrap_periodic) and bool(np.any(self.periodic_length > 0))
         keep = first_step if first_step > 0 else None
+        self._body_structure = (self.body_structure_index,
+                                StringArray(self.structure_names, self.body_structure_index))
+        self._blob_structure = None
         self.collections = {kind: PvdCollection(collection_name(output_name, kind), keep) for kind in (BLOBS, BODIES)}
 
     def write(self, step, body_arrays, body_velocities=None, blob_slip=None):
@@ -229,15 +308,17 @@ class VtkSeries:
             locations = locations + shifts
             r_vectors = r_vectors + shifts[body_arrays.blob_body_index]
         blob_index = body_arrays.blob_body_index
-        blobs = blob_polydata(r_vectors, body_arrays.blob_radius, blob_index, self.body_structure_index[blob_index],
-                              self.structure_names, blob_velocities, blob_slip)
-        bodies = body_polydata(locations, orientations, self.body_structure_index, self.structure_names,
-                               body_velocities)
+        if self._blob_structure is None or self._blob_structure[0].shape[0] != blob_index.shape[0]:
+            blob_structure_index = self.body_structure_index[blob_index]
+            self._blob_structure = (blob_structure_index, StringArray(self.structure_names, blob_structure_index))
+        files = ((BLOBS, r_vectors, blob_point_arrays(body_arrays.blob_radius, blob_index, self._blob_structure,
+                                                      blob_velocities, blob_slip)),
+                 (BODIES, locations, body_point_arrays(orientations, self._body_structure, body_velocities)))
         time = step_time(step, self.dt)
         paths = []
-        for kind, mesh in ((BLOBS, blobs), (BODIES, bodies)):
+        for kind, points, arrays in files:
             path = step_file_name(self.output_name, kind, step)
-            mesh.save(path)
+            write_vtp(path, points, arrays)
             self.collections[kind].add(time, path)
             paths.append(path)
         return paths
@@ -252,7 +333,6 @@ class AlsoWriteVtk:
     """
 
     def __init__(self, snapshot_writer, options, types, system):
-        require_pyvista('%s: save_vtk True' % options.where('save_vtk'))
         self.snapshot_writer, self.system = snapshot_writer, system
         self.series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
                                 options.dt, options.periodic_length, wrap_periodic=False,
