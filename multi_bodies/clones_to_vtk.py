@@ -51,6 +51,7 @@ def convert(options, wrap_periodic=False):
     for step, step_locations, step_orientations in zip(steps, locations, orientations):
         body_arrays.locations, body_arrays.orientations = step_locations, step_orientations
         series.write(int(step), body_arrays, velocities)
+    series.close()
     written = len(steps)
     print('wrote %d step(s): %s and %s (open them in ParaView, see doc/visualisation.md)'
           % (written, collection_name(options.output_name, 'blobs'), collection_name(options.output_name, 'bodies')))

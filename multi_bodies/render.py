@@ -5,7 +5,8 @@ Run from the folder the run was started in (as the other scripts)::
     python render.py --input-file inputfile_dynamic.dat [--step k] [--png out.png] [--movie out.gif]
 
 Blobs are drawn as spheres of the blob radius, the wall ``z = 0`` as a grey
-plane, each body in its own colour (matplotlib's ``tab10`` colours, body 0
+plane with each blob's footprint (darker grey, straight below the blob, so
+that heights can be read), each body in its own colour (matplotlib's ``tab10`` colours, body 0
 first, in input order).  ``--step`` picks a saved step (default: the last
 one); ``--png`` writes a picture of it (default name
 ``output_name.<step, 8 digits>.png`` when neither ``--png`` nor ``--movie`` is
@@ -40,6 +41,7 @@ from multi_bodies.input_options import read_input_file  # noqa: E402
 from multi_bodies.vtk_output import load_run, periodic_shifts, run_configurations  # noqa: E402
 
 WALL_RGB = (0.78, 0.78, 0.78)
+SHADOW_RGB = (0.62, 0.62, 0.62)  # each blob's footprint on the wall, straight below it: shows the height
 BACKGROUND_RGB = (1.0, 1.0, 1.0)
 LIGHT = np.array([0.35, -0.55, 0.76]) / np.linalg.norm([0.35, -0.55, 0.76])
 TAB10 = np.array([[0.122, 0.467, 0.706], [1.0, 0.498, 0.055], [0.173, 0.627, 0.173], [0.839, 0.153, 0.157],
@@ -111,6 +113,10 @@ def render_matplotlib(scene, r_vectors, title, size):
                             facecolors=[WALL_RGB], edgecolors='none', zorder=0)
     ax.add_collection3d(wall)
     r_vectors = np.asarray(r_vectors).reshape(-1, 3)
+    angles = np.linspace(0.0, 2.0 * np.pi, 13)[:-1]
+    disc = np.column_stack((np.cos(angles), np.sin(angles), np.zeros_like(angles)))
+    footprints = r_vectors[:, None, :] * np.array([1.0, 1.0, 0.0]) + scene.blob_radius * disc[None, :, :]
+    ax.add_collection3d(Poly3DCollection(footprints, facecolors=[SHADOW_RGB], edgecolors='none', zorder=0.5))
     resolution = 6 if r_vectors.shape[0] <= 2000 else 3
     quads, normals = sphere_faces(resolution)
     faces = r_vectors[:, None, None, :] + scene.blob_radius * quads[None, :, :, :]
@@ -140,7 +146,11 @@ def render_pyvista(scene, r_vectors, title, size):
     x0, x1, y0, y1 = scene.wall
     plotter.add_mesh(pyvista.Plane(center=((x0 + x1) / 2, (y0 + y1) / 2, 0.0), direction=(0, 0, 1),
                                    i_size=x1 - x0, j_size=y1 - y0), color=WALL_RGB, lighting=False)
-    points = pyvista.PolyData(np.asarray(r_vectors, dtype=float).reshape(-1, 3))
+    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+    footprints = pyvista.PolyData(r_vectors * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, 1e-3 * scene.z_top]))
+    plotter.add_mesh(footprints.glyph(geom=pyvista.Disc(inner=0.0, outer=scene.blob_radius, c_res=24), scale=False,
+                                      orient=False), color=SHADOW_RGB, lighting=False)
+    points = pyvista.PolyData(r_vectors)
     points.point_data['rgb'] = (255 * scene.colours).astype(np.uint8)
     glyphs = points.glyph(geom=pyvista.Sphere(radius=scene.blob_radius, theta_resolution=16, phi_resolution=12),
                           scale=False, orient=False)

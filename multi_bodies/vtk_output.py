@@ -259,6 +259,11 @@ class PvdCollection:
     def close(self):
         self.file.close()
 
+    def __del__(self):
+        file = getattr(self, 'file', None)
+        if file is not None:
+            file.close()
+
 
 class VtkSeries:
     """Writes the blob and body files of saved steps of one run, and their two ``.pvd`` collections.
@@ -322,6 +327,11 @@ class VtkSeries:
             self.collections[kind].add(time, path)
             paths.append(path)
         return paths
+
+    def close(self):
+        """Close the ``.pvd`` files (they are complete after every step already)."""
+        for collection in self.collections.values():
+            collection.close()
 
 
 class AlsoWriteVtk:
