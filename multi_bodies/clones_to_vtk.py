@@ -19,7 +19,7 @@ that the run left (finished or stopped):
 It writes ``output_name.blobs.<step>.vtp``, ``output_name.bodies.<step>.vtp``
 and the collections ``output_name.blobs.pvd`` and ``output_name.bodies.pvd``
 (times ``step * dt``; see ``multi_bodies/vtk_output.py`` and
-doc/visualisation.md).  ``--wrap-periodic`` draws every body in the primary
+doc/visualisation.md); ``--output-name`` gives them another prefix.  ``--wrap-periodic`` draws every body in the primary
 box ``[0, L)`` of the periodic axes of ``periodic_length``.
 """
 import argparse
@@ -41,10 +41,17 @@ from multi_bodies.input_options import read_input_file  # noqa: E402
 from multi_bodies.vtk_output import (STATIC_SCHEMES, VtkSeries, collection_name, load_run,  # noqa: E402
                                      run_configurations, static_velocities)
 
-def convert(options, wrap_periodic=False):
-    """Write the VTK series of the run of ``options``; returns the number of steps written."""
+def convert(options, wrap_periodic=False, vtk_name=None):
+    """Write the VTK series of the run of ``options``; returns the number of steps written.
+
+    ``vtk_name``: prefix of the VTK files (default the run's ``output_name``).
+    """
+    vtk_name = options.output_name if vtk_name is None else vtk_name
     body_arrays, types = load_run(options)
-    series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
+    folder = os.path.dirname(vtk_name)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    series = VtkSeries(vtk_name, [name for name, _ in types], [count for _, count in types],
                        options.dt, options.periodic_length, wrap_periodic=wrap_periodic)
     steps, locations, orientations = run_configurations(options, body_arrays, types)
     velocities = static_velocities(options, body_arrays.num_bodies) if options.scheme in STATIC_SCHEMES else None
@@ -54,7 +61,7 @@ def convert(options, wrap_periodic=False):
     series.close()
     written = len(steps)
     print('wrote %d step(s): %s and %s (open them in ParaView, see doc/visualisation.md)'
-          % (written, collection_name(options.output_name, 'blobs'), collection_name(options.output_name, 'bodies')))
+          % (written, collection_name(vtk_name, 'blobs'), collection_name(vtk_name, 'bodies')))
     return written
 
 
@@ -64,9 +71,11 @@ def main(argv=None):
     parser.add_argument('--input-file', required=True, help='input file of the run')
     parser.add_argument('--wrap-periodic', action='store_true',
                         help='draw the bodies in the primary box [0, L) of the periodic axes of periodic_length')
+    parser.add_argument('--output-name', default=None,
+                        help='prefix of the VTK files (default: the output_name of the input file)')
     args = parser.parse_args(argv)
     options = read_input_file(args.input_file)
-    convert(options, wrap_periodic=args.wrap_periodic)
+    convert(options, wrap_periodic=args.wrap_periodic, vtk_name=args.output_name)
     return 0
 
 
