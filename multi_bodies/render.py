@@ -63,11 +63,15 @@ class Scene:
     """
 
     def __init__(self, body_arrays, all_blob_positions, view, periodic_length=(0.0, 0.0, 0.0), wrap=False):
+        """``all_blob_positions``: iterable of (N, 3) arrays, the frames to be drawn."""
         self.blob_radius = body_arrays.blob_radius
         self.blob_body_index = body_arrays.blob_body_index
         self.colours = body_colours(body_arrays.num_bodies)[self.blob_body_index]
-        points = np.asarray(all_blob_positions).reshape(-1, 3)
-        low, high = points.min(axis=0) - self.blob_radius, points.max(axis=0) + self.blob_radius
+        low, high = np.full(3, np.inf), np.full(3, -np.inf)
+        for r_vectors in all_blob_positions:  # one frame at a time: a long run need not fit in memory
+            r_vectors = np.asarray(r_vectors).reshape(-1, 3)
+            low, high = np.minimum(low, r_vectors.min(axis=0)), np.maximum(high, r_vectors.max(axis=0))
+        low, high = low - self.blob_radius, high + self.blob_radius
         lengths = np.asarray(periodic_length, dtype=float)
         if wrap:
             for axis in (0, 1):
@@ -203,23 +207,27 @@ def write_png(path, frame):
     plt.imsave(path, frame)
 
 
-def write_gif(path, frames, fps):
-    """GIF of RGB frames (each (H, W, 3) uint8) through matplotlib's Pillow writer."""
+def write_gif(path, frames, size, fps):
+    """GIF of RGB frames (an iterable of (H, W, 3) uint8, each rendered when needed) through matplotlib's
+    Pillow writer; returns the number of frames."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     from matplotlib.animation import PillowWriter
-    height, width = frames[0].shape[:2]
+    width, height = size
     fig = plt.figure(figsize=(width / 100.0, height / 100.0), dpi=100)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
     ax.set_axis_off()
-    image = ax.imshow(frames[0], interpolation='nearest')
+    image = ax.imshow(np.zeros((height, width, 3), dtype=np.uint8), interpolation='nearest')
     writer = PillowWriter(fps=fps)
+    count = 0
     with writer.saving(fig, path, dpi=100):
         for frame in frames:
             image.set_data(frame)
             writer.grab_frame()
+            count += 1
     plt.close(fig)
+    return count
 
 
 def frame_title(options, step):
@@ -241,9 +249,12 @@ def main(argv=None):
     parser.add_argument('--view', type=float, nargs=2, default=(25.0, -60.0), metavar=('ELEVATION', 'AZIMUTH'),
                         help='camera elevation and azimuth in degrees (default 25 -60)')
     parser.add_argument('--fps', type=float, default=5.0, help='frames per second of the GIF (default 5)')
+    parser.add_argument('--every', type=int, default=1, help='GIF of every n-th saved step only (default 1)')
     parser.add_argument('--wrap-periodic', action='store_true',
                         help='draw the bodies in the primary box [0, L) of the periodic axes')
     args = parser.parse_args(argv)
+    if args.every < 1:
+        raise utils.UserInputError('--every: give a positive number of saved steps between frames')
     if min(args.size) < 16:
         raise utils.UserInputError('--size: give a width and height of at least 16 pixels')
 
@@ -253,27 +264,30 @@ def main(argv=None):
     if args.step is not None and args.step not in set(steps.tolist()):
         raise utils.UserInputError('--step %d: no saved step %d for %s; saved steps are %s'
                                    % (args.step, args.step, args.input_file, utils.describe_steps(steps)))
-    positions = []
-    for step_locations, step_orientations in zip(locations, orientations):
-        body_arrays.locations, body_arrays.orientations = step_locations, step_orientations
+    index = len(steps) - 1 if args.step is None else steps.tolist().index(args.step)
+    chosen = range(0, len(steps), args.every) if args.movie else [index]
+
+    def blob_positions(i):
+        """Blob positions (N, 3) of saved step number ``i``."""
+        body_arrays.locations, body_arrays.orientations = locations[i], orientations[i]
         r_vectors = body_arrays.blob_positions()
         if args.wrap_periodic:
-            r_vectors = r_vectors + periodic_shifts(step_locations, options.periodic_length)[body_arrays.blob_body_index]
-        positions.append(r_vectors)
-    index = len(steps) - 1 if args.step is None else steps.tolist().index(args.step)
-    scene = Scene(body_arrays, positions if args.movie else positions[index], args.view, options.periodic_length,
-                  args.wrap_periodic)
+            r_vectors = r_vectors + periodic_shifts(locations[i], options.periodic_length)[body_arrays.blob_body_index]
+        return r_vectors
+
+    scene = Scene(body_arrays, (blob_positions(i) for i in sorted(set(chosen) | {index})), args.view,
+                  options.periodic_length, args.wrap_periodic)
     render = choose_renderer(args.backend)
     size = tuple(args.size)
 
     if args.png is not None or args.movie is None:
         path = args.png or '%s.%s.png' % (options.output_name, str(int(steps[index])).zfill(8))
-        write_png(path, render(scene, positions[index], frame_title(options, int(steps[index])), size))
+        write_png(path, render(scene, blob_positions(index), frame_title(options, int(steps[index])), size))
         print('wrote %s (step %d)' % (path, int(steps[index])))
     if args.movie is not None:
-        frames = [render(scene, r, frame_title(options, int(s)), size) for s, r in zip(steps, positions)]
-        write_gif(args.movie, frames, args.fps)
-        print('wrote %s (%d steps)' % (args.movie, len(frames)))
+        frames = (render(scene, blob_positions(i), frame_title(options, int(steps[i])), size) for i in chosen)
+        count = write_gif(args.movie, frames, size, args.fps)
+        print('wrote %s (%d steps)' % (args.movie, count))
     return 0
 
 

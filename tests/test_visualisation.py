@@ -174,6 +174,29 @@ def test_one_file_snapshots_convert_to_the_same_positions(tmp_path, monkeypatch)
         assert np.allclose(mesh.points, expected, rtol=0, atol=1e-12)
 
 
+def test_monte_carlo_snapshots_without_time_step_are_numbered_by_step(tmp_path, monkeypatch):
+    """The Monte Carlo script saves the same .clones names and has no dt: the .pvd time of step k is k."""
+    import pyvista
+    needs_pyvista()
+    input_name = dynamic_input(tmp_path)
+    text = (tmp_path / input_name).read_text().splitlines()
+    (tmp_path / 'mcmc.dat').write_text('\n'.join(line for line in text if not line.startswith(('dt ', 'scheme '))))
+    (tmp_path / 'out').mkdir()
+    rng = np.random.default_rng(8)
+    for step in (0, 10, 20):
+        for name, count in TYPES:
+            locations, orientations = read_clones_file(str(tmp_path / (name + '.clones')))
+            write_clones_file(tmp_path / 'out' / ('run.%s.%s.clones' % (name, str(step).zfill(8))),
+                              locations + rng.normal(size=locations.shape), random_quaternions(rng, count))
+    monkeypatch.chdir(tmp_path)
+    assert CONVERTER.main(['--input-file', 'mcmc.dat']) == 0
+    reader = pyvista.get_reader('out/run.blobs.pvd')
+    assert reader.time_values == [0.0, 10.0, 20.0]
+    for step in (0, 10, 20):
+        mesh = pyvista.read('out/run.blobs.%s.vtp' % str(step).zfill(8))
+        assert np.allclose(mesh.points, blobs_by_body_code(tmp_path, step)[0], rtol=0, atol=1e-12)
+
+
 def test_static_mobility_run_gives_rigid_body_blob_velocities_and_shares_the_velocity_field_frame(tmp_path,
                                                                                                   monkeypatch):
     """Static problem: one step, velocities of .velocities.dat; blob velocity = v + w x (r - location)."""
