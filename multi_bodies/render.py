@@ -258,6 +258,11 @@ def main(argv=None):
     if min(args.size) < 16:
         raise utils.UserInputError('--size: give a width and height of at least 16 pixels')
 
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise utils.UserInputError('render.py draws and writes pictures with matplotlib, which is not installed; '
+                                   'install it with "python3 -m pip install matplotlib"')
     options = read_input_file(args.input_file)
     body_arrays, types = load_run(options)
     steps, locations, orientations = run_configurations(options, body_arrays, types)

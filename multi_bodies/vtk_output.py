@@ -50,7 +50,8 @@ from quaternion_integrator.quaternion import rotation_matrices
 
 BLOBS = 'blobs'
 BODIES = 'bodies'
-_PVD_HEAD = '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n  <Collection>\n'
+_PVD_HEAD = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+             '  <Collection>\n')
 _PVD_TAIL = '  </Collection>\n</VTKFile>\n'
 _PVD_ENTRY = '    <DataSet timestep="%s" group="" part="0" file="%s"/>\n'
 
@@ -358,7 +359,7 @@ class AlsoWriteVtk:
         return getattr(self.snapshot_writer, name)
 
 
-# ------------------------------------------------------------------ a saved run, read back (clones_to_vtk.py, render.py)
+# ------------------------------------------------------------------ a saved run, read back (clones_to_vtk, render)
 STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 
 

@@ -317,6 +317,7 @@ def test_clones_series_reader_sorts_steps_and_ignores_partial_files(tmp_path):
 # ------------------------------------------------------------------ pictures
 def render_scene(tmp_path, extra_args, size=(320, 240)):
     """Two shells: body 0 (blue) at x = -3 and body 1 (orange) at x = +3, seen along +y; run render.py."""
+    pytest.importorskip('matplotlib', reason='render.py needs matplotlib (installed with pyvista)')
     shutil.copy(STRUCTURES / 'shell_N_12_Rg_1.vertex', tmp_path / 'shell.vertex')
     write_clones_file(tmp_path / 'shell.clones', [[-3.0, 0.0, 3.0], [3.0, 0.0, 3.0]], [[1, 0, 0, 0]] * 2)
     write_input(tmp_path / 'in.dat', {'scheme': 'body_mobility', 'blob_radius': 0.4, 'output_name': 'run'},
@@ -374,7 +375,8 @@ def test_render_with_pyvista_off_screen_draws_the_same_scene(tmp_path):
 
 
 def test_render_movie_has_one_frame_per_saved_step(dynamic_run):
-    from PIL import Image
+    pytest.importorskip('matplotlib', reason='render.py needs matplotlib (installed with pyvista)')
+    Image = pytest.importorskip('PIL.Image', reason='GIFs are written through Pillow (installed with matplotlib)')
     env = {k: v for k, v in os.environ.items() if k not in ('DISPLAY', 'WAYLAND_DISPLAY')}
     env['PYTHONPATH'] = str(REPO)
     result = subprocess.run([sys.executable, str(REPO / 'multi_bodies' / 'render.py'), '--input-file', 'input.dat',
