@@ -35,8 +35,16 @@ TYPES = (('boomerang_N_15', 2), ('shell_N_12_Rg_1', 3))
 WALL_RGB = np.array([0.78, 0.78, 0.78])
 
 
+def needs(module, reason):
+    """The module, or skip the test with ``reason`` when it cannot be imported."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        pytest.skip(reason)
+
+
 def needs_pyvista():
-    return pytest.importorskip('pyvista', reason='pyvista is not installed: the VTK files cannot be written or read')
+    return needs('pyvista', 'pyvista is not installed: the VTK files cannot be read back')
 
 
 def random_quaternions(rng, count):
@@ -72,7 +80,6 @@ def dynamic_input(run_dir, **changes):
 @pytest.fixture(scope='module')
 def dynamic_run(tmp_path_factory):
     """The run, saved with save_vtk True, in a folder of its own; returns that folder."""
-    needs_pyvista()
     run_dir = tmp_path_factory.mktemp('vtk_run')
     input_name = dynamic_input(run_dir, save_vtk='True')
     cwd = os.getcwd()
@@ -99,7 +106,7 @@ def blobs_by_body_code(run_dir, step):
 
 
 def check_step_files(run_dir, step):
-    import pyvista
+    pyvista = needs_pyvista()
     expected_blobs, expected_rotations, expected_locations = blobs_by_body_code(run_dir, step)
     blobs = pyvista.read(str(run_dir / 'out' / ('run.blobs.%s.vtp' % str(step).zfill(8))))
     assert np.allclose(blobs.points, expected_blobs, rtol=0, atol=1e-12)
@@ -129,7 +136,7 @@ def test_blob_positions_of_every_step_match_the_body_code(dynamic_run, monkeypat
 
 
 def test_pvd_lists_every_saved_step_at_step_times_and_reads_as_time_series(dynamic_run):
-    import pyvista
+    pyvista = needs_pyvista()
     for kind in ('blobs', 'bodies'):
         pvd = dynamic_run / 'out' / ('run.%s.pvd' % kind)
         entries = ElementTree.parse(str(pvd)).getroot().find('Collection').findall('DataSet')
@@ -156,8 +163,7 @@ def test_restart_keeps_the_earlier_steps_in_the_pvd(tmp_path, monkeypatch):
 
 def test_one_file_snapshots_convert_to_the_same_positions(tmp_path, monkeypatch):
     """save_clones one_file, n_save 2: steps 0, 2, 4 and the positions of the one_file_per_step run."""
-    import pyvista
-    needs_pyvista()
+    pyvista = needs_pyvista()
     input_name = dynamic_input(tmp_path, save_clones='one_file', n_save=2)
     monkeypatch.chdir(tmp_path)
     assert DYNAMIC.main(['--input-file', input_name]) == 0
@@ -176,8 +182,7 @@ def test_one_file_snapshots_convert_to_the_same_positions(tmp_path, monkeypatch)
 
 def test_monte_carlo_snapshots_without_time_step_are_numbered_by_step(tmp_path, monkeypatch):
     """The Monte Carlo script saves the same .clones names and has no dt: the .pvd time of step k is k."""
-    import pyvista
-    needs_pyvista()
+    pyvista = needs_pyvista()
     input_name = dynamic_input(tmp_path)
     text = (tmp_path / input_name).read_text().splitlines()
     (tmp_path / 'mcmc.dat').write_text('\n'.join(line for line in text if not line.startswith(('dt ', 'scheme '))))
@@ -200,8 +205,7 @@ def test_monte_carlo_snapshots_without_time_step_are_numbered_by_step(tmp_path, 
 def test_static_mobility_run_gives_rigid_body_blob_velocities_and_shares_the_velocity_field_frame(tmp_path,
                                                                                                   monkeypatch):
     """Static problem: one step, velocities of .velocities.dat; blob velocity = v + w x (r - location)."""
-    import pyvista
-    needs_pyvista()
+    pyvista = needs_pyvista()
     dynamic_input(tmp_path)
     grid = (-6.0, 10.0, 4, -4.0, 4.0, 2, 0.5, 8.0, 3)
     options = {'scheme': 'mobility', 'mobility_blobs_implementation': 'python',
@@ -238,8 +242,7 @@ def test_static_mobility_run_gives_rigid_body_blob_velocities_and_shares_the_vel
 
 
 def test_slip_of_active_bodies_is_the_slip_file_rotated_with_the_body(tmp_path, monkeypatch):
-    import pyvista
-    needs_pyvista()
+    pyvista = needs_pyvista()
     rng = np.random.default_rng(5)
     reference = read_vertex_file(str(STRUCTURES / 'rod_N_10.vertex'))
     write_vertex_file(tmp_path / 'rod.vertex', reference)
@@ -270,8 +273,7 @@ def test_periodic_shifts_bring_locations_into_the_primary_box():
 
 
 def test_wrap_periodic_moves_whole_bodies(tmp_path, monkeypatch):
-    import pyvista
-    needs_pyvista()
+    pyvista = needs_pyvista()
     dynamic_input(tmp_path)
     options = {'scheme': 'body_mobility', 'blob_radius': BLOB_RADIUS, 'output_name': 'run',
                'periodic_length': '5 5 0'}
@@ -317,7 +319,7 @@ def test_clones_series_reader_sorts_steps_and_ignores_partial_files(tmp_path):
 # ------------------------------------------------------------------ pictures
 def render_scene(tmp_path, extra_args, size=(320, 240)):
     """Two shells: body 0 (blue) at x = -3 and body 1 (orange) at x = +3, seen along +y; run render.py."""
-    pytest.importorskip('matplotlib', reason='render.py needs matplotlib (installed with pyvista)')
+    needs('matplotlib', 'render.py needs matplotlib (installed with pyvista)')
     shutil.copy(STRUCTURES / 'shell_N_12_Rg_1.vertex', tmp_path / 'shell.vertex')
     write_clones_file(tmp_path / 'shell.clones', [[-3.0, 0.0, 3.0], [3.0, 0.0, 3.0]], [[1, 0, 0, 0]] * 2)
     write_input(tmp_path / 'in.dat', {'scheme': 'body_mobility', 'blob_radius': 0.4, 'output_name': 'run'},
@@ -375,8 +377,8 @@ def test_render_with_pyvista_off_screen_draws_the_same_scene(tmp_path):
 
 
 def test_render_movie_has_one_frame_per_saved_step(dynamic_run):
-    pytest.importorskip('matplotlib', reason='render.py needs matplotlib (installed with pyvista)')
-    Image = pytest.importorskip('PIL.Image', reason='GIFs are written through Pillow (installed with matplotlib)')
+    needs('matplotlib', 'render.py needs matplotlib (installed with pyvista)')
+    Image = needs('PIL.Image', 'GIFs are written through Pillow (installed with matplotlib)')
     env = {k: v for k, v in os.environ.items() if k not in ('DISPLAY', 'WAYLAND_DISPLAY')}
     env['PYTHONPATH'] = str(REPO)
     result = subprocess.run([sys.executable, str(REPO / 'multi_bodies' / 'render.py'), '--input-file', 'input.dat',
