@@ -338,7 +338,7 @@ class VtkSeries:
 class AlsoWriteVtk:
     """Wraps the snapshot writer of a running script: each ``save(step)`` also writes the VTK files.
 
-    ``snapshot_writer``: any object with ``save(step)``; ``system``: the
+    ``snapshot_writer``: any object with ``save(step, ...)``; ``system``: the
     running system, whose ``arrays`` (a ``BodyArrays``) hold the configuration
     at the time of the save; ``types``: list of (structure ID, bodies).
     """
@@ -349,9 +349,11 @@ class AlsoWriteVtk:
                                 options.dt, options.periodic_length, wrap_periodic=False,
                                 first_step=options.initial_step)
 
-    def save(self, step):
-        self.snapshot_writer.save(step)
+    def save(self, step, *args, **kwargs):
+        """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step``."""
+        result = self.snapshot_writer.save(step, *args, **kwargs)
         self.series.write(step, self.system.arrays)
+        return result
 
     def __getattr__(self, name):
         if name in ('snapshot_writer', 'system', 'series'):
