@@ -120,7 +120,7 @@ def write_vtp(path, points, point_arrays):
     vertices = np.arange(count, dtype='<i8')
     blocks, xml, offset = [], [], 0
 
-    def appended(values, name, components, element='DataArray'):
+    def appended(values, name, components):
         nonlocal offset
         values = np.ascontiguousarray(values)
         vtk_type = 'Float64' if values.dtype.kind == 'f' else 'Int64'
@@ -128,8 +128,8 @@ def write_vtp(path, points, point_arrays):
         data = values.tobytes()
         blocks.append(np.uint64(len(data)).astype('<u8').tobytes())
         blocks.append(data)
-        text = '<%s type="%s" Name="%s" NumberOfComponents="%d" format="appended" offset="%d"/>' % (
-            element, vtk_type, name, components, offset)
+        text = '<DataArray type="%s" Name="%s" NumberOfComponents="%d" format="appended" offset="%d"/>' % (
+            vtk_type, name, components, offset)
         offset += 8 + len(data)
         return text
 
