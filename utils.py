@@ -1,11 +1,14 @@
-"""Small helpers shared by every room: the user-error type, logging, timers.
+"""Small helpers shared by every room: the user-error type, logging, timers, trajectory readers.
 
 This module sits on the lowest floor (see ARCHITECTURE.md): it imports
 nothing from the package.
 """
 import logging
+import os
 import sys
 import time
+
+import numpy as np
 
 
 class UserInputError(ValueError):
@@ -58,3 +61,144 @@ class Timer:
     def __exit__(self, *exc):
         self.elapsed = time.perf_counter() - self.start
         return False
+
+
+# ------------------------------------------------------------------ readers of saved trajectories
+# Snapshots of the dynamic and Monte Carlo scripts (SPEC sections 2.1 and 9):
+# ``save_clones one_file_per_step`` writes ``output_name.ID.<step, 8 digits>.clones``
+# per structure and saved step; ``save_clones one_file`` writes one
+# ``output_name.ID.config`` per structure, the snapshots one after the other,
+# each starting with its count line.  Lines are ``x y z s p1 p2 p3``; ``#``
+# starts a comment.  Quaternions are normalised when read, as the structure
+# readers of the package do.
+
+def _snapshot_rows(text_lines, path):
+    """Numbers of the non-empty lines of a snapshot file: list of (line number, list of float)."""
+    rows = []
+    for number, raw in enumerate(text_lines, start=1):
+        tokens = raw.split('#', 1)[0].split()
+        if not tokens:
+            continue
+        try:
+            rows.append((number, [float(t) for t in tokens]))
+        except ValueError:
+            raise UserInputError("%s, line %d: cannot read '%s' as numbers" % (path, number, raw.strip()))
+    return rows
+
+
+def _normalised_configuration(table, path):
+    """Split rows (Nb, 7) into locations (Nb, 3) and unit quaternions (Nb, 4)."""
+    table = np.asarray(table, dtype=float).reshape(-1, 7)
+    norms = np.linalg.norm(table[:, 3:], axis=1)
+    if np.any(norms == 0.0):
+        raise UserInputError('%s: body %d has a zero quaternion' % (path, int(np.argmax(norms == 0.0))))
+    return table[:, :3].copy(), table[:, 3:] / norms[:, None]
+
+
+def read_clones_snapshot(path):
+    """One ``.clones`` file: locations (Nb, 3) and normalised quaternions (Nb, 4)."""
+    if not os.path.isfile(path):
+        raise UserInputError("snapshot file '%s' not found" % path)
+    with open(path, 'r') as f:
+        rows = _snapshot_rows(f, path)
+    if not rows:
+        raise UserInputError("%s is empty: a .clones file starts with the number of bodies" % path)
+    count = int(rows[0][1][0])
+    body_rows = rows[1:1 + count]
+    if len(body_rows) < count or any(len(values) < 7 for _, values in body_rows):
+        raise UserInputError('%s: announces %d bodies of 7 numbers (x y z s p1 p2 p3) but the file holds fewer; '
+                             'the snapshot is incomplete' % (path, count))
+    return _normalised_configuration([values[:7] for _, values in body_rows], path)
+
+
+def clones_series_steps(output_name, structure_id):
+    """Saved steps of one structure (sorted ints) and their files: ``output_name.ID.<step>.clones``."""
+    import glob
+    import re
+    prefix = '%s.%s.' % (output_name, structure_id)
+    pattern = re.compile(r'^(\d{8,})\.clones$')
+    found = {}
+    for path in glob.glob(glob.escape(prefix) + '*.clones'):
+        match = pattern.match(path[len(prefix):])
+        if match:
+            found[int(match.group(1))] = path
+    steps = sorted(found)
+    return steps, [found[s] for s in steps]
+
+
+def read_clones_series(output_name, structure_id, steps=None):
+    """Trajectory of one structure saved with ``save_clones one_file_per_step``.
+
+    Parameters
+    ----------
+    output_name : str, the run's ``output_name`` (relative to the working directory).
+    structure_id : str, the structure ID (clones file name without ``.clones``).
+    steps : list of int or None, the steps to read (default: every saved step).
+
+    Returns
+    -------
+    steps : ndarray of int, shape (S,)
+    locations : ndarray, shape (S, Nb, 3)
+    orientations : ndarray, shape (S, Nb, 4), unit scalar-first quaternions.
+    """
+    saved, paths = clones_series_steps(output_name, structure_id)
+    if steps is not None:
+        by_step = dict(zip(saved, paths))
+        missing = [s for s in steps if s not in by_step]
+        if missing:
+            raise UserInputError('no snapshot %s.%s.%s.clones; saved steps are %s'
+                                 % (output_name, structure_id, str(missing[0]).zfill(8), describe_steps(saved)))
+        saved, paths = list(steps), [by_step[s] for s in steps]
+    if not saved:
+        raise UserInputError('no snapshot %s.%s.<step>.clones found (save_clones one_file_per_step); check '
+                             'output_name and that the run has saved a step' % (output_name, structure_id))
+    configurations = [read_clones_snapshot(path) for path in paths]
+    counts = {c[0].shape[0] for c in configurations}
+    if len(counts) != 1:
+        raise UserInputError('%s.%s.*.clones: the snapshots hold different numbers of bodies %s'
+                             % (output_name, structure_id, sorted(counts)))
+    return (np.array(saved, dtype=int), np.stack([c[0] for c in configurations]),
+            np.stack([c[1] for c in configurations]))
+
+
+def read_config_series(path):
+    """Trajectory of one structure saved with ``save_clones one_file`` (``output_name.ID.config``).
+
+    The snapshots follow each other, each a count line and one line per body.
+    An incomplete last snapshot (a run stopped while writing) is left out.
+
+    Returns
+    -------
+    locations : ndarray, shape (S, Nb, 3)
+    orientations : ndarray, shape (S, Nb, 4), unit scalar-first quaternions.
+    """
+    if not os.path.isfile(path):
+        raise UserInputError("snapshot file '%s' not found (save_clones one_file)" % path)
+    with open(path, 'r') as f:
+        rows = _snapshot_rows(f, path)
+    blocks, index = [], 0
+    while index < len(rows):
+        number, values = rows[index]
+        if len(values) != 1 or values[0] != int(values[0]) or values[0] < 1:
+            raise UserInputError('%s, line %d: expected the count line of a snapshot (one positive integer)'
+                                 % (path, number))
+        count = int(values[0])
+        body_rows = rows[index + 1:index + 1 + count]
+        if len(body_rows) < count or any(len(v) < 7 for _, v in body_rows):
+            break  # incomplete last snapshot
+        blocks.append([v[:7] for _, v in body_rows])
+        index += 1 + count
+    if not blocks:
+        raise UserInputError('%s holds no complete snapshot' % path)
+    if len({len(b) for b in blocks}) != 1:
+        raise UserInputError('%s: the snapshots hold different numbers of bodies' % path)
+    configurations = [_normalised_configuration(b, path) for b in blocks]
+    return np.stack([c[0] for c in configurations]), np.stack([c[1] for c in configurations])
+
+
+def describe_steps(steps):
+    """Short text of a sorted list of steps: '0, 1, ..., 10' style."""
+    steps = list(steps)
+    if len(steps) <= 6:
+        return ', '.join(str(s) for s in steps) or 'none'
+    return '%d, %d, ..., %d (%d steps)' % (steps[0], steps[1], steps[-1], len(steps))

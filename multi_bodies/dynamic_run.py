@@ -125,6 +125,9 @@ class DynamicRun:
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=self.restart)
+        if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
+            from multi_bodies.vtk_output import AlsoWriteVtk
+            writer = AlsoWriteVtk(writer, options, self.types, system)
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)
         status, step, stopped_line = 0, first, None

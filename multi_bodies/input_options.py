@@ -56,6 +56,7 @@ OPTION_TABLE = {
     'save_body_mobility': ('bool', False),
     'save_blobs_mobility': ('bool', False),
     'save_velocities': ('bool', False),
+    'save_vtk': ('bool', False),
     'slip_file': ('optional_str', None),
     'structure_names': ('optional_str', None),
 }
