@@ -41,10 +41,9 @@ import numpy as np
 
 from body.body import blob_positions
 from multi_bodies.multi_bodies_functions import minimum_image
-from quaternion_integrator.quaternion import rotation_matrices
 from utils import UserInputError
 
-PAIR_CHUNK_ELEMENTS = 262144  # pairs per chunk of the NumPy sums (bounded memory)
+PAIR_CHUNK_ELEMENTS = 65536  # pairs per chunk of the NumPy sums (bounded memory)
 USER_POTENTIAL_FILE = 'user_defined_potentials.py'
 GPU_POTENTIAL_FILE = 'potential_pycuda_user_defined.py'
 POTENTIAL_HOOKS = ('blob_potential', 'blob_blob_potential', 'body_body_potential')
@@ -178,15 +177,22 @@ class PythonPairSums:
         return float(np.sum(self.potential(minimum_image(r, self.periodic_length), **self.keywords)))
 
     def total(self, r_vectors):
-        """Sum over blob pairs i < j; r_vectors (N, 3)."""
+        """Sum over blob pairs i < j; r_vectors (N, 3).
+
+        Rows are taken in blocks: each block against the blobs after it (a full
+        rectangle of pairs) plus the pairs inside the block (its upper triangle).
+        """
         n = r_vectors.shape[0]
         total = 0.0
-        rows = max(1, PAIR_CHUNK_ELEMENTS // max(n, 1))
-        for start in range(0, n - 1, rows):
-            stop = min(n - 1, start + rows)
-            d = r_vectors[None, start + 1:, :] - r_vectors[start:stop, None, :]
-            upper = np.arange(start + 1, n)[None, :] > np.arange(start, stop)[:, None]
-            total += self._sum(d[upper])
+        rows = max(1, min(n, PAIR_CHUNK_ELEMENTS // max(n, 1)))
+        for start in range(0, n, rows):
+            stop = min(n, start + rows)
+            block = r_vectors[start:stop]
+            if stop < n:
+                total += self._sum(r_vectors[None, stop:, :] - block[:, None, :])
+            if stop - start > 1:
+                i, j = np.triu_indices(stop - start, k=1)
+                total += self._sum(block[j] - block[i])
         return total
 
     def cross(self, targets, sources, exclude_start, exclude_stop):
@@ -232,21 +238,45 @@ def cpp_available():
 def quaternions_from_rotations(phi):
     """``from_rotation`` of many rotation vectors: phi (n, 3) radians -> quaternions (n, 4)."""
     phi = np.asarray(phi, dtype=float).reshape(-1, 3)
-    angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
+    angle = np.sqrt(phi[:, 0] * phi[:, 0] + phi[:, 1] * phi[:, 1] + phi[:, 2] * phi[:, 2])
+    nonzero = angle > 0.0
+    # sin(|phi|/2)/|phi| (1/2 in the limit |phi| -> 0, where the vector part is 0 anyway)
+    factor = np.where(nonzero, np.sin(0.5 * angle) / np.where(nonzero, angle, 1.0), 0.5)
     q = np.empty((phi.shape[0], 4))
     q[:, 0] = np.cos(0.5 * angle)
-    safe = np.where(angle > 0.0, angle, 1.0)
-    q[:, 1:] = np.where(angle[:, None] > 0.0, np.sin(0.5 * safe)[:, None] * phi / safe[:, None], 0.0)
+    q[:, 1:] = factor[:, None] * phi
     return q
 
 
 def quaternion_products(p, q):
-    """Hamilton products ``p * q`` row by row: (n, 4) x (n, 4) -> (n, 4), scalar first."""
-    p, q = np.asarray(p, dtype=float).reshape(-1, 4), np.asarray(q, dtype=float).reshape(-1, 4)
-    out = np.empty_like(q)
-    out[:, 0] = p[:, 0] * q[:, 0] - np.einsum('ij,ij->i', p[:, 1:], q[:, 1:])
-    out[:, 1:] = p[:, :1] * q[:, 1:] + q[:, :1] * p[:, 1:] + np.cross(p[:, 1:], q[:, 1:])
+    """Hamilton products ``p * q`` row by row: (n, 4) x (n, 4) -> (n, 4), scalar first.
+
+    ``(s, u) * (t, v) = (s t - u.v, s v + t u + u x v)``.
+    """
+    p0, p1, p2, p3 = np.asarray(p, dtype=float).reshape(-1, 4).T
+    q0, q1, q2, q3 = np.asarray(q, dtype=float).reshape(-1, 4).T
+    out = np.empty((max(p0.size, q0.size), 4))
+    out[:, 0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+    out[:, 1] = p0 * q1 + q0 * p1 + p2 * q3 - p3 * q2
+    out[:, 2] = p0 * q2 + q0 * p2 + p3 * q1 - p1 * q3
+    out[:, 3] = p0 * q3 + q0 * p3 + p1 * q2 - p2 * q1
     return out
+
+
+def quaternion_product_scalars(p, q):
+    """``p * q`` of two quaternions given as 4 floats each (one-body moves: no array overhead); returns a tuple."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + q0 * p1 + p2 * q3 - p3 * q2,
+            p0 * q2 + q0 * p2 + p3 * q1 - p1 * q3, p0 * q3 + q0 * p3 + p1 * q2 - p2 * q1)
+
+
+def rotation_matrix_scalars(q):
+    """``R(q)`` (3, 3) of one quaternion given as 4 floats (SPEC section 3)."""
+    s, p1, p2, p3 = q
+    return 2.0 * np.array([[p1 * p1 + s * s - 0.5, p1 * p2 - s * p3, p1 * p3 + s * p2],
+                           [p2 * p1 + s * p3, p2 * p2 + s * s - 0.5, p2 * p3 - s * p1],
+                           [p3 * p1 - s * p2, p3 * p2 + s * p1, p3 * p3 + s * s - 0.5]])
 
 
 # ---------------------------------------------------------------------------------------------- energy
@@ -275,7 +305,7 @@ class MCMCEnergy:
 
     def body_blob_positions(self, k, location, orientation):
         """Blob positions (n_k, 3) of body ``k`` at ``location`` (3,) and ``orientation`` (4,)."""
-        return location + self.references[k] @ rotation_matrices(orientation)[0].T
+        return location + self.references[k] @ rotation_matrix_scalars(orientation).T
 
     # ----------------------------------------------------------------------------- energies
     def one_blob(self, r_vectors):

@@ -198,7 +198,8 @@ class MCMCRun:
 
         try:
             for step in range(first, last):
-                if step % options.n_save == 0:
+                # a restart does not write its first snapshot again (the run before wrote it)
+                if step % options.n_save == 0 and not (restart and step == first):
                     save(step)
                 sampler.step(step, self.rng)
                 progress.after_step(step, 0, sampler.invalid)

@@ -16,7 +16,7 @@ Moves (``mcmc_move``):
 Step sizes: ``max_translation`` (default ``0.1 a``) and ``max_angle_shift``
 (default ``max_translation`` over the largest body length).  During the
 first ``n_burn_in`` steps they are scaled every ``ADAPT_INTERVAL``
-proposals by ``exp(acceptance of the window - target_acceptance)`` (the
+proposals by ``exp(ADAPT_GAIN (acceptance of the window - target_acceptance))`` (the
 ratio between them kept, the angle capped at pi); afterwards they stay fixed,
 so the chain that follows samples exp(-U/kT) exactly.
 
@@ -26,9 +26,10 @@ import math
 
 import numpy as np
 
-from many_bodyMCMC.mcmc_energy import quaternion_products, quaternions_from_rotations
+from many_bodyMCMC.mcmc_energy import quaternion_product_scalars, quaternion_products, quaternions_from_rotations
 
-ADAPT_INTERVAL = 100  # proposals per adaptation window during the burn-in
+ADAPT_INTERVAL = 50  # proposals per adaptation window during the burn-in
+ADAPT_GAIN = 1.5  # log step-size change per unit of acceptance error (the acceptance falls ~0.5 per e-fold)
 MOVES = ('all_bodies', 'one_body')
 
 
@@ -88,12 +89,14 @@ class MetropolisSampler:
                 self.current_energy = energy
             self._count(step, 1, int(accepted), int(math.isinf(energy)))
             return
-        uniforms = rng.random(nb)
+        uniforms = rng.random(nb).tolist()
         accepted = invalid = 0
         offsets = self.energy.offsets
+        new_locations = self.locations + translations
+        rotations = rotations.tolist()
         for k in range(nb):
-            location = self.locations[k] + translations[k]
-            orientation = quaternion_products(rotations[k], self.orientations[k])[0]
+            location = new_locations[k]
+            orientation = np.array(quaternion_product_scalars(rotations[k], self.orientations[k].tolist()))
             delta, body_r = self.energy.body_change(k, location, orientation, self.r_vectors, self.locations,
                                                     self.orientations)
             if math.isinf(delta) and delta > 0:
@@ -119,9 +122,9 @@ class MetropolisSampler:
             self.adapt()
 
     def adapt(self):
-        """Scale both step sizes by exp(window acceptance - target); start a new window."""
+        """Scale both step sizes by exp(ADAPT_GAIN (window acceptance - target)); start a new window."""
         ratio = self.window_accepted / self.window_proposals
-        factor = math.exp(ratio - self.target_acceptance)
+        factor = math.exp(ADAPT_GAIN * (ratio - self.target_acceptance))
         self.max_translation *= factor
         self.max_angle_shift = min(self.max_angle_shift * factor, math.pi)
         self.window_proposals = self.window_accepted = 0
