@@ -410,10 +410,13 @@ def make_pair_sums(implementation, keywords, hooks, where='mcmc_energy_implement
         from many_bodyMCMC import mcmc_cuda
         mcmc_cuda.check_usable()
     except Exception as err:  # no CuPy, no device, compiler failure
-        what = ('%s is for the GPU energy' % hooks.gpu_file) if hooks.gpu_file else 'mcmc_energy_implementation pycuda'
-        raise UserInputError('%s: %s, which cannot run on this machine (%s: %s); on a CPU write the potentials in '
-                             '%s and remove or rename %s, or choose mcmc_energy_implementation python or C++'
-                             % (where, what, type(err).__name__, err, USER_POTENTIAL_FILE, GPU_POTENTIAL_FILE))
+        reason = '%s: %s' % (type(err).__name__, err)
+        if hooks.gpu_file is not None:
+            raise UserInputError('%s is for the GPU energy (mcmc_energy_implementation pycuda), which cannot run on '
+                                 'this machine (%s); on a CPU write the potentials in %s and remove or rename %s'
+                                 % (hooks.gpu_file, reason, USER_POTENTIAL_FILE, GPU_POTENTIAL_FILE))
+        raise UserInputError('%s: mcmc_energy_implementation pycuda cannot run on this machine (%s); choose auto, '
+                             'C++ or python' % (where, reason))
     if hooks.gpu_file is not None:
         load_gpu_potentials(hooks)
     if 'blob_blob_potential' in hooks.overridden and hooks.blob_blob_cuda_source is None:
