@@ -295,7 +295,7 @@ def orientation_from_lab_z(rng, m):
     R = rows if np.linalg.det(rows) > 0 else rows[[1, 0, 2]]
     s = 0.5 * np.sqrt(max(1.0 + np.trace(R), 1e-300))
     if s > 0.1:
-        return np.array([s, (R[2, 1] - R[1, 2]) / (4 * s), (R[0, 2] - R[2, 0]) / (4 * s), (R[1, 0] - R[0, 1]) / (4 * s)])
+        return np.array([s, R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / np.array([1, 4 * s, 4 * s, 4 * s])
     i = int(np.argmax(np.diag(R)))
     j, k = (i + 1) % 3, (i + 2) % 3
     v = np.zeros(3)
