@@ -2,7 +2,8 @@
 
 ``run_mcmc(options)`` sets the run up (bodies, potentials, energy backend,
 generator), writes every output through ``multi_bodies.run_output`` and
-returns the exit status (0 done, 130 interrupted).  Outputs, prefixed by
+returns the exit status (0 done; 130 or 143 when SIGINT or SIGTERM stopped it after
+the step in progress, with every file complete).  Outputs, prefixed by
 ``output_name``: ``.inputfile``, ``.random_state``, ``.bodies_info``,
 snapshots with the names and formats of the dynamic script (``save_clones``),
 ``.restart`` (one record per saved step: generator, chain state), ``.time``
@@ -10,7 +11,9 @@ and ``.MCMC_info``.  A restart with ``initial_step`` equal to a saved step
 continues the uninterrupted chain exactly.
 """
 import os
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -71,6 +74,32 @@ def check_options(options):
 
 def _no_slip(body, slip, **kwargs):
     body.slip_reference = None
+
+
+SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+class _StopRequest:
+    """SIGINT/SIGTERM set ``signal_number``; the loop stops after the step in progress (a second signal at once)."""
+
+    def __init__(self):
+        self.signal_number, self._previous = None, {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in SIGNAL_EXIT_STATUS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signal_number, frame):
+        if self.signal_number is not None:
+            raise KeyboardInterrupt
+        self.signal_number = signal_number
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
 
 
 class MCMCRun:
@@ -196,17 +225,25 @@ class MCMCRun:
             self.write_info()
             progress.at_save(index, sampler.invalid, extra=', acceptance ratio = %.4g' % sampler.acceptance_ratio())
 
+        stop = _StopRequest()
         try:
-            for step in range(first, last):
-                # a restart does not write its first snapshot again (the run before wrote it)
-                if step % options.n_save == 0 and not (restart and step == first):
-                    save(step)
-                sampler.step(step, self.rng)
-                progress.after_step(step, 0, sampler.invalid)
-            else:
-                step = last
-                if last > first and last % options.n_save == 0:
-                    save(last)
+            with stop:
+                for step in range(first, last):
+                    # a restart does not write its first snapshot again (the run before wrote it)
+                    if step % options.n_save == 0 and not (restart and step == first):
+                        save(step)
+                    sampler.step(step, self.rng)
+                    progress.after_step(step, 0, sampler.invalid)
+                    if stop.signal_number is not None:
+                        step += 1
+                        break
+                else:
+                    step = last
+                    if last > first and last % options.n_save == 0:
+                        save(last)
+            if stop.signal_number is not None:
+                stopped_line = 'run stopped by %s at step %d' % (signal.Signals(stop.signal_number).name, step)
+                status = SIGNAL_EXIT_STATUS[stop.signal_number]
             if last <= first:
                 self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
         except KeyboardInterrupt:

@@ -384,6 +384,8 @@ def run_script(folder, monkeypatch, input_name='input.dat'):
 def read_mcmc_info(path):
     values = {}
     for line in Path(path).read_text().splitlines():
+        if '=' not in line:
+            continue
         key, value = (part.strip() for part in line.split('=', 1))
         values[key] = value
     return values
@@ -531,3 +533,22 @@ def test_example_boomerang_suspension_runs(tmp_path, monkeypatch):
     assert int(info['proposals']) == 30 and info['invalid_proposals'] == '0'
     config = (folder / 'data' / 'boomerang_suspension.boomerang_suspension.config').read_text().splitlines()
     assert len(config) == 4 * 17   # steps 0, 10, 20, 30 of 16 boomerangs
+
+
+def test_sigterm_stops_after_the_step_with_complete_files(tmp_path, monkeypatch):
+    """SIGTERM during a run: the step in progress finishes, status 143, .time and .MCMC_info are written."""
+    import signal
+    from many_bodyMCMC import sampler as sampler_module
+    write_scene(tmp_path, {'n_steps': 1000, 'n_save': 10, 'seed': 3, 'output_name': 'run',
+                           'mcmc_energy_implementation': 'python'}, height=2.0)
+    original = sampler_module.MetropolisSampler.step
+
+    def step(self, index, rng):
+        original(self, index, rng)
+        if index == 25:
+            os.kill(os.getpid(), signal.SIGTERM)
+    monkeypatch.setattr(sampler_module.MetropolisSampler, 'step', step)
+    assert run_script(tmp_path, monkeypatch) == 143
+    info = read_mcmc_info(tmp_path / 'run.MCMC_info')
+    assert info['proposals'] == '26' and 'stopped by SIGTERM at step 26' in (tmp_path / 'run.MCMC_info').read_text()
+    assert (tmp_path / 'run.time').is_file() and (tmp_path / 'run.blob.00000020.clones').is_file()
