@@ -77,7 +77,9 @@ def main(argv=None):
     parser.add_argument('--backends', nargs='+', default=['python', 'C++', 'pycuda'])
     args = parser.parse_args(argv)
     threads = os.environ.get('OMP_NUM_THREADS', 'all cores')
-    print('Monte Carlo, %d boomerangs (OMP_NUM_THREADS = %s)' % (args.bodies, threads))
+    load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
+    print('Monte Carlo, %d boomerangs (OMP_NUM_THREADS = %s; %d cores, load average %.1f: figures scale down '
+          'when other jobs share the cores)' % (args.bodies, threads, os.cpu_count() or 0, load))
     print('%-8s %8s %14s %12s %14s %12s %16s %12s' % ('backend', 'blobs', 'all-bodies/s', 'pairs/s', 'one-body/s',
                                                      'sweeps/s', 'one-body/all', 'pair ratio'))
     for backend in args.backends:
