@@ -57,6 +57,13 @@ extensions = [
         extra_link_args=link_args,
         cxx_std=17,
     ),
+    Pybind11Extension(
+        'many_bodyMCMC._energy_cpp',
+        ['many_bodyMCMC/cpp/energy_module.cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
 ]
 
 setup(

@@ -59,6 +59,10 @@ OPTION_TABLE = {
     'save_vtk': ('bool', False),
     'slip_file': ('optional_str', None),
     'structure_names': ('optional_str', None),
+    # Monte Carlo sampler only (many_bodyMCMC, doc/mcmc.md); 0 step sizes select the published defaults
+    'mcmc_move': ('str', 'all_bodies'), 'mcmc_energy_implementation': ('str', 'auto'),
+    'max_translation': ('float', 0.0), 'max_angle_shift': ('float', 0.0),
+    'n_burn_in': ('int', 0), 'target_acceptance': ('float', 0.3),
 }
 
 # Options of later versions of the published code that this package does not implement.
