@@ -93,11 +93,13 @@ def _jobqueue_cluster(args):
                      log_directory=args.job_log_directory, local_directory=args.job_local_directory,
                      python=sys.executable)
     if args.print_job_script:
-        cluster = runner.make_jobqueue_cluster(args.jobqueue, 0, retries=args.retries, **arguments)
+        cluster = runner.make_jobqueue_cluster(args.jobqueue, 0, retries=args.retries, dashboard_address=None,
+                                               **arguments)
         print(cluster.job_script())
         cluster.close()
         return None
-    return runner.make_jobqueue_cluster(args.jobqueue, args.jobs, retries=args.retries, **arguments)
+    return runner.make_jobqueue_cluster(args.jobqueue, args.jobs, retries=args.retries,
+                                        dashboard_address=args.dashboard_address, **arguments)
 
 
 def run(args):

@@ -102,7 +102,8 @@ def parse_vary(items):
             raise UserInputError('--vary %s: structure lines cannot be varied; make one input file per set of '
                                  'structures' % item)
         if name not in OPTION_TABLE:
-            close = difflib.get_close_matches(name, list(OPTION_TABLE), n=1)
+            close = [option for option in OPTION_TABLE if option.lower() == name.lower()]
+            close = close or difflib.get_close_matches(name, list(OPTION_TABLE), n=1)
             raise UserInputError("--vary %s: unknown option '%s'%s" % (item, name,
                                  " (did you mean '%s'?)" % close[0] if close else ''))
         if name in seen:
@@ -654,8 +655,10 @@ def jobqueue_arguments(kind, cores, memory, walltime=None, queue=None, account=N
     if not memory:
         raise UserInputError('--jobqueue %s needs --job-memory (memory of one job, e.g. 64GB)' % kind)
     processes = cores // omp_threads
-    kwargs = {'cores': processes, 'processes': processes, 'memory': memory,
-              'job_script_prologue': ['export %s=%s' % item for item in thread_environment(omp_threads).items()],
+    package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    prologue = ['export %s=%s' % item for item in thread_environment(omp_threads).items()]
+    prologue.append('export PYTHONPATH=%s${PYTHONPATH:+:$PYTHONPATH}' % package_root)  # the workers import us
+    kwargs = {'cores': processes, 'processes': processes, 'memory': memory, 'job_script_prologue': prologue,
               'job_extra_directives': list(extra_directives)}
     if kind == 'slurm':
         kwargs['job_cpu'] = cores
@@ -667,12 +670,17 @@ def jobqueue_arguments(kind, cores, memory, walltime=None, queue=None, account=N
     return kwargs
 
 
-def make_jobqueue_cluster(kind, jobs, retries=3, **arguments):
-    """A dask-jobqueue cluster (Slurm, PBS or LSF) scaled to ``jobs`` batch jobs (see :func:`jobqueue_arguments`)."""
+def make_jobqueue_cluster(kind, jobs, retries=3, dashboard_address=':8787', **arguments):
+    """A dask-jobqueue cluster (Slurm, PBS or LSF) scaled to ``jobs`` batch jobs (see :func:`jobqueue_arguments`).
+
+    The scheduler runs in this process (on the login node); its dashboard is
+    served at ``dashboard_address`` (None: no dashboard).
+    """
     dask_jobqueue = require_jobqueue()
     require_distributed()
     import dask
     kwargs = jobqueue_arguments(kind, **arguments)
+    kwargs['scheduler_options'] = {'dashboard_address': dashboard_address}
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries)}):
         cluster = getattr(dask_jobqueue, JOBQUEUE_CLASSES[kind])(**kwargs)
     if jobs:
