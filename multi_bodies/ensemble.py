@@ -69,6 +69,8 @@ def make_parser():
     jobs.add_argument('--job-interface', help='network interface of the workers, e.g. ib0')
     jobs.add_argument('--job-directive', action='append', default=[],
                       help='extra line of the job script header, e.g. "--constraint=cpu" (repeatable)')
+    jobs.add_argument('--job-lifetime', help='retire the workers of a job after this time, a little under the '
+                                             'wall time (e.g. 3h50m); a new job replaces it')
     jobs.add_argument('--job-log-directory', help='folder of the job logs')
     jobs.add_argument('--job-local-directory', help='node-local scratch folder of the workers')
     jobs.add_argument('--print-job-script', action='store_true', help='print the job script and exit')
@@ -91,7 +93,7 @@ def _jobqueue_cluster(args):
                      queue=args.job_queue, account=args.job_account, omp_threads=args.omp_threads or 1,
                      interface=args.job_interface, extra_directives=args.job_directive,
                      log_directory=args.job_log_directory, local_directory=args.job_local_directory,
-                     python=sys.executable)
+                     python=sys.executable, lifetime=args.job_lifetime)
     if args.print_job_script:
         cluster = runner.make_jobqueue_cluster(args.jobqueue, 0, retries=args.retries, dashboard_address=None,
                                                **arguments)
@@ -114,18 +116,18 @@ def run(args):
         _jobqueue_cluster(args)
         return 0
     cluster = client = None
-    if args.workers == 0:
-        runner.write_plan(plan)
-        results = runner.run_serially(plan)
-    else:
-        distributed = runner.require_distributed()
-        if args.jobqueue:
-            cluster = _jobqueue_cluster(args)
-        elif not args.scheduler:
-            cluster = runner.make_local_cluster(args.workers or os.cpu_count() or 1, args.omp_threads,
-                                                retries=args.retries, dashboard_address=args.dashboard_address)
-        runner.write_plan(plan)
-        try:
+    try:
+        if args.workers == 0:
+            runner.write_plan(plan)
+            results = runner.run_serially(plan)
+        else:
+            distributed = runner.require_distributed()
+            runner.write_plan(plan)
+            if args.jobqueue:
+                cluster = _jobqueue_cluster(args)
+            elif not args.scheduler:
+                cluster = runner.make_local_cluster(args.workers or os.cpu_count() or 1, args.omp_threads,
+                                                    retries=args.retries, dashboard_address=args.dashboard_address)
             client = distributed.Client(args.scheduler if args.scheduler else cluster)
             print('ensemble of %d replicas (%d points x %d) in %s, master seed %d'
                   % (len(plan['replicas']), len(plan['points']), args.replicas, plan['output_dir'],
@@ -137,11 +139,15 @@ def run(args):
                 else:
                     print('Dask dashboard: not served (it needs bokeh: pip install bokeh)', flush=True)
             results = runner.run_on_client(plan, client, retries=args.retries)
-        finally:
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
+    except KeyboardInterrupt:
+        print('\nensemble stopped; rerun the same command to resume it (finished replicas are skipped, the others '
+              'continue from their last saved step)', file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
     failed = [result for result in results if result['status'] != 'done']
     if failed:
         print('%d replicas did not finish:' % len(failed))

@@ -582,8 +582,12 @@ def run_on_client(plan, client, retries=3, refresh=1.0, stream=None):
                 spec = spec_of[future.key]
                 if future.status == 'finished':
                     result = future.result()
-                else:
-                    result = _failure_result(spec, future.exception())
+                else:  # raised after its retries, lost its worker too often (KilledWorker), or cancelled
+                    try:
+                        exception = future.exception()
+                    except Exception as err:  # a cancelled future raises instead
+                        exception = err
+                    result = _failure_result(spec, exception)
                     _write_status(spec, result)
                 results.append(result)
                 done += result['status'] == 'done'
@@ -641,11 +645,14 @@ JOBQUEUE_CLASSES = {'slurm': 'SLURMCluster', 'pbs': 'PBSCluster', 'lsf': 'LSFClu
 
 def jobqueue_arguments(kind, cores, memory, walltime=None, queue=None, account=None, omp_threads=1,
                        interface=None, extra_directives=(), log_directory=None, local_directory=None,
-                       python=None):
+                       python=None, lifetime=None):
     """Keyword arguments of the dask-jobqueue cluster class for one batch job of ``cores`` cores.
 
     Each job runs ``cores // omp_threads`` worker processes of one task
     thread each; every worker's replica gets ``omp_threads`` OpenMP threads.
+    ``lifetime`` (e.g. '3h50m', a little under the wall time) retires the
+    workers of a job before the queue kills it (``--lifetime`` of dask-worker,
+    staggered by 4 minutes), and a new job replaces it.
     """
     if kind not in JOBQUEUE_CLASSES:
         raise UserInputError('--jobqueue %s: choose one of %s' % (kind, ', '.join(sorted(JOBQUEUE_CLASSES))))
@@ -662,6 +669,8 @@ def jobqueue_arguments(kind, cores, memory, walltime=None, queue=None, account=N
               'job_extra_directives': list(extra_directives)}
     if kind == 'slurm':
         kwargs['job_cpu'] = cores
+    if lifetime:
+        kwargs['worker_extra_args'] = ['--lifetime', lifetime, '--lifetime-stagger', '4m']
     for key, value in (('walltime', walltime), ('queue', queue), ('account', account), ('interface', interface),
                        ('log_directory', log_directory), ('local_directory', local_directory),
                        ('python', python)):
@@ -680,9 +689,11 @@ def make_jobqueue_cluster(kind, jobs, retries=3, dashboard_address=':8787', **ar
     require_distributed()
     import dask
     kwargs = jobqueue_arguments(kind, **arguments)
-    kwargs['scheduler_options'] = {'dashboard_address': dashboard_address}
+    kwargs['scheduler_options'] = ({'dashboard': False} if dashboard_address is None
+                                   else {'dashboard_address': dashboard_address})
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries)}):
         cluster = getattr(dask_jobqueue, JOBQUEUE_CLASSES[kind])(**kwargs)
     if jobs:
-        cluster.scale(jobs=jobs)
+        # adaptive with a fixed size: a job that ends (wall time, node failure) is replaced by a new one
+        cluster.adapt(minimum_jobs=jobs, maximum_jobs=jobs)
     return cluster

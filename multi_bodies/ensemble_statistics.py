@@ -7,7 +7,8 @@ so an ensemble run on a cluster can be copied elsewhere and aggregated
 there.  Per replica it computes
 
 * the density of body heights z (all saved frames from ``discard`` on, all
-  bodies of a structure type), on bins common to every point and replica;
+  bodies of a structure type), on bins of each structure type common to
+  every point and replica;
 * the mean-square displacement of the body locations against the lag time
   ``lag * n_save * dt``: parallel to the wall (``msd_xy``), normal to it
   (``msd_z``) and their sum (``msd_location``), averaged over bodies and
@@ -129,7 +130,8 @@ def aggregate(output_dir, bins=40, height_range=None, max_lag=None, discard=0, c
     """Statistics of the ensemble in ``output_dir``; writes the CSV tables (and charts); returns them.
 
     bins : number of height bins; height_range : (low, high) or None for the
-        range of all heights of all points (one more pass over the files)
+        range of the heights of each structure type over all points (one
+        more pass over the files)
     max_lag : largest MSD lag in saved frames (default: half the frames)
     discard : saved frames dropped at the start of every replica
     Returns ``{point name: {'overrides', 'replicas', 'height': {ID: (edges,
@@ -151,19 +153,23 @@ def aggregate(output_dir, bins=40, height_range=None, max_lag=None, discard=0, c
         options, output_name, trajectories = replica_trajectories(output_dir, replica)
         return options, output_name, {sid: frames[discard:] for sid, frames in trajectories.items()}
 
-    if height_range is None:  # pass 1: the common height range of every structure
-        low, high = np.inf, -np.inf
+    ranges = {}  # structure ID -> (lowest, highest) height over every point and replica
+    if height_range is None:  # pass 1: the height range of every structure type
         for replicas in by_point.values():
             for replica in replicas:
-                for frames in load(replica)[2].values():
+                for sid, frames in load(replica)[2].items():
                     if frames.size:
-                        low, high = min(low, frames[:, :, 2].min()), max(high, frames[:, :, 2].max())
-        if not np.isfinite(low):
+                        low, high = ranges.get(sid, (np.inf, -np.inf))
+                        ranges[sid] = (min(low, frames[:, :, 2].min()), max(high, frames[:, :, 2].max()))
+        if not ranges:
             raise UserInputError('%s: the finished replicas have no saved frames to aggregate' % output_dir)
-        if high <= low:
-            high = low + 1.0
-        height_range = (low, high)
-    edges = np.linspace(height_range[0], height_range[1], int(bins) + 1)
+    edges_of = {}
+
+    def edges_for(sid):
+        if sid not in edges_of:
+            low, high = height_range if height_range is not None else ranges.get(sid, (0.0, 1.0))
+            edges_of[sid] = np.linspace(low, high if high > low else low + 1.0, int(bins) + 1)
+        return edges_of[sid]
 
     statistics = {}
     for index, point in enumerate(manifest['points']):
@@ -176,6 +182,7 @@ def aggregate(output_dir, bins=40, height_range=None, max_lag=None, discard=0, c
             options, output_name, trajectories = load(replica)
             for sid, frames in trajectories.items():
                 z = frames[:, :, 2].ravel()
+                edges = edges_for(sid)
                 counts = np.histogram(z, bins=edges)[0]
                 heights.setdefault(sid, []).append(counts / (max(z.size, 1) * np.diff(edges)))
                 lags = (frames.shape[0] // 2) if max_lag is None else max_lag
@@ -186,7 +193,7 @@ def aggregate(output_dir, bins=40, height_range=None, max_lag=None, discard=0, c
         point_stats = {'overrides': point['overrides'], 'replicas': len(replicas), 'height': {}, 'msd': {},
                        'info': {}}
         for sid, densities in heights.items():
-            point_stats['height'][sid] = (edges,) + mean_and_error(densities)
+            point_stats['height'][sid] = (edges_for(sid),) + mean_and_error(densities)
         for sid, per_replica in msds.items():
             length = min(len(m['msd_xy']) for m in per_replica)
             entry = {'lag_time': lag_time[sid][:length]}

@@ -12,6 +12,7 @@ The tests that start a cluster skip when dask.distributed is not installed
 (``pip install -e '.[ensemble]'``).
 """
 import importlib
+import importlib.util
 import io
 import json
 import os
@@ -411,8 +412,9 @@ def test_failing_replica_is_reported_and_the_others_complete(scene, client, tmp_
 
 @pytest.mark.skipif(importlib.util.find_spec('dask_jobqueue') is None, reason='dask-jobqueue is not installed')
 def test_slurm_job_script_has_one_thread_per_worker():
-    cluster = runner.make_jobqueue_cluster('slurm', 0, dashboard_address=None, cores=8, memory='16GB', walltime='01:00:00',
-                                           omp_threads=2, queue='short', extra_directives=['--constraint=cpu'])
+    cluster = runner.make_jobqueue_cluster('slurm', 0, dashboard_address=None, cores=8, memory='16GB',
+                                           walltime='01:00:00', omp_threads=2, queue='short',
+                                           extra_directives=['--constraint=cpu'])
     try:
         script = cluster.job_script()
     finally:
@@ -420,3 +422,21 @@ def test_slurm_job_script_has_one_thread_per_worker():
     assert '#SBATCH --cpus-per-task=8' in script and '#SBATCH -p short' in script
     assert '#SBATCH --constraint=cpu' in script and 'export OMP_NUM_THREADS=2' in script
     assert '--nworkers 4' in script and '--nthreads 1' in script
+
+
+def test_one_file_series_give_the_same_statistics(scene, tmp_path, capsys):
+    """save_clones one_file (.config series) and one_file_per_step (.clones files) of one run aggregate alike;
+    the command line without Dask (--workers 0) runs them, and a rerun skips both."""
+    output_dir = str(tmp_path / 'storage')
+    argv = ['--input-file', scene, '--replicas', '1', '--vary', 'save_clones=one_file_per_step,one_file',
+            '--workers', '0', '--output-dir', output_dir, '--seed', str(MASTER_SEED)]
+    assert SCRIPT.main(argv) == 0
+    assert os.path.isfile(os.path.join(output_dir, 'save_clones-one_file', 'r0000', 'run.spheres.config'))
+    statistics = stats.aggregate(output_dir, charts=False, log=lambda *a: None)
+    per_step, one_file = statistics['save_clones-one_file_per_step'], statistics['save_clones-one_file']
+    for quantity in stats.MSD_QUANTITIES:
+        np.testing.assert_array_equal(per_step['msd']['spheres'][quantity][0], one_file['msd']['spheres'][quantity][0])
+    np.testing.assert_array_equal(per_step['height']['spheres'][1], one_file['height']['spheres'][1])
+    capsys.readouterr()
+    assert SCRIPT.main(argv) == 0
+    assert '2 finished before, skipped' in capsys.readouterr().out
