@@ -683,14 +683,13 @@ def make_jobqueue_cluster(kind, jobs, retries=3, dashboard_address=':8787', **ar
     """A dask-jobqueue cluster (Slurm, PBS or LSF) scaled to ``jobs`` batch jobs (see :func:`jobqueue_arguments`).
 
     The scheduler runs in this process (on the login node); its dashboard is
-    served at ``dashboard_address`` (None: no dashboard).
+    served at ``dashboard_address`` (None: on any free port).
     """
     dask_jobqueue = require_jobqueue()
     require_distributed()
     import dask
     kwargs = jobqueue_arguments(kind, **arguments)
-    kwargs['scheduler_options'] = ({'dashboard': False} if dashboard_address is None
-                                   else {'dashboard_address': dashboard_address})
+    kwargs['scheduler_options'] = {'dashboard_address': dashboard_address or ':0'}  # None: any free port
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries)}):
         cluster = getattr(dask_jobqueue, JOBQUEUE_CLASSES[kind])(**kwargs)
     if jobs:

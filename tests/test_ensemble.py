@@ -410,6 +410,7 @@ def test_failing_replica_is_reported_and_the_others_complete(scene, client, tmp_
     assert os.path.getsize(os.path.join(output_dir, 'msd.png')) > 1000
 
 
+@needs_distributed
 @pytest.mark.skipif(importlib.util.find_spec('dask_jobqueue') is None, reason='dask-jobqueue is not installed')
 def test_slurm_job_script_has_one_thread_per_worker():
     cluster = runner.make_jobqueue_cluster('slurm', 0, dashboard_address=None, cores=8, memory='16GB',
