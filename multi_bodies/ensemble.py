@@ -19,6 +19,7 @@ Exit status: 0 all replicas done, 1 some failed or stopped, 2 bad input.
 """
 import argparse
 import os
+import signal
 import sys
 
 _SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
@@ -115,14 +116,24 @@ def run(args):
     if args.jobqueue and args.print_job_script:
         _jobqueue_cluster(args)
         return 0
+    if args.workers != 0:
+        distributed = runner.require_distributed()
+    with runner.ensemble_lock(plan['output_dir']):
+        runner.write_plan(plan)
+        return _run_locked(args, plan, distributed if args.workers != 0 else None)
+
+
+def _stop_on_sigterm(signal_number, frame):
+    raise KeyboardInterrupt
+
+
+def _run_locked(args, plan, distributed):
     cluster = client = None
+    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm)  # scancel/kill: close the cluster, then stop
     try:
-        if args.workers == 0:
-            runner.write_plan(plan)
+        if distributed is None:
             results = runner.run_serially(plan)
         else:
-            distributed = runner.require_distributed()
-            runner.write_plan(plan)
             if args.jobqueue:
                 cluster = _jobqueue_cluster(args)
             elif not args.scheduler:
@@ -144,6 +155,7 @@ def run(args):
               'continue from their last saved step)', file=sys.stderr)
         return 130
     finally:
+        signal.signal(signal.SIGTERM, previous)
         if client is not None:
             client.close()
         if cluster is not None:

@@ -300,6 +300,61 @@ def existing_master_seed(output_dir):
         return None
 
 
+LOCK_NAME = 'ensemble.lock'
+
+
+@contextlib.contextmanager
+def ensemble_lock(output_dir):
+    """Hold ``output_dir/ensemble.lock`` while an ensemble runs there, so that two drivers never share a folder.
+
+    The lock file names the host and process.  One left by a process of this
+    host that no longer runs is taken over; one held by a live process, or
+    by a process of another host, raises UserInputError.
+    """
+    try:
+        os.makedirs(output_dir, exist_ok=True)
+    except OSError as err:
+        raise UserInputError('--output-dir %s: cannot create it (%s)' % (output_dir, err.strerror or err))
+    path = os.path.join(output_dir, LOCK_NAME)
+    host, pid = socket.gethostname(), os.getpid()
+    for _ in range(2):
+        try:
+            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                with open(path) as f:
+                    holder = json.load(f)
+            except (OSError, ValueError):
+                holder = {}
+            if holder.get('host') == host and isinstance(holder.get('pid'), int) and not _alive(holder['pid']):
+                os.remove(path)  # stale: its process has gone
+                continue
+            raise UserInputError('%s: another ensemble.py (pid %s on %s, started %s) is running in this folder; '
+                                 'wait for it or stop it (if it no longer runs, remove %s)'
+                                 % (output_dir, holder.get('pid', '?'), holder.get('host', '?'),
+                                    holder.get('started', '?'), path))
+        with os.fdopen(descriptor, 'w') as f:
+            json.dump({'host': host, 'pid': pid, 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}, f)
+        break
+    try:
+        yield path
+    finally:
+        try:
+            os.remove(path)
+        except FileNotFoundError:
+            pass
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def replica_specs(plan):
     """The task argument of every replica (small JSON-ready dicts)."""
     return [{'folder': replica['folder'],
@@ -486,6 +541,8 @@ class EnsembleProgress:
             print(text, file=self.stream, flush=True)
 
     def line(self):
+        if self.total == 0:
+            return 'ensemble: nothing to run (%d replicas finished before, skipped)' % self.skipped
         done, failed, running = self.counts
         finished = done + failed
         elapsed = time.perf_counter() - self.start

@@ -440,4 +440,22 @@ def test_one_file_series_give_the_same_statistics(scene, tmp_path, capsys):
     np.testing.assert_array_equal(per_step['height']['spheres'][1], one_file['height']['spheres'][1])
     capsys.readouterr()
     assert SCRIPT.main(argv) == 0
-    assert '2 finished before, skipped' in capsys.readouterr().out
+    assert 'nothing to run (2 replicas finished before, skipped)' in capsys.readouterr().out
+
+
+def test_two_drivers_never_share_a_folder(tmp_path):
+    folder = str(tmp_path / 'locked')
+    with runner.ensemble_lock(folder) as path:
+        with pytest.raises(UserInputError, match='another ensemble.py .* is running in this folder'):
+            with runner.ensemble_lock(folder):
+                pass
+    assert not os.path.exists(path)
+    # a lock left by a process of this host that has gone is taken over
+    import socket
+    import subprocess
+    import sys
+    gone = subprocess.run([sys.executable, '-c', 'import os; print(os.getpid())'], capture_output=True, text=True)
+    with open(path, 'w') as f:
+        json.dump({'host': socket.gethostname(), 'pid': int(gone.stdout)}, f)
+    with runner.ensemble_lock(folder):
+        assert json.load(open(path))['pid'] == os.getpid()
