@@ -35,6 +35,8 @@ except ImportError:
 import utils  # noqa: E402
 from multi_bodies import ensemble_runner as runner  # noqa: E402
 
+REPORT_LIMIT = 20  # failed replicas listed at the end (all are reported as they fail)
+
 
 def make_parser():
     parser = argparse.ArgumentParser(
@@ -163,9 +165,13 @@ def _run_locked(args, plan, distributed):
     failed = [result for result in results if result['status'] != 'done']
     if failed:
         print('%d replicas did not finish:' % len(failed))
-        for result in failed:
+        failed.sort(key=lambda result: result['folder'])
+        for result in failed[:REPORT_LIMIT]:
             print('  %s: %s: %s' % (os.path.join(plan['output_dir'], result['folder']), result['status'],
                                     result.get('message', '')))
+        if len(failed) > REPORT_LIMIT:
+            print('  ... and %d more (each folder\'s status.json and replica.log say why)'
+                  % (len(failed) - REPORT_LIMIT))
         print('fix what the messages say and rerun the same command: finished replicas are skipped')
         return 1
     print('all %d replicas done; statistics: python %s --aggregate %s'
