@@ -32,17 +32,23 @@ NO_WALL = '_no_wall'
 
 
 # ------------------------------------------------------------------ backend choice
-def resolve_implementation(name, kind='vector_product', log=None):
+def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None):
     """Turn ``auto`` / ``auto_no_wall`` into the fastest backend usable here.
 
-    kind 'vector_product': pycuda, else C++, else python; 'blobs' (dense
-    matrices, CPU only): C++, else python; 'forces': pycuda, else C++, else
-    python.  Other names are returned unchanged.  ``log`` (callable) is told
-    the choice.
+    kinds 'vector_product' and 'blobs' (dense matrices, CPU only): the backend
+    of smallest cost measured on this machine at ``num_blobs`` blobs
+    (``mobility.choose``); 'forces': pycuda, else C++, else python.  Other
+    names are returned unchanged.  ``log`` (callable) is told the choice.
     """
     if name not in ('auto', 'auto' + NO_WALL):
         return name
     suffix = name[len('auto'):]
+    if kind != 'forces':
+        from mobility import choose
+        chosen = choose.choose_backend(kind, num_blobs, wall=not suffix, log=log) + suffix
+        if log is not None:
+            log('%s: auto chose %s (smallest measured cost here)' % (kind, chosen))
+        return chosen
     order = {'vector_product': ('pycuda', 'C++', 'python'), 'blobs': ('C++', 'python'),
              'forces': ('pycuda', 'C++', 'python')}[kind]
     for backend in order:
@@ -316,8 +322,10 @@ class System:
 
 def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=None):
     """A System from validated input ``Options`` (``auto`` backends resolved and logged)."""
-    product = resolve_implementation(options.mobility_vector_prod_implementation, 'vector_product', log)
-    blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log)
+    product = resolve_implementation(options.mobility_vector_prod_implementation, 'vector_product', log,
+                                     num_blobs=body_arrays.num_blobs)
+    blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log,
+                                   num_blobs=max(body_arrays.type_blobs or [1]))
     forces = resolve_implementation(options.blob_blob_force_implementation, 'forces', log)
     physics = dict(g=options.g, repulsion_strength_wall=options.repulsion_strength_wall,
                    debye_length_wall=options.debye_length_wall, repulsion_strength=options.repulsion_strength,
