@@ -1,0 +1,1021 @@
+"""The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
+
+Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md).  It reads
+the scene as the scripts do (``read_input_file``, ``read_bodies``,
+``bodies_to_arrays``, the user's hooks from the run directory) and measures,
+for each choice a user makes in the input file, the error of each option and
+its cost per step on this machine:
+
+* ``resolution``: for each structure type recognised as a sphere (an
+  icosahedral shell, or a single blob), the 1-blob roller model and the
+  shells of 12, 42, 162 and 642 blobs; for other bodies the blob spacing and
+  the gaps against the blob radius (and, on request, a coarsened model);
+* ``wall``: the body mobility with and without the wall;
+* ``rollers``: multiblob against single-blob roller spheres;
+* ``solver``: one dense solve against one preconditioned GMRES solve;
+* ``backend``: one ``M f`` on every usable backend;
+* ``dt``: stability estimates of the time step.
+
+Error, everywhere: the largest relative error among a body's six
+self-mobility diagonal entries (translation along x, y (parallel to the
+wall) and z (perpendicular); rotation about x, y and z), at the scene's
+smallest gap: the wall gap of the lowest body of the type, and, separately,
+the nearest pair of bodies of the type.  For a sphere at the wall gap the
+reference is exact (``multi_bodies.sphere_tables``, for h/R >= 1.01);
+otherwise it is the Richardson extrapolation of the 42-, 162- and 642-blob
+shells, whose own error is estimated by the same extrapolation.
+
+Mobilities here are dense (one body or one pair, or the whole scene for the
+dense solve): shapes (6, 6) per body, torques about the body centre; lengths
+and times in the user's units.
+"""
+import json
+import os
+import time
+from collections import namedtuple
+
+import numpy as np
+import scipy.linalg
+
+import mobility
+from body.body import K_matrices, bodies_to_arrays
+from mobility import choose
+from multi_bodies import body_solver
+from multi_bodies import multi_bodies_functions as mbf
+from multi_bodies import sphere_tables
+from multi_bodies.input_options import read_input_file
+from multi_bodies.run_setup import read_bodies
+from multi_bodies.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
+
+SHELL_SIZES = (12, 42, 162, 642)
+RICHARDSON_LEVELS = (42, 162, 642)
+GMRES_WARNING_ITERATIONS = 100
+NO_WALL = '_no_wall'
+DENSE_BLOB_LIMIT = 3000           # blobs above which one dense solve is modelled, not measured
+MEASURE_BUDGET_S = 1.0            # a single timing predicted to take longer is modelled instead
+ROLLER_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_rollers',
+                  'deterministic_adams_bashforth': 'deterministic_adams_bashforth_rollers',
+                  'stochastic_adams_bashforth': 'stochastic_adams_bashforth_rollers',
+                  'stochastic_first_order_RFD': 'stochastic_first_order_rollers'}
+DENSE_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_dense_algebra',
+                 'stochastic_first_order_RFD': 'stochastic_first_order_RFD_dense_algebra'}
+STATIC_SCHEMES = ('mobility', 'resistance', 'body_mobility')
+
+# Scheme cost/accuracy tables shipped with the package, by scheme name: a dict with 'order',
+# 'solves_per_step', 'stability' (dt * mu * k limit) and 'source'.  The deterministic rows are the
+# textbook stability limits of the schemes on the negative real axis, confirmed by the chart of
+# doc/integrators_accuracy_vs_dt.md.  The weak-error table of the stochastic schemes is not
+# measured yet: add its rows here (and its chart in doc/) when it exists.
+SCHEME_TABLE = {
+    'deterministic_forward_euler': {'order': 1, 'solves_per_step': 1, 'stability': 2.0,
+                                    'source': 'forward Euler: |1 + z| <= 1'},
+    'deterministic_adams_bashforth': {'order': 2, 'solves_per_step': 1, 'stability': 1.0,
+                                      'source': 'AB2: real stability interval [-1, 0]'},
+}
+STOCHASTIC_SCHEME_TABLE = {}  # weak error and cost per scheme: not available yet
+
+Choice = namedtuple('Choice', ['topic', 'structure', 'candidate', 'blobs', 'estimated_error', 'cost_s',
+                               'meets_target', 'note'])
+Choice.__doc__ = """One row of a choice table (the JSON rows of ``.advice.json``, plus a free-text note)."""
+
+
+# ------------------------------------------------------------------ dense mobilities of small sets of bodies
+def _dense_matrix(wall, backend):
+    return mobility.blob_mobility_matrix(backend + ('' if wall else NO_WALL))
+
+
+def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='python'):
+    """Body mobility (6 nb, 6 nb) of rigid bodies made of the given blobs, torques about ``centres``.
+
+    blob_sets: list of (n_k, 3) lab-frame blob positions; centres (nb, 3).
+    A body of one blob is a roller: its 6x6 block is the blob's grand
+    mobility (translation and rotation couplings, Rotne-Prager(-Blake)).
+    """
+    if all(len(b) == 1 for b in blob_sets):
+        return roller_grand_mobility(np.concatenate(blob_sets), blob_radius, eta, wall, backend)
+    r = np.concatenate(blob_sets)
+    M = _dense_matrix(wall, backend)(r, eta, blob_radius)
+    K = np.zeros((3 * r.shape[0], 6 * len(blob_sets)))
+    row = 0
+    for k, (blobs, centre) in enumerate(zip(blob_sets, centres)):
+        n = len(blobs)
+        K[row:row + 3 * n, 6 * k:6 * k + 6] = K_matrices(np.asarray(blobs)[None], np.asarray(centre)[None])[0]
+        row += 3 * n
+    factor = scipy.linalg.cho_factor(M)
+    resistance = K.T @ scipy.linalg.cho_solve(factor, K)
+    return np.linalg.inv(resistance)
+
+
+def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='python'):
+    """Grand mobility (6n, 6n) of single blobs ``positions`` (n, 3), ordered ``[v_k, w_k]`` per blob."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    n = positions.shape[0]
+    name = backend + ('' if wall else NO_WALL)
+    products = {kind: mobility.blob_product(name, kind) for kind in mobility.PRODUCT_KINDS}
+    G = np.zeros((6 * n, 6 * n))
+    for col in range(6 * n):
+        body, component = divmod(col, 6)
+        e = np.zeros(3 * n)
+        e[3 * body + component % 3] = 1.0
+        if component < 3:
+            v = products['trans_times_force'](positions, e, eta, blob_radius)
+            w = products['rot_times_force'](positions, e, eta, blob_radius)
+        else:
+            v = products['trans_times_torque'](positions, e, eta, blob_radius)
+            w = products['rot_times_torque'](positions, e, eta, blob_radius)
+        G[:, col] = np.concatenate((np.reshape(v, (n, 3)), np.reshape(w, (n, 3))), axis=1).reshape(-1)
+    return G
+
+
+def normalised_diagonal(body_mobility, sphere_radius, eta):
+    """The six self-mobility diagonal entries of body 0 in units of the bulk sphere values, shape (6,)."""
+    d = np.diag(body_mobility)[:6]
+    bulk = np.array([1.0 / (6 * np.pi * eta * sphere_radius)] * 3 + [1.0 / (8 * np.pi * eta * sphere_radius ** 3)] * 3)
+    return d / bulk
+
+
+def exact_diagonal(h_over_R):
+    """Exact normalised diagonal (xx, yy, zz, rxx, ryy, rzz) of a sphere at h/R, or None below the table."""
+    exact = sphere_tables.exact_self_mobilities(h_over_R)
+    if exact is None:
+        return None
+    par, perp, rot_par, rot_perp = exact
+    return np.array([par, par, perp, rot_par, rot_par, rot_perp])
+
+
+def worst_error(values, reference):
+    """Largest relative error ``max |values / reference - 1|`` (the advisor's error measure)."""
+    return float(np.max(np.abs(np.asarray(values) / np.asarray(reference) - 1.0)))
+
+
+def richardson(levels):
+    """Extrapolate a sequence of values (each (6,)) of three successive shell levels.
+
+    With differences ``d1 = v2 - v1``, ``d2 = v3 - v2`` and ``q = d1 / d2``,
+    entries converging monotonically (``q > 1``) are extrapolated as
+    ``v3 + d2 / (q - 1)`` (geometric convergence at the observed rate);
+    other entries keep ``v3 + d2`` (the last difference taken as the
+    remaining error).  Returns the extrapolated values (6,).
+    """
+    v1, v2, v3 = (np.asarray(v, dtype=float) for v in levels)
+    d1, d2 = v2 - v1, v3 - v2
+    with np.errstate(divide='ignore', invalid='ignore'):
+        q = d1 / d2
+    monotone = np.isfinite(q) & (q > 1.0)
+    extrapolated = np.where(monotone, v3 + d2 / np.where(monotone, q - 1.0, 1.0), v3 + d2)
+    return np.where(d2 == 0.0, v3, extrapolated)
+
+
+# ------------------------------------------------------------------ sphere models
+_CALIBRATED = {}
+
+
+def calibrated_model(num_blobs, sphere_radius):
+    """Calibrated shell of hydrodynamic radius ``sphere_radius``: (blobs (n, 3) about 0, blob radius)."""
+    if num_blobs not in _CALIBRATED:
+        _CALIBRATED[num_blobs] = calibrated_shell(num_blobs)[:2]
+    blobs, a = _CALIBRATED[num_blobs]
+    return blobs * sphere_radius, a * sphere_radius
+
+
+def bulk_radius(blobs, blob_radius):
+    """Hydrodynamic radius (translation, far from walls) of a rigid body of RPY blobs (n, 3)."""
+    centre = np.mean(blobs, axis=0)
+    arms = np.asarray(blobs, dtype=float) - centre
+    backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
+    M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
+    K = K_matrices(arms[None], np.zeros((1, 3)))[0]
+    N = np.linalg.inv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
+    return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
+
+
+def fixed_radius_model(num_blobs, sphere_radius, blob_radius):
+    """Shell of ``num_blobs`` blobs of the given blob radius with hydrodynamic radius ``sphere_radius``.
+
+    The shell radius solves ``R_h(shell radius) = sphere_radius`` by secant
+    steps (R_h grows about one for one with the shell radius).  Returns
+    (blobs (n, 3), blob_radius), or None when the blobs would overlap by more
+    than their radius (spacing < a) or no shell radius fits.
+    """
+    unit = icosahedral_shell(num_blobs)
+    unit_spacing = smallest_distance(unit)
+
+    def excess(radius):
+        return bulk_radius(unit * radius, blob_radius) - sphere_radius
+    x0 = max(sphere_radius - blob_radius, 0.5 * sphere_radius)
+    x1 = x0 + 0.05 * sphere_radius
+    f0, f1 = excess(x0), excess(x1)
+    for _ in range(20):
+        if f1 == f0:
+            break
+        x0, x1, f0 = x1, x1 - f1 * (x1 - x0) / (f1 - f0), f1
+        if not x1 > 0:
+            return None
+        f1 = excess(x1)
+        if abs(f1) < 1e-9 * sphere_radius:
+            break
+    if abs(f1) > 1e-6 * sphere_radius or unit_spacing * x1 < blob_radius:
+        return None
+    return unit * x1, blob_radius
+
+
+def recognise_sphere(reference, blob_radius):
+    """Sphere model of a structure, or None: dict(kind 'blob' or 'shell', blobs, radius R, offset (3,)).
+
+    A single blob is a sphere of radius ``a``.  A shell is recognised when its
+    blobs lie on a sphere about their centroid (radii equal to 1e-3) and their
+    count and smallest spacing are those of an icosahedral shell; its radius
+    is the hydrodynamic radius of the model (bulk translational mobility).
+    """
+    reference = np.asarray(reference, dtype=float).reshape(-1, 3)
+    n = reference.shape[0]
+    if n == 1:
+        return dict(kind='blob', blobs=n, radius=blob_radius, offset=reference[0].copy())
+    sizes = [12]
+    while sizes[-1] < n:
+        sizes.append(4 * sizes[-1] - 6)
+    if sizes[-1] != n:
+        return None
+    centroid = reference.mean(axis=0)
+    radii = np.linalg.norm(reference - centroid, axis=1)
+    if np.std(radii) > 1e-3 * np.mean(radii):
+        return None
+    unit_spacing = smallest_distance(icosahedral_shell(n))
+    if abs(smallest_distance(reference) / np.mean(radii) - unit_spacing) > 1e-3 * unit_spacing:
+        return None
+    return dict(kind='shell', blobs=n, radius=bulk_radius(reference, blob_radius), offset=centroid)
+
+
+# ------------------------------------------------------------------ the scene
+class Scene:
+    """The scene of an input file, read as the scripts read it.
+
+    Attributes: ``options``, ``bodies``, ``types`` (list of (ID, count)),
+    ``arrays`` (BodyArrays), ``r_vectors`` (N, 3), ``hooks`` (the user's
+    physics hooks of the run directory), ``structures`` (list of dicts per
+    type: ID, spec, reference (n, 3), bodies slice, sphere model or None,
+    centres (nb, 3) of the bodies (blob centroids), lowest (index in the type),
+    nearest_pair ((i, j) in the type or None), nearest_gap (centre distance)).
+    """
+
+    def __init__(self, input_file, directory=None):
+        self.directory = os.path.dirname(os.path.abspath(input_file)) if directory is None else directory
+        self.options = read_input_file(input_file)
+        self.hooks = mbf.load_user_hooks(os.getcwd(), load_pycuda=False)
+        self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
+                                              single_blob_bodies='rollers' in self.options.scheme)
+        self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
+        slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]
+        self.arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
+        self.r_vectors = self.arrays.blob_positions()
+        self.a = self.options.blob_radius
+        self.eta = self.options.eta
+        if not (self.a > 0 and self.eta > 0):
+            from utils import UserInputError
+            raise UserInputError('%s: blob_radius and eta must be positive' % self.options.input_file)
+        self.structures = []
+        offsets = self.arrays.blob_offsets
+        for (structure_id, count), spec, (bodies, blobs), n in zip(
+                self.types, self.options.structures, self.arrays.type_slices, self.arrays.type_blobs):
+            reference = self.arrays.reference_blobs[offsets[bodies.start]:offsets[bodies.start] + n]
+            r_type = self.r_vectors[blobs].reshape(count, n, 3)
+            centres = r_type.mean(axis=1)
+            lowest = int(np.argmin(centres[:, 2])) if count else 0
+            info = dict(ID=structure_id, spec=spec, reference=reference, bodies=bodies, blobs=blobs,
+                        num_blobs=n, count=count, centres=centres, lowest=lowest, r_type=r_type,
+                        sphere=recognise_sphere(reference, self.a), nearest_pair=None, nearest_gap=None)
+            if count > 1:
+                distance = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
+                distance[np.diag_indices(count)] = np.inf
+                i, j = np.unravel_index(np.argmin(distance), distance.shape)
+                info['nearest_pair'], info['nearest_gap'] = (int(i), int(j)), float(distance[i, j])
+            self.structures.append(info)
+
+    @property
+    def num_blobs(self):
+        return self.arrays.num_blobs
+
+    @property
+    def wall(self):
+        names = (self.options.mobility_vector_prod_implementation, self.options.mobility_blobs_implementation)
+        if 'rollers' in self.options.scheme:
+            return self.options.domain != 'no_wall'
+        return not all(name.endswith(NO_WALL) for name in names)
+
+    def physics(self):
+        o = self.options
+        return dict(g=o.g, repulsion_strength_wall=o.repulsion_strength_wall, debye_length_wall=o.debye_length_wall,
+                    repulsion_strength=o.repulsion_strength, debye_length=o.debye_length,
+                    periodic_length=np.array(o.periodic_length), blob_radius=o.blob_radius, blob_mass=1.0)
+
+
+# ------------------------------------------------------------------ the advisor
+class Advisor:
+    """Measures every choice for one scene; see the module docstring.
+
+    Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
+    ``quick`` (skip measurements that grow with the scene: shells' errors
+    from the shipped table, pair errors skipped, costs modelled from one
+    measured ``M f``, no dense solve), ``coarsen`` (also offer coarsened
+    models of non-spherical bodies), ``log`` (callable for progress lines).
+    """
+
+    def __init__(self, scene, accuracy=0.01, quick=False, coarsen=False, log=None):
+        self.scene, self.accuracy, self.quick, self.coarsen = scene, float(accuracy), quick, coarsen
+        self.log = log or (lambda text: None)
+        self.choices = []
+        self.notes = []
+        self.recommendation = {}
+        self.files = {}
+        self.sources = []
+        self.backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
+        self.iterations = None
+        self.product_seconds = None
+
+    # -------------------------------------------------------------- costs
+    def product_time(self, r_vectors, wall=True, backend=None):
+        """(seconds of one M f on these blobs, 'measured' or 'modelled') with ``backend`` (default: the fastest CPU)."""
+        backend = backend or self.backend
+        n = len(r_vectors)
+        if self.product_seconds is not None:
+            base_seconds, base_n = self.product_seconds
+            predicted = base_seconds * (n / base_n) ** 2
+            if self.quick or predicted > MEASURE_BUDGET_S:
+                return predicted, 'modelled'
+        product = mobility.mobility_vector_product(backend + ('' if wall else NO_WALL))
+        force = np.random.default_rng(2).standard_normal(3 * n)
+        seconds = choose.time_call(lambda: product(r_vectors, force, self.scene.eta, self.scene.a,
+                                                   self.scene.options.periodic_length), repeats=2)
+        return seconds, 'measured'
+
+    def cost_per_step(self, seconds):
+        """Cost of one mobility solve: ``M f`` time x GMRES iterations of the scene (at least one)."""
+        return seconds * max(1, self.iterations or 1)
+
+    def replaced_scene_blobs(self, structure, model_blobs):
+        """Blob positions (N', 3) of the scene with every body of ``structure`` replaced by ``model_blobs``."""
+        parts = []
+        for other in self.scene.structures:
+            if other is structure:
+                rotations = self.scene.arrays.rotation_matrices()[other['bodies']]
+                parts.append((other['centres'][:, None, :] + np.einsum('kij,nj->kni', rotations, model_blobs)
+                              ).reshape(-1, 3))
+            else:
+                parts.append(other['r_type'].reshape(-1, 3))
+        return np.concatenate(parts)
+
+    # -------------------------------------------------------------- run everything
+    def run(self):
+        """Measure every choice; returns self (``choices``, ``recommendation``, ``notes``)."""
+        steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
+                 ('resolution', self.measure_resolution), ('wall', self.measure_wall),
+                 ('rollers', self.measure_rollers), ('dt', self.measure_dt)]
+        for name, step in steps:
+            start = time.perf_counter()
+            step()
+            self.log('%s: %.2f s' % (name, time.perf_counter() - start))
+        return self
+
+    def add(self, topic, structure, candidate, blobs, error, cost, meets, note=''):
+        self.choices.append(Choice(topic, structure, candidate, None if blobs is None else int(blobs),
+                                   None if error is None else float(error), None if cost is None else float(cost),
+                                   bool(meets), note))
+
+    # -------------------------------------------------------------- solver
+    def scene_rhs(self):
+        """Force-torque (Nb, 6) and slip (N, 3) of the scene (seeded random forces when they vanish)."""
+        scene = self.scene
+        from multi_bodies.system import System
+        system = System(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
+                        scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
+                        blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
+        force_torque = system.forces_torques(scene.r_vectors)
+        slip = system.slip() if system.has_slip else np.zeros_like(scene.r_vectors)
+        if not np.any(force_torque) and not np.any(slip):
+            force_torque = np.random.default_rng(3).standard_normal((scene.arrays.num_bodies, 6))
+        return force_torque, slip
+
+    def _forces_backend(self):
+        name = self.scene.options.blob_blob_force_implementation
+        if name in ('auto', 'pycuda'):
+            return 'C++' if self.backend == 'C++' else 'python'
+        return name
+
+    def measure_solver(self):
+        scene = self.scene
+        wall = scene.wall
+        product = mobility.mobility_vector_product(self.backend + ('' if wall else NO_WALL))
+        matrix = mobility.blob_mobility_matrix(self.backend + ('' if wall else NO_WALL))
+        force_torque, slip = self.scene_rhs()
+        tolerance = scene.options.solver_tolerance
+        start = time.perf_counter()
+        operator = body_solver.saddle_point_operator(scene.arrays, scene.r_vectors, product, scene.eta, scene.a,
+                                                     scene.options.periodic_length)
+        preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, scene.r_vectors, matrix, scene.eta,
+                                                                 scene.a, stacked_mobility=matrix)
+        result = body_solver.solve_mobility_problem(operator, preconditioner,
+                                                    body_solver.mobility_rhs(force_torque, slip),
+                                                    scene.num_blobs, tolerance, true_residual=False)
+        gmres_seconds = time.perf_counter() - start
+        self.iterations = result.iterations
+        note = '%d GMRES iterations at solver_tolerance %g' % (result.iterations, tolerance)
+        if not result.converged:
+            note += ', NOT converged'
+        if result.iterations > GMRES_WARNING_ITERATIONS:
+            warning = ('WARNING: GMRES needed %d iterations (more than %d) at solver_tolerance %g: the packing is '
+                       'dense or the problem ill-conditioned (blobs overlapping the wall or each other, blob radius '
+                       'large against the spacing); check the configuration' %
+                       (result.iterations, GMRES_WARNING_ITERATIONS, tolerance))
+            self.notes.append(warning)
+            note += ' (above %d: warning)' % GMRES_WARNING_ITERATIONS
+        self.add('solver', None, 'preconditioned GMRES', scene.num_blobs, tolerance, gmres_seconds,
+                 result.converged and result.iterations <= GMRES_WARNING_ITERATIONS, note)
+        # Dense: measured on the scene when small, modelled as (N / n)^3 from a measured smaller dense solve.
+        n = scene.num_blobs
+        if n <= DENSE_BLOB_LIMIT and not self.quick:
+            start = time.perf_counter()
+            body_solver.dense_mobility_velocities(scene.arrays, scene.r_vectors, force_torque, slip, matrix,
+                                                  scene.eta, scene.a)
+            dense_seconds, how = time.perf_counter() - start, 'measured'
+        else:
+            probe = min(n, 600)
+            r = scene.r_vectors[:probe]
+            start = time.perf_counter()
+            M = matrix(r, scene.eta, scene.a)
+            np.linalg.inv(M)
+            dense_seconds, how = (time.perf_counter() - start) * 2.0 * (n / probe) ** 3, 'modelled'
+        self.add('solver', None, 'dense solve', n, None, dense_seconds, True,
+                 '%s; memory %.3g GB for the %d x %d blob matrix' % (how, 8 * 2 * (3 * n) ** 2 / 1e9, 3 * n, 3 * n))
+        dense_scheme = DENSE_SCHEMES.get(scene.options.scheme)
+        if dense_seconds < gmres_seconds and dense_scheme:
+            self.recommendation['scheme'] = dense_scheme
+        elif dense_seconds < gmres_seconds:
+            self.notes.append('a dense solve (%.3g s) is faster than GMRES (%.3g s) here, but scheme %s has no '
+                              'dense-algebra variant' % (dense_seconds, gmres_seconds, scene.options.scheme))
+
+    # -------------------------------------------------------------- backends
+    def measure_backends(self):
+        scene = self.scene
+        wall = scene.wall
+        costs = {}
+        for backend in ('pycuda', 'C++', 'python'):
+            if not mobility.backends.is_usable(backend):
+                self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, None, None, False,
+                         'not usable here: %s' % mobility.backends.available_implementations()[backend])
+                continue
+            if backend == 'python' and scene.num_blobs > 4000:
+                seconds, how = choose.modelled_seconds('python', 'vector_product', scene.num_blobs, wall)
+            else:
+                seconds, how = self.product_time(scene.r_vectors, wall, backend)
+            costs[backend] = seconds
+            self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, 0.0, seconds, True,
+                     'one M f, %s' % how)
+        fastest = min(costs, key=costs.get)
+        self.product_seconds = (costs[self.backend], scene.num_blobs)
+        suffix = '' if wall else NO_WALL
+        if scene.options.mobility_vector_prod_implementation != fastest + suffix:
+            self.recommendation['mobility_vector_prod_implementation'] = fastest + suffix
+        cpu = 'C++' if 'C++' in costs else 'python'
+        if scene.options.mobility_blobs_implementation != cpu + suffix:
+            self.recommendation['mobility_blobs_implementation'] = cpu + suffix
+
+    # -------------------------------------------------------------- resolution
+    def sphere_models(self, structure):
+        """Candidate models of a sphere structure.
+
+        List of (label, blobs (n, 3) about 0, blob radius, applicable): the
+        1-blob roller model, the calibrated shells (blob radius scaled with
+        R; applicable when this is the only structure type, since
+        ``blob_radius`` is one value for every structure) and, with several
+        structure types, shells that keep the scene's blob radius.
+        """
+        R = structure['sphere']['radius']
+        single_type = len(self.scene.structures) == 1
+        models = [('1 blob (roller model)', np.zeros((1, 3)), R, False)]
+        for n in SHELL_SIZES:
+            blobs, a = calibrated_model(n, R)
+            models.append(('shell %d' % n, blobs, a, single_type))
+        if not single_type:
+            for n in SHELL_SIZES:
+                model = fixed_radius_model(n, R, self.scene.a)
+                if model is not None:
+                    models.append(('shell %d (a = %.4g)' % (n, self.scene.a), model[0], model[1], True))
+        return models
+
+    def model_errors(self, structure, models):
+        """Per model: (wall-gap diagonal (6,), pair diagonal (6,) or None), normalised by the sphere's bulk values."""
+        scene = self.scene
+        R = structure['sphere']['radius']
+        centre = structure['centres'][structure['lowest']]
+        pair = structure['nearest_pair']
+        results = []
+        for label, blobs, a, _ in models:
+            wall_diag = normalised_diagonal(bodies_mobility([blobs + centre], [centre], a, scene.eta, scene.wall,
+                                                            self.backend), R, scene.eta)
+            pair_diag = None
+            if pair is not None and not self.quick:
+                c0, c1 = structure['centres'][pair[0]], structure['centres'][pair[1]]
+                pair_diag = normalised_diagonal(bodies_mobility([blobs + c0, blobs + c1], [c0, c1], a, scene.eta,
+                                                                scene.wall, self.backend), R, scene.eta)
+            results.append((wall_diag, pair_diag))
+        return results
+
+    def current_model_diagonals(self, structure):
+        scene = self.scene
+        R = structure['sphere']['radius']
+        r_type, centres = structure['r_type'], structure['centres']
+        low = structure['lowest']
+        wall_diag = normalised_diagonal(bodies_mobility([r_type[low]], [centres[low]], scene.a, scene.eta, scene.wall,
+                                                        self.backend), R, scene.eta)
+        pair_diag = None
+        if structure['nearest_pair'] is not None and not self.quick:
+            i, j = structure['nearest_pair']
+            pair_diag = normalised_diagonal(bodies_mobility([r_type[i], r_type[j]], [centres[i], centres[j]], scene.a,
+                                                            scene.eta, scene.wall, self.backend), R, scene.eta)
+        return wall_diag, pair_diag
+
+    def measure_resolution(self):
+        self.resolution_details = {}
+        for structure in self.scene.structures:
+            if structure['sphere'] is None:
+                self.measure_other_body(structure)
+            else:
+                self.measure_sphere(structure)
+
+    def measure_sphere(self, structure):
+        scene = self.scene
+        sid, R = structure['ID'], structure['sphere']['radius']
+        h = structure['centres'][structure['lowest']][2] / R
+        models = self.sphere_models(structure)
+        labels = [m[0] for m in models]
+        diagonals = self.model_errors(structure, models)
+        current_wall, current_pair = self.current_model_diagonals(structure)
+        exact = exact_diagonal(h) if scene.wall else np.ones(6)  # free space: the bulk values are exact
+        # Richardson reference: the calibrated shells converge to the sphere.
+        levels = [diagonals[labels.index('shell %d' % n)] for n in RICHARDSON_LEVELS]
+        wall_reference = richardson([d[0] for d in levels])
+        pair_reference = None
+        if structure['nearest_pair'] is not None and not self.quick:
+            pair_reference = richardson([d[1] for d in levels])
+        reference = exact if exact is not None else wall_reference
+        source = 'exact sphere-wall table' if exact is not None else 'Richardson extrapolation of shells 42-162-642'
+        self.sources.append('%s: wall-gap errors against the %s (h/R = %.4g)' % (sid, source, h))
+        if pair_reference is not None:
+            self.sources.append('%s: pair errors against the Richardson extrapolation of shells 42-162-642 '
+                                '(centre distance %.4g R)' % (sid, structure['nearest_gap'] / R))
+        elif structure['nearest_pair'] is not None:
+            self.sources.append('%s: pair errors not measured (--quick)' % sid)
+        current_label = 'current (%d blobs, a = %.4g)' % (structure['num_blobs'], scene.a)
+        rows = [(current_label, structure['num_blobs'], current_wall, current_pair, None)]
+        rows += [(label, len(blobs), d[0], d[1], (label, blobs, a, applicable))
+                 for (label, blobs, a, applicable), d in zip(models, diagonals)]
+        details, candidates = [], []
+        for label, n, wall_diag, pair_diag, model in rows:
+            wall_error = worst_error(wall_diag, reference) if reference is not None else None
+            calibrated = model is not None and n > 1 and '(' not in label
+            if self.quick and calibrated and scene.wall:
+                shipped = sphere_tables.shipped_shell_errors(n, h)
+                if shipped is not None:
+                    wall_error = float(np.max(np.abs(shipped)))
+            richardson_error = worst_error(wall_diag, wall_reference)
+            pair_error = worst_error(pair_diag, pair_reference) if (pair_diag is not None and
+                                                                    pair_reference is not None) else None
+            errors = [e for e in (wall_error, pair_error) if e is not None]
+            error = max(errors) if errors else None
+            if model is None:
+                seconds, how = self.product_time(scene.r_vectors, scene.wall)
+                cost = self.cost_per_step(seconds)
+            elif n == 1:
+                others = [s['r_type'].reshape(-1, 3) for s in scene.structures if s is not structure]
+                seconds, how = self.product_time(np.concatenate([structure['centres']] + others), scene.wall)
+                cost = seconds
+            else:
+                seconds, how = self.product_time(self.replaced_scene_blobs(structure, model[1]), scene.wall)
+                cost = self.cost_per_step(seconds)
+            meets = error is not None and error <= self.accuracy
+            note = 'wall gap %s%s; Richardson estimate %s; pair %s; cost %s' % (
+                _percent(wall_error), ' (shipped table)' if self.quick and calibrated and scene.wall else '',
+                _percent(richardson_error), _percent(pair_error), how)
+            if calibrated and len(scene.structures) > 1:
+                note += '; needs blob_radius %.4g for every structure' % model[2]
+            self.add('resolution', sid, label, n, error, cost, meets, note)
+            details.append(dict(candidate=label, blobs=n, wall_error=wall_error, richardson_error=richardson_error,
+                                pair_error=pair_error, cost_s=cost))
+            if model is not None and model[3]:
+                candidates.append((model, cost, error, meets))
+        self.resolution_details[sid] = dict(h_over_R=h, radius=R, rows=details, wall_reference=wall_reference,
+                                            exact=exact)
+        current = [c for c in self.choices if c.topic == 'resolution' and c.structure == sid][0]
+        adequate = [c for c in candidates if c[3]]
+        if adequate:
+            best = min(adequate, key=lambda c: c[1])
+            if current.meets_target and current.cost_s <= best[1]:
+                return  # the scene's own model meets the target and costs no more
+        else:
+            known = [c for c in candidates if c[2] is not None]
+            best = min(known, key=lambda c: c[2]) if known else None
+            if best is None or (current.estimated_error is not None and best[2] >= current.estimated_error):
+                self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; the current model is kept'
+                                  % (sid, _percent(self.accuracy), h))
+                return
+            self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; recommended: the most accurate '
+                              '(%s, %s)' % (sid, _percent(self.accuracy), h, best[0][0], _percent(best[2])))
+        label, blobs, a, _ = best[0]
+        vertex = self.write_vertex(sid, label, blobs)
+        spec = structure['spec']
+        line = '%s %s%s' % (vertex, spec.clones_file, ' ' + spec.slip_file if spec.slip_file else '')
+        self.recommendation['structure:%s' % sid] = line
+        if abs(a - scene.a) > 1e-9 * a:
+            self.recommendation['blob_radius'] = '%.12g' % a
+        if spec.slip_file:
+            self.notes.append('%s has a slip file for %d blobs: a %d-blob model needs its own slip file (for '
+                              'squirmers: python -m multi_bodies.structure_generators squirmer-slip --blobs %d)'
+                              % (sid, structure['num_blobs'], len(blobs), len(blobs)))
+
+    def write_vertex(self, sid, label, blobs):
+        """Write the recommended model next to the output (``output_name.advice.<ID>.<model>.vertex``)."""
+        from multi_bodies.structure_files import write_vertex_file
+        name = '%s.advice.%s.%s.vertex' % (self.scene.options.output_name, sid,
+                                           label.split(' (')[0].replace(' ', '_'))
+        self.files[name] = (blobs, 'model recommended by multi_bodies/advise.py for structure %s: %s' % (sid, label))
+        return name
+
+    def measure_other_body(self, structure):
+        """Bodies that are not spheres: spacing and gaps against the blob radius, coarsened model on request."""
+        scene = self.scene
+        sid, a = structure['ID'], scene.a
+        reference = structure['reference']
+        spacing = smallest_distance(reference) if len(reference) > 1 else float('nan')
+        lowest_blob = float(np.min(structure['r_type'][:, :, 2]))
+        others = np.concatenate([s['r_type'].reshape(-1, 3) for s in scene.structures]) if scene.num_blobs < 20000 \
+            else None
+        body_gap = None
+        if others is not None and structure['count'] >= 1:
+            own = scene.arrays.blob_body_index
+            r = scene.r_vectors
+            index = np.arange(structure['blobs'].start, structure['blobs'].stop)
+            best = np.inf
+            for start in range(0, len(index), 256):
+                chunk = index[start:start + 256]
+                d = np.linalg.norm(r[chunk, None, :] - r[None, :, :], axis=2)
+                d[own[chunk][:, None] == own[None, :]] = np.inf
+                best = min(best, float(np.min(d)) if d.size else np.inf)
+            body_gap = best if np.isfinite(best) else None
+        consequences = []
+        ratio = spacing / a
+        if ratio > 2.2:
+            consequences.append('spacing/a = %.2f > 2: blobs do not touch, fluid leaks through the surface and the '
+                                'drag is underestimated' % ratio)
+        elif ratio < 1.0:
+            consequences.append('spacing/a = %.2f < 1: blobs overlap strongly; the surface is smooth but the blob '
+                                'mobility is ill-conditioned (more GMRES iterations, VALIDATION T6)' % ratio)
+        else:
+            consequences.append('spacing/a = %.2f: the usual range (about 2 for touching blobs)' % ratio)
+        if scene.wall and lowest_blob / a < 1.0:
+            consequences.append('lowest blob at z/a = %.2f < 1: its mobility is regularised (damped like (z/a)^2); '
+                                'lubrication with the wall is not resolved' % (lowest_blob / a))
+        elif scene.wall and lowest_blob / a < 2.0:
+            consequences.append('wall gap z/a = %.2f: gap comparable to a blob; near-wall mobilities are resolved only '
+                                'to the blob size' % (lowest_blob / a))
+        if body_gap is not None and body_gap / a < 2.0:
+            consequences.append('nearest blobs of two bodies at %.2f a (< 2a): the bodies overlap hydrodynamically; '
+                                'close-range interactions are not resolved' % (body_gap / a))
+        note = '; '.join(consequences)
+        seconds, how = self.product_time(scene.r_vectors, scene.wall)
+        self.add('resolution', sid, 'current (%d blobs, spacing/a %.3g, wall gap/a %.3g%s)' % (
+            structure['num_blobs'], ratio, lowest_blob / a,
+            '' if body_gap is None else ', body gap/a %.3g' % (body_gap / a)),
+            structure['num_blobs'], None, self.cost_per_step(seconds), True, note)
+        if self.coarsen and len(reference) >= 4:
+            self.measure_coarsened(structure, seconds)
+
+    def measure_coarsened(self, structure, current_seconds):
+        """Every other blob, blob radius rescaled to keep the bulk translational drag; error against the current model."""
+        scene = self.scene
+        sid, a = structure['ID'], scene.a
+        reference = structure['reference']
+        coarse = reference[::2]
+        target = bulk_radius(reference, a)
+        low, high = 0.1 * a, 10.0 * a
+        for _ in range(50):
+            middle = np.sqrt(low * high)
+            if bulk_radius(coarse, middle) < target:
+                low = middle
+            else:
+                high = middle
+        a_coarse = np.sqrt(low * high)
+        low_index = structure['lowest']
+        rotation = scene.arrays.rotation_matrices()[structure['bodies']][low_index]
+        location = scene.arrays.locations[structure['bodies']][low_index]
+        centre = structure['centres'][low_index]
+        fine = bodies_mobility([structure['r_type'][low_index]], [centre], a, scene.eta, scene.wall, self.backend)
+        coarse_blobs = location + coarse @ rotation.T
+        if np.min(coarse_blobs[:, 2]) <= 0 and scene.wall:
+            return
+        rough = bodies_mobility([coarse_blobs], [centre], a_coarse, scene.eta, scene.wall, self.backend)
+        error = worst_error(np.diag(rough), np.diag(fine))
+        replaced = self.replaced_scene_blobs(structure, (coarse @ np.eye(3)) - (reference.mean(axis=0)))
+        seconds, how = self.product_time(replaced, scene.wall)
+        self.add('resolution', sid, 'coarsened (every other blob, a = %.4g)' % a_coarse, len(coarse), error,
+                 self.cost_per_step(seconds), error <= self.accuracy,
+                 'error against the current model at its wall gap; blob_radius is shared by all structures; cost %s'
+                 % how)
+
+    # -------------------------------------------------------------- wall
+    def measure_wall(self):
+        scene = self.scene
+        if not scene.wall:
+            self.add('wall', None, 'no wall (current)', scene.num_blobs, None, None, True, 'the scene has no wall')
+            return
+        worst = 0.0
+        for structure in scene.structures:
+            low = structure['lowest']
+            blobs, centre = structure['r_type'][low], structure['centres'][low]
+            with_wall = bodies_mobility([blobs], [centre], scene.a, scene.eta, True, self.backend)
+            without = bodies_mobility([blobs], [centre], scene.a, scene.eta, False, self.backend)
+            difference = worst_error(np.diag(without), np.diag(with_wall))
+            worst = max(worst, difference)
+            self.add('wall', structure['ID'], 'no wall, lowest body (centre z = %.4g)' % centre[2],
+                     structure['num_blobs'], difference, None, difference <= self.accuracy,
+                     'largest relative change of the self-mobility diagonal when the wall is removed')
+        wall_seconds, how_wall = self.product_time(scene.r_vectors, True)
+        free_seconds, how_free = self.product_time(scene.r_vectors, False)
+        self.add('wall', None, 'with wall (current)', scene.num_blobs, 0.0, self.cost_per_step(wall_seconds), True,
+                 'M f %s' % how_wall)
+        meets = worst <= self.accuracy
+        self.add('wall', None, 'no wall (_no_wall backends)', scene.num_blobs, worst,
+                 self.cost_per_step(free_seconds), meets,
+                 'M f %s; %.2fx faster than with the wall' % (how_free, wall_seconds / max(free_seconds, 1e-12)))
+        if meets:
+            if 'rollers' in scene.options.scheme:
+                self.recommendation['domain'] = 'no_wall'
+            else:
+                for option in ('mobility_vector_prod_implementation', 'mobility_blobs_implementation'):
+                    base = self.recommendation.get(option, getattr(scene.options, option))
+                    self.recommendation[option] = base if base.endswith(NO_WALL) else base + NO_WALL
+
+    # -------------------------------------------------------------- rollers
+    def measure_rollers(self):
+        scene = self.scene
+        spheres = [s for s in scene.structures if s['sphere'] is not None]
+        if len(spheres) != len(scene.structures):
+            self.add('rollers', None, 'single-blob rollers', None, None, None, False,
+                     'not applicable: not every structure is a sphere')
+            return
+        details = getattr(self, 'resolution_details', {})
+        roller_error, multiblob_error, roller_cost, multiblob_cost = 0.0, 0.0, 0.0, 0.0
+        known = True
+        for s in spheres:
+            rows = [c for c in self.choices if c.topic == 'resolution' and c.structure == s['ID']]
+            current = rows[0]
+            roller = [c for c in rows if c.blobs == 1 and c.candidate.startswith('1 blob')][0]
+            if roller.estimated_error is None or current.estimated_error is None:
+                known = False
+                continue
+            roller_error = max(roller_error, roller.estimated_error)
+            multiblob_error = max(multiblob_error, current.estimated_error)
+            roller_cost, multiblob_cost = roller.cost_s, current.cost_s
+        radii = {round(s['sphere']['radius'], 9) for s in spheres}
+        dynamic = scene.options.scheme not in STATIC_SCHEMES
+        self.add('rollers', None, 'multiblob (current)', scene.num_blobs, multiblob_error if known else None,
+                 multiblob_cost, known and multiblob_error <= self.accuracy)
+        meets = known and roller_error <= self.accuracy
+        applicable = dynamic and len(radii) == 1
+        self.add('rollers', None, 'single-blob rollers', scene.arrays.num_bodies, roller_error if known else None,
+                 roller_cost, meets, '' if applicable else 'rollers need a dynamic scheme and spheres of one radius')
+        if meets and applicable and 'rollers' not in scene.options.scheme:
+            roller_scheme = ROLLER_SCHEMES.get(scene.options.scheme)
+            if roller_scheme is None:
+                return
+            for key in [k for k in self.recommendation if k.startswith('structure:') or k == 'blob_radius']:
+                del self.recommendation[key]
+            self.recommendation.pop('scheme', None)
+            self.recommendation['scheme'] = roller_scheme
+            self.recommendation['blob_radius'] = '%.12g' % radii.pop()
+            for s in spheres:
+                vertex = self.write_vertex(s['ID'], 'blob', np.zeros((1, 3)))
+                self.recommendation['structure:%s' % s['ID']] = '%s %s' % (vertex, s['spec'].clones_file)
+                if np.linalg.norm(s['sphere']['offset']) > 1e-9 * s['sphere']['radius']:
+                    self.notes.append('%s: the shell centre is not the body location; move the clones locations '
+                                      'by the centre offset %s for the roller model' % (s['ID'], s['sphere']['offset']))
+
+    # -------------------------------------------------------------- time step
+    def measure_dt(self):
+        scene = self.scene
+        options = scene.options
+        physics = scene.physics()
+        hooks = scene.hooks
+        # The body with the lowest blob; its stiffness against a vertical displacement of the whole body.
+        lowest_blob = int(np.argmin(scene.r_vectors[:, 2]))
+        body = int(scene.arrays.blob_body_index[lowest_blob])
+        start, stop = scene.arrays.blob_offsets[body], scene.arrays.blob_offsets[body + 1]
+        blobs = scene.r_vectors[start:stop]
+        centre = blobs.mean(axis=0)
+
+        def vertical_force(shift):
+            moved = blobs + np.array([0.0, 0.0, shift])
+            return float(np.sum(np.asarray(hooks.blob_external_forces(moved, **physics)).reshape(-1, 3)[:, 2]))
+
+        delta = 1e-4 * max(scene.a, 1e-12)
+        stiffness_now = -(vertical_force(delta) - vertical_force(-delta)) / (2 * delta)
+        mobility_now = bodies_mobility([blobs], [centre], scene.a, scene.eta, scene.wall, self.backend)[2, 2]
+        # Resting height: where gravity and the wall repulsion balance (found by bisection on the shift).
+        rest_shift, rest_note = None, ''
+        low_shift, high_shift = -float(np.min(blobs[:, 2])) + 1e-6 * scene.a, 0.0
+        if vertical_force(0.0) < 0 and vertical_force(low_shift) > 1e-9 * abs(vertical_force(0.0)):
+            for _ in range(80):
+                middle = 0.5 * (low_shift + high_shift)
+                if vertical_force(middle) > 0:
+                    low_shift = middle
+                else:
+                    high_shift = middle
+            rest_shift = 0.5 * (low_shift + high_shift)
+        elif vertical_force(0.0) < 0:
+            rest_note = ('the wall repulsion cannot balance gravity on this body: it sinks until its lowest blob '
+                         'nearly touches z = 0, slowed only by the regularised mobility (damped like (z/a)^2); '
+                         'no resting-state stiffness estimate')
+        estimates = [('at the start', stiffness_now, mobility_now, float(np.min(blobs[:, 2])))]
+        if rest_shift is not None:
+            rested = blobs + np.array([0.0, 0.0, rest_shift])
+            stiffness_rest = -(vertical_force(rest_shift + delta) - vertical_force(rest_shift - delta)) / (2 * delta)
+            mobility_rest = bodies_mobility([rested], [centre + [0, 0, rest_shift]], scene.a, scene.eta, scene.wall,
+                                            self.backend)[2, 2]
+            estimates.append(('resting on the wall', stiffness_rest, mobility_rest, float(np.min(rested[:, 2]))))
+        rate = max(k * mu for _, k, mu, _ in estimates if k > 0) if any(k > 0 for _, k, _, _ in estimates) else 0.0
+        # Blob-blob repulsion between the nearest blobs of two bodies (relative mobility ~ twice one body's).
+        pair_note = ''
+        if options.blob_blob_force_implementation != 'None' and scene.arrays.num_bodies > 1 and scene.num_blobs < 20000:
+            r = scene.r_vectors
+            own = scene.arrays.blob_body_index
+            best = np.inf
+            for first in range(0, len(r), 512):
+                d = np.linalg.norm(r[first:first + 512, None, :] - r[None, :, :], axis=2)
+                d[own[first:first + 512, None] == own[None, :]] = np.inf
+                best = min(best, float(np.min(d)))
+            if np.isfinite(best):
+                e = np.array([best, 0.0, 0.0])
+                f = lambda x: float(np.asarray(hooks.blob_blob_force(np.array([x, 0.0, 0.0]), **physics)).reshape(3)[0])
+                k_pair = abs((f(best + delta) - f(best - delta)) / (2 * delta))
+                pair_rate = k_pair * 2.0 * mobility_now
+                pair_note = 'nearest blobs of two bodies at %.4g: pair stiffness %.3g, rate %.3g' % (best, k_pair,
+                                                                                                     pair_rate)
+                del e
+                rate = max(rate, pair_rate)
+        dt = options.dt
+        for where, k, mu, z in estimates:
+            self.notes.append('dt: %s, lowest blob z = %.4g: wall+gravity stiffness %.4g, mobility mu_zz %.4g, '
+                              'mu k = %.4g per unit time' % (where, z, k, mu, mu * k))
+        if pair_note:
+            self.notes.append('dt: ' + pair_note)
+        if rest_note:
+            self.notes.append('dt: ' + rest_note)
+        solve_cost = next((c.cost_s for c in self.choices if c.topic == 'solver' and c.candidate.endswith('GMRES')),
+                          None)
+        safe = []
+        for scheme, row in SCHEME_TABLE.items():
+            limit = row['stability'] / rate if rate > 0 else np.inf
+            stable = dt > 0 and dt < limit
+            if stable:
+                safe.append(scheme)
+            self.add('dt', None, '%s: stable below dt = %.4g (input dt %g)' % (scheme, limit, dt), None, None,
+                     None if solve_cost is None else solve_cost * row['solves_per_step'], stable,
+                     'order %d; %s; dt mu k < %g' % (row['order'], row['source'], row['stability']))
+        # Stochastic: the rms Brownian step of the lowest body against the Debye lengths.
+        kT = options.kT
+        mu = estimates[-1][2]
+        lengths = [options.debye_length_wall] + ([options.debye_length]
+                                                 if options.blob_blob_force_implementation != 'None' else [])
+        b = min(lengths)
+        dt_brownian = b ** 2 / (2.0 * kT * mu) if kT > 0 and mu > 0 else np.inf
+        step = np.sqrt(2.0 * kT * mu * dt) if dt > 0 else 0.0
+        self.add('dt', None, 'stochastic: Brownian step sqrt(2 kT mu dt) = %.4g against Debye length %g; equal at '
+                 'dt = %.4g' % (step, b, dt_brownian), None, None, None, step <= b,
+                 'stochastic scheme weak-error/cost table not yet available')
+        self.notes.append('dt: the stochastic schemes\' weak-error and cost table is not yet available (the stochastic '
+                          'schemes are being written); only the stability estimates above are given for them')
+        if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
+            if 'deterministic_forward_euler' in safe:
+                self.recommendation['scheme'] = 'deterministic_forward_euler'
+            else:
+                limit = SCHEME_TABLE[options.scheme]['stability'] / rate
+                self.recommendation['dt'] = '%.3g' % (0.5 * limit)
+        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian)
+
+    # -------------------------------------------------------------- output
+    def as_json(self):
+        return {'target_accuracy': self.accuracy,
+                'choices': [dict(topic=c.topic, structure=c.structure, candidate=c.candidate, blobs=c.blobs,
+                                 estimated_error=c.estimated_error, cost_s=c.cost_s, meets_target=c.meets_target)
+                            for c in self.choices],
+                'recommendation': dict(self.recommendation)}
+
+    def report(self):
+        """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
+        lines = ['# Advice for %s (target accuracy %s%s)' % (self.scene.options.input_file, _percent(self.accuracy),
+                                                          ', --quick' if self.quick else ''),
+                 '', 'Scene: %d bodies, %d blobs, %d structure types; blob_radius %g, eta %g, %s.' % (
+                     self.scene.arrays.num_bodies, self.scene.num_blobs, len(self.scene.structures), self.scene.a,
+                     self.scene.eta, 'wall at z = 0' if self.scene.wall else 'no wall'),
+                 'Error: the largest relative error of the six self-mobility diagonal entries of a body at the '
+                 'smallest gap; cost per step: one M f (%s) x GMRES iterations of the scene (%s).' % (
+                     self.backend, self.iterations)]
+        for structure in self.scene.structures:
+            sphere = structure['sphere']
+            lines.append('- %s: %d bodies of %d blobs, %s' % (
+                structure['ID'], structure['count'], structure['num_blobs'],
+                'sphere of radius %.4g (%s), lowest centre h/R = %.4g%s' % (
+                    sphere['radius'], sphere['kind'], structure['centres'][structure['lowest']][2] / sphere['radius'],
+                    '' if structure['nearest_gap'] is None else
+                    ', nearest pair at %.4g R' % (structure['nearest_gap'] / sphere['radius']))
+                if sphere else 'not a sphere'))
+        for topic in ('resolution', 'wall', 'rollers', 'solver', 'backend', 'dt'):
+            rows = [c for c in self.choices if c.topic == topic]
+            if not rows:
+                continue
+            lines += ['', '## %s' % topic, '',
+                      '| structure | option | blobs | estimated error | cost per step | meets target | note |',
+                      '|---|---|---|---|---|---|---|']
+            for c in rows:
+                lines.append('| %s | %s | %s | %s | %s | %s | %s |' % (
+                    c.structure or '', c.candidate, '' if c.blobs is None else c.blobs, _percent(c.estimated_error),
+                    _seconds(c.cost_s), 'yes' if c.meets_target else 'no', c.note))
+        if self.sources:
+            lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
+            if self.quick:
+                lines.append('- --quick: shell errors at the wall gap of single-type scenes come from the shipped table '
+                             'of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, interpolated in h/R); pair '
+                             'errors are not measured; costs of other models are modelled as M f x (N/N_scene)^2; the '
+                             'dense solve is modelled as N^3 from a smaller one')
+        if self.notes:
+            lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
+        lines += ['', '## recommendation', '']
+        if not self.recommendation:
+            lines.append('The input already uses the cheapest adequate choices measured here: no line to change.')
+        else:
+            lines.append('Change these input lines:')
+            lines.append('')
+            lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
+        return '\n'.join(lines) + '\n'
+
+    def write(self):
+        """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
+        from multi_bodies.structure_files import write_vertex_file
+        output = self.scene.options.output_name
+        folder = os.path.dirname(output)
+        if folder:
+            os.makedirs(folder, exist_ok=True)
+        for path, (blobs, comment) in self.files.items():
+            write_vertex_file(path, blobs, comment=comment)
+        path = output + '.advice.json'
+        with open(path, 'w') as f:
+            json.dump(self.as_json(), f, indent=1)
+        return path
+
+
+def recommendation_lines(recommendation):
+    """Input-file lines ``option value`` of a recommendation (``structure:<ID>`` keys become ``structure``)."""
+    return ['%-40s %s' % (key.split(':')[0], value) for key, value in recommendation.items()]
+
+
+def apply_recommendation(text, recommendation, structure_ids):
+    """Input text with the recommended lines in place of the old ones.
+
+    ``structure_ids``: the structure ID of each ``structure`` line, in order.
+    Options not present are appended.
+    """
+    lines = text.splitlines()
+    done = set()
+    structure_index = 0
+    for i, raw in enumerate(lines):
+        words = raw.split('#', 1)[0].split()
+        if not words:
+            continue
+        name = words[0]
+        if name == 'structure':
+            key = 'structure:%s' % structure_ids[structure_index]
+            structure_index += 1
+            if key in recommendation:
+                lines[i] = 'structure %s' % recommendation[key]
+                done.add(key)
+        elif name in recommendation:
+            lines[i] = '%s %s' % (name, recommendation[name])
+            done.add(name)
+    lines += ['%s %s' % (key, value) for key, value in recommendation.items() if key not in done]
+    return '\n'.join(lines) + '\n'
+
+
+def _percent(value):
+    if value is None:
+        return '-'
+    return '%.3g%%' % (100.0 * value)
+
+
+def _seconds(value):
+    if value is None:
+        return '-'
+    return '%.3g ms' % (1e3 * value) if value < 1.0 else '%.3g s' % value
+
+
+def advise(input_file, accuracy=0.01, quick=False, coarsen=False, log=None):
+    """Read the scene of ``input_file`` (run directory = current directory) and return the finished Advisor."""
+    return Advisor(Scene(input_file), accuracy, quick, coarsen, log).run()
