@@ -148,21 +148,22 @@ def worst_error(values, reference):
     return float(np.max(np.abs(np.asarray(values) / np.asarray(reference) - 1.0)))
 
 
-def richardson(levels):
+def richardson(levels, smallest_rate=2.0):
     """Extrapolate a sequence of values (each (6,)) of three successive shell levels.
 
     With differences ``d1 = v2 - v1``, ``d2 = v3 - v2`` and ``q = d1 / d2``,
-    entries converging monotonically (``q > 1``) are extrapolated as
-    ``v3 + d2 / (q - 1)`` (geometric convergence at the observed rate);
-    other entries keep ``v3 + d2`` (the last difference taken as the
-    remaining error).  Returns the extrapolated values (6,).
+    entries that converge at a clear geometric rate (``q >= smallest_rate``:
+    the difference at least halves per fourfold refinement) are extrapolated
+    as ``v3 + d2 / (q - 1)``; other entries (no clear rate, or a change of
+    sign) keep ``v3 + d2``, the last difference taken as the remaining error.
+    Returns the extrapolated values (6,).
     """
     v1, v2, v3 = (np.asarray(v, dtype=float) for v in levels)
     d1, d2 = v2 - v1, v3 - v2
     with np.errstate(divide='ignore', invalid='ignore'):
         q = d1 / d2
-    monotone = np.isfinite(q) & (q > 1.0)
-    extrapolated = np.where(monotone, v3 + d2 / np.where(monotone, q - 1.0, 1.0), v3 + d2)
+    geometric = np.isfinite(q) & (q >= smallest_rate)
+    extrapolated = np.where(geometric, v3 + d2 / np.where(geometric, q - 1.0, 1.0), v3 + d2)
     return np.where(d2 == 0.0, v3, extrapolated)
 
 
@@ -558,6 +559,16 @@ class Advisor:
         if structure['nearest_pair'] is not None and not self.quick:
             pair_reference = richardson([d[1] for d in levels])
         reference = exact if exact is not None else wall_reference
+        finest_spacing = smallest_distance(models[labels.index('shell %d' % RICHARDSON_LEVELS[-1])][1])
+        gaps = [('wall gap', (h - 1.0) * R)]
+        if structure['nearest_gap'] is not None:
+            gaps.append(('pair gap', structure['nearest_gap'] - 2.0 * R))
+        for what, gap in gaps:
+            if gap < finest_spacing:
+                self.notes.append('%s: the %s (%.3g) is smaller than the blob spacing of the finest shell (%.3g): '
+                                  'convergence slows there and the Richardson estimates are lower bounds (at h/R = '
+                                  '1.1 they are up to 2.3 times too small, doc/advisor.md)'
+                                  % (sid, what, gap, finest_spacing))
         source = 'exact sphere-wall table' if exact is not None else 'Richardson extrapolation of shells 42-162-642'
         self.sources.append('%s: wall-gap errors against the %s (h/R = %.4g)' % (sid, source, h))
         if pair_reference is not None:
@@ -614,7 +625,7 @@ class Advisor:
         else:
             known = [c for c in candidates if c[2] is not None]
             best = min(known, key=lambda c: c[2]) if known else None
-            if best is None or (current.estimated_error is not None and best[2] >= current.estimated_error):
+            if best is None or (current.estimated_error is not None and best[2] > 0.9 * current.estimated_error):
                 self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; the current model is kept'
                                   % (sid, _percent(self.accuracy), h))
                 return
@@ -623,14 +634,16 @@ class Advisor:
         label, blobs, a, _ = best[0]
         vertex = self.write_vertex(sid, label, blobs)
         spec = structure['spec']
-        line = '%s %s%s' % (vertex, spec.clones_file, ' ' + spec.slip_file if spec.slip_file else '')
-        self.recommendation['structure:%s' % sid] = line
+        if spec.slip_file:
+            self.notes.append('%s has a slip file for %d blobs, so its model is not changed automatically: the %s '
+                              'model (written to %s%s) needs its own slip file, e.g. for squirmers python -m '
+                              'multi_bodies.structure_generators squirmer-slip --blobs %d (radius 1)'
+                              % (sid, structure['num_blobs'], label, vertex,
+                                 ', blob_radius %.12g' % a if abs(a - scene.a) > 1e-9 * a else '', len(blobs)))
+            return
+        self.recommendation['structure:%s' % sid] = '%s %s' % (vertex, spec.clones_file)
         if abs(a - scene.a) > 1e-9 * a:
             self.recommendation['blob_radius'] = '%.12g' % a
-        if spec.slip_file:
-            self.notes.append('%s has a slip file for %d blobs: a %d-blob model needs its own slip file (for '
-                              'squirmers: python -m multi_bodies.structure_generators squirmer-slip --blobs %d)'
-                              % (sid, structure['num_blobs'], len(blobs), len(blobs)))
 
     def write_vertex(self, sid, label, blobs):
         """Write the recommended model next to the output (``output_name.advice.<ID>.<model>.vertex``)."""
@@ -758,9 +771,9 @@ class Advisor:
     def measure_rollers(self):
         scene = self.scene
         spheres = [s for s in scene.structures if s['sphere'] is not None]
-        if len(spheres) != len(scene.structures):
+        if len(spheres) != len(scene.structures) or any(s['spec'].slip_file for s in spheres):
             self.add('rollers', None, 'single-blob rollers', None, None, None, False,
-                     'not applicable: not every structure is a sphere')
+                     'not applicable: not every structure is a passive sphere (rollers carry no slip)')
             return
         details = getattr(self, 'resolution_details', {})
         roller_error, multiblob_error, roller_cost, multiblob_cost = 0.0, 0.0, 0.0, 0.0
@@ -803,6 +816,9 @@ class Advisor:
     def measure_dt(self):
         scene = self.scene
         options = scene.options
+        if options.scheme in STATIC_SCHEMES:
+            self.add('dt', None, 'no time step (static problem %s)' % options.scheme, None, None, None, True)
+            return
         physics = scene.physics()
         hooks = scene.hooks
         # The body with the lowest blob; its stiffness against a vertical displacement of the whole body.

@@ -124,9 +124,9 @@ def exact_self_mobilities(h_over_R):
     if not _INTERPOLANTS:
         _INTERPOLANTS.extend(_parallel_ratio_interpolants())
     far_translation, far_rotation = _parallel_far_field(h)
-    if h in EXACT_SPHERE_WALL:
-        row = EXACT_SPHERE_WALL[h]
-        return np.array(row[:4])
+    tabled = [k for k in EXACT_SPHERE_WALL if abs(k - h) <= 1e-9 * k]
+    if tabled:
+        return np.array(EXACT_SPHERE_WALL[tabled[0]][:4])
     if h > max(EXACT_SPHERE_WALL):
         par, rot_par = far_translation, far_rotation
     else:
