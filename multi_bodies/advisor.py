@@ -103,7 +103,7 @@ def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='py
         row += 3 * n
     factor = scipy.linalg.cho_factor(M)
     resistance = K.T @ scipy.linalg.cho_solve(factor, K)
-    return np.linalg.inv(resistance)
+    return np.linalg.pinv(resistance)  # pinv: a straight rod has no resistance to spinning about its axis
 
 
 def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='python'):
@@ -144,8 +144,13 @@ def exact_diagonal(h_over_R):
 
 
 def worst_error(values, reference):
-    """Largest relative error ``max |values / reference - 1|`` (the advisor's error measure)."""
-    return float(np.max(np.abs(np.asarray(values) / np.asarray(reference) - 1.0)))
+    """Largest relative error ``max |values / reference - 1|`` (the advisor's error measure).
+
+    Entries whose reference vanishes (the spin of a straight rod about its axis) are left out.
+    """
+    values, reference = np.asarray(values, dtype=float), np.asarray(reference, dtype=float)
+    keep = np.abs(reference) > 1e-12 * np.max(np.abs(reference))
+    return float(np.max(np.abs(values[keep] / reference[keep] - 1.0)))
 
 
 def richardson(levels, smallest_rate=2.0):
@@ -167,6 +172,22 @@ def richardson(levels, smallest_rate=2.0):
     return np.where(d2 == 0.0, v3, extrapolated)
 
 
+def distance_to_other_bodies(r_vectors, owner):
+    """Distance from every blob to the closest blob of another body, shape (N,) (inf with one body).
+
+    r_vectors (N, 3); owner (N,) body index of each blob.  A k-d tree query of
+    as many neighbours as the largest body has blobs (plus one) must contain
+    a blob of another body, so the search costs O(N n log N), not O(N^2).
+    """
+    from scipy.spatial import cKDTree
+    owner = np.asarray(owner)
+    if len(np.unique(owner)) < 2:
+        return np.full(len(owner), np.inf)
+    k = min(len(owner), int(np.max(np.bincount(owner))) + 1)
+    distance, index = cKDTree(r_vectors).query(r_vectors, k=k)
+    return np.min(np.where(owner[index] != owner[:, None], distance, np.inf), axis=1)
+
+
 # ------------------------------------------------------------------ sphere models
 _CALIBRATED = {}
 
@@ -186,7 +207,7 @@ def bulk_radius(blobs, blob_radius):
     backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
     M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
     K = K_matrices(arms[None], np.zeros((1, 3)))[0]
-    N = np.linalg.inv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
+    N = np.linalg.pinv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
     return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
 
 
@@ -331,22 +352,34 @@ class Advisor:
         self.sources = []
         self.backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
         self.iterations = None
-        self.product_seconds = None
+        self.product_seconds = {}  # (backend, wall) -> (seconds of one M f of the scene, blobs)
+
+    def blob_gaps(self):
+        """Distance of every blob to the closest blob of another body, (N,), computed once."""
+        if getattr(self, '_blob_gaps', None) is None:
+            self._blob_gaps = distance_to_other_bodies(self.scene.r_vectors, self.scene.arrays.blob_body_index)
+        return self._blob_gaps
 
     # -------------------------------------------------------------- costs
     def product_time(self, r_vectors, wall=True, backend=None):
         """(seconds of one M f on these blobs, 'measured' or 'modelled') with ``backend`` (default: the fastest CPU)."""
         backend = backend or self.backend
         n = len(r_vectors)
-        if self.product_seconds is not None:
-            base_seconds, base_n = self.product_seconds
+        base = self.product_seconds.get((backend, wall)) if self.product_seconds else None
+        if base is not None:
+            base_seconds, base_n = base
             predicted = base_seconds * (n / base_n) ** 2
+            if n == base_n:
+                return base_seconds, 'measured'
             if self.quick or predicted > MEASURE_BUDGET_S:
                 return predicted, 'modelled'
         product = mobility.mobility_vector_product(backend + ('' if wall else NO_WALL))
         force = np.random.default_rng(2).standard_normal(3 * n)
         seconds = choose.time_call(lambda: product(r_vectors, force, self.scene.eta, self.scene.a,
                                                    self.scene.options.periodic_length), repeats=2)
+        if n == self.scene.num_blobs:
+            self.product_seconds = self.product_seconds or {}
+            self.product_seconds[(backend, wall)] = (seconds, n)
         return seconds, 'measured'
 
     def cost_per_step(self, seconds):
@@ -472,13 +505,12 @@ class Advisor:
             self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, 0.0, seconds, True,
                      'one M f, %s' % how)
         fastest = min(costs, key=costs.get)
-        self.product_seconds = (costs[self.backend], scene.num_blobs)
         suffix = '' if wall else NO_WALL
-        if scene.options.mobility_vector_prod_implementation != fastest + suffix:
-            self.recommendation['mobility_vector_prod_implementation'] = fastest + suffix
         cpu = 'C++' if 'C++' in costs else 'python'
-        if scene.options.mobility_blobs_implementation != cpu + suffix:
-            self.recommendation['mobility_blobs_implementation'] = cpu + suffix
+        for option, best in (('mobility_vector_prod_implementation', fastest), ('mobility_blobs_implementation', cpu)):
+            current = getattr(scene.options, option)
+            if current not in (best + suffix, 'auto' + suffix):  # auto measures the same costs at run time
+                self.recommendation[option] = best + suffix
 
     # -------------------------------------------------------------- resolution
     def sphere_models(self, structure):
@@ -626,8 +658,11 @@ class Advisor:
             known = [c for c in candidates if c[2] is not None]
             best = min(known, key=lambda c: c[2]) if known else None
             if best is None or (current.estimated_error is not None and best[2] > 0.9 * current.estimated_error):
-                self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; the current model is kept'
-                                  % (sid, _percent(self.accuracy), h))
+                self.notes.append('%s: no %smodel up to 642 blobs meets %s at h/R = %.3g; the current model is kept%s'
+                                  % (sid, '' if len(scene.structures) == 1 else 'applicable ', _percent(self.accuracy),
+                                     h, '' if len(scene.structures) == 1 else
+                                     ' (the calibrated shells need their own blob_radius, which every structure '
+                                     'shares)'))
                 return
             self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; recommended: the most accurate '
                               '(%s, %s)' % (sid, _percent(self.accuracy), h, best[0][0], _percent(best[2])))
@@ -660,20 +695,8 @@ class Advisor:
         reference = structure['reference']
         spacing = smallest_distance(reference) if len(reference) > 1 else float('nan')
         lowest_blob = float(np.min(structure['r_type'][:, :, 2]))
-        others = np.concatenate([s['r_type'].reshape(-1, 3) for s in scene.structures]) if scene.num_blobs < 20000 \
-            else None
-        body_gap = None
-        if others is not None and structure['count'] >= 1:
-            own = scene.arrays.blob_body_index
-            r = scene.r_vectors
-            index = np.arange(structure['blobs'].start, structure['blobs'].stop)
-            best = np.inf
-            for start in range(0, len(index), 256):
-                chunk = index[start:start + 256]
-                d = np.linalg.norm(r[chunk, None, :] - r[None, :, :], axis=2)
-                d[own[chunk][:, None] == own[None, :]] = np.inf
-                best = min(best, float(np.min(d)) if d.size else np.inf)
-            body_gap = best if np.isfinite(best) else None
+        gaps = self.blob_gaps()[structure['blobs']]
+        body_gap = float(np.min(gaps)) if np.isfinite(np.min(gaps)) else None
         consequences = []
         ratio = spacing / a
         if ratio > 2.2:
@@ -850,33 +873,26 @@ class Advisor:
             rest_note = ('the wall repulsion cannot balance gravity on this body: it sinks until its lowest blob '
                          'nearly touches z = 0, slowed only by the regularised mobility (damped like (z/a)^2); '
                          'no resting-state stiffness estimate')
-        estimates = [('at the start', stiffness_now, mobility_now, float(np.min(blobs[:, 2])))]
+        estimates = [('at the start', stiffness_now + 0.0, mobility_now, float(np.min(blobs[:, 2])))]
         if rest_shift is not None:
             rested = blobs + np.array([0.0, 0.0, rest_shift])
             stiffness_rest = -(vertical_force(rest_shift + delta) - vertical_force(rest_shift - delta)) / (2 * delta)
             mobility_rest = bodies_mobility([rested], [centre + [0, 0, rest_shift]], scene.a, scene.eta, scene.wall,
                                             self.backend)[2, 2]
-            estimates.append(('resting on the wall', stiffness_rest, mobility_rest, float(np.min(rested[:, 2]))))
+            estimates.append(('resting on the wall', stiffness_rest + 0.0, mobility_rest, float(np.min(rested[:, 2]))))
         rate = max(k * mu for _, k, mu, _ in estimates if k > 0) if any(k > 0 for _, k, _, _ in estimates) else 0.0
         # Blob-blob repulsion between the nearest blobs of two bodies (relative mobility ~ twice one body's).
         pair_note = ''
-        if options.blob_blob_force_implementation != 'None' and scene.arrays.num_bodies > 1 and scene.num_blobs < 20000:
-            r = scene.r_vectors
-            own = scene.arrays.blob_body_index
-            best = np.inf
-            for first in range(0, len(r), 512):
-                d = np.linalg.norm(r[first:first + 512, None, :] - r[None, :, :], axis=2)
-                d[own[first:first + 512, None] == own[None, :]] = np.inf
-                best = min(best, float(np.min(d)))
-            if np.isfinite(best):
-                e = np.array([best, 0.0, 0.0])
-                f = lambda x: float(np.asarray(hooks.blob_blob_force(np.array([x, 0.0, 0.0]), **physics)).reshape(3)[0])
-                k_pair = abs((f(best + delta) - f(best - delta)) / (2 * delta))
-                pair_rate = k_pair * 2.0 * mobility_now
-                pair_note = 'nearest blobs of two bodies at %.4g: pair stiffness %.3g, rate %.3g' % (best, k_pair,
-                                                                                                     pair_rate)
-                del e
-                rate = max(rate, pair_rate)
+        best = float(np.min(self.blob_gaps()))
+        if options.blob_blob_force_implementation != 'None' and np.isfinite(best):
+
+            def pair_force(x):
+                return float(np.asarray(hooks.blob_blob_force(np.array([x, 0.0, 0.0]), **physics)).reshape(3)[0])
+            k_pair = abs((pair_force(best + delta) - pair_force(best - delta)) / (2 * delta))
+            pair_rate = k_pair * 2.0 * mobility_now
+            pair_note = ('nearest blobs of two bodies at %.4g: pair stiffness %.3g, rate (relative mobility taken as '
+                         'twice mu_zz) %.3g' % (best, k_pair, pair_rate))
+            rate = max(rate, pair_rate)
         dt = options.dt
         for where, k, mu, z in estimates:
             self.notes.append('dt: %s, lowest blob z = %.4g: wall+gravity stiffness %.4g, mobility mu_zz %.4g, '
@@ -904,11 +920,17 @@ class Advisor:
         b = min(lengths)
         dt_brownian = b ** 2 / (2.0 * kT * mu) if kT > 0 and mu > 0 else np.inf
         step = np.sqrt(2.0 * kT * mu * dt) if dt > 0 else 0.0
-        self.add('dt', None, 'stochastic: Brownian step sqrt(2 kT mu dt) = %.4g against Debye length %g; equal at '
-                 'dt = %.4g' % (step, b, dt_brownian), None, None, None, step <= b,
+        self.add('dt', None, 'stochastic: Brownian step sqrt(2 kT mu dt) = %.4g (kT %g) against Debye length %g; '
+                 'equal at dt = %.4g' % (step, kT, b, dt_brownian), None, None, None, step <= b,
                  'stochastic scheme weak-error/cost table not yet available')
+        self.notes.append('dt: schemes stable at the input dt = %g: %s. Of these, deterministic_adams_bashforth costs '
+                          'one solve per step like forward Euler and is second order, so it is the cheaper for a given '
+                          'accuracy wherever it is stable. The limits are linear-stability estimates; '
+                          'doc/integrators_accuracy_vs_dt.md measured on its stiff scene (mu k = 5.6 by this estimate) '
+                          'Adams-Bashforth crossing the wall at dt mu k = 4.5 and inaccurate at 2.2, forward Euler '
+                          'bounded but off by 0.4 at 4.5' % (dt, ', '.join(safe) or 'none'))
         self.notes.append('dt: the stochastic schemes\' weak-error and cost table is not yet available (the stochastic '
-                          'schemes are being written); only the stability estimates above are given for them')
+                          'schemes are being written); only the Brownian-step estimate above is given for them')
         if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
             if 'deterministic_forward_euler' in safe:
                 self.recommendation['scheme'] = 'deterministic_forward_euler'
