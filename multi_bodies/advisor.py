@@ -442,15 +442,19 @@ class Advisor:
         matrix = mobility.blob_mobility_matrix(self.backend + ('' if wall else NO_WALL))
         force_torque, slip = self.scene_rhs()
         tolerance = scene.options.solver_tolerance
-        start = time.perf_counter()
-        operator = body_solver.saddle_point_operator(scene.arrays, scene.r_vectors, product, scene.eta, scene.a,
-                                                     scene.options.periodic_length)
-        preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, scene.r_vectors, matrix, scene.eta,
-                                                                 scene.a, stacked_mobility=matrix)
-        result = body_solver.solve_mobility_problem(operator, preconditioner,
-                                                    body_solver.mobility_rhs(force_torque, slip),
-                                                    scene.num_blobs, tolerance, true_residual=False)
-        gmres_seconds = time.perf_counter() - start
+        results = []
+
+        def gmres_solve():
+            operator = body_solver.saddle_point_operator(scene.arrays, scene.r_vectors, product, scene.eta, scene.a,
+                                                         scene.options.periodic_length)
+            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, scene.r_vectors, matrix,
+                                                                     scene.eta, scene.a, stacked_mobility=matrix)
+            results.append(body_solver.solve_mobility_problem(operator, preconditioner,
+                                                              body_solver.mobility_rhs(force_torque, slip),
+                                                              scene.num_blobs, tolerance, true_residual=False))
+        # One solve (preconditioner built, GMRES from a zero guess); repeated when short, best time kept.
+        gmres_seconds = choose.time_call(gmres_solve, repeats=2)
+        result = results[-1]
         self.iterations = result.iterations
         note = '%d GMRES iterations at solver_tolerance %g' % (result.iterations, tolerance)
         if not result.converged:
@@ -467,10 +471,9 @@ class Advisor:
         # Dense: measured on the scene when small, modelled as (N / n)^3 from a measured smaller dense solve.
         n = scene.num_blobs
         if n <= DENSE_BLOB_LIMIT and not self.quick:
-            start = time.perf_counter()
-            body_solver.dense_mobility_velocities(scene.arrays, scene.r_vectors, force_torque, slip, matrix,
-                                                  scene.eta, scene.a)
-            dense_seconds, how = time.perf_counter() - start, 'measured'
+            dense_seconds = choose.time_call(lambda: body_solver.dense_mobility_velocities(
+                scene.arrays, scene.r_vectors, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
+            how = 'measured'
         else:
             probe = min(n, 600)
             r = scene.r_vectors[:probe]
@@ -703,8 +706,8 @@ class Advisor:
             consequences.append('spacing/a = %.2f > 2: blobs do not touch, fluid leaks through the surface and the '
                                 'drag is underestimated' % ratio)
         elif ratio < 1.0:
-            consequences.append('spacing/a = %.2f < 1: blobs overlap strongly; the surface is smooth but the blob '
-                                'mobility is ill-conditioned (more GMRES iterations, VALIDATION T6)' % ratio)
+            consequences.append('spacing/a = %.2f < 1: each blob centre lies inside its neighbour; the surface is '
+                                'smooth but the blob mobility is worse conditioned (more GMRES iterations)' % ratio)
         else:
             consequences.append('spacing/a = %.2f: the usual range (about 2 for touching blobs)' % ratio)
         if scene.wall and lowest_blob / a < 1.0:
