@@ -466,11 +466,19 @@ class Advisor:
                        (result.iterations, GMRES_WARNING_ITERATIONS, tolerance))
             self.notes.append(warning)
             note += ' (above %d: warning)' % GMRES_WARNING_ITERATIONS
+        if 'rollers' in scene.options.scheme:
+            note += ' (of the multiblob problem; rollers need none)'
+            seconds = self.product_time(scene.r_vectors, wall)[0]
+            self.add('solver', None, 'rollers: one M f per step%s' % (
+                '' if scene.options.free_kinematics else ' plus GMRES for the prescribed spins'),
+                scene.num_blobs, None, seconds, True, 'free_kinematics %s' % scene.options.free_kinematics)
         self.add('solver', None, 'preconditioned GMRES', scene.num_blobs, tolerance, gmres_seconds,
                  result.converged and result.iterations <= GMRES_WARNING_ITERATIONS, note)
+        if 'rollers' in scene.options.scheme:
+            return
         # Dense: measured on the scene when small, modelled as (N / n)^3 from a measured smaller dense solve.
         n = scene.num_blobs
-        if n <= DENSE_BLOB_LIMIT and not self.quick:
+        if n <= DENSE_BLOB_LIMIT and (not self.quick or n <= 600):
             dense_seconds = choose.time_call(lambda: body_solver.dense_mobility_velocities(
                 scene.arrays, scene.r_vectors, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
             how = 'measured'
@@ -759,6 +767,11 @@ class Advisor:
                  self.cost_per_step(seconds), error <= self.accuracy,
                  'error against the current model at its wall gap; blob_radius is shared by all structures; cost %s'
                  % how)
+        vertex = self.write_vertex(sid, 'coarsened', coarse)
+        spec = structure['spec']
+        if error <= self.accuracy and len(scene.structures) == 1 and not spec.slip_file:
+            self.recommendation['structure:%s' % sid] = '%s %s' % (vertex, spec.clones_file)
+            self.recommendation['blob_radius'] = '%.12g' % a_coarse
 
     # -------------------------------------------------------------- wall
     def measure_wall(self):
@@ -816,6 +829,9 @@ class Advisor:
             roller_cost, multiblob_cost = roller.cost_s, current.cost_s
         radii = {round(s['sphere']['radius'], 9) for s in spheres}
         dynamic = scene.options.scheme not in STATIC_SCHEMES
+        if 'rollers' in scene.options.scheme:
+            self.rollers_scene(spheres, roller_error if known else None)
+            return
         self.add('rollers', None, 'multiblob (current)', scene.num_blobs, multiblob_error if known else None,
                  multiblob_cost, known and multiblob_error <= self.accuracy)
         meets = known and roller_error <= self.accuracy
@@ -837,6 +853,34 @@ class Advisor:
                 if np.linalg.norm(s['sphere']['offset']) > 1e-9 * s['sphere']['radius']:
                     self.notes.append('%s: the shell centre is not the body location; move the clones locations '
                                       'by the centre offset %s for the roller model' % (s['ID'], s['sphere']['offset']))
+
+    def rollers_scene(self, spheres, roller_error):
+        """A roller scheme already: compare with the multiblob model the resolution section recommends."""
+        scene = self.scene
+        roller_cost = self.product_time(scene.r_vectors, scene.wall)[0]
+        self.add('rollers', None, 'single-blob rollers (current)', scene.num_blobs, roller_error, roller_cost,
+                 roller_error is not None and roller_error <= self.accuracy, 'one M f per step (free kinematics)')
+        shells = [k for k in self.recommendation if k.startswith('structure:')]
+        if not shells:
+            return
+        chosen = [c for s in spheres for c in self.choices if c.topic == 'resolution' and c.structure == s['ID']
+                  and self.recommendation.get('structure:%s' % s['ID'], '').split()[0].endswith(
+                      '.%s.vertex' % c.candidate.split(' (')[0].replace(' ', '_'))]
+        error = max((c.estimated_error for c in chosen if c.estimated_error is not None), default=None)
+        self.add('rollers', None, 'multiblob (%s)' % ', '.join(c.candidate for c in chosen), None, error,
+                 max((c.cost_s for c in chosen if c.cost_s is not None), default=None),
+                 error is not None and error <= self.accuracy, 'cost assumes the GMRES iterations measured here')
+        multiblob = {v: k for k, v in ROLLER_SCHEMES.items()}.get(scene.options.scheme)
+        if multiblob is None:
+            for key in shells + ['blob_radius']:
+                self.recommendation.pop(key, None)
+            self.notes.append('scheme %s has no multiblob counterpart here: the shell models are not put in the input'
+                              % scene.options.scheme)
+            return
+        self.recommendation['scheme'] = multiblob
+        if scene.options.domain == 'no_wall':
+            self.notes.append('domain no_wall applies to rollers only: with multiblob bodies use the _no_wall '
+                              'mobility implementations')
 
     # -------------------------------------------------------------- time step
     def measure_dt(self):

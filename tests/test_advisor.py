@@ -225,3 +225,24 @@ def test_script_on_the_manual_example_and_bad_input(tmp_path):
     bad = subprocess.run([sys.executable, SCRIPT, '--input-file', 'in.dat', '--accuracy', '2'], cwd=tmp_path,
                          capture_output=True, text=True, env=env)
     assert bad.returncode == 2 and 'Traceback' not in bad.stderr and '--accuracy' in bad.stderr
+
+
+def test_coarsened_rod_keeps_its_drag_and_reports_its_error(tmp_path, monkeypatch):
+    """--coarsen: every other blob with a radius that keeps the bulk drag (checked with the RPY matrix directly)."""
+    from multi_bodies.structure_generators import rod
+    monkeypatch.chdir(tmp_path)
+    blobs = rod(10, 0.5)
+    scene = advisor.Scene(write_scene(str(tmp_path), [('rod', blobs, [[0.0, 0.0, 1.0]])], 0.25))
+    result = advisor.Advisor(scene, 0.01, coarsen=True)
+    result.measure_resolution()
+    coarse = [c for c in rows(result, 'resolution', 'rod') if c.candidate.startswith('coarsened')][0]
+    assert coarse.blobs == 5
+    a_coarse = float(coarse.candidate.split('a = ')[1].rstrip(')'))
+
+    def drag(points, a):
+        M = mobility.rotne_prager_tensor(points, 1.0, a)
+        K = K_matrices(points[None], points.mean(axis=0)[None])[0]
+        return np.trace(np.linalg.pinv(K.T @ np.linalg.solve(M, K))[:3, :3])
+    assert drag(blobs[::2], a_coarse) == pytest.approx(drag(blobs, 0.25), rel=1e-3)
+    # Five blobs cannot represent ten near the wall exactly: a finite error, reported against the target.
+    assert 0 < coarse.estimated_error < 1 and coarse.meets_target == (coarse.estimated_error <= 0.01)
