@@ -38,7 +38,8 @@ def main(argv=None):
     """Advise on an input file; returns the exit status."""
     parser = argparse.ArgumentParser(description='Measure the cheapest model that meets an accuracy target for '
                                                  'the scene of an input file (see doc/advisor.md).')
-    parser.add_argument('--input-file', required=True, help='input file of multi_bodies.py or multi_bodies_utilities.py')
+    parser.add_argument('--input-file', required=True,
+                        help='input file of multi_bodies.py or multi_bodies_utilities.py')
     parser.add_argument('--accuracy', type=float, default=0.01,
                         help='target relative error of the body self mobilities (default 0.01)')
     parser.add_argument('--quick', action='store_true',

@@ -338,7 +338,7 @@ class Advisor:
     Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
     ``quick`` (skip measurements that grow with the scene: shells' errors
     from the shipped table, pair errors skipped, costs modelled from one
-    measured ``M f``, no dense solve), ``coarsen`` (also offer coarsened
+    measured ``M f``, the dense solve modelled above 600 blobs), ``coarsen`` (also offer coarsened
     models of non-spherical bodies), ``log`` (callable for progress lines).
     """
 
@@ -737,7 +737,10 @@ class Advisor:
             self.measure_coarsened(structure, seconds)
 
     def measure_coarsened(self, structure, current_seconds):
-        """Every other blob, blob radius rescaled to keep the bulk translational drag; error against the current model."""
+        """Every other blob, blob radius rescaled to keep the bulk translational drag.
+
+        Its error is measured against the current model at the wall gap of the lowest body.
+        """
         scene = self.scene
         sid, a = structure['ID'], scene.a
         reference = structure['reference']
@@ -814,7 +817,6 @@ class Advisor:
             self.add('rollers', None, 'single-blob rollers', None, None, None, False,
                      'not applicable: not every structure is a passive sphere (rollers carry no slip)')
             return
-        details = getattr(self, 'resolution_details', {})
         roller_error, multiblob_error, roller_cost, multiblob_cost = 0.0, 0.0, 0.0, 0.0
         known = True
         for s in spheres:
@@ -1027,10 +1029,11 @@ class Advisor:
         if self.sources:
             lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
             if self.quick:
-                lines.append('- --quick: shell errors at the wall gap of single-type scenes come from the shipped table '
-                             'of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, interpolated in h/R); pair '
-                             'errors are not measured; costs of other models are modelled as M f x (N/N_scene)^2; the '
-                             'dense solve is modelled as N^3 from a smaller one')
+                lines.append('- --quick: shell errors at the wall gap of single-type scenes come from the shipped '
+                             'table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, interpolated in h/R); '
+                             'pair errors are not measured; costs of other models are modelled as M f x '
+                             '(N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 from a 600-blob '
+                             'inversion')
         if self.notes:
             lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
         lines += ['', '## recommendation', '']

@@ -47,7 +47,8 @@ def write_scene(folder, structures, blob_radius, scheme='body_mobility', extra=N
     lines += ['%s %s' % item for item in (extra or {}).items()]
     for name, blobs, locations in structures:
         write_vertex_file(os.path.join(folder, name + '.vertex'), blobs)
-        write_clones_file(os.path.join(folder, name + '.clones'), locations, np.tile([1.0, 0, 0, 0], (len(locations), 1)))
+        write_clones_file(os.path.join(folder, name + '.clones'), locations,
+                          np.tile([1.0, 0, 0, 0], (len(locations), 1)))
         lines.append('structure %s.vertex %s.clones' % (name, name))
     with open(os.path.join(folder, 'input.dat'), 'w') as f:
         f.write('\n'.join(lines) + '\n')
