@@ -627,10 +627,11 @@ class Advisor:
         for label, n, wall_diag, pair_diag, model in rows:
             wall_error = worst_error(wall_diag, reference) if reference is not None else None
             calibrated = model is not None and n > 1 and '(' not in label
+            from_table = False
             if self.quick and calibrated and scene.wall:
                 shipped = sphere_tables.shipped_shell_errors(n, h)
                 if shipped is not None:
-                    wall_error = float(np.max(np.abs(shipped)))
+                    wall_error, from_table = float(np.max(np.abs(shipped))), True
             richardson_error = worst_error(wall_diag, wall_reference)
             pair_error = worst_error(pair_diag, pair_reference) if (pair_diag is not None and
                                                                     pair_reference is not None) else None
@@ -648,7 +649,7 @@ class Advisor:
                 cost = self.cost_per_step(seconds)
             meets = error is not None and error <= self.accuracy
             note = 'wall gap %s%s; Richardson estimate %s; pair %s; cost %s' % (
-                _percent(wall_error), ' (shipped table)' if self.quick and calibrated and scene.wall else '',
+                _percent(wall_error), ' (shipped table)' if from_table else '',
                 _percent(richardson_error), _percent(pair_error), how)
             if calibrated and len(scene.structures) > 1:
                 note += '; needs blob_radius %.4g for every structure' % model[2]
@@ -1029,11 +1030,11 @@ class Advisor:
         if self.sources:
             lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
             if self.quick:
-                lines.append('- --quick: shell errors at the wall gap of single-type scenes come from the shipped '
-                             'table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, interpolated in h/R); '
-                             'pair errors are not measured; costs of other models are modelled as M f x '
-                             '(N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 from a 600-blob '
-                             'inversion')
+                lines.append('- --quick: errors of the calibrated shells at the wall gap (h/R >= 1.1) come from '
+                             'the shipped table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, '
+                             'interpolated in h/R); pair errors are not measured; costs of other models are '
+                             'modelled as M f x (N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 '
+                             'from a 600-blob inversion')
         if self.notes:
             lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
         lines += ['', '## recommendation', '']
