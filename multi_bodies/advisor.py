@@ -221,6 +221,8 @@ def fixed_radius_model(num_blobs, sphere_radius, blob_radius):
     """
     unit = icosahedral_shell(num_blobs)
     unit_spacing = smallest_distance(unit)
+    if unit_spacing * sphere_radius < blob_radius:  # the shell radius is below R: spacing < a for sure
+        return None
 
     def excess(radius):
         return bulk_radius(unit * radius, blob_radius) - sphere_radius
