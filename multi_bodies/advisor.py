@@ -72,7 +72,25 @@ SCHEME_TABLE = {
     'deterministic_adams_bashforth': {'order': 2, 'solves_per_step': 1, 'stability': 1.0,
                                       'source': 'AB2: real stability interval [-1, 0]'},
 }
-STOCHASTIC_SCHEME_TABLE = {}  # weak error and cost per scheme: not available yet
+# Rows to come, one per stochastic scheme: {'solves_per_step': int, 'lanczos_per_step': int,
+# 'weak_error': (C, p) with the weak error of the charted observable ~ C dt^p (dt in units of the chart's
+# relaxation time 'time_unit'), 'time_unit': str, 'source': str}.  Empty: the table is not measured yet.
+STOCHASTIC_SCHEME_TABLE = {}
+
+
+def cheapest_scheme(table, accuracy, solve_seconds):
+    """The scheme of a weak-error table that reaches ``accuracy`` at the smallest cost per unit time.
+
+    For each row, the time step that gives the target is ``dt* = (accuracy / C)^(1/p)`` and the cost
+    per unit of simulated time is ``solves_per_step * solve_seconds / dt*``.  Returns a list of
+    (cost per unit time, scheme, dt*) sorted cheapest first (empty for an empty table).
+    """
+    ranked = []
+    for scheme, row in table.items():
+        constant, order = row['weak_error']
+        dt_target = (accuracy / constant) ** (1.0 / order)
+        ranked.append((row['solves_per_step'] * solve_seconds / dt_target, scheme, dt_target))
+    return sorted(ranked)
 
 Choice = namedtuple('Choice', ['topic', 'structure', 'candidate', 'blobs', 'estimated_error', 'cost_s',
                                'meets_target', 'note'])
@@ -981,8 +999,18 @@ class Advisor:
                           'doc/integrators_accuracy_vs_dt.md measured on its stiff scene (mu k = 5.6 by this estimate) '
                           'Adams-Bashforth crossing the wall at dt mu k = 4.5 and inaccurate at 2.2, forward Euler '
                           'bounded but off by 0.4 at 4.5' % (dt, ', '.join(safe) or 'none'))
-        self.notes.append('dt: the stochastic schemes\' weak-error and cost table is not yet available (the stochastic '
-                          'schemes are being written); only the Brownian-step estimate above is given for them')
+        ranked = cheapest_scheme(STOCHASTIC_SCHEME_TABLE, self.accuracy, solve_cost or 0.0)
+        for cost, scheme, dt_target in ranked:
+            row = STOCHASTIC_SCHEME_TABLE[scheme]
+            self.add('dt', None, '%s: weak error %s at dt = %.4g %s' % (scheme, _percent(self.accuracy), dt_target,
+                                                                      row['time_unit']), None, self.accuracy, cost,
+                     True, 'cost per unit time; %s' % row['source'])
+        if ranked:
+            self.notes.append('dt: cheapest stochastic scheme for %s: %s' % (_percent(self.accuracy), ranked[0][1]))
+        else:
+            self.notes.append('dt: the stochastic schemes\' weak-error and cost table is not yet available (the '
+                              'stochastic schemes are being written); only the Brownian-step estimate above is given '
+                              'for them')
         if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
             if 'deterministic_forward_euler' in safe:
                 self.recommendation['scheme'] = 'deterministic_forward_euler'

@@ -247,3 +247,14 @@ def test_coarsened_rod_keeps_its_drag_and_reports_its_error(tmp_path, monkeypatc
     assert drag(blobs[::2], a_coarse) == pytest.approx(drag(blobs, 0.25), rel=1e-3)
     # Five blobs cannot represent ten near the wall exactly: a finite error, reported against the target.
     assert 0 < coarse.estimated_error < 1 and coarse.meets_target == (coarse.estimated_error <= 0.01)
+
+
+def test_a_shipped_weak_error_table_ranks_schemes_by_cost_per_unit_time():
+    """With error = C dt^p, the dt for a target e is (e/C)^(1/p); cost per unit time = solves / dt."""
+    table = {'first': {'solves_per_step': 1, 'weak_error': (0.1, 1.0)},
+             'second': {'solves_per_step': 3, 'weak_error': (0.1, 2.0)}}
+    ranked = advisor.cheapest_scheme(table, 0.001, 1.0)
+    # first: dt = 0.01 -> 100 solves per unit time; second: dt = 0.1 -> 30 solves per unit time.
+    assert [name for _, name, _ in ranked] == ['second', 'first']
+    assert ranked[0][0] == pytest.approx(30.0) and ranked[1][2] == pytest.approx(0.01)
+    assert advisor.cheapest_scheme({}, 0.01, 1.0) == []
