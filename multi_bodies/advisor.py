@@ -431,6 +431,8 @@ class Advisor:
         return self
 
     def add(self, topic, structure, candidate, blobs, error, cost, meets, note=''):
+        if error is not None and not np.isfinite(error):
+            error = None  # unknown (JSON has no infinity)
         self.choices.append(Choice(topic, structure, candidate, None if blobs is None else int(blobs),
                                    None if error is None else float(error), None if cost is None else float(cost),
                                    bool(meets), note))
@@ -589,10 +591,15 @@ class Advisor:
         R = structure['sphere']['radius']
         r_type, centres = structure['r_type'], structure['centres']
         low = structure['lowest']
+        n = structure['num_blobs']
+        if n > DENSE_BLOB_LIMIT:
+            self.notes.append('%s: %d blobs per body is too many for a dense body mobility here; the current model '
+                              'is not measured' % (structure['ID'], n))
+            return None, None
         wall_diag = normalised_diagonal(bodies_mobility([r_type[low]], [centres[low]], scene.a, scene.eta, scene.wall,
                                                         self.backend), R, scene.eta)
         pair_diag = None
-        if structure['nearest_pair'] is not None and not self.quick:
+        if structure['nearest_pair'] is not None and not self.quick and 2 * n <= DENSE_BLOB_LIMIT:
             i, j = structure['nearest_pair']
             pair_diag = normalised_diagonal(bodies_mobility([r_type[i], r_type[j]], [centres[i], centres[j]], scene.a,
                                                             scene.eta, scene.wall, self.backend), R, scene.eta)
@@ -645,14 +652,15 @@ class Advisor:
                  for (label, blobs, a, applicable), d in zip(models, diagonals)]
         details, candidates = [], []
         for label, n, wall_diag, pair_diag, model in rows:
-            wall_error = worst_error(wall_diag, reference) if reference is not None else None
+            wall_error = worst_error(wall_diag, reference) if (reference is not None and
+                                                                wall_diag is not None) else None
             calibrated = model is not None and n > 1 and '(' not in label
             from_table = False
             if self.quick and calibrated and scene.wall:
                 shipped = sphere_tables.shipped_shell_errors(n, h)
                 if shipped is not None:
                     wall_error, from_table = float(np.max(np.abs(shipped))), True
-            richardson_error = worst_error(wall_diag, wall_reference)
+            richardson_error = worst_error(wall_diag, wall_reference) if wall_diag is not None else None
             pair_error = worst_error(pair_diag, pair_reference) if (pair_diag is not None and
                                                                     pair_reference is not None) else None
             errors = [e for e in (wall_error, pair_error) if e is not None]
@@ -754,7 +762,7 @@ class Advisor:
             structure['num_blobs'], ratio, lowest_blob / a,
             '' if body_gap is None else ', body gap/a %.3g' % (body_gap / a)),
             structure['num_blobs'], None, self.cost_per_step(seconds), True, note)
-        if self.coarsen and len(reference) >= 4:
+        if self.coarsen and 4 <= len(reference) <= DENSE_BLOB_LIMIT:
             self.measure_coarsened(structure, seconds)
 
     def measure_coarsened(self, structure, current_seconds):
@@ -807,6 +815,11 @@ class Advisor:
         for structure in scene.structures:
             low = structure['lowest']
             blobs, centre = structure['r_type'][low], structure['centres'][low]
+            if len(blobs) > DENSE_BLOB_LIMIT:
+                worst = np.inf
+                self.add('wall', structure['ID'], 'no wall, lowest body', len(blobs), None, None, False,
+                         'too many blobs per body for a dense body mobility here')
+                continue
             with_wall = bodies_mobility([blobs], [centre], scene.a, scene.eta, True, self.backend)
             without = bodies_mobility([blobs], [centre], scene.a, scene.eta, False, self.backend)
             difference = worst_error(np.diag(without), np.diag(with_wall))
@@ -920,6 +933,10 @@ class Advisor:
         start, stop = scene.arrays.blob_offsets[body], scene.arrays.blob_offsets[body + 1]
         blobs = scene.r_vectors[start:stop]
         centre = blobs.mean(axis=0)
+        if len(blobs) > DENSE_BLOB_LIMIT:
+            self.add('dt', None, 'no estimate: the lowest body has %d blobs, too many for a dense mobility here'
+                     % len(blobs), None, None, None, False)
+            return
 
         def vertical_force(shift):
             moved = blobs + np.array([0.0, 0.0, shift])
