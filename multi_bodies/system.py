@@ -33,17 +33,23 @@ NO_WALL = '_no_wall'
 
 
 # ------------------------------------------------------------------ backend choice
-def resolve_implementation(name, kind='vector_product', log=None):
+def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None):
     """Turn ``auto`` / ``auto_no_wall`` into the fastest backend usable here.
 
-    kind 'vector_product': pycuda, else C++, else python; 'blobs' (dense
-    matrices, CPU only): C++, else python; 'forces': pycuda, else C++, else
-    python.  Other names are returned unchanged.  ``log`` (callable) is told
-    the choice.
+    kinds 'vector_product' and 'blobs' (dense matrices, CPU only): the backend
+    of smallest cost measured on this machine at ``num_blobs`` blobs
+    (``mobility.choose``); 'forces': pycuda, else C++, else python.  Other
+    names are returned unchanged.  ``log`` (callable) is told the choice.
     """
     if name not in ('auto', 'auto' + NO_WALL):
         return name
     suffix = name[len('auto'):]
+    if kind != 'forces':
+        from mobility import choose
+        chosen = choose.choose_backend(kind, num_blobs, wall=not suffix, log=log) + suffix
+        if log is not None:
+            log('%s: auto chose %s (smallest measured cost here)' % (kind, chosen))
+        return chosen
     order = {'vector_product': ('pycuda', 'C++', 'python'), 'blobs': ('C++', 'python'),
              'forces': ('pycuda', 'C++', 'python')}[kind]
     for backend in order:
@@ -548,8 +554,10 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     overrides that cannot take effect with the chosen implementations are
     logged (``log``, a callable taking one line).
     """
-    product = resolve_implementation(options.mobility_vector_prod_implementation, 'vector_product', log)
-    blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log)
+    product = resolve_implementation(options.mobility_vector_prod_implementation, 'vector_product', log,
+                                     num_blobs=body_arrays.num_blobs)
+    blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log,
+                                   num_blobs=max(body_arrays.type_blobs or [1]))
     forces = resolve_blob_blob_implementation(options.blob_blob_force_implementation, hooks, log)
     body_body = options.body_body_force_torque_implementation
     if not hooks.is_default('body_body_force_torque') and body_body != 'python' and log is not None:

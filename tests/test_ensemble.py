@@ -276,19 +276,17 @@ def test_clones_readers(tmp_path):
 
 
 # ------------------------------------------------------------------ resuming a killed replica
-# A resumed replica continues from its last saved step through initial_step.
-# Today that restart is exact only to the GMRES tolerance: the restart state
-# does not hold the solver's initial guess, and the snapshot's quaternions are
-# renormalised when read back (1 ulp).  Snapshots written before the resumed
-# step are compared bit for bit, later ones to RESUME_TOLERANCE, and the
-# strict xfail below turns into a failure the day restarts become bit for bit.
+# A resumed replica continues from its last saved step through initial_step,
+# and the restart record holds the generator, the scheme history, the solver's
+# initial guess and the exact configuration, so the resumed run is bit for bit
+# the undisturbed one.  (RESUME_TOLERANCE is kept for compare_resumed(exact=False).)
 SOLVER_TOLERANCE = 1e-8  # the default solver_tolerance of the scene
 # A relative GMRES error e in the velocities moves a body by at most about
 # e x (its whole path, < 1 here) over the run; 10 x that bound.
 RESUME_TOLERANCE = 10 * SOLVER_TOLERANCE
 
 
-def compare_resumed(folder, reference, resumed_from, exact=False):
+def compare_resumed(folder, reference, resumed_from, exact=True):
     """Snapshots of a resumed replica against the undisturbed one (bit for bit before ``resumed_from``)."""
     names = sorted(n for n in os.listdir(reference) if n.endswith('.clones'))
     assert names == sorted(n for n in os.listdir(folder) if n.endswith('.clones'))
@@ -338,8 +336,6 @@ def test_resume_after_a_cut_restart_record(serial, tmp_path):
     assert [r['step'] for r in run_output.read_restart_records(os.path.join(folder, 'run'))] == [0, 2, 4, 4, 6, 8, 10]
 
 
-@pytest.mark.xfail(strict=True, reason='restarts are exact to the GMRES tolerance only: the restart state lacks the '
-                                       'solver initial guess and snapshot quaternions are renormalised on reading')
 def test_resume_is_bit_for_bit(serial, tmp_path):
     result, folder, reference = cut_replica(serial[0], tmp_path)
     compare_resumed(folder, reference, 4, exact=True)

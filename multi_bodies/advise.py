@@ -1,0 +1,66 @@
+"""Which model does a scene need?  Measure the cheapest adequate model for an input file.
+
+Run from the folder the input file is meant to run in (as the other scripts)::
+
+    python advise.py --input-file inputfile_dynamic.dat [--accuracy 0.01] [--quick] [--coarsen]
+
+It reads the scene as ``multi_bodies.py`` and ``multi_bodies_utilities.py``
+do and measures, on this machine: the resolution of each structure type, wall
+against no wall, multiblob against single-blob rollers, dense against GMRES,
+the mobility backends, and the stability of the time step (see
+doc/advisor.md).  It prints a table per choice, the recommendation and the
+input lines to change, and writes ``output_name.advice.json`` (plus the
+``.vertex`` files of the models it recommends, ``output_name.advice.*.vertex``).
+
+``--quick`` skips what grows with the scene (pair errors, the dense solve,
+timings of other models) and says which numbers then come from the shipped
+tables.  Mistakes in the input stop with one message (exit status 2).
+"""
+import argparse
+import os
+import sys
+
+_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
+# The script's folder holds multi_bodies.py, which would hide the package of the same name.
+sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
+if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
+    del sys.modules['multi_bodies']
+try:
+    import multi_bodies.input_options  # noqa: F401
+except ImportError:
+    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+
+import utils  # noqa: E402
+from multi_bodies import advisor  # noqa: E402
+
+
+def main(argv=None):
+    """Advise on an input file; returns the exit status."""
+    parser = argparse.ArgumentParser(description='Measure the cheapest model that meets an accuracy target for '
+                                                 'the scene of an input file (see doc/advisor.md).')
+    parser.add_argument('--input-file', required=True,
+                        help='input file of multi_bodies.py or multi_bodies_utilities.py')
+    parser.add_argument('--accuracy', type=float, default=0.01,
+                        help='target relative error of the body self mobilities (default 0.01)')
+    parser.add_argument('--quick', action='store_true',
+                        help='skip measurements that grow with the scene; use the shipped tables instead')
+    parser.add_argument('--coarsen', action='store_true',
+                        help='also offer coarsened models (every other blob) of bodies that are not spheres')
+    parser.add_argument('--verbose', action='store_true', help='print the time each measurement took')
+    args = parser.parse_args(argv)
+    if not 0.0 < args.accuracy < 1.0:
+        raise utils.UserInputError('--accuracy is a relative error between 0 and 1 (e.g. 0.01), got %g'
+                                   % args.accuracy)
+    log = print if args.verbose else None
+    result = advisor.advise(args.input_file, accuracy=args.accuracy, quick=args.quick, coarsen=args.coarsen,
+                            log=log)
+    sys.stdout.write(result.report())
+    path = result.write()
+    print('\nwrote %s' % path)
+    for name in result.files:
+        print('wrote %s' % name)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(utils.fail_cleanly(main))

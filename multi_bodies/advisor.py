@@ -1,0 +1,1157 @@
+"""The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
+
+Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md).  It reads
+the scene as the scripts do (``read_input_file``, ``read_bodies``,
+``bodies_to_arrays``, the user's hooks from the run directory) and measures,
+for each choice a user makes in the input file, the error of each option and
+its cost per step on this machine:
+
+* ``resolution``: for each structure type recognised as a sphere (an
+  icosahedral shell, or a single blob), the 1-blob roller model and the
+  shells of 12, 42, 162 and 642 blobs; for other bodies the blob spacing and
+  the gaps against the blob radius (and, on request, a coarsened model);
+* ``wall``: the body mobility with and without the wall;
+* ``rollers``: multiblob against single-blob roller spheres;
+* ``solver``: one dense solve against one preconditioned GMRES solve;
+* ``backend``: one ``M f`` on every usable backend;
+* ``dt``: stability estimates of the time step.
+
+Error, everywhere: the largest relative error among a body's six
+self-mobility diagonal entries (translation along x, y (parallel to the
+wall) and z (perpendicular); rotation about x, y and z), at the scene's
+smallest gap: the wall gap of the lowest body of the type, and, separately,
+the nearest pair of bodies of the type.  For a sphere at the wall gap the
+reference is exact (``multi_bodies.sphere_tables``, for h/R >= 1.01);
+otherwise it is the Richardson extrapolation of the 42-, 162- and 642-blob
+shells, whose own error is estimated by the same extrapolation.
+
+Mobilities here are dense (one body or one pair, or the whole scene for the
+dense solve): shapes (6, 6) per body, torques about the body centre; lengths
+and times in the user's units.
+"""
+import json
+import os
+import time
+from collections import namedtuple
+
+import numpy as np
+import scipy.linalg
+
+import mobility
+from body.body import K_matrices, bodies_to_arrays
+from mobility import choose
+from multi_bodies import body_solver
+from multi_bodies import multi_bodies_functions as mbf
+from multi_bodies import sphere_tables
+from multi_bodies.input_options import read_input_file
+from multi_bodies.run_setup import read_bodies
+from multi_bodies.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
+
+SHELL_SIZES = (12, 42, 162, 642)
+RICHARDSON_LEVELS = (42, 162, 642)
+GMRES_WARNING_ITERATIONS = 100
+NO_WALL = '_no_wall'
+DENSE_BLOB_LIMIT = 3000           # blobs above which one dense solve is modelled, not measured
+MEASURE_BUDGET_S = 1.0            # a single timing predicted to take longer is modelled instead
+ROLLER_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_rollers',
+                  'deterministic_adams_bashforth': 'deterministic_adams_bashforth_rollers',
+                  'stochastic_adams_bashforth': 'stochastic_adams_bashforth_rollers',
+                  'stochastic_first_order_RFD': 'stochastic_first_order_rollers'}
+DENSE_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_dense_algebra',
+                 'stochastic_first_order_RFD': 'stochastic_first_order_RFD_dense_algebra'}
+STATIC_SCHEMES = ('mobility', 'resistance', 'body_mobility')
+
+# Scheme cost/accuracy tables shipped with the package, by scheme name: a dict with 'order',
+# 'solves_per_step', 'stability' (dt * mu * k limit) and 'source'.  The deterministic rows are the
+# textbook stability limits of the schemes on the negative real axis, confirmed by the chart of
+# doc/integrators_accuracy_vs_dt.md.  The weak-error table of the stochastic schemes is not
+# measured yet: add its rows here (and its chart in doc/) when it exists.
+SCHEME_TABLE = {
+    'deterministic_forward_euler': {'order': 1, 'solves_per_step': 1, 'stability': 2.0,
+                                    'source': 'forward Euler: |1 + z| <= 1'},
+    'deterministic_adams_bashforth': {'order': 2, 'solves_per_step': 1, 'stability': 1.0,
+                                      'source': 'AB2: real stability interval [-1, 0]'},
+}
+# Rows to come, one per stochastic scheme: {'solves_per_step': int, 'lanczos_per_step': int,
+# 'weak_error': (C, p) with the weak error of the charted observable ~ C dt^p (dt in units of the chart's
+# relaxation time 'time_unit'), 'time_unit': str, 'source': str}.  Empty: the table is not measured yet.
+STOCHASTIC_SCHEME_TABLE = {}
+
+
+def cheapest_scheme(table, accuracy, solve_seconds):
+    """The scheme of a weak-error table that reaches ``accuracy`` at the smallest cost per unit time.
+
+    For each row, the time step that gives the target is ``dt* = (accuracy / C)^(1/p)`` and the cost
+    per unit of simulated time is ``solves_per_step * solve_seconds / dt*``.  Returns a list of
+    (cost per unit time, scheme, dt*) sorted cheapest first (empty for an empty table).
+    """
+    ranked = []
+    for scheme, row in table.items():
+        constant, order = row['weak_error']
+        dt_target = (accuracy / constant) ** (1.0 / order)
+        ranked.append((row['solves_per_step'] * solve_seconds / dt_target, scheme, dt_target))
+    return sorted(ranked)
+
+Choice = namedtuple('Choice', ['topic', 'structure', 'candidate', 'blobs', 'estimated_error', 'cost_s',
+                               'meets_target', 'note'])
+Choice.__doc__ = """One row of a choice table (the JSON rows of ``.advice.json``, plus a free-text note)."""
+
+
+# ------------------------------------------------------------------ dense mobilities of small sets of bodies
+def _dense_matrix(wall, backend):
+    return mobility.blob_mobility_matrix(backend + ('' if wall else NO_WALL))
+
+
+def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='python'):
+    """Body mobility (6 nb, 6 nb) of rigid bodies made of the given blobs, torques about ``centres``.
+
+    blob_sets: list of (n_k, 3) lab-frame blob positions; centres (nb, 3).
+    A body of one blob is a roller: its 6x6 block is the blob's grand
+    mobility (translation and rotation couplings, Rotne-Prager(-Blake)).
+    """
+    if all(len(b) == 1 for b in blob_sets):
+        return roller_grand_mobility(np.concatenate(blob_sets), blob_radius, eta, wall, backend)
+    r = np.concatenate(blob_sets)
+    M = _dense_matrix(wall, backend)(r, eta, blob_radius)
+    K = np.zeros((3 * r.shape[0], 6 * len(blob_sets)))
+    row = 0
+    for k, (blobs, centre) in enumerate(zip(blob_sets, centres)):
+        n = len(blobs)
+        K[row:row + 3 * n, 6 * k:6 * k + 6] = K_matrices(np.asarray(blobs)[None], np.asarray(centre)[None])[0]
+        row += 3 * n
+    factor = scipy.linalg.cho_factor(M)
+    resistance = K.T @ scipy.linalg.cho_solve(factor, K)
+    return np.linalg.pinv(resistance)  # pinv: a straight rod has no resistance to spinning about its axis
+
+
+def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='python'):
+    """Grand mobility (6n, 6n) of single blobs ``positions`` (n, 3), ordered ``[v_k, w_k]`` per blob."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    n = positions.shape[0]
+    name = backend + ('' if wall else NO_WALL)
+    products = {kind: mobility.blob_product(name, kind) for kind in mobility.PRODUCT_KINDS}
+    G = np.zeros((6 * n, 6 * n))
+    for col in range(6 * n):
+        body, component = divmod(col, 6)
+        e = np.zeros(3 * n)
+        e[3 * body + component % 3] = 1.0
+        if component < 3:
+            v = products['trans_times_force'](positions, e, eta, blob_radius)
+            w = products['rot_times_force'](positions, e, eta, blob_radius)
+        else:
+            v = products['trans_times_torque'](positions, e, eta, blob_radius)
+            w = products['rot_times_torque'](positions, e, eta, blob_radius)
+        G[:, col] = np.concatenate((np.reshape(v, (n, 3)), np.reshape(w, (n, 3))), axis=1).reshape(-1)
+    return G
+
+
+def normalised_diagonal(body_mobility, sphere_radius, eta):
+    """The six self-mobility diagonal entries of body 0 in units of the bulk sphere values, shape (6,)."""
+    d = np.diag(body_mobility)[:6]
+    bulk = np.array([1.0 / (6 * np.pi * eta * sphere_radius)] * 3 + [1.0 / (8 * np.pi * eta * sphere_radius ** 3)] * 3)
+    return d / bulk
+
+
+def exact_diagonal(h_over_R):
+    """Exact normalised diagonal (xx, yy, zz, rxx, ryy, rzz) of a sphere at h/R, or None below the table."""
+    exact = sphere_tables.exact_self_mobilities(h_over_R)
+    if exact is None:
+        return None
+    par, perp, rot_par, rot_perp = exact
+    return np.array([par, par, perp, rot_par, rot_par, rot_perp])
+
+
+def worst_error(values, reference):
+    """Largest relative error ``max |values / reference - 1|`` (the advisor's error measure).
+
+    Entries whose reference vanishes (the spin of a straight rod about its axis) are left out.
+    """
+    values, reference = np.asarray(values, dtype=float), np.asarray(reference, dtype=float)
+    keep = np.abs(reference) > 1e-12 * np.max(np.abs(reference))
+    return float(np.max(np.abs(values[keep] / reference[keep] - 1.0)))
+
+
+def richardson(levels, smallest_rate=2.0):
+    """Extrapolate a sequence of values (each (6,)) of three successive shell levels.
+
+    With differences ``d1 = v2 - v1``, ``d2 = v3 - v2`` and ``q = d1 / d2``,
+    entries that converge at a clear geometric rate (``q >= smallest_rate``:
+    the difference at least halves per fourfold refinement) are extrapolated
+    as ``v3 + d2 / (q - 1)``; other entries (no clear rate, or a change of
+    sign) keep ``v3 + d2``, the last difference taken as the remaining error.
+    Returns the extrapolated values (6,).
+    """
+    v1, v2, v3 = (np.asarray(v, dtype=float) for v in levels)
+    d1, d2 = v2 - v1, v3 - v2
+    with np.errstate(divide='ignore', invalid='ignore'):
+        q = d1 / d2
+    geometric = np.isfinite(q) & (q >= smallest_rate)
+    extrapolated = np.where(geometric, v3 + d2 / np.where(geometric, q - 1.0, 1.0), v3 + d2)
+    return np.where(d2 == 0.0, v3, extrapolated)
+
+
+def distance_to_other_bodies(r_vectors, owner):
+    """Distance from every blob to the closest blob of another body, shape (N,) (inf with one body).
+
+    r_vectors (N, 3); owner (N,) body index of each blob.  A k-d tree query of
+    as many neighbours as the largest body has blobs (plus one) must contain
+    a blob of another body, so the search costs O(N n log N), not O(N^2).
+    """
+    from scipy.spatial import cKDTree
+    owner = np.asarray(owner)
+    if len(np.unique(owner)) < 2:
+        return np.full(len(owner), np.inf)
+    k = min(len(owner), int(np.max(np.bincount(owner))) + 1)
+    distance, index = cKDTree(r_vectors).query(r_vectors, k=k)
+    return np.min(np.where(owner[index] != owner[:, None], distance, np.inf), axis=1)
+
+
+# ------------------------------------------------------------------ sphere models
+_CALIBRATED = {}
+
+
+def calibrated_model(num_blobs, sphere_radius):
+    """Calibrated shell of hydrodynamic radius ``sphere_radius``: (blobs (n, 3) about 0, blob radius)."""
+    if num_blobs not in _CALIBRATED:
+        _CALIBRATED[num_blobs] = calibrated_shell(num_blobs)[:2]
+    blobs, a = _CALIBRATED[num_blobs]
+    return blobs * sphere_radius, a * sphere_radius
+
+
+def bulk_radius(blobs, blob_radius):
+    """Hydrodynamic radius (translation, far from walls) of a rigid body of RPY blobs (n, 3)."""
+    centre = np.mean(blobs, axis=0)
+    arms = np.asarray(blobs, dtype=float) - centre
+    backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
+    M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
+    K = K_matrices(arms[None], np.zeros((1, 3)))[0]
+    N = np.linalg.pinv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
+    return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
+
+
+def fixed_radius_model(num_blobs, sphere_radius, blob_radius):
+    """Shell of ``num_blobs`` blobs of the given blob radius with hydrodynamic radius ``sphere_radius``.
+
+    The shell radius solves ``R_h(shell radius) = sphere_radius`` by secant
+    steps (R_h grows about one for one with the shell radius).  Returns
+    (blobs (n, 3), blob_radius), or None when the blobs would overlap by more
+    than their radius (spacing < a) or no shell radius fits.
+    """
+    unit = icosahedral_shell(num_blobs)
+    unit_spacing = smallest_distance(unit)
+    if unit_spacing * sphere_radius < blob_radius:  # the shell radius is below R: spacing < a for sure
+        return None
+
+    def excess(radius):
+        return bulk_radius(unit * radius, blob_radius) - sphere_radius
+    x0 = max(sphere_radius - blob_radius, 0.5 * sphere_radius)
+    x1 = x0 + 0.05 * sphere_radius
+    f0, f1 = excess(x0), excess(x1)
+    for _ in range(20):
+        if f1 == f0:
+            break
+        x0, x1, f0 = x1, x1 - f1 * (x1 - x0) / (f1 - f0), f1
+        if not x1 > 0:
+            return None
+        f1 = excess(x1)
+        if abs(f1) < 1e-9 * sphere_radius:
+            break
+    if abs(f1) > 1e-6 * sphere_radius or unit_spacing * x1 < blob_radius:
+        return None
+    return unit * x1, blob_radius
+
+
+def recognise_sphere(reference, blob_radius):
+    """Sphere model of a structure, or None: dict(kind 'blob' or 'shell', blobs, radius R, offset (3,)).
+
+    A single blob is a sphere of radius ``a``.  A shell is recognised when its
+    blobs lie on a sphere about their centroid (radii equal to 1e-3) and their
+    count and smallest spacing are those of an icosahedral shell; its radius
+    is the hydrodynamic radius of the model (bulk translational mobility).
+    """
+    reference = np.asarray(reference, dtype=float).reshape(-1, 3)
+    n = reference.shape[0]
+    if n == 1:
+        return dict(kind='blob', blobs=n, radius=blob_radius, offset=reference[0].copy())
+    sizes = [12]
+    while sizes[-1] < n:
+        sizes.append(4 * sizes[-1] - 6)
+    if sizes[-1] != n:
+        return None
+    centroid = reference.mean(axis=0)
+    radii = np.linalg.norm(reference - centroid, axis=1)
+    if np.std(radii) > 1e-3 * np.mean(radii):
+        return None
+    unit_spacing = smallest_distance(icosahedral_shell(n))
+    if abs(smallest_distance(reference) / np.mean(radii) - unit_spacing) > 1e-3 * unit_spacing:
+        return None
+    return dict(kind='shell', blobs=n, radius=bulk_radius(reference, blob_radius), offset=centroid)
+
+
+# ------------------------------------------------------------------ the scene
+class Scene:
+    """The scene of an input file, read as the scripts read it.
+
+    Attributes: ``options``, ``bodies``, ``types`` (list of (ID, count)),
+    ``arrays`` (BodyArrays), ``r_vectors`` (N, 3), ``hooks`` (the user's
+    physics hooks of the run directory), ``structures`` (list of dicts per
+    type: ID, spec, reference (n, 3), bodies slice, sphere model or None,
+    centres (nb, 3) of the bodies (blob centroids), lowest (index in the type),
+    nearest_pair ((i, j) in the type or None), nearest_gap (centre distance)).
+    """
+
+    def __init__(self, input_file, directory=None):
+        self.directory = os.path.dirname(os.path.abspath(input_file)) if directory is None else directory
+        self.options = read_input_file(input_file)
+        self.hooks = mbf.load_user_hooks(os.getcwd(), load_pycuda=False)
+        self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
+                                              single_blob_bodies='rollers' in self.options.scheme)
+        self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
+        slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]
+        self.arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
+        self.r_vectors = self.arrays.blob_positions()
+        self.a = self.options.blob_radius
+        self.eta = self.options.eta
+        if not (self.a > 0 and self.eta > 0):
+            from utils import UserInputError
+            raise UserInputError('%s: blob_radius and eta must be positive' % self.options.input_file)
+        self.structures = []
+        offsets = self.arrays.blob_offsets
+        for (structure_id, count), spec, (bodies, blobs), n in zip(
+                self.types, self.options.structures, self.arrays.type_slices, self.arrays.type_blobs):
+            reference = self.arrays.reference_blobs[offsets[bodies.start]:offsets[bodies.start] + n]
+            r_type = self.r_vectors[blobs].reshape(count, n, 3)
+            centres = r_type.mean(axis=1)
+            lowest = int(np.argmin(centres[:, 2])) if count else 0
+            info = dict(ID=structure_id, spec=spec, reference=reference, bodies=bodies, blobs=blobs,
+                        num_blobs=n, count=count, centres=centres, lowest=lowest, r_type=r_type,
+                        sphere=recognise_sphere(reference, self.a), nearest_pair=None, nearest_gap=None)
+            if count > 1:
+                distance = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
+                distance[np.diag_indices(count)] = np.inf
+                i, j = np.unravel_index(np.argmin(distance), distance.shape)
+                info['nearest_pair'], info['nearest_gap'] = (int(i), int(j)), float(distance[i, j])
+            self.structures.append(info)
+
+    @property
+    def num_blobs(self):
+        return self.arrays.num_blobs
+
+    @property
+    def wall(self):
+        names = (self.options.mobility_vector_prod_implementation, self.options.mobility_blobs_implementation)
+        if 'rollers' in self.options.scheme:
+            return self.options.domain != 'no_wall'
+        return not all(name.endswith(NO_WALL) for name in names)
+
+    def physics(self):
+        o = self.options
+        return dict(g=o.g, repulsion_strength_wall=o.repulsion_strength_wall, debye_length_wall=o.debye_length_wall,
+                    repulsion_strength=o.repulsion_strength, debye_length=o.debye_length,
+                    periodic_length=np.array(o.periodic_length), blob_radius=o.blob_radius, blob_mass=1.0)
+
+
+# ------------------------------------------------------------------ the advisor
+class Advisor:
+    """Measures every choice for one scene; see the module docstring.
+
+    Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
+    ``quick`` (skip measurements that grow with the scene: shells' errors
+    from the shipped table, pair errors skipped, costs modelled from one
+    measured ``M f``, the dense solve modelled above 600 blobs), ``coarsen`` (also offer coarsened
+    models of non-spherical bodies), ``log`` (callable for progress lines).
+    """
+
+    def __init__(self, scene, accuracy=0.01, quick=False, coarsen=False, log=None):
+        self.scene, self.accuracy, self.quick, self.coarsen = scene, float(accuracy), quick, coarsen
+        self.log = log or (lambda text: None)
+        self.choices = []
+        self.notes = []
+        self.recommendation = {}
+        self.files = {}
+        self.sources = []
+        self.backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
+        self.iterations = None
+        self.product_seconds = {}  # (backend, wall) -> (seconds of one M f of the scene, blobs)
+
+    def blob_gaps(self):
+        """Distance of every blob to the closest blob of another body, (N,), computed once."""
+        if getattr(self, '_blob_gaps', None) is None:
+            self._blob_gaps = distance_to_other_bodies(self.scene.r_vectors, self.scene.arrays.blob_body_index)
+        return self._blob_gaps
+
+    # -------------------------------------------------------------- costs
+    def product_time(self, r_vectors, wall=True, backend=None):
+        """(seconds of one M f on these blobs, 'measured' or 'modelled') with ``backend`` (default: the fastest CPU)."""
+        backend = backend or self.backend
+        n = len(r_vectors)
+        base = self.product_seconds.get((backend, wall)) if self.product_seconds else None
+        if base is not None:
+            base_seconds, base_n = base
+            predicted = base_seconds * (n / base_n) ** 2
+            if n == base_n:
+                return base_seconds, 'measured'
+            if self.quick or predicted > MEASURE_BUDGET_S:
+                return predicted, 'modelled'
+        product = mobility.mobility_vector_product(backend + ('' if wall else NO_WALL))
+        force = np.random.default_rng(2).standard_normal(3 * n)
+        seconds = choose.time_call(lambda: product(r_vectors, force, self.scene.eta, self.scene.a,
+                                                   self.scene.options.periodic_length), repeats=2)
+        if n == self.scene.num_blobs:
+            self.product_seconds = self.product_seconds or {}
+            self.product_seconds[(backend, wall)] = (seconds, n)
+        return seconds, 'measured'
+
+    def cost_per_step(self, seconds):
+        """Cost of one mobility solve: ``M f`` time x GMRES iterations of the scene (at least one)."""
+        return seconds * max(1, self.iterations or 1)
+
+    def replaced_scene_blobs(self, structure, model_blobs):
+        """Blob positions (N', 3) of the scene with every body of ``structure`` replaced by ``model_blobs``."""
+        parts = []
+        for other in self.scene.structures:
+            if other is structure:
+                rotations = self.scene.arrays.rotation_matrices()[other['bodies']]
+                parts.append((other['centres'][:, None, :] + np.einsum('kij,nj->kni', rotations, model_blobs)
+                              ).reshape(-1, 3))
+            else:
+                parts.append(other['r_type'].reshape(-1, 3))
+        return np.concatenate(parts)
+
+    # -------------------------------------------------------------- run everything
+    def run(self):
+        """Measure every choice; returns self (``choices``, ``recommendation``, ``notes``)."""
+        steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
+                 ('resolution', self.measure_resolution), ('wall', self.measure_wall),
+                 ('rollers', self.measure_rollers), ('dt', self.measure_dt)]
+        for name, step in steps:
+            start = time.perf_counter()
+            step()
+            self.log('%s: %.2f s' % (name, time.perf_counter() - start))
+        return self
+
+    def add(self, topic, structure, candidate, blobs, error, cost, meets, note=''):
+        if error is not None and not np.isfinite(error):
+            error = None  # unknown (JSON has no infinity)
+        self.choices.append(Choice(topic, structure, candidate, None if blobs is None else int(blobs),
+                                   None if error is None else float(error), None if cost is None else float(cost),
+                                   bool(meets), note))
+
+    # -------------------------------------------------------------- solver
+    def scene_rhs(self):
+        """Force-torque (Nb, 6) and slip (N, 3) of the scene (seeded random forces when they vanish)."""
+        scene = self.scene
+        from multi_bodies.system import System
+        system = System(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
+                        scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
+                        blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
+        force_torque = system.forces_torques(scene.r_vectors)
+        slip = system.slip() if system.has_slip else np.zeros_like(scene.r_vectors)
+        if not np.any(force_torque) and not np.any(slip):
+            force_torque = np.random.default_rng(3).standard_normal((scene.arrays.num_bodies, 6))
+        return force_torque, slip
+
+    def _forces_backend(self):
+        name = self.scene.options.blob_blob_force_implementation
+        if name in ('auto', 'pycuda'):
+            return 'C++' if self.backend == 'C++' else 'python'
+        return name
+
+    def measure_solver(self):
+        scene = self.scene
+        wall = scene.wall
+        product = mobility.mobility_vector_product(self.backend + ('' if wall else NO_WALL))
+        matrix = mobility.blob_mobility_matrix(self.backend + ('' if wall else NO_WALL))
+        force_torque, slip = self.scene_rhs()
+        tolerance = scene.options.solver_tolerance
+        results = []
+
+        def gmres_solve():
+            operator = body_solver.saddle_point_operator(scene.arrays, scene.r_vectors, product, scene.eta, scene.a,
+                                                         scene.options.periodic_length)
+            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, scene.r_vectors, matrix,
+                                                                     scene.eta, scene.a, stacked_mobility=matrix)
+            results.append(body_solver.solve_mobility_problem(operator, preconditioner,
+                                                              body_solver.mobility_rhs(force_torque, slip),
+                                                              scene.num_blobs, tolerance, true_residual=False))
+        # One solve (preconditioner built, GMRES from a zero guess); repeated when short, best time kept.
+        gmres_seconds = choose.time_call(gmres_solve, repeats=2)
+        result = results[-1]
+        self.iterations = result.iterations
+        note = '%d GMRES iterations at solver_tolerance %g' % (result.iterations, tolerance)
+        if not result.converged:
+            note += ', NOT converged'
+        if result.iterations > GMRES_WARNING_ITERATIONS:
+            warning = ('WARNING: GMRES needed %d iterations (more than %d) at solver_tolerance %g: the packing is '
+                       'dense or the problem ill-conditioned (blobs overlapping the wall or each other, blob radius '
+                       'large against the spacing); check the configuration' %
+                       (result.iterations, GMRES_WARNING_ITERATIONS, tolerance))
+            self.notes.append(warning)
+            note += ' (above %d: warning)' % GMRES_WARNING_ITERATIONS
+        if 'rollers' in scene.options.scheme:
+            note += ' (of the multiblob problem; rollers need none)'
+            seconds = self.product_time(scene.r_vectors, wall)[0]
+            self.add('solver', None, 'rollers: one M f per step%s' % (
+                '' if scene.options.free_kinematics else ' plus GMRES for the prescribed spins'),
+                scene.num_blobs, None, seconds, True, 'free_kinematics %s' % scene.options.free_kinematics)
+        self.add('solver', None, 'preconditioned GMRES', scene.num_blobs, tolerance, gmres_seconds,
+                 result.converged and result.iterations <= GMRES_WARNING_ITERATIONS, note)
+        if 'rollers' in scene.options.scheme:
+            return
+        # Dense: measured on the scene when small, modelled as (N / n)^3 from a measured smaller dense solve.
+        n = scene.num_blobs
+        if n <= DENSE_BLOB_LIMIT and (not self.quick or n <= 600):
+            dense_seconds = choose.time_call(lambda: body_solver.dense_mobility_velocities(
+                scene.arrays, scene.r_vectors, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
+            how = 'measured'
+        else:
+            probe = min(n, 600)
+            r = scene.r_vectors[:probe]
+            start = time.perf_counter()
+            M = matrix(r, scene.eta, scene.a)
+            np.linalg.inv(M)
+            dense_seconds, how = (time.perf_counter() - start) * 2.0 * (n / probe) ** 3, 'modelled'
+        self.add('solver', None, 'dense solve', n, None, dense_seconds, True,
+                 '%s; memory %.3g GB for the %d x %d blob matrix' % (how, 8 * 2 * (3 * n) ** 2 / 1e9, 3 * n, 3 * n))
+        dense_scheme = DENSE_SCHEMES.get(scene.options.scheme)
+        if dense_seconds < gmres_seconds and dense_scheme:
+            self.recommendation['scheme'] = dense_scheme
+        elif dense_seconds < gmres_seconds:
+            self.notes.append('a dense solve (%.3g s) is faster than GMRES (%.3g s) here, but scheme %s has no '
+                              'dense-algebra variant' % (dense_seconds, gmres_seconds, scene.options.scheme))
+
+    # -------------------------------------------------------------- backends
+    def measure_backends(self):
+        scene = self.scene
+        wall = scene.wall
+        costs = {}
+        for backend in ('pycuda', 'C++', 'python'):
+            if not mobility.backends.is_usable(backend):
+                self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, None, None, False,
+                         'not usable here: %s' % mobility.backends.available_implementations()[backend])
+                continue
+            if backend == 'python' and scene.num_blobs > 4000:
+                seconds, how = choose.modelled_seconds('python', 'vector_product', scene.num_blobs, wall)
+            else:
+                seconds, how = self.product_time(scene.r_vectors, wall, backend)
+            costs[backend] = seconds
+            self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, 0.0, seconds, True,
+                     'one M f, %s' % how)
+        fastest = min(costs, key=costs.get)
+        suffix = '' if wall else NO_WALL
+        cpu = 'C++' if 'C++' in costs else 'python'
+        for option, best in (('mobility_vector_prod_implementation', fastest), ('mobility_blobs_implementation', cpu)):
+            current = getattr(scene.options, option)
+            if current not in (best + suffix, 'auto' + suffix):  # auto measures the same costs at run time
+                self.recommendation[option] = best + suffix
+
+    # -------------------------------------------------------------- resolution
+    def sphere_models(self, structure):
+        """Candidate models of a sphere structure.
+
+        List of (label, blobs (n, 3) about 0, blob radius, applicable): the
+        1-blob roller model, the calibrated shells (blob radius scaled with
+        R; applicable when this is the only structure type, since
+        ``blob_radius`` is one value for every structure) and, with several
+        structure types, shells that keep the scene's blob radius.
+        """
+        R = structure['sphere']['radius']
+        single_type = len(self.scene.structures) == 1
+        models = [('1 blob (roller model)', np.zeros((1, 3)), R, False)]
+        for n in SHELL_SIZES:
+            blobs, a = calibrated_model(n, R)
+            models.append(('shell %d' % n, blobs, a, single_type))
+        if not single_type:
+            for n in SHELL_SIZES:
+                model = fixed_radius_model(n, R, self.scene.a)
+                if model is not None:
+                    models.append(('shell %d (a = %.4g)' % (n, self.scene.a), model[0], model[1], True))
+        return models
+
+    def model_errors(self, structure, models):
+        """Per model: (wall-gap diagonal (6,), pair diagonal (6,) or None), normalised by the sphere's bulk values."""
+        scene = self.scene
+        R = structure['sphere']['radius']
+        centre = structure['centres'][structure['lowest']]
+        pair = structure['nearest_pair']
+        results = []
+        for label, blobs, a, _ in models:
+            wall_diag = normalised_diagonal(bodies_mobility([blobs + centre], [centre], a, scene.eta, scene.wall,
+                                                            self.backend), R, scene.eta)
+            pair_diag = None
+            if pair is not None and not self.quick:
+                c0, c1 = structure['centres'][pair[0]], structure['centres'][pair[1]]
+                pair_diag = normalised_diagonal(bodies_mobility([blobs + c0, blobs + c1], [c0, c1], a, scene.eta,
+                                                                scene.wall, self.backend), R, scene.eta)
+            results.append((wall_diag, pair_diag))
+        return results
+
+    def current_model_diagonals(self, structure):
+        scene = self.scene
+        R = structure['sphere']['radius']
+        r_type, centres = structure['r_type'], structure['centres']
+        low = structure['lowest']
+        n = structure['num_blobs']
+        if n > DENSE_BLOB_LIMIT:
+            self.notes.append('%s: %d blobs per body is too many for a dense body mobility here; the current model '
+                              'is not measured' % (structure['ID'], n))
+            return None, None
+        wall_diag = normalised_diagonal(bodies_mobility([r_type[low]], [centres[low]], scene.a, scene.eta, scene.wall,
+                                                        self.backend), R, scene.eta)
+        pair_diag = None
+        if structure['nearest_pair'] is not None and not self.quick and 2 * n <= DENSE_BLOB_LIMIT:
+            i, j = structure['nearest_pair']
+            pair_diag = normalised_diagonal(bodies_mobility([r_type[i], r_type[j]], [centres[i], centres[j]], scene.a,
+                                                            scene.eta, scene.wall, self.backend), R, scene.eta)
+        return wall_diag, pair_diag
+
+    def measure_resolution(self):
+        self.resolution_details = {}
+        for structure in self.scene.structures:
+            if structure['sphere'] is None:
+                self.measure_other_body(structure)
+            else:
+                self.measure_sphere(structure)
+
+    def measure_sphere(self, structure):
+        scene = self.scene
+        sid, R = structure['ID'], structure['sphere']['radius']
+        h = structure['centres'][structure['lowest']][2] / R
+        models = self.sphere_models(structure)
+        labels = [m[0] for m in models]
+        diagonals = self.model_errors(structure, models)
+        current_wall, current_pair = self.current_model_diagonals(structure)
+        exact = exact_diagonal(h) if scene.wall else np.ones(6)  # free space: the bulk values are exact
+        # Richardson reference: the calibrated shells converge to the sphere.
+        levels = [diagonals[labels.index('shell %d' % n)] for n in RICHARDSON_LEVELS]
+        wall_reference = richardson([d[0] for d in levels])
+        pair_reference = None
+        if structure['nearest_pair'] is not None and not self.quick:
+            pair_reference = richardson([d[1] for d in levels])
+        reference = exact if exact is not None else wall_reference
+        finest_spacing = smallest_distance(models[labels.index('shell %d' % RICHARDSON_LEVELS[-1])][1])
+        gaps = [('wall gap', (h - 1.0) * R)]
+        if structure['nearest_gap'] is not None:
+            gaps.append(('pair gap', structure['nearest_gap'] - 2.0 * R))
+        for what, gap in gaps:
+            if gap < finest_spacing:
+                self.notes.append('%s: the %s (%.3g) is smaller than the blob spacing of the finest shell (%.3g): '
+                                  'convergence slows there and the Richardson estimates are lower bounds (at h/R = '
+                                  '1.1 they are up to 2.3 times too small, doc/advisor.md)'
+                                  % (sid, what, gap, finest_spacing))
+        source = 'exact sphere-wall table' if exact is not None else 'Richardson extrapolation of shells 42-162-642'
+        self.sources.append('%s: wall-gap errors against the %s (h/R = %.4g)' % (sid, source, h))
+        if pair_reference is not None:
+            self.sources.append('%s: pair errors against the Richardson extrapolation of shells 42-162-642 '
+                                '(centre distance %.4g R)' % (sid, structure['nearest_gap'] / R))
+        elif structure['nearest_pair'] is not None:
+            self.sources.append('%s: pair errors not measured (--quick)' % sid)
+        current_label = 'current (%d blobs, a = %.4g)' % (structure['num_blobs'], scene.a)
+        rows = [(current_label, structure['num_blobs'], current_wall, current_pair, None)]
+        rows += [(label, len(blobs), d[0], d[1], (label, blobs, a, applicable))
+                 for (label, blobs, a, applicable), d in zip(models, diagonals)]
+        details, candidates = [], []
+        for label, n, wall_diag, pair_diag, model in rows:
+            wall_error = worst_error(wall_diag, reference) if (reference is not None and
+                                                                wall_diag is not None) else None
+            calibrated = model is not None and n > 1 and '(' not in label
+            from_table = False
+            if self.quick and calibrated and scene.wall:
+                shipped = sphere_tables.shipped_shell_errors(n, h)
+                if shipped is not None:
+                    wall_error, from_table = float(np.max(np.abs(shipped))), True
+            richardson_error = worst_error(wall_diag, wall_reference) if wall_diag is not None else None
+            pair_error = worst_error(pair_diag, pair_reference) if (pair_diag is not None and
+                                                                    pair_reference is not None) else None
+            errors = [e for e in (wall_error, pair_error) if e is not None]
+            error = max(errors) if errors else None
+            if model is None:
+                seconds, how = self.product_time(scene.r_vectors, scene.wall)
+                cost = self.cost_per_step(seconds)
+            elif n == 1:
+                others = [s['r_type'].reshape(-1, 3) for s in scene.structures if s is not structure]
+                seconds, how = self.product_time(np.concatenate([structure['centres']] + others), scene.wall)
+                cost = seconds
+            else:
+                seconds, how = self.product_time(self.replaced_scene_blobs(structure, model[1]), scene.wall)
+                cost = self.cost_per_step(seconds)
+            meets = error is not None and error <= self.accuracy
+            note = 'wall gap %s%s; Richardson estimate %s; pair %s; cost %s' % (
+                _percent(wall_error), ' (shipped table)' if from_table else '',
+                _percent(richardson_error), _percent(pair_error), how)
+            if calibrated and len(scene.structures) > 1:
+                note += '; needs blob_radius %.4g for every structure' % model[2]
+            self.add('resolution', sid, label, n, error, cost, meets, note)
+            details.append(dict(candidate=label, blobs=n, wall_error=wall_error, richardson_error=richardson_error,
+                                pair_error=pair_error, cost_s=cost))
+            if model is not None and model[3]:
+                candidates.append((model, cost, error, meets))
+        self.resolution_details[sid] = dict(h_over_R=h, radius=R, rows=details, wall_reference=wall_reference,
+                                            exact=exact)
+        current = [c for c in self.choices if c.topic == 'resolution' and c.structure == sid][0]
+        adequate = [c for c in candidates if c[3]]
+        if adequate:
+            best = min(adequate, key=lambda c: c[1])
+            if current.meets_target and current.cost_s <= best[1]:
+                return  # the scene's own model meets the target and costs no more
+        else:
+            known = [c for c in candidates if c[2] is not None]
+            best = min(known, key=lambda c: c[2]) if known else None
+            if best is None or (current.estimated_error is not None and best[2] > 0.9 * current.estimated_error):
+                self.notes.append('%s: no %smodel up to 642 blobs meets %s at h/R = %.3g; the current model is kept%s'
+                                  % (sid, '' if len(scene.structures) == 1 else 'applicable ', _percent(self.accuracy),
+                                     h, '' if len(scene.structures) == 1 else
+                                     ' (the calibrated shells need their own blob_radius, which every structure '
+                                     'shares)'))
+                return
+            self.notes.append('%s: no model up to 642 blobs meets %s at h/R = %.3g; recommended: the most accurate '
+                              '(%s, %s)' % (sid, _percent(self.accuracy), h, best[0][0], _percent(best[2])))
+        label, blobs, a, _ = best[0]
+        vertex = self.write_vertex(sid, label, blobs)
+        spec = structure['spec']
+        if spec.slip_file:
+            self.notes.append('%s has a slip file for %d blobs, so its model is not changed automatically: the %s '
+                              'model (written to %s%s) needs its own slip file, e.g. for squirmers python -m '
+                              'multi_bodies.structure_generators squirmer-slip --blobs %d (radius 1)'
+                              % (sid, structure['num_blobs'], label, vertex,
+                                 ', blob_radius %.12g' % a if abs(a - scene.a) > 1e-9 * a else '', len(blobs)))
+            return
+        self.recommendation['structure:%s' % sid] = '%s %s' % (vertex, spec.clones_file)
+        if abs(a - scene.a) > 1e-9 * a:
+            self.recommendation['blob_radius'] = '%.12g' % a
+
+    def write_vertex(self, sid, label, blobs):
+        """Write the recommended model next to the output (``output_name.advice.<ID>.<model>.vertex``)."""
+        from multi_bodies.structure_files import write_vertex_file
+        name = '%s.advice.%s.%s.vertex' % (self.scene.options.output_name, sid,
+                                           label.split(' (')[0].replace(' ', '_'))
+        self.files[name] = (blobs, 'model recommended by multi_bodies/advise.py for structure %s: %s' % (sid, label))
+        return name
+
+    def measure_other_body(self, structure):
+        """Bodies that are not spheres: spacing and gaps against the blob radius, coarsened model on request."""
+        scene = self.scene
+        sid, a = structure['ID'], scene.a
+        reference = structure['reference']
+        spacing = smallest_distance(reference) if len(reference) > 1 else float('nan')
+        lowest_blob = float(np.min(structure['r_type'][:, :, 2]))
+        gaps = self.blob_gaps()[structure['blobs']]
+        body_gap = float(np.min(gaps)) if np.isfinite(np.min(gaps)) else None
+        consequences = []
+        ratio = spacing / a
+        if ratio > 2.2:
+            consequences.append('spacing/a = %.2f > 2: blobs do not touch, fluid leaks through the surface and the '
+                                'drag is underestimated' % ratio)
+        elif ratio < 1.0:
+            consequences.append('spacing/a = %.2f < 1: each blob centre lies inside its neighbour; the surface is '
+                                'smooth but the blob mobility is worse conditioned (more GMRES iterations)' % ratio)
+        else:
+            consequences.append('spacing/a = %.2f: the usual range (about 2 for touching blobs)' % ratio)
+        if scene.wall and lowest_blob / a < 1.0:
+            consequences.append('lowest blob at z/a = %.2f < 1: its mobility is regularised (damped like (z/a)^2); '
+                                'lubrication with the wall is not resolved' % (lowest_blob / a))
+        elif scene.wall and lowest_blob / a < 2.0:
+            consequences.append('wall gap z/a = %.2f: gap comparable to a blob; near-wall mobilities are resolved only '
+                                'to the blob size' % (lowest_blob / a))
+        if body_gap is not None and body_gap / a < 2.0:
+            consequences.append('nearest blobs of two bodies at %.2f a (< 2a): the bodies overlap hydrodynamically; '
+                                'close-range interactions are not resolved' % (body_gap / a))
+        note = '; '.join(consequences)
+        seconds, how = self.product_time(scene.r_vectors, scene.wall)
+        self.add('resolution', sid, 'current (%d blobs, spacing/a %.3g, wall gap/a %.3g%s)' % (
+            structure['num_blobs'], ratio, lowest_blob / a,
+            '' if body_gap is None else ', body gap/a %.3g' % (body_gap / a)),
+            structure['num_blobs'], None, self.cost_per_step(seconds), True, note)
+        if self.coarsen and 4 <= len(reference) <= DENSE_BLOB_LIMIT:
+            self.measure_coarsened(structure, seconds)
+
+    def measure_coarsened(self, structure, current_seconds):
+        """Every other blob, blob radius rescaled to keep the bulk translational drag.
+
+        Its error is measured against the current model at the wall gap of the lowest body.
+        """
+        scene = self.scene
+        sid, a = structure['ID'], scene.a
+        reference = structure['reference']
+        coarse = reference[::2]
+        target = bulk_radius(reference, a)
+        low, high = 0.1 * a, 10.0 * a
+        for _ in range(50):
+            middle = np.sqrt(low * high)
+            if bulk_radius(coarse, middle) < target:
+                low = middle
+            else:
+                high = middle
+        a_coarse = np.sqrt(low * high)
+        low_index = structure['lowest']
+        rotation = scene.arrays.rotation_matrices()[structure['bodies']][low_index]
+        location = scene.arrays.locations[structure['bodies']][low_index]
+        centre = structure['centres'][low_index]
+        fine = bodies_mobility([structure['r_type'][low_index]], [centre], a, scene.eta, scene.wall, self.backend)
+        coarse_blobs = location + coarse @ rotation.T
+        if np.min(coarse_blobs[:, 2]) <= 0 and scene.wall:
+            return
+        rough = bodies_mobility([coarse_blobs], [centre], a_coarse, scene.eta, scene.wall, self.backend)
+        error = worst_error(np.diag(rough), np.diag(fine))
+        replaced = self.replaced_scene_blobs(structure, (coarse @ np.eye(3)) - (reference.mean(axis=0)))
+        seconds, how = self.product_time(replaced, scene.wall)
+        self.add('resolution', sid, 'coarsened (every other blob, a = %.4g)' % a_coarse, len(coarse), error,
+                 self.cost_per_step(seconds), error <= self.accuracy,
+                 'error against the current model at its wall gap; blob_radius is shared by all structures; cost %s'
+                 % how)
+        vertex = self.write_vertex(sid, 'coarsened', coarse)
+        spec = structure['spec']
+        if error <= self.accuracy and len(scene.structures) == 1 and not spec.slip_file:
+            self.recommendation['structure:%s' % sid] = '%s %s' % (vertex, spec.clones_file)
+            self.recommendation['blob_radius'] = '%.12g' % a_coarse
+
+    # -------------------------------------------------------------- wall
+    def measure_wall(self):
+        scene = self.scene
+        if not scene.wall:
+            self.add('wall', None, 'no wall (current)', scene.num_blobs, None, None, True, 'the scene has no wall')
+            return
+        worst = 0.0
+        for structure in scene.structures:
+            low = structure['lowest']
+            blobs, centre = structure['r_type'][low], structure['centres'][low]
+            if len(blobs) > DENSE_BLOB_LIMIT:
+                worst = np.inf
+                self.add('wall', structure['ID'], 'no wall, lowest body', len(blobs), None, None, False,
+                         'too many blobs per body for a dense body mobility here')
+                continue
+            with_wall = bodies_mobility([blobs], [centre], scene.a, scene.eta, True, self.backend)
+            without = bodies_mobility([blobs], [centre], scene.a, scene.eta, False, self.backend)
+            difference = worst_error(np.diag(without), np.diag(with_wall))
+            worst = max(worst, difference)
+            self.add('wall', structure['ID'], 'no wall, lowest body (centre z = %.4g)' % centre[2],
+                     structure['num_blobs'], difference, None, difference <= self.accuracy,
+                     'largest relative change of the self-mobility diagonal when the wall is removed')
+        wall_seconds, how_wall = self.product_time(scene.r_vectors, True)
+        free_seconds, how_free = self.product_time(scene.r_vectors, False)
+        self.add('wall', None, 'with wall (current)', scene.num_blobs, 0.0, self.cost_per_step(wall_seconds), True,
+                 'M f %s' % how_wall)
+        meets = worst <= self.accuracy
+        self.add('wall', None, 'no wall (_no_wall backends)', scene.num_blobs, worst,
+                 self.cost_per_step(free_seconds), meets,
+                 'M f %s; %.2fx faster than with the wall' % (how_free, wall_seconds / max(free_seconds, 1e-12)))
+        if meets:
+            if 'rollers' in scene.options.scheme:
+                self.recommendation['domain'] = 'no_wall'
+            else:
+                for option in ('mobility_vector_prod_implementation', 'mobility_blobs_implementation'):
+                    base = self.recommendation.get(option, getattr(scene.options, option))
+                    self.recommendation[option] = base if base.endswith(NO_WALL) else base + NO_WALL
+
+    # -------------------------------------------------------------- rollers
+    def measure_rollers(self):
+        scene = self.scene
+        spheres = [s for s in scene.structures if s['sphere'] is not None]
+        if len(spheres) != len(scene.structures) or any(s['spec'].slip_file for s in spheres):
+            self.add('rollers', None, 'single-blob rollers', None, None, None, False,
+                     'not applicable: not every structure is a passive sphere (rollers carry no slip)')
+            return
+        roller_error, multiblob_error, roller_cost, multiblob_cost = 0.0, 0.0, 0.0, 0.0
+        known = True
+        for s in spheres:
+            rows = [c for c in self.choices if c.topic == 'resolution' and c.structure == s['ID']]
+            current = rows[0]
+            roller = [c for c in rows if c.blobs == 1 and c.candidate.startswith('1 blob')][0]
+            if roller.estimated_error is None or current.estimated_error is None:
+                known = False
+                continue
+            roller_error = max(roller_error, roller.estimated_error)
+            multiblob_error = max(multiblob_error, current.estimated_error)
+            roller_cost, multiblob_cost = roller.cost_s, current.cost_s
+        radii = {round(s['sphere']['radius'], 9) for s in spheres}
+        dynamic = scene.options.scheme not in STATIC_SCHEMES
+        if 'rollers' in scene.options.scheme:
+            self.rollers_scene(spheres, roller_error if known else None)
+            return
+        self.add('rollers', None, 'multiblob (current)', scene.num_blobs, multiblob_error if known else None,
+                 multiblob_cost, known and multiblob_error <= self.accuracy)
+        meets = known and roller_error <= self.accuracy
+        applicable = dynamic and len(radii) == 1
+        self.add('rollers', None, 'single-blob rollers', scene.arrays.num_bodies, roller_error if known else None,
+                 roller_cost, meets, '' if applicable else 'rollers need a dynamic scheme and spheres of one radius')
+        if meets and applicable and 'rollers' not in scene.options.scheme:
+            roller_scheme = ROLLER_SCHEMES.get(scene.options.scheme)
+            if roller_scheme is None:
+                return
+            for key in [k for k in self.recommendation if k.startswith('structure:') or k == 'blob_radius']:
+                del self.recommendation[key]
+            self.recommendation.pop('scheme', None)
+            self.recommendation['scheme'] = roller_scheme
+            self.recommendation['blob_radius'] = '%.12g' % radii.pop()
+            for s in spheres:
+                vertex = self.write_vertex(s['ID'], 'blob', np.zeros((1, 3)))
+                self.recommendation['structure:%s' % s['ID']] = '%s %s' % (vertex, s['spec'].clones_file)
+                if np.linalg.norm(s['sphere']['offset']) > 1e-9 * s['sphere']['radius']:
+                    self.notes.append('%s: the shell centre is not the body location; move the clones locations '
+                                      'by the centre offset %s for the roller model' % (s['ID'], s['sphere']['offset']))
+
+    def rollers_scene(self, spheres, roller_error):
+        """A roller scheme already: compare with the multiblob model the resolution section recommends."""
+        scene = self.scene
+        roller_cost = self.product_time(scene.r_vectors, scene.wall)[0]
+        self.add('rollers', None, 'single-blob rollers (current)', scene.num_blobs, roller_error, roller_cost,
+                 roller_error is not None and roller_error <= self.accuracy, 'one M f per step (free kinematics)')
+        shells = [k for k in self.recommendation if k.startswith('structure:')]
+        if not shells:
+            return
+        chosen = [c for s in spheres for c in self.choices if c.topic == 'resolution' and c.structure == s['ID']
+                  and self.recommendation.get('structure:%s' % s['ID'], '').split()[0].endswith(
+                      '.%s.vertex' % c.candidate.split(' (')[0].replace(' ', '_'))]
+        error = max((c.estimated_error for c in chosen if c.estimated_error is not None), default=None)
+        self.add('rollers', None, 'multiblob (%s)' % ', '.join(c.candidate for c in chosen), None, error,
+                 max((c.cost_s for c in chosen if c.cost_s is not None), default=None),
+                 error is not None and error <= self.accuracy, 'cost assumes the GMRES iterations measured here')
+        multiblob = {v: k for k, v in ROLLER_SCHEMES.items()}.get(scene.options.scheme)
+        if multiblob is None:
+            for key in shells + ['blob_radius']:
+                self.recommendation.pop(key, None)
+            self.notes.append('scheme %s has no multiblob counterpart here: the shell models are not put in the input'
+                              % scene.options.scheme)
+            return
+        self.recommendation['scheme'] = multiblob
+        if scene.options.domain == 'no_wall':
+            self.notes.append('domain no_wall applies to rollers only: with multiblob bodies use the _no_wall '
+                              'mobility implementations')
+
+    # -------------------------------------------------------------- time step
+    def measure_dt(self):
+        scene = self.scene
+        options = scene.options
+        if options.scheme in STATIC_SCHEMES:
+            self.add('dt', None, 'no time step (static problem %s)' % options.scheme, None, None, None, True)
+            return
+        physics = scene.physics()
+        hooks = scene.hooks
+        # The body with the lowest blob; its stiffness against a vertical displacement of the whole body.
+        lowest_blob = int(np.argmin(scene.r_vectors[:, 2]))
+        body = int(scene.arrays.blob_body_index[lowest_blob])
+        start, stop = scene.arrays.blob_offsets[body], scene.arrays.blob_offsets[body + 1]
+        blobs = scene.r_vectors[start:stop]
+        centre = blobs.mean(axis=0)
+        if len(blobs) > DENSE_BLOB_LIMIT:
+            self.add('dt', None, 'no estimate: the lowest body has %d blobs, too many for a dense mobility here'
+                     % len(blobs), None, None, None, False)
+            return
+
+        def vertical_force(shift):
+            moved = blobs + np.array([0.0, 0.0, shift])
+            return float(np.sum(np.asarray(hooks.blob_external_forces(moved, **physics)).reshape(-1, 3)[:, 2]))
+
+        delta = 1e-4 * max(scene.a, 1e-12)
+        stiffness_now = -(vertical_force(delta) - vertical_force(-delta)) / (2 * delta)
+        mobility_now = bodies_mobility([blobs], [centre], scene.a, scene.eta, scene.wall, self.backend)[2, 2]
+        # Resting height: where gravity and the wall repulsion balance (found by bisection on the shift).
+        rest_shift, rest_note = None, ''
+        low_shift, high_shift = -float(np.min(blobs[:, 2])) + 1e-6 * scene.a, 0.0
+        if vertical_force(0.0) < 0 and vertical_force(low_shift) > 1e-9 * abs(vertical_force(0.0)):
+            for _ in range(80):
+                middle = 0.5 * (low_shift + high_shift)
+                if vertical_force(middle) > 0:
+                    low_shift = middle
+                else:
+                    high_shift = middle
+            rest_shift = 0.5 * (low_shift + high_shift)
+        elif vertical_force(0.0) < 0:
+            rest_note = ('the wall repulsion cannot balance gravity on this body: it sinks until its lowest blob '
+                         'nearly touches z = 0, slowed only by the regularised mobility (damped like (z/a)^2); '
+                         'no resting-state stiffness estimate')
+        estimates = [('at the start', stiffness_now + 0.0, mobility_now, float(np.min(blobs[:, 2])))]
+        if rest_shift is not None:
+            rested = blobs + np.array([0.0, 0.0, rest_shift])
+            stiffness_rest = -(vertical_force(rest_shift + delta) - vertical_force(rest_shift - delta)) / (2 * delta)
+            mobility_rest = bodies_mobility([rested], [centre + [0, 0, rest_shift]], scene.a, scene.eta, scene.wall,
+                                            self.backend)[2, 2]
+            estimates.append(('resting on the wall', stiffness_rest + 0.0, mobility_rest, float(np.min(rested[:, 2]))))
+        rate = max(k * mu for _, k, mu, _ in estimates if k > 0) if any(k > 0 for _, k, _, _ in estimates) else 0.0
+        # Blob-blob repulsion between the nearest blobs of two bodies (relative mobility ~ twice one body's).
+        pair_note = ''
+        best = float(np.min(self.blob_gaps()))
+        if options.blob_blob_force_implementation != 'None' and np.isfinite(best):
+
+            def pair_force(x):
+                return float(np.asarray(hooks.blob_blob_force(np.array([x, 0.0, 0.0]), **physics)).reshape(3)[0])
+            k_pair = abs((pair_force(best + delta) - pair_force(best - delta)) / (2 * delta))
+            pair_rate = k_pair * 2.0 * mobility_now
+            pair_note = ('nearest blobs of two bodies at %.4g: pair stiffness %.3g, rate (relative mobility taken as '
+                         'twice mu_zz) %.3g' % (best, k_pair, pair_rate))
+            rate = max(rate, pair_rate)
+        dt = options.dt
+        for where, k, mu, z in estimates:
+            self.notes.append('dt: %s, lowest blob z = %.4g: wall+gravity stiffness %.4g, mobility mu_zz %.4g, '
+                              'mu k = %.4g per unit time' % (where, z, k, mu, mu * k))
+        if pair_note:
+            self.notes.append('dt: ' + pair_note)
+        if rest_note:
+            self.notes.append('dt: ' + rest_note)
+        solve_cost = next((c.cost_s for c in self.choices if c.topic == 'solver' and c.candidate.endswith('GMRES')),
+                          None)
+        safe = []
+        for scheme, row in SCHEME_TABLE.items():
+            limit = row['stability'] / rate if rate > 0 else np.inf
+            stable = dt > 0 and dt < limit
+            if stable:
+                safe.append(scheme)
+            self.add('dt', None, '%s: stable below dt = %.4g (input dt %g)' % (scheme, limit, dt), None, None,
+                     None if solve_cost is None else solve_cost * row['solves_per_step'], stable,
+                     'order %d; %s; dt mu k < %g' % (row['order'], row['source'], row['stability']))
+        # Stochastic: the rms Brownian step of the lowest body against the Debye lengths.
+        kT = options.kT
+        mu = estimates[-1][2]
+        lengths = [options.debye_length_wall] + ([options.debye_length]
+                                                 if options.blob_blob_force_implementation != 'None' else [])
+        b = min(lengths)
+        dt_brownian = b ** 2 / (2.0 * kT * mu) if kT > 0 and mu > 0 else np.inf
+        step = np.sqrt(2.0 * kT * mu * dt) if dt > 0 else 0.0
+        self.add('dt', None, 'stochastic: Brownian step sqrt(2 kT mu dt) = %.4g (kT %g) against Debye length %g; '
+                 'equal at dt = %.4g' % (step, kT, b, dt_brownian), None, None, None, step <= b,
+                 'stochastic scheme weak-error/cost table not yet available')
+        self.notes.append('dt: schemes stable at the input dt = %g: %s. Of these, deterministic_adams_bashforth costs '
+                          'one solve per step like forward Euler and is second order, so it is the cheaper for a given '
+                          'accuracy wherever it is stable. The limits are linear-stability estimates; '
+                          'doc/integrators_accuracy_vs_dt.md measured on its stiff scene (mu k = 5.6 by this estimate) '
+                          'Adams-Bashforth crossing the wall at dt mu k = 4.5 and inaccurate at 2.2, forward Euler '
+                          'bounded but off by 0.4 at 4.5' % (dt, ', '.join(safe) or 'none'))
+        ranked = cheapest_scheme(STOCHASTIC_SCHEME_TABLE, self.accuracy, solve_cost or 0.0)
+        for cost, scheme, dt_target in ranked:
+            row = STOCHASTIC_SCHEME_TABLE[scheme]
+            self.add('dt', None, '%s: weak error %s at dt = %.4g %s' % (scheme, _percent(self.accuracy), dt_target,
+                                                                      row['time_unit']), None, self.accuracy, cost,
+                     True, 'cost per unit time; %s' % row['source'])
+        if ranked:
+            self.notes.append('dt: cheapest stochastic scheme for %s: %s' % (_percent(self.accuracy), ranked[0][1]))
+        else:
+            self.notes.append('dt: the stochastic schemes\' weak-error and cost table is not yet available (the '
+                              'stochastic schemes are being written); only the Brownian-step estimate above is given '
+                              'for them')
+        if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
+            if 'deterministic_forward_euler' in safe:
+                self.recommendation['scheme'] = 'deterministic_forward_euler'
+            else:
+                limit = SCHEME_TABLE[options.scheme]['stability'] / rate
+                self.recommendation['dt'] = '%.3g' % (0.5 * limit)
+        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian)
+
+    # -------------------------------------------------------------- output
+    def as_json(self):
+        return {'target_accuracy': self.accuracy,
+                'choices': [dict(topic=c.topic, structure=c.structure, candidate=c.candidate, blobs=c.blobs,
+                                 estimated_error=c.estimated_error, cost_s=c.cost_s, meets_target=c.meets_target)
+                            for c in self.choices],
+                'recommendation': dict(self.recommendation)}
+
+    def report(self):
+        """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
+        lines = ['# Advice for %s (target accuracy %s%s)' % (self.scene.options.input_file, _percent(self.accuracy),
+                                                          ', --quick' if self.quick else ''),
+                 '', 'Scene: %d bodies, %d blobs, %d structure types; blob_radius %g, eta %g, %s.' % (
+                     self.scene.arrays.num_bodies, self.scene.num_blobs, len(self.scene.structures), self.scene.a,
+                     self.scene.eta, 'wall at z = 0' if self.scene.wall else 'no wall'),
+                 'Error: the largest relative error of the six self-mobility diagonal entries of a body at the '
+                 'smallest gap; cost per step: one M f (%s) x GMRES iterations of the scene (%s).' % (
+                     self.backend, self.iterations)]
+        for structure in self.scene.structures:
+            sphere = structure['sphere']
+            lines.append('- %s: %d bodies of %d blobs, %s' % (
+                structure['ID'], structure['count'], structure['num_blobs'],
+                'sphere of radius %.4g (%s), lowest centre h/R = %.4g%s' % (
+                    sphere['radius'], sphere['kind'], structure['centres'][structure['lowest']][2] / sphere['radius'],
+                    '' if structure['nearest_gap'] is None else
+                    ', nearest pair at %.4g R' % (structure['nearest_gap'] / sphere['radius']))
+                if sphere else 'not a sphere'))
+        for topic in ('resolution', 'wall', 'rollers', 'solver', 'backend', 'dt'):
+            rows = [c for c in self.choices if c.topic == topic]
+            if not rows:
+                continue
+            lines += ['', '## %s' % topic, '',
+                      '| structure | option | blobs | estimated error | cost per step | meets target | note |',
+                      '|---|---|---|---|---|---|---|']
+            for c in rows:
+                lines.append('| %s | %s | %s | %s | %s | %s | %s |' % (
+                    c.structure or '', c.candidate, '' if c.blobs is None else c.blobs, _percent(c.estimated_error),
+                    _seconds(c.cost_s), 'yes' if c.meets_target else 'no', c.note))
+        if self.sources:
+            lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
+            if self.quick:
+                lines.append('- --quick: errors of the calibrated shells at the wall gap (h/R >= 1.1) come from '
+                             'the shipped table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, '
+                             'interpolated in h/R); pair errors are not measured; costs of other models are '
+                             'modelled as M f x (N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 '
+                             'from a 600-blob inversion')
+        if self.notes:
+            lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
+        lines += ['', '## recommendation', '']
+        if not self.recommendation:
+            lines.append('The input already uses the cheapest adequate choices measured here: no line to change.')
+        else:
+            lines.append('Change these input lines:')
+            lines.append('')
+            lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
+        return '\n'.join(lines) + '\n'
+
+    def write(self):
+        """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
+        from multi_bodies.structure_files import write_vertex_file
+        output = self.scene.options.output_name
+        folder = os.path.dirname(output)
+        if folder:
+            os.makedirs(folder, exist_ok=True)
+        for path, (blobs, comment) in self.files.items():
+            write_vertex_file(path, blobs, comment=comment)
+        path = output + '.advice.json'
+        with open(path, 'w') as f:
+            json.dump(self.as_json(), f, indent=1)
+        return path
+
+
+def recommendation_lines(recommendation):
+    """Input-file lines ``option value`` of a recommendation (``structure:<ID>`` keys become ``structure``)."""
+    return ['%-40s %s' % (key.split(':')[0], value) for key, value in recommendation.items()]
+
+
+def apply_recommendation(text, recommendation, structure_ids):
+    """Input text with the recommended lines in place of the old ones.
+
+    ``structure_ids``: the structure ID of each ``structure`` line, in order.
+    Options not present are appended.
+    """
+    lines = text.splitlines()
+    done = set()
+    structure_index = 0
+    for i, raw in enumerate(lines):
+        words = raw.split('#', 1)[0].split()
+        if not words:
+            continue
+        name = words[0]
+        if name == 'structure':
+            key = 'structure:%s' % structure_ids[structure_index]
+            structure_index += 1
+            if key in recommendation:
+                lines[i] = 'structure %s' % recommendation[key]
+                done.add(key)
+        elif name in recommendation:
+            lines[i] = '%s %s' % (name, recommendation[name])
+            done.add(name)
+    lines += ['%s %s' % (key, value) for key, value in recommendation.items() if key not in done]
+    return '\n'.join(lines) + '\n'
+
+
+def _percent(value):
+    if value is None:
+        return '-'
+    return '%.3g%%' % (100.0 * value)
+
+
+def _seconds(value):
+    if value is None:
+        return '-'
+    return '%.3g ms' % (1e3 * value) if value < 1.0 else '%.3g s' % value
+
+
+def advise(input_file, accuracy=0.01, quick=False, coarsen=False, log=None):
+    """Read the scene of ``input_file`` (run directory = current directory) and return the finished Advisor."""
+    return Advisor(Scene(input_file), accuracy, quick, coarsen, log).run()
