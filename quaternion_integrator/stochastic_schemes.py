@@ -64,6 +64,7 @@ class StochasticScheme(Scheme):
     every ``update_PC`` steps, SPEC §4.3).
     """
     dense = False
+    thermal_drift = True  # False switches every drift term off (a negative control for the tests; wrong physics)
 
     def __init__(self, dt, options=None):
         super().__init__(dt)
@@ -136,6 +137,8 @@ class StochasticScheme(Scheme):
         """
         lengths = self.body_lengths(system)
         W = np.asarray(W, dtype=float).reshape(-1, 6)
+        if not self.thermal_drift:
+            return np.zeros_like(W)
         W_tilde = W.copy()
         W_tilde[:, :3] /= lengths[:, None]
         minus = system.mobility_problem(*rfd_configuration(locations, orientations, W, -0.5 * self.delta, lengths))
@@ -272,6 +275,8 @@ class StochasticTractionEM(StochasticScheme):
         D_K = (plus.K_dot(U_R) - problem.K_dot(U_R)).reshape(-1)
         z = rng.standard_normal(3 * system.num_blobs)
         noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        if not self.thermal_drift:
+            return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
         return problem, pc, noise, (D_M - D_K) / self.delta, -D_KT / self.delta
 
     def attempt(self, system, step_index, rng, old):
@@ -329,7 +334,7 @@ class StochasticSlipTrapz(StochasticScheme):
         W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
                            preconditioner=pc, kind='stochastic').velocities
         plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
-        c = 2.0 * self.kT / self.delta
+        c = 2.0 * self.kT / self.delta if self.thermal_drift else 0.0
         slip_c = n1 + c * (plus.M_dot(W_s) - MW)
         force_c = -c * (plus.KT_dot(W_s) - KW)
         self.move(system, old, U1, self.dt)  # predictor
@@ -367,7 +372,7 @@ class StochasticSlipMid(StochasticScheme):
         W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
                            preconditioner=pc, kind='stochastic').velocities
         plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
-        c = self.kT / self.delta
+        c = self.kT / self.delta if self.thermal_drift else 0.0
         slip_c = n_c + c * (plus.M_dot(W_s) - MW)
         force_c = -c * (plus.KT_dot(W_s) - KW)
         self.move(system, old, U_m, 0.5 * self.dt)  # midpoint
@@ -412,7 +417,8 @@ class StochasticFirstOrderRFDDense(DenseScheme):
         N_plus = system.dense_matrices(*plus)[3]
         W_tilde = W_rfd.reshape(-1, 6).copy()
         W_tilde[:, :3] /= lengths[:, None]
-        U = (U + (self.kT / self.delta) * ((N_plus - N) @ W_tilde.reshape(-1))).reshape(-1, 6)
+        c = self.kT / self.delta if self.thermal_drift else 0.0
+        U = (U + c * ((N_plus - N) @ W_tilde.reshape(-1))).reshape(-1, 6)
         self.move(system, old, U, self.dt)
         return U
 
@@ -470,7 +476,7 @@ class StochasticSlipMidDLA(DenseScheme):
         mid = system.get_state()
         matrices_mid = system.dense_matrices(*mid)
         _, M_inv_mid, K_mid, N_mid = matrices_mid
-        c = self.kT / self.delta
+        c = self.kT / self.delta if self.thermal_drift else 0.0
         U = self.dense_velocity(system, matrices_mid).reshape(-1) + N_mid @ (
             -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
         U = U.reshape(-1, 6)
@@ -487,7 +493,7 @@ class StochasticRollerScheme(StochasticScheme):
         """Noise ``sqrt(2kT/(f dt)) M^{1/2} z`` plus (optionally) the RFD drift. Draws z (3N), then W (3N)."""
         z = rng.standard_normal(3 * system.num_blobs)
         velocity = system.roller_noise(r_vectors, z, self.noise_factor(dt_fraction))
-        if with_drift and self.kT > 0:
+        if with_drift and self.kT > 0 and self.thermal_drift:
             W = rng.standard_normal(3 * system.num_blobs)
             velocity = velocity + system.roller_drift(r_vectors, W, self.kT, self.delta)
         return velocity
@@ -497,6 +503,8 @@ class StochasticRollerScheme(StochasticScheme):
         if self.kT == 0:
             return np.zeros_like(r_vectors)
         W = rng.standard_normal(3 * system.num_blobs)
+        if not self.thermal_drift:
+            return np.zeros_like(r_vectors)
         return system.roller_drift(r_vectors, W, self.kT, self.delta)
 
     def move(self, system, old, velocities, dt):

@@ -1,5 +1,11 @@
 """Shared test fixtures: where the reference data lives, which backends run here."""
 import os
+
+# The tests' dense algebra is on small matrices (preconditioner blocks, dense schemes of a few bodies):
+# several BLAS threads on 2 shared cores made a dense Brownian step 8 times slower (measured), so the
+# tests use one BLAS thread.  Set before numpy is imported; the C++ kernels keep their OpenMP threads.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+os.environ.setdefault('MKL_NUM_THREADS', '1')
 from pathlib import Path
 
 import pytest
