@@ -195,6 +195,10 @@ def test_msd_laws_and_the_analysis_script(tmp_path, monkeypatch):
     assert table.shape == (21, 13) and data['msd'].shape == (21, 6, 6)
     np.testing.assert_allclose(table[:, 0], 0.01 * np.arange(21))
     assert np.all(table[1:, 1:7] > 0) and np.all(table[1:, 7:] > 0)      # error bars from the 3 runs
+    from boomerang import plot_boomerang_msd, plot_boomerang_trajectory
+    assert plot_boomerang_msd.main([str(output) + '.npz', '--slope-mu', '20', '--output', str(tmp_path / 'm.png')]) == 0
+    assert plot_boomerang_trajectory.main([files[0], '--output', str(tmp_path / 't.png')]) == 0
+    assert (tmp_path / 'm.png').stat().st_size > 0 and (tmp_path / 't.png').stat().st_size > 0
 
 
 # ------------------------------------------------------------------ Gibbs-Boltzmann
