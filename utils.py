@@ -279,3 +279,78 @@ def read_config_frames(path):
     if not frames:
         return np.zeros((0, 0, 7))
     return np.stack(frames)
+
+
+# ------------------------------------------------------------------ single-body trajectory files (boomerang, sphere)
+# ------------------------------------------------------------ trajectory readers
+def read_trajectory_file(path):
+    """Read a single-body trajectory file written by ``boomerang/boomerang.py`` (or the published code).
+
+    Format: a ``Parameters:`` line, ``key: value`` lines (a line without a
+    colon continues the previous value), ``Trajectory data:``,
+    ``Location, Orientation:``, then one line ``x, y, z, s, p1, p2, p3`` per
+    configuration.
+
+    Returns
+    -------
+    parameters : dict of str -> str
+    locations : ndarray, shape (n, 3)
+    orientations : ndarray, shape (n, 4), scalar-first quaternions.
+
+    Raises ``UserInputError`` naming the file and line when the file does not
+    have this layout.
+    """
+    import numpy as np
+    parameters = {}
+    rows = []
+    section = None
+    last_key = None
+    try:
+        f = open(path)
+    except OSError as err:
+        raise UserInputError('cannot read trajectory file %s (%s)' % (path, err.strerror))
+    with f:
+        for number, raw in enumerate(f, start=1):
+            line = raw.strip()
+            if not line:
+                continue
+            if line == 'Parameters:':
+                section = 'parameters'
+            elif line == 'Trajectory data:':
+                section = 'header'
+            elif section == 'header' and line.startswith('Location'):
+                section = 'data'
+            elif section == 'parameters':
+                if ':' in line:
+                    last_key, value = line.split(':', 1)
+                    last_key = last_key.strip()
+                    parameters[last_key] = value.strip()
+                elif last_key is not None:
+                    parameters[last_key] += ' ' + line
+            elif section == 'data':
+                try:
+                    values = [float(v) for v in line.split(',') if v.strip()]
+                except ValueError:
+                    values = []
+                if len(values) != 7:
+                    raise UserInputError('%s, line %d: expected 7 comma-separated numbers '
+                                         '"x, y, z, s, p1, p2, p3", got %r' % (path, number, line))
+                rows.append(values)
+            else:
+                raise UserInputError('%s, line %d: not a trajectory file (expected "Parameters:", '
+                                     '"Trajectory data:" and "Location, Orientation:" before the data)'
+                                     % (path, number))
+    if section != 'data':
+        raise UserInputError('%s: no "Location, Orientation:" line, so no trajectory data' % path)
+    data = np.array(rows, dtype=float).reshape(-1, 7)
+    return parameters, data[:, :3], data[:, 3:]
+
+
+def trajectory_parameter(parameters, key, path='the trajectory file'):
+    """Float value of ``key`` in the parameters of ``read_trajectory_file``; UserInputError when missing."""
+    if key not in parameters:
+        raise UserInputError('%s has no parameter %r (found: %s)' % (path, key, ', '.join(sorted(parameters))))
+    try:
+        return float(parameters[key])
+    except ValueError:
+        raise UserInputError('%s: parameter %s = %r is not a number' % (path, key, parameters[key]))

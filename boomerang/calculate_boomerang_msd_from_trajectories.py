@@ -1,0 +1,82 @@
+"""Mean-square displacement of the boomerang from trajectory files, with error bars over the trajectories.
+
+Run from inside ``boomerang/``::
+
+    python calculate_boomerang_msd_from_trajectories.py data/boomerang/boomerang-trajectory-dt-0.01-N-1000-*.txt \
+        --end 2.0 --output data/boomerang/boomerang-msd-dt-0.01
+
+Every file is one independent run of ``boomerang.py`` (same ``dt``).  For
+each run the 6x6 MSD of the tracking point and of the rotational
+displacement (``sphere/rigid_msd.py``) is averaged over all time origins,
+for lags ``0, dt, ..., end``; the mean over runs and its standard error
+(``std / sqrt(runs)``) are written:
+
+* ``<output>.txt``: ``t``, the 6 diagonal entries (x, y, z, u_x, u_y, u_z),
+  then their 6 standard errors (the published script pickled the same data);
+* ``<output>.npz``: ``times``, ``msd`` (L, 6, 6), ``msd_error`` (L, 6, 6),
+  ``point``, ``files``.
+
+``--point X Y Z`` tracks another point fixed in the body (body frame, um),
+e.g. the centre of diffusion or the centre of the arms instead of the apex
+(Delong et al. 2015 compare them).  Plot with ``plot_boomerang_msd.py``.
+"""
+import argparse
+import os
+import sys
+
+_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
+if os.path.dirname(_SCRIPT_DIR) not in [os.path.abspath(p or os.curdir) for p in sys.path]:
+    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+
+import numpy as np  # noqa: E402
+
+import utils  # noqa: E402
+from sphere.rigid_msd import msd_statistics  # noqa: E402
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description='MSD of the boomerang from trajectory files (see doc/boomerang.md).')
+    parser.add_argument('files', nargs='+', help='trajectory files written by boomerang.py')
+    parser.add_argument('--end', type=float, default=None,
+                        help='longest lag time (default: a quarter of the shortest trajectory)')
+    parser.add_argument('--point', type=float, nargs=3, default=[0.0, 0.0, 0.0], metavar=('X', 'Y', 'Z'),
+                        help='tracking point in the body frame (default 0 0 0, the apex)')
+    parser.add_argument('--output', default=None,
+                        help='output path without extension (default: boomerang-msd-runs-<n> next to the first file)')
+    args = parser.parse_args(argv)
+
+    trajectories, dts = [], []
+    for path in args.files:
+        parameters, locations, orientations = utils.read_trajectory_file(path)
+        dts.append(utils.trajectory_parameter(parameters, 'dt', path))
+        trajectories.append((locations, orientations))
+    if not np.allclose(dts, dts[0], rtol=1e-12):
+        raise utils.UserInputError('the trajectory files have different time steps (%s); give files of one dt'
+                                   % ', '.join(sorted(set('%g' % d for d in dts))))
+    dt = dts[0]
+    shortest = min(len(loc) for loc, _ in trajectories)
+    end = args.end if args.end is not None else 0.25 * (shortest - 1) * dt
+    n_lags = int(round(end / dt))
+    if n_lags < 1 or n_lags >= shortest:
+        raise utils.UserInputError('--end %s must be at least one time step (%s) and shorter than the shortest '
+                                   'trajectory (%d configurations)' % (end, dt, shortest))
+    lags = np.arange(n_lags + 1)
+    msd, msd_error = msd_statistics(trajectories, lags, args.point)
+    times = lags * dt
+    output = args.output or os.path.join(os.path.dirname(os.path.abspath(args.files[0])),
+                                         'boomerang-msd-dt-%s-runs-%d' % (dt, len(trajectories)))
+    diagonal = np.arange(6)
+    header = ('MSD of the boomerang from %d trajectories (dt %s), tracking point %s (body frame)\n'
+              'columns: t, MSD x y z u_x u_y u_z, standard errors over the trajectories of the same'
+              % (len(trajectories), dt, list(args.point)))
+    np.savetxt(output + '.txt', np.column_stack((times, msd[:, diagonal, diagonal], msd_error[:, diagonal, diagonal])),
+               header=header)
+    np.savez(output + '.npz', times=times, msd=msd, msd_error=msd_error, point=np.array(args.point),
+             files=np.array(args.files))
+    print('wrote %s.txt and %s.npz (%d lags, %d trajectories)' % (output, output, len(lags), len(trajectories)))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(utils.fail_cleanly(main))
