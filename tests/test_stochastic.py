@@ -487,38 +487,88 @@ def boomerang_quadrature(reference, samples=20000, seed=400):
     return q, weights / total, h, cdf, moments
 
 
+def boomerang_start(n_bodies, seed):
+    """Exact equilibrium sample of ``n_bodies`` boomerangs 12 apart: (reference, locations, orientations, exact)."""
+    reference = gen.boomerang(spacing=2 * BOOM_A)
+    pool, weights, h_grid, cdf, exact = boomerang_quadrature(reference)
+    rng = np.random.default_rng(seed)
+    chosen = rng.choice(pool.shape[0], size=n_bodies, p=weights)
+    heights = np.array([np.interp(rng.random(), cdf[index], h_grid) for index in chosen])
+    locations = np.column_stack((12.0 * (np.arange(n_bodies) % 6), 12.0 * (np.arange(n_bodies) // 6), heights))
+    return reference, locations, pool[chosen], np.array(exact)
+
+
+def boomerang_keywords():
+    return physics(g=BOOM_G, repulsion_strength_wall=BOOM_EPS, debye_length_wall=BOOM_B, blob_radius=BOOM_A)
+
+
+@pytest.fixture(scope='module')
+def boomerang_brownian():
+    """Per-body time averages of (h, cos theta, cos^2 theta) of 30 boomerangs, 250 steps of Slip_Trapz."""
+    n_bodies, n_steps = 30, 250
+    reference, locations, orientations, exact = boomerang_start(n_bodies, 401)
+    bodies = []
+    for location, orientation in zip(locations, orientations):
+        body = Body(location, orientation, reference, BOOM_A)
+        body.ID = 'boomerang'
+        body.body_length = body.calc_body_length()
+        bodies.append(body)
+    system = System(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'),
+                    boomerang_keywords(), ETA, BOOM_A, 1e-4, vector_product_name=CPP, blobs_name=CPP)
+    scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
+    rng = np.random.default_rng(402)
+    sums = np.zeros((n_bodies, 3))
+    for step in range(n_steps):
+        scheme.step(system, step, rng)
+        c = rotation_matrices(system.arrays.orientations)[:, 2, 2]
+        sums += np.column_stack((system.arrays.locations[:, 2], c, c ** 2))
+    return sums / n_steps, exact
+
+
 @pytest.mark.slow
-def test_boomerang_height_and_tilt_keep_gibbs_boltzmann():
+def test_boomerang_height_and_tilt_keep_gibbs_boltzmann(boomerang_brownian):
     """30 boomerangs (15 blobs each, far apart) under stochastic_Slip_Trapz keep the exact equilibrium.
 
     Started from an exact sample (importance-resampled orientations, then heights from the conditional
     density); per-body time averages of h, cos(theta) and cos^2(theta) are within 4 SE of the quadrature
     values.  This exercises the block-preconditioned Lanczos noise and the slip RFD on rigid bodies.
     """
-    reference = gen.boomerang(spacing=2 * BOOM_A)
-    pool, weights, h_grid, cdf, (mean_h, mean_cos, mean_cos2) = boomerang_quadrature(reference)
-    rng = np.random.default_rng(401)
+    per_body, exact = boomerang_brownian
+    scores = z_score(per_body, exact)
+    assert np.max(np.abs(scores)) < 4.0, (per_body.mean(axis=0), exact, scores)
+
+
+@pytest.mark.slow
+def test_boomerang_equilibrium_of_monte_carlo_and_brownian_dynamics_agree(boomerang_brownian):
+    """VALIDATION T4 (short version): the Metropolis sampler of many_bodyMCMC on the same scene (same
+    bodies, potentials and start) gives the same <h>, <cos theta>, <cos^2 theta> as the Brownian run:
+    the difference is within 4 combined standard errors (each from its per-body spread)."""
+    from many_bodyMCMC import mcmc_energy
+    from many_bodyMCMC.sampler import MetropolisSampler
     n_bodies = 30
-    chosen = rng.choice(pool.shape[0], size=n_bodies, p=weights)
+    reference, locations, orientations, _ = boomerang_start(n_bodies, 401)
     bodies = []
-    for k, index in enumerate(chosen):
-        h = np.interp(rng.random(), cdf[index], h_grid)
-        body = Body(np.array([12.0 * (k % 6), 12.0 * (k // 6), h]), pool[index], reference, BOOM_A)
+    for location, orientation in zip(locations, orientations):
+        body = Body(location, orientation, reference, BOOM_A)
         body.ID = 'boomerang'
-        body.body_length = body.calc_body_length()
         bodies.append(body)
     arrays = bodies_to_arrays(bodies, [n_bodies])
-    physics_values = physics(g=BOOM_G, repulsion_strength_wall=BOOM_EPS, debye_length_wall=BOOM_B,
-                             blob_radius=BOOM_A)
-    system = System(bodies, arrays, mbf.load_user_hooks('/nonexistent'), physics_values, ETA, BOOM_A, 1e-4,
-                    vector_product_name=CPP, blobs_name=CPP)
-    scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
+    keywords = boomerang_keywords()
+    hooks = mcmc_energy.load_user_potentials('/nonexistent')
+    pair_sums, _ = mcmc_energy.make_pair_sums('C++' if mcmc_energy.cpp_available()[0] else 'python', keywords,
+                                              hooks)
+    energy = mcmc_energy.MCMCEnergy(arrays, keywords, hooks, pair_sums)
+    sampler = MetropolisSampler(energy, locations, orientations, KT, max_translation=0.2, max_angle_shift=0.3,
+                                move='one_body')
+    rng = np.random.default_rng(403)
     sums = np.zeros((n_bodies, 3))
-    n_steps = 250
-    for step in range(n_steps):
-        scheme.step(system, step, rng)
-        c = rotation_matrices(system.arrays.orientations)[:, 2, 2]
-        sums += np.column_stack((system.arrays.locations[:, 2], c, c ** 2))
-    per_body = sums / n_steps
-    scores = z_score(per_body, np.array([mean_h, mean_cos, mean_cos2]))
-    assert np.max(np.abs(scores)) < 4.0, (per_body.mean(axis=0), (mean_h, mean_cos, mean_cos2), scores)
+    n_sweeps = 150
+    for sweep in range(n_sweeps):
+        sampler.step(sweep, rng)
+        c = rotation_matrices(sampler.orientations)[:, 2, 2]
+        sums += np.column_stack((sampler.locations[:, 2], c, c ** 2))
+    monte_carlo = sums / n_sweeps
+    brownian, _ = boomerang_brownian
+    difference = monte_carlo.mean(axis=0) - brownian.mean(axis=0)
+    error = np.sqrt(monte_carlo.var(axis=0, ddof=1) / n_bodies + brownian.var(axis=0, ddof=1) / n_bodies)
+    assert np.all(np.abs(difference) < 4 * error), (monte_carlo.mean(axis=0), brownian.mean(axis=0), error)
