@@ -1,20 +1,22 @@
-"""Deterministic dynamics of many rigid multiblob bodies, or of single-blob rollers, above a wall.
+"""Deterministic and Brownian dynamics of many rigid multiblob bodies, or of single-blob rollers, above a wall.
 
 Run from inside ``multi_bodies/`` (the manual's sections 5.1 to 5.3)::
 
     python multi_bodies.py --input-file inputfile_dynamic.dat [--print-residual]
 
-The input file names the scheme (``deterministic_forward_euler``,
-``deterministic_forward_euler_dense_algebra``, ``deterministic_adams_bashforth``,
-``deterministic_forward_euler_rollers``, ``deterministic_adams_bashforth_rollers``),
-the time step and the bodies; see doc/dynamics.md.  Outputs, all prefixed by
-``output_name``:
+The input file names the scheme (the deterministic schemes of doc/dynamics.md
+and the stochastic schemes of doc/brownian.md, e.g. ``stochastic_Slip_Trapz``
+and ``stochastic_adams_bashforth_rollers``), the time step and the bodies.
+The run itself is ``multi_bodies.dynamic_run.run_dynamics``.  Outputs, all
+prefixed by ``output_name``:
 
 * ``.inputfile`` (copy of the input), ``.bodies_info``, ``.random_state``
   (pickled state of the run's ``numpy.random.Generator``);
 * per saved step and structure ``.<ID>.<step, 8 digits>.clones``
   (``save_clones one_file_per_step``) or one ``.<ID>.config`` per structure
   (``save_clones one_file``), numbers with round-trip precision;
+* ``.restart`` (generator state and scheme history of every saved step, for
+  exact restarts with ``initial_step``);
 * ``.info`` (invalid configurations, GMRES and Lanczos iteration counts) and
   ``.time`` (wall-clock seconds of the time loop), also when a run stops early.
 
