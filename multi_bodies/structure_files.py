@@ -175,11 +175,17 @@ def write_vertex_file(path, reference_configuration, comment=None):
             f.write('%s %s %s\n' % (repr(float(x)), repr(float(y)), repr(float(z))))
 
 
-def write_clones_file(path, locations, orientations):
-    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision)."""
+def write_clones_file(path, locations, orientations, comment=None):
+    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision).
+
+    ``comment``: text written first, each line behind ``# ``.
+    """
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     with open(path, 'w') as f:
+        if comment:
+            for line in comment.splitlines():
+                f.write('# %s\n' % line)
         f.write('%d\n' % locations.shape[0])
         for row in np.concatenate((locations, orientations), axis=1):
             f.write(' '.join(repr(float(v)) for v in row) + '\n')
