@@ -135,6 +135,8 @@ class DynamicRun:
                 self.rng_from_restart = True
             self.scheme.set_history(state.get('scheme'))
             self.system.set_counters(state.get('counters') or {})
+            for name, guess in (state.get('solver_guesses') or {}).items():  # GMRES starts where it left off
+                setattr(self.system, name, None if guess is None else np.array(guess, copy=True))
         elif options.initial_step > 0:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
@@ -144,7 +146,9 @@ class DynamicRun:
     # -------------------------------------------------------------- output helpers
     def restart_state(self):
         return {'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
-                'counters': self.system.counters(self.scheme)}
+                'counters': self.system.counters(self.scheme),
+                'solver_guesses': {name: getattr(self.system, name, None)
+                                   for name in ('first_guess', 'roller_torque_guess')}}
 
     def write_info(self, extra_lines=()):
         run_output.write_info(self.options.output_name + '.info', self.system.counters(self.scheme), extra_lines)
