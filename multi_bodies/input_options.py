@@ -139,6 +139,8 @@ def _convert(kind, name, value, where):
             fail('one number')
         try:
             return finite(words[0], 'a number')
+        except UserInputError:
+            raise
         except ValueError:
             fail('a number')
     if kind == 'bool':
@@ -148,6 +150,8 @@ def _convert(kind, name, value, where):
     if kind == 'floats3':
         try:
             numbers = tuple(finite(w, 'three numbers') for w in words)
+        except UserInputError:
+            raise
         except ValueError:
             fail('three numbers')
         if len(numbers) != 3:
@@ -165,6 +169,8 @@ def _convert(kind, name, value, where):
                 if cells < 1 or not high > low:
                     fail(expected)
                 grid.append((low, high, cells))
+        except UserInputError:
+            raise
         except ValueError:
             fail(expected)
         return tuple(grid)
