@@ -194,7 +194,12 @@ class DynamicRun:
                     status = SIGNAL_EXIT_STATUS[stop.signal_number]
                 if last <= first:
                     self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
-            except utils.SimulationStopped as err:
+            except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
+                if isinstance(err, np.linalg.LinAlgError):  # a singular blob mobility: blobs of a body merged
+                    err = utils.SimulationStopped('step %d of %s: the linear algebra failed (%s); the blobs of a '
+                                                  'body are too close to each other for their distance to the '
+                                                  'origin (check the positions and forces)'
+                                                  % (step, options.scheme, err))
                 progress.close()
                 self.log_error('error: run stopped: %s. Snapshots up to the last saved step are complete; .info '
                                'and .time are written.' % str(err).rstrip('.'))

@@ -121,6 +121,9 @@ def _convert(kind, name, value, where):
         number = float(word)
         if not math.isfinite(number):
             fail(expected + ' (finite: not nan or inf)')
+        if abs(number) > LARGEST_VALUE:
+            fail(expected + ' of magnitude at most %g (larger values overflow when squared; rescale the units)'
+                 % LARGEST_VALUE)
         return number
 
     if kind in ('str', 'optional_str'):
@@ -227,6 +230,10 @@ def parse_input_text(text, input_file='<input>'):
 
 
 STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+# Largest magnitude of a number option: its square still fits in a double.
+LARGEST_VALUE = 1e150
+# eta and blob_radius beyond these bounds make eta a^3 (rotational resistance) over- or underflow.
+SCALE_RANGE = (1e-50, 1e50)
 ROLLER_ONLY_OPTIONS = ('domain', 'omega_one_roller', 'free_kinematics')
 
 
@@ -249,9 +256,19 @@ def unused_option_warnings(options):
 
 def check_ranges(options):
     """Values that parse but make no sense: caught here, with the line, not deep in a solver."""
+    for name in ('eta', 'blob_radius'):
+        value = getattr(options, name)
+        if not SCALE_RANGE[0] <= value <= SCALE_RANGE[1]:
+            raise UserInputError('%s: %s must be positive, between %g and %g (beyond that eta a^3 over- or '
+                                 'underflows in double precision; rescale the units), got %g'
+                                 % (options.where(name), name, SCALE_RANGE[0], SCALE_RANGE[1], value))
     if not 0.0 < options.solver_tolerance < 1.0:
         raise UserInputError('%s: solver_tolerance is a relative tolerance between 0 and 1 (e.g. 1e-8), got %g'
                              % (options.where('solver_tolerance'), options.solver_tolerance))
+    for name in ('debye_length', 'debye_length_wall'):
+        if not getattr(options, name) > 0.0:
+            raise UserInputError('%s: %s must be positive (the repulsion laws divide by it), got %g'
+                                 % (options.where(name), name, getattr(options, name)))
     if options.tracer_radius < 0.0:
         raise UserInputError('%s: tracer_radius must be >= 0 (0 gives the point velocity), got %g'
                              % (options.where('tracer_radius'), options.tracer_radius))

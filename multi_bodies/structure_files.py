@@ -121,8 +121,21 @@ def _read_counted_table(path, kind, columns, expected, referenced_from, exact_co
 
 
 def read_vertex_file(path, referenced_from=None):
-    """Blob positions of the reference configuration, shape (n, 3)."""
-    return _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+    """Blob positions of the reference configuration, shape (n, 3).
+
+    Two blobs at the same position are refused: they make the body's blob
+    mobility singular.
+    """
+    blobs = _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+    _, first, counts = np.unique(blobs, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        repeated = blobs[first[np.argmax(counts > 1)]]
+        same = np.flatnonzero(np.all(blobs == repeated, axis=1))
+        rows = [n for n, t in _meaningful_lines(path, 'vertex', referenced_from)[1:]]
+        raise UserInputError("%s, lines %d and %d: two blobs at the same position %s make the mobility of the "
+                             "body singular; remove one of the lines and fix the count"
+                             % (path, rows[same[0]], rows[same[1]], ' '.join(repr(float(v)) for v in repeated)))
+    return blobs
 
 
 def read_clones_file(path, referenced_from=None):

@@ -530,3 +530,23 @@ def test_every_option_is_documented():
     documented = set(re.findall(r'^\| `(\w+)`', text, flags=re.M))
     missing = sorted((set(OPTION_TABLE) | {'structure'}) - documented)
     assert not missing, 'options missing from doc/options.md: %s' % missing
+
+
+@pytest.mark.parametrize('line, fragment', [('eta 1e60', 'eta must be positive, between'),
+                                            ('blob_radius 1e-320', 'blob_radius must be positive, between'),
+                                            ('g 1e200', 'magnitude at most'),
+                                            ('debye_length -0', 'debye_length must be positive'),
+                                            ('debye_length_wall 0', 'debye_length_wall must be positive')])
+def test_option_values_that_overflow_or_divide_by_zero_are_refused(line, fragment):
+    """Found by tests/test_fuzz.py: these gave a singular matrix or a ZeroDivisionError deep in a solver."""
+    with pytest.raises(utils.UserInputError, match='in.dat, line 1: .*' + fragment):
+        parse_input_text(line + '\n', 'in.dat')
+
+
+def test_coinciding_blobs_in_a_vertex_file_are_refused(tmp_path):
+    """Found by tests/test_fuzz.py (a duplicated line and a fixed count): a singular blob mobility."""
+    path = tmp_path / 'b.vertex'
+    path.write_text('# two blobs at one point\n3\n0 0 0\n1 0 0\n0 0 0\n')
+    from multi_bodies.structure_files import read_vertex_file
+    with pytest.raises(utils.UserInputError, match='b.vertex, lines 3 and 5: two blobs at the same position'):
+        read_vertex_file(str(path))
