@@ -234,13 +234,14 @@ def check_run(kind, folder, input_name):
 
 # Findings in files this test's author does not own, reported to their owner (issue 10 report); each has a
 # strict xfail test below that reproduces it, so that the entry is removed when the owner fixes it.
-KNOWN_FOREIGN = {
-    # multi_bodies_utilities.py copies the input file and writes .bodies_info before it checks the
+KNOWN_FOREIGN = (
+    # multi_bodies_utilities.py copies the input file (and writes .bodies_info) before it checks the
     # backends and reads the force/velocity file.
-    'static: earlier outputs changed by a failed validation (bodies_info)',
-    'static: earlier outputs changed by a failed validation (bodies_info, inputfile)',
-    'static: earlier outputs changed by a failed validation (inputfile)',
-}
+    'static: earlier outputs changed by a failed validation',
+    # A body far from the origin (|location| ~ 1e20 with blobs ~ 1 apart): its blob positions coincide in
+    # double precision and the blob mobility is singular; the static script has no check and no handler.
+    'static: LinAlgError in multi_bodies/body_solver.py',
+)
 FINDINGS = collections.defaultdict(list)
 COLLECT = os.environ.get('RMB_FUZZ_COLLECT', '') not in ('', '0')
 
@@ -251,7 +252,7 @@ def run_both(folder, static_input, edits):
             check_run(kind, folder, input_name)
         except Finding as finding:
             FINDINGS[finding.signature].append('%s on %s after %r\n%s' % (kind, input_name, edits, finding))
-            if not (COLLECT or finding.signature in KNOWN_FOREIGN):
+            if not (COLLECT or finding.signature.startswith(KNOWN_FOREIGN)):
                 raise
 
 
@@ -288,3 +289,25 @@ def test_report_fuzz_outcomes():
         print('finding (%d cases): %s\n    first: %s\n    %s' % (len(examples), signature, examples[0].splitlines()[0],
                                                             examples[0].splitlines()[-1][:300]))
     assert OUTCOMES['cases'] > 0
+
+
+# ---------------------------------------------------------------------- the known findings, reproduced
+@pytest.mark.xfail(strict=True, reason='multi_bodies_utilities.py writes .inputfile before reading force_file '
+                                       '(issue 10 report); remove this mark and the KNOWN_FOREIGN entry when fixed')
+def test_known_static_writes_before_validation(earlier_run, tmp_path):
+    folder = tmp_path / 'case'
+    shutil.copytree(earlier_run, folder)
+    (folder / 'inputfile.dat').write_text((folder / 'inputfile.dat').read_text() + '# a changed input\n')
+    (folder / 'Structures' / 'force.dat').write_text('0 0 -1 0 0 0\n')  # one line for three bodies
+    check_run('static', folder, 'inputfile.dat')
+
+
+@pytest.mark.xfail(strict=True, reason='static script: singular blob mobility of a body at z = 1e20 is a '
+                                       'traceback (issue 10 report); remove this mark and the KNOWN_FOREIGN '
+                                       'entry when fixed')
+def test_known_static_singular_far_body(earlier_run, tmp_path):
+    folder = tmp_path / 'case'
+    shutil.copytree(earlier_run, folder)
+    clones = folder / 'Structures' / 'shell_N_12_Rg_1.clones'
+    clones.write_text(clones.read_text().replace('0 5 5 1 0 0 0', '0 5 1e20 1 0 0 0'))
+    check_run('static', folder, 'inputfile.dat')
