@@ -235,6 +235,10 @@ LARGEST_VALUE = 1e150
 # eta and blob_radius beyond these bounds make eta a^3 (rotational resistance) over- or underflow.
 SCALE_RANGE = (1e-50, 1e50)
 ROLLER_ONLY_OPTIONS = ('domain', 'omega_one_roller', 'free_kinematics')
+# Options of the published input files that are read (and checked) but change nothing in this version;
+# remove a name here when a scheme starts to use it (doc/options.md lists them too).
+NO_EFFECT_OPTIONS = ('n_relaxation', 'update_PC', 'rf_delta', 'save_velocities', 'slip_file',
+                     'structure_names', 'save_body_mobility', 'save_blobs_mobility')
 
 
 def unused_option_warnings(options):
@@ -248,6 +252,10 @@ def unused_option_warnings(options):
                          'free space)' if name == 'domain' else '')
                 messages.append("%s: option '%s' is used by the roller schemes only and is ignored by scheme "
                                 "'%s'%s; remove the line" % (options.where(name), name, scheme, extra))
+    for name in NO_EFFECT_OPTIONS:
+        if options.is_set(name):
+            messages.append("%s: option '%s' is accepted for compatibility with the published input files but "
+                            "has no effect in this version (see doc/options.md)" % (options.where(name), name))
     if options.is_set('kT') and (scheme.startswith('deterministic') or scheme in STATIC_SCHEMES):
         messages.append("%s: option 'kT' is ignored by scheme '%s', which has no thermal noise; choose a "
                         "stochastic scheme or remove the line" % (options.where('kT'), scheme))
