@@ -39,6 +39,36 @@ def copy_scene(folder):
     return folder
 
 
+def add_generated_inputs(folder):
+    """Inputs made from the shipped ones for the other readers and schemes; returns ``folder``.
+
+    * ``inputfile_resistance.dat``: the resistance problem of ``inputfile.dat``'s bodies with ``velocity.dat``;
+    * ``inputfile_squirmer.dat`` (dynamic, 2 steps) and ``inputfile_squirmer_mobility.dat`` (static): the
+      squirmer of ``examples/squirmer`` (a 42-blob shell with a ``.slip`` file);
+    * ``inputfile_rollers_mobility.dat``: the mobility problem of the four rollers of ``inputfile_rollers.dat``.
+    """
+    folder = Path(folder)
+    static = (folder / 'inputfile.dat').read_text()
+    (folder / 'velocity.dat').write_text('0 0 0 0 0 0\n0 0 0 0 0 1\n1 0 0 0 0 0\n')
+    (folder / 'inputfile_resistance.dat').write_text(set_options(
+        static, scheme='resistance', force_file=None, velocity_file='velocity.dat', output_name='data/resistance'))
+    (folder / 'Structures' / 'squirmer.clones').write_text('1\n0 0 3 1 0 0 0\n')
+    squirmer = ('structure Structures/shell_N_42_Rg_0_8912_Rh_1.vertex Structures/squirmer.clones '
+                'Structures/shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip')
+    common = dict(blob_radius=0.243548261566, eta=1.0, g=0.5, repulsion_strength_wall=1.0, debye_length_wall=0.2)
+    (folder / 'inputfile_squirmer.dat').write_text(set_options(
+        squirmer, scheme='deterministic_adams_bashforth', mobility_vector_prod_implementation='C++', dt=0.05,
+        n_steps=2, n_save=1, output_name='data/squirmer', **common))
+    (folder / 'inputfile_squirmer_mobility.dat').write_text(set_options(
+        squirmer, scheme='mobility', output_name='data/squirmer_static', **common))
+    rollers = [line for line in (folder / 'inputfile_rollers.dat').read_text().splitlines()
+               if line.startswith('structure')]
+    (folder / 'inputfile_rollers_mobility.dat').write_text(set_options(
+        '\n'.join(rollers), scheme='mobility', blob_radius=0.656, eta=1e-3, g=0.0024892,
+        output_name='data/rollers_static'))
+    return folder
+
+
 def set_options(text, **values):
     """Input-file text with option lines replaced (or appended); a value None removes the option."""
     lines = text.splitlines()

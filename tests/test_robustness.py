@@ -23,8 +23,8 @@ from multi_bodies import run_output
 from multi_bodies.input_options import OPTION_TABLE, parse_input_text
 from multi_bodies.structure_files import read_clones_file
 
-from run_scenes import (REPO_ROOT, SCRIPT_DIR, copy_scene, edit_input, run_in_process, snapshot_files,
-                        start_child)
+from run_scenes import (REPO_ROOT, SCRIPT_DIR, add_generated_inputs, copy_scene, edit_input, run_in_process,
+                        snapshot_files, start_child)
 
 BOOMERANG = 'boomerang_N_15'
 
@@ -296,27 +296,12 @@ NON_FINITE_FILES = {
 }
 
 
-def extra_static_inputs(folder):
-    """A resistance problem with a velocity file and a mobility problem of a squirmer (slip file)."""
-    text = (folder / 'inputfile.dat').read_text()
-    (folder / 'velocity.dat').write_text('0 0 0 0 0 0\n0 0 0 0 0 1\n1 0 0 0 0 0\n')
-    from run_scenes import set_options
-    (folder / 'inputfile_resistance.dat').write_text(set_options(text, scheme='resistance', force_file=None,
-                                                                 velocity_file='velocity.dat'))
-    (folder / 'Structures' / 'squirmer.clones').write_text('1\n0 0 3 1 0 0 0\n')
-    lines = [line for line in text.splitlines() if not line.startswith('structure')]
-    lines += ['structure Structures/shell_N_42_Rg_0_8912_Rh_1.vertex Structures/squirmer.clones '
-              'Structures/shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip']
-    (folder / 'inputfile_squirmer_mobility.dat').write_text(
-        set_options('\n'.join(lines), force_file=None, plot_velocity_field=None, blob_radius=0.243548261566))
-
-
 @pytest.mark.parametrize('kind', sorted(NON_FINITE_FILES))
 @pytest.mark.parametrize('value', ['nan', '-inf', '1e400'])
 def test_non_finite_numbers_refused_when_read(tmp_path, kind, value):
     folder = copy_scene(tmp_path / 'run')
     edit_input(folder / 'inputfile_dynamic.dat', n_steps=2)
-    extra_static_inputs(folder)
+    add_generated_inputs(folder)
     script, input_name, spoiled, old, new, line = NON_FINITE_FILES[kind]
     path = folder / spoiled
     text = path.read_text()
@@ -339,9 +324,10 @@ def test_non_finite_numbers_refused_when_read(tmp_path, kind, value):
 def test_extra_static_inputs_run_unspoiled(tmp_path):
     """Positive control of the non-finite tests: the unspoiled resistance and squirmer problems run."""
     folder = copy_scene(tmp_path / 'run')
-    extra_static_inputs(folder)
-    for input_name in ('inputfile_resistance.dat', 'inputfile_squirmer_mobility.dat'):
-        status, _, err = run_in_process('static', folder, input_name)
+    add_generated_inputs(folder)
+    for kind, input_name in (('static', 'inputfile_resistance.dat'), ('static', 'inputfile_squirmer_mobility.dat'),
+                             ('static', 'inputfile_rollers_mobility.dat'), ('dynamic', 'inputfile_squirmer.dat')):
+        status, _, err = run_in_process(kind, folder, input_name)
         assert status == 0, err
 
 
