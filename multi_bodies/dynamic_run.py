@@ -81,6 +81,8 @@ def check_options(options):
     for name in ('blob_radius', 'eta'):
         if not getattr(options, name) > 0:
             raise utils.UserInputError('%s: %s must be positive' % (options.where(name), name))
+    if not options.dt > 0:
+        raise utils.UserInputError('%s: dt must be positive for a dynamic run, got %g' % (options.where('dt'), options.dt))
     if options.n_save < 1:
         raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
     if options.n_steps < 0:

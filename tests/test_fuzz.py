@@ -35,6 +35,7 @@ prints the number of cases and of each outcome at the end.
 """
 import collections
 import os
+import re
 import shutil
 import time
 import traceback
@@ -78,9 +79,13 @@ INPUTS = sorted({name for _, statics, files in SCENES.values() for name in files
 DYNAMIC_INPUTS = {dynamic for dynamic, _, _ in SCENES.values()}
 MUTABLE = sorted({name for _, _, files in SCENES.values() for name in files})
 
-# Things a status-2 message may name: the files of the scene, the options, the words for the input file.
-NAMEABLE = ({os.path.basename(name) for name in MUTABLE} | set(OPTION_TABLE)
-            | {'structure', 'input file', 'output_name', 'user_defined_functions'})
+# What a status-2 message must name: a file of the scene, or an option (as a whole word; the short names
+# g, dt, kT, eta only as "'g'" or "g must", so that "e.g." does not count).
+NAMEABLE = re.compile('|'.join(
+    [re.escape(os.path.basename(name)) for name in MUTABLE]
+    + [r'\b%s\b' % re.escape(name) for name in OPTION_TABLE if len(name) > 3]
+    + [r"'%s'|\b%s must" % (name, name) for name in OPTION_TABLE if len(name) <= 3]
+    + [r'\bstructure\b', 'input file', 'user_defined_functions']))
 
 NUMBERS = ['nan', 'NaN', 'inf', '-inf', '1e308', '1e400', '-1e400', '1e150', '1e20', '1e-320', '-1', '-0', '0',
            '-2.5', '99999', '-99999', '9223372036854775808', '1e', '0x10', '1,5', '.', '+', '--1', '1e-5']
@@ -195,6 +200,7 @@ def earlier_run(tmp_path_factory):
 
 
 OUTCOMES = collections.Counter()
+MESSAGES = collections.Counter()  # status-2 messages with names and numbers blanked out
 
 
 def within_limits(folder):
@@ -246,7 +252,9 @@ def check_run(kind, folder, input_name):
         raise Finding('%s: traceback printed' % kind, err[-3000:])
     if status == 2:
         message = [line for line in err.splitlines() if line.startswith('error: ')]
-        if not message or not any(name in message[-1] for name in NAMEABLE):
+        if message:
+            MESSAGES[re.sub(r"'[^']*'|\S*\d\S*", '_', message[-1])[:110]] += 1
+        if not message or not NAMEABLE.search(message[-1]):
             raise Finding('%s: status 2 without a message naming a file or option' % kind, err[-3000:])
         after = snapshot_files(folder / 'data')
         changed = sorted(name for name in before if after.get(name) != before[name])
@@ -316,6 +324,10 @@ def test_report_fuzz_outcomes():
     for signature, examples in sorted(FINDINGS.items()):
         print('finding (%d cases): %s\n    first: %s\n    %s' % (len(examples), signature, examples[0].splitlines()[0],
                                                             examples[0].splitlines()[-1][:300]))
+    if COLLECT:
+        print('%d kinds of status-2 message, most frequent first:' % len(MESSAGES))
+        for text, count in MESSAGES.most_common():
+            print('%5d  %s' % (count, text))
     assert OUTCOMES['cases'] > 0
 
 

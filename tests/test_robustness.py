@@ -553,3 +553,21 @@ def test_coinciding_blobs_in_a_vertex_file_are_refused(tmp_path):
 def test_options_without_effect_warn(name, value):
     options = parse_input_text('%s %s\n' % (name, value), 'in.dat')
     assert any(m.startswith("in.dat, line 1: option '%s'" % name) and 'no effect' in m for m in options.warnings)
+
+
+def test_zero_time_step_names_its_line(tmp_path):
+    """Found by tests/test_fuzz.py: 'dt must be positive' named no file or line."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2, dt=0)
+    status, _, err = run_in_process('dynamic', folder, 'inputfile_dynamic.dat')
+    assert status == 2 and re.search(r'inputfile_dynamic.dat, line \d+: dt must be positive', err), err
+
+
+def test_ctrl_c_outside_the_time_loop_is_one_line():
+    def interrupted_main():
+        raise KeyboardInterrupt
+    err = io.StringIO()
+    import contextlib
+    with contextlib.redirect_stderr(err), pytest.raises(SystemExit) as stop:
+        utils.fail_cleanly(interrupted_main)
+    assert stop.value.code == 130
+    assert len(err.getvalue().splitlines()) == 1 and 'SIGINT' in err.getvalue()
