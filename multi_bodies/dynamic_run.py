@@ -107,7 +107,10 @@ class DynamicRun:
     def __init__(self, options, print_residual=False, log=print):
         self.options, self.log = options, log
         check_options(options)
-        self.scheme = make_scheme(options.scheme, options.dt, options)
+        try:
+            self.scheme = make_scheme(options.scheme, options.dt, options)
+        except utils.UserInputError as err:  # name the line of the scheme option
+            raise utils.UserInputError('%s: %s' % (options.where('scheme'), err))
         self.hooks = multi_bodies_functions.load_user_hooks(
             os.getcwd(), load_pycuda=options.blob_blob_force_implementation in ('pycuda', 'auto'))
         if self.hooks.overridden:

@@ -183,7 +183,8 @@ BAD_RERUNS = {
     'negative seed': ({'seed': -3}, 'seed'),
     'unknown backend': ({'mobility_vector_prod_implementation': 'fortran'}, 'mobility_vector_prod_implementation'),
     'unknown blob force': ({'blob_blob_force_implementation': 'fortran'}, 'blob_blob_force_implementation'),
-    'stochastic scheme': ({'scheme': 'stochastic_first_order_RFD'}, 'scheme'),
+    'stochastic scheme': ({'scheme': 'stochastic_first_order_RFD'}, "inputfile_dynamic.dat, line"),
+    'unknown scheme': ({'scheme': 'leapfrog'}, "inputfile_dynamic.dat, line"),
     'restart from a step never saved': ({'initial_step': 7, 'n_steps': 9, 'n_save': 2}, 'initial_step'),
 }
 
