@@ -30,12 +30,16 @@ class SimulationStopped(RuntimeError):
 
 
 def fail_cleanly(main, *args, **kwargs):
-    """Run ``main``; turn a UserInputError into a message and exit status 2."""
+    """Run ``main``; a UserInputError becomes its message and exit status 2, Ctrl-C one line and 130."""
     try:
         return main(*args, **kwargs)
     except UserInputError as err:
         print('error: %s' % err, file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        # Ctrl-C outside the time loop (which handles it itself): one line, no traceback.
+        print('interrupted (SIGINT); files written so far are complete', file=sys.stderr)
+        sys.exit(130)
 
 
 def get_logger(name='rigid_multiblob'):
@@ -354,3 +358,37 @@ def trajectory_parameter(parameters, key, path='the trajectory file'):
         return float(parameters[key])
     except ValueError:
         raise UserInputError('%s: parameter %s = %r is not a number' % (path, key, parameters[key]))
+
+
+def warn_user(message, stream=None):
+    """Print one ``warning: <message>`` line on standard error (or ``stream``).
+
+    For input that is accepted but probably not what the user meant (an
+    option the scheme ignores, extra fields on a line): the run goes on, the
+    user is told once, with the file, line or option to change.
+    """
+    print('warning: %s' % message, file=sys.stderr if stream is None else stream, flush=True)
+
+
+def read_text_file(path, what, hint):
+    """Text of the UTF-8 file ``path`` (a byte-order mark is allowed), or UserInputError.
+
+    ``what`` names the file in messages ("input file", "vertex file", ...);
+    ``hint`` says how to give another one.  A folder, a missing file, an
+    unreadable file and bytes that are not UTF-8 each get their own message.
+    """
+    if os.path.isdir(path):
+        raise UserInputError("%s '%s' is a folder, not a file; %s" % (what, path, hint))
+    if not os.path.isfile(path):
+        raise UserInputError("%s '%s' not found; %s" % (what, path, hint))
+    try:
+        with open(path, 'rb') as f:
+            data = f.read()
+    except OSError as err:
+        raise UserInputError("%s '%s' cannot be read (%s); %s" % (what, path, err.strerror or err, hint))
+    try:
+        return data.decode('utf-8-sig')
+    except UnicodeDecodeError as err:
+        line = data.count(b'\n', 0, err.start) + 1
+        raise UserInputError("%s '%s', line %d: byte 0x%02x is not UTF-8 text; save the file as plain UTF-8 "
+                             "(or ASCII) text" % (what, path, line, data[err.start]))

@@ -52,6 +52,8 @@ class _StopRequest:
 
 def check_options(options):
     """Ranges the dynamic run needs, checked before anything is written."""
+    if not options.dt > 0:
+        raise utils.UserInputError('%s: dt must be positive for a dynamic run, got %g' % (options.where('dt'), options.dt))
     if options.n_save < 1:
         raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
     if options.n_steps < 0:
@@ -74,7 +76,12 @@ class DynamicRun:
     def __init__(self, options, print_residual=False, log=print):
         self.options, self.log = options, log
         check_options(options)
-        self.scheme = make_scheme(options.scheme, options.dt, options)
+        try:
+            self.scheme = make_scheme(options.scheme, options.dt, options)
+        except utils.UserInputError as err:  # name the line of the scheme option (unless the message names one)
+            if str(err).startswith(options.input_file):
+                raise
+            raise utils.UserInputError('%s: %s' % (options.where('scheme'), err))
         self.restart = None
         if options.initial_step > 0:
             self.restart = run_output.restart_record(options.output_name, options.initial_step)
@@ -135,6 +142,8 @@ class DynamicRun:
 
         def save(index):
             writer.save(index, system.arrays.locations, system.arrays.orientations, self.restart_state())
+            if options.save_blobs_mobility or options.save_body_mobility:
+                self.save_mobilities(index)
             self.write_info()
             progress.at_save(index, scheme.invalid_configurations)
 
@@ -159,7 +168,12 @@ class DynamicRun:
                     status = SIGNAL_EXIT_STATUS[stop.signal_number]
                 if last <= first:
                     self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
-            except utils.SimulationStopped as err:
+            except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
+                if isinstance(err, np.linalg.LinAlgError):  # a singular blob mobility: blobs of a body merged
+                    err = utils.SimulationStopped('step %d of %s: the linear algebra failed (%s); the blobs of a '
+                                                  'body are too close to each other for their distance to the '
+                                                  'origin (check the positions and forces)'
+                                                  % (step, options.scheme, err))
                 progress.close()
                 self.log_error('error: run stopped: %s. Snapshots up to the last saved step are complete; .info '
                                'and .time are written.' % str(err).rstrip('.'))
@@ -178,6 +192,17 @@ class DynamicRun:
             self.log_error('%s; outputs are complete up to the last saved step; restart with initial_step '
                            'set to that step' % stopped_line)
         return status
+
+    def save_mobilities(self, step):
+        """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities of the saved step (SPEC 2.1)."""
+        system = self.system
+        stem = '%s.%%s.%s.dat' % (self.options.output_name, str(step).zfill(8))
+        M, M_inv, _, N = system.dense_matrices(system.arrays.locations, system.arrays.orientations,
+                                               inverse=self.options.save_body_mobility)
+        if self.options.save_blobs_mobility:
+            np.savetxt(stem % 'blobs_mobility', M, delimiter='  ')
+        if self.options.save_body_mobility:
+            np.savetxt(stem % 'body_mobility', N, delimiter='  ')
 
     def log_error(self, text):
         import sys

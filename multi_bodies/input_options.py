@@ -1,6 +1,6 @@
 """Reader of the input file of the scripts: typed options with defaults.
 
-Format (SPEC section 1.1): one option per line, ``name value``; everything
+Format: one option per line, ``name value``; everything
 after a ``#`` is a comment; blank lines are skipped; a repeated option
 replaces the earlier one, except ``structure``, of which every line is kept
 (one per body type, in order).
@@ -12,10 +12,11 @@ expected.  Options that only later versions of the published code know are
 refused as unsupported rather than silently ignored (SPEC decision 9).
 """
 import difflib
+import math
 import os
 from collections import namedtuple
 
-from utils import UserInputError
+from utils import UserInputError, read_text_file, warn_user
 
 
 # name -> (kind, default).  Kinds: str, int, float, floats3, grid9, bool, optional_str, optional_int.
@@ -86,13 +87,16 @@ class Options:
     Every name of ``OPTION_TABLE`` is an attribute (defaults filled in);
     ``structures`` is the list of ``StructureSpec`` in input order;
     ``input_file`` the path read; ``where(name)`` says on which line an
-    option was set ("<file>, line <n>", or "<file> (default)").
+    option was set ("<file>, line <n>", or "<file> (default)");
+    ``warnings`` the messages about accepted but doubtful lines (printed by
+    ``read_input_file``).
     """
 
     def __init__(self, input_file, values, lines, structures):
         self.input_file = input_file
         self._lines = dict(lines)
         self.structures = list(structures)
+        self.warnings = []
         for name, (kind, default) in OPTION_TABLE.items():
             setattr(self, name, values.get(name, default))
 
@@ -118,6 +122,15 @@ def _convert(kind, name, value, where):
     def fail(expected):
         raise UserInputError("%s: option '%s' expects %s, got '%s'" % (where, name, expected, value))
 
+    def finite(word, expected):
+        number = float(word)
+        if not math.isfinite(number):
+            fail(expected + ' (finite: not nan or inf)')
+        if abs(number) > LARGEST_VALUE:
+            fail(expected + ' of magnitude at most %g (larger values overflow when squared; rescale the units)'
+                 % LARGEST_VALUE)
+        return number
+
     if kind in ('str', 'optional_str'):
         if len(words) != 1:
             fail('one word (no spaces)')
@@ -133,7 +146,9 @@ def _convert(kind, name, value, where):
         if len(words) != 1:
             fail('one number')
         try:
-            return float(words[0])
+            return finite(words[0], 'a number')
+        except UserInputError:
+            raise
         except ValueError:
             fail('a number')
     if kind == 'bool':
@@ -142,7 +157,9 @@ def _convert(kind, name, value, where):
         return words[0] == 'True'
     if kind == 'floats3':
         try:
-            numbers = tuple(float(w) for w in words)
+            numbers = tuple(finite(w, 'three numbers') for w in words)
+        except UserInputError:
+            raise
         except ValueError:
             fail('three numbers')
         if len(numbers) != 3:
@@ -155,10 +172,13 @@ def _convert(kind, name, value, where):
         try:
             grid = []
             for axis in range(3):
-                low, high, cells = float(words[3 * axis]), float(words[3 * axis + 1]), int(words[3 * axis + 2])
+                low, high = finite(words[3 * axis], expected), finite(words[3 * axis + 1], expected)
+                cells = int(words[3 * axis + 2])
                 if cells < 1 or not high > low:
                     fail(expected)
                 grid.append((low, high, cells))
+        except UserInputError:
+            raise
         except ValueError:
             fail(expected)
         return tuple(grid)
@@ -173,7 +193,7 @@ def structure_id_from_clones(clones_path):
 
 def parse_input_text(text, input_file='<input>'):
     """Parse the text of an input file into ``Options`` (see module docstring)."""
-    values, lines, structures = {}, {}, []
+    values, lines, structures, repeated = {}, {}, [], []
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split('#', 1)[0].strip()
         if not line:
@@ -203,21 +223,73 @@ def parse_input_text(text, input_file='<input>'):
             hint = " (did you mean '%s'?)" % close[0] if close else ''
             raise UserInputError("%s: unknown option '%s'%s" % (where, name, hint))
         values[name] = _convert(OPTION_TABLE[name][0], name, value, where)
+        if name in lines:
+            repeated.append("%s: option '%s' repeats line %d; the later value is used (remove one of the lines)"
+                            % (where, name, lines[name]))
         lines[name] = number
     options = Options(input_file, values, lines, structures)
     check_ranges(options)
     check_periodic_box(options)
+    options.warnings = repeated + unused_option_warnings(options)
     return options
+
+
+STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+# Largest magnitude of a number option: its square still fits in a double.
+LARGEST_VALUE = 1e150
+# eta and blob_radius beyond these bounds make eta a^3 (rotational resistance) over- or underflow.
+SCALE_RANGE = (1e-50, 1e50)
+ROLLER_ONLY_OPTIONS = ('domain', 'omega_one_roller', 'free_kinematics')
+# Options of the published input files that are read (and checked) but change nothing in this version;
+# remove a name here when a scheme starts to use it (doc/options.md lists them too).
+NO_EFFECT_OPTIONS = ('n_relaxation', 'save_velocities', 'slip_file', 'structure_names')
+STOCHASTIC_ONLY_OPTIONS = ('kT', 'rf_delta', 'update_PC')
+
+
+def unused_option_warnings(options):
+    """Messages for options that the chosen scheme does not use although the file sets them."""
+    messages = []
+    scheme = options.scheme
+    if 'rollers' not in scheme:
+        for name in ROLLER_ONLY_OPTIONS:
+            if options.is_set(name):
+                extra = (' (the wall is chosen by the mobility implementations: names ending in _no_wall are '
+                         'free space)' if name == 'domain' else '')
+                messages.append("%s: option '%s' is used by the roller schemes only and is ignored by scheme "
+                                "'%s'%s; remove the line" % (options.where(name), name, scheme, extra))
+    for name in NO_EFFECT_OPTIONS:
+        if options.is_set(name):
+            messages.append("%s: option '%s' is accepted for compatibility with the published input files but "
+                            "has no effect in this version (see doc/options.md)" % (options.where(name), name))
+    if scheme.startswith('deterministic') or scheme in STATIC_SCHEMES:
+        for name in STOCHASTIC_ONLY_OPTIONS:
+            if options.is_set(name):
+                messages.append("%s: option '%s' is ignored by scheme '%s', which has no thermal noise; choose a "
+                                "stochastic scheme or remove the line" % (options.where(name), name, scheme))
+    return messages
 
 
 def check_ranges(options):
     """Values that parse but make no sense: caught here, with the line, not deep in a solver."""
+    for name in ('eta', 'blob_radius'):
+        value = getattr(options, name)
+        if not SCALE_RANGE[0] <= value <= SCALE_RANGE[1]:
+            raise UserInputError('%s: %s must be positive, between %g and %g (beyond that eta a^3 over- or '
+                                 'underflows in double precision; rescale the units), got %g'
+                                 % (options.where(name), name, SCALE_RANGE[0], SCALE_RANGE[1], value))
     if not 0.0 < options.solver_tolerance < 1.0:
         raise UserInputError('%s: solver_tolerance is a relative tolerance between 0 and 1 (e.g. 1e-8), got %g'
                              % (options.where('solver_tolerance'), options.solver_tolerance))
+    for name in ('debye_length', 'debye_length_wall'):
+        if not getattr(options, name) > 0.0:
+            raise UserInputError('%s: %s must be positive (the repulsion laws divide by it), got %g'
+                                 % (options.where(name), name, getattr(options, name)))
     if options.tracer_radius < 0.0:
         raise UserInputError('%s: tracer_radius must be >= 0 (0 gives the point velocity), got %g'
                              % (options.where('tracer_radius'), options.tracer_radius))
+    if options.n_steps < 0:
+        raise UserInputError('%s: n_steps must be >= 0 (the index of the last step), got %d'
+                             % (options.where('n_steps'), options.n_steps))
 
 
 def check_periodic_box(options):
@@ -237,9 +309,12 @@ def check_periodic_box(options):
 
 
 def read_input_file(path):
-    """Read and validate the input file at ``path``; returns ``Options``."""
-    if not os.path.isfile(path):
-        raise UserInputError("input file '%s' not found (give it with --input-file)" % path)
-    with open(path, 'r') as f:
-        text = f.read()
-    return parse_input_text(text, path)
+    """Read and validate the input file at ``path``; returns ``Options``.
+
+    Warnings about accepted but doubtful lines are printed on standard error.
+    """
+    text = read_text_file(path, 'input file', 'give the input file with --input-file')
+    options = parse_input_text(text, path)
+    for message in options.warnings:
+        warn_user(message)
+    return options

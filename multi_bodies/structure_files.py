@@ -15,40 +15,66 @@ lines are skipped.
 * velocity file (scheme ``resistance``): one line per body ``vx vy vz wx wy wz``.
 
 Every reader raises ``utils.UserInputError`` naming the file and line and
-what was expected when a file is missing or malformed.
+what was expected when a file is missing, is not UTF-8 text or is
+malformed.  Numbers must be finite and at most ``LARGEST_VALUE`` in
+magnitude (squares of distances must not overflow): ``nan``, ``inf`` and
+``1e400`` are refused when the file is read, not deep in a solver.  Extra
+values on a ``.clones`` or ``.slip`` line are ignored with a warning; a
+fourth column in a ``.vertex`` file is an error, because later versions of
+the published code read it as the radius of that blob, while this package
+gives every blob the one ``blob_radius`` of the input file.
 """
 import os
 
 import numpy as np
 
-from utils import UserInputError
+from utils import UserInputError, read_text_file, warn_user
+
+# Largest magnitude accepted in a structure or body file: its square (1e300) still fits in a double.
+LARGEST_VALUE = 1e150
 
 
 def _meaningful_lines(path, kind, referenced_from=None):
     """(line number, tokens) of the non-empty lines of ``path`` after removing comments."""
-    if not os.path.isfile(path):
-        origin = ' (named in %s)' % referenced_from if referenced_from else ''
-        raise UserInputError("%s file '%s' not found%s; check the path, which is relative to the "
-                             "directory the script runs in (%s)" % (kind, path, origin, os.getcwd()))
+    origin = ' (named in %s)' % referenced_from if referenced_from else ''
+    text = read_text_file(path, '%s file' % kind,
+                          'check the path%s, which is relative to the directory the script runs in (%s)'
+                          % (origin, os.getcwd()))
     rows = []
-    with open(path, 'r') as f:
-        for number, raw in enumerate(f, start=1):
-            tokens = raw.split('#', 1)[0].split()
-            if tokens:
-                rows.append((number, tokens))
+    for number, raw in enumerate(text.splitlines(), start=1):
+        tokens = raw.split('#', 1)[0].split()
+        if tokens:
+            rows.append((number, tokens))
     return rows
 
 
 def _parse_row(path, number, tokens, columns, expected):
-    """First ``columns`` numbers of one line, or UserInputError."""
+    """First ``columns`` numbers of one line, or UserInputError (also for nan, inf, |x| > LARGEST_VALUE)."""
     if len(tokens) < columns:
         raise UserInputError("%s, line %d: expected %s (%d numbers), found %d value(s): '%s'"
                              % (path, number, expected, columns, len(tokens), ' '.join(tokens)))
     try:
-        return [float(t) for t in tokens[:columns]]
+        numbers = [float(t) for t in tokens[:columns]]
     except ValueError:
         raise UserInputError("%s, line %d: expected %s (%d numbers), cannot read '%s' as numbers"
                              % (path, number, expected, columns, ' '.join(tokens[:columns])))
+    for token, value in zip(tokens, numbers):
+        if not np.isfinite(value):
+            raise UserInputError("%s, line %d: '%s' is not a finite number (expected %s); fix the value"
+                                 % (path, number, token, expected))
+        if abs(value) > LARGEST_VALUE:
+            raise UserInputError("%s, line %d: '%s' is too large (magnitude above %g, whose square overflows); "
+                                 "rescale the units" % (path, number, token, LARGEST_VALUE))
+    return numbers
+
+
+def _check_extra_columns(path, data, columns, expected, kind):
+    """Warn once per file about lines with more than ``columns`` values (the extra ones are ignored)."""
+    longer = [(n, t) for n, t in data if len(t) > columns]
+    if longer:
+        number, tokens = longer[0]
+        warn_user("%s, line %d: %d values, but a %s line holds %d (%s); the extra values are ignored "
+                  "(%d line(s) affected)" % (path, number, len(tokens), kind, columns, expected, len(longer)))
 
 
 def _read_counted_table(path, kind, columns, expected, referenced_from, exact_count):
@@ -77,27 +103,53 @@ def _read_counted_table(path, kind, columns, expected, referenced_from, exact_co
     if exact_count and len(data) > count:
         raise UserInputError("%s, line %d: the first line announces %d %s but the file has %d; "
                              "fix the count" % (path, data[count][0], count, expected + ' line(s)', len(data)))
+    if kind == 'vertex':
+        for n, t in data:
+            if len(t) > columns:
+                raise UserInputError(
+                    "%s, line %d: %d values, but a vertex line holds the 3 numbers x y z. Later versions of the "
+                    "published code read a 4th column as the radius of that blob; this package gives every blob "
+                    "the radius blob_radius of the input file, so the file would mean something else here. "
+                    "Remove the extra column(s) (and set blob_radius)" % (path, n, len(t)))
+    else:
+        _check_extra_columns(path, data, columns, expected, kind)
     table = [_parse_row(path, n, t, columns, expected) for n, t in data[:count]]
     # Rows past the count are still checked so that a typo there is reported.
     for n, t in data[count:]:
         _parse_row(path, n, t, columns, expected)
-    return np.array(table, dtype=float)
+    return np.array(table, dtype=float).reshape(count, columns)
 
 
 def read_vertex_file(path, referenced_from=None):
-    """Blob positions of the reference configuration, shape (n, 3)."""
-    return _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+    """Blob positions of the reference configuration, shape (n, 3).
+
+    Two blobs at the same position are refused: they make the body's blob
+    mobility singular.
+    """
+    blobs = _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+    _, first, counts = np.unique(blobs, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        repeated = blobs[first[np.argmax(counts > 1)]]
+        same = np.flatnonzero(np.all(blobs == repeated, axis=1))
+        rows = [n for n, t in _meaningful_lines(path, 'vertex', referenced_from)[1:]]
+        raise UserInputError("%s, lines %d and %d: two blobs at the same position %s make the mobility of the "
+                             "body singular; remove one of the lines and fix the count"
+                             % (path, rows[same[0]], rows[same[1]], ' '.join(repr(float(v)) for v in repeated)))
+    return blobs
 
 
 def read_clones_file(path, referenced_from=None):
     """Body locations, shape (Nb, 3), and normalised quaternions, shape (Nb, 4)."""
     table = _read_counted_table(path, 'clones', 7, 'body location and quaternion x y z s p1 p2 p3',
                                 referenced_from, exact_count=False)
-    norms = np.linalg.norm(table[:, 3:], axis=1)
-    if np.any(norms == 0.0):
+    quaternions = table[:, 3:].copy()
+    scale = np.max(np.abs(quaternions), axis=1)
+    if np.any(scale == 0.0):
         raise UserInputError("%s: body %d has a zero quaternion; give a unit quaternion s p1 p2 p3"
-                             % (path, int(np.argmax(norms == 0.0))))
-    return table[:, :3].copy(), table[:, 3:] / norms[:, None]
+                             % (path, int(np.argmax(scale == 0.0))))
+    tiny = scale < 1e-100  # squares would underflow: rescale those rows first (others as published)
+    quaternions[tiny] /= scale[tiny, None]
+    return table[:, :3].copy(), quaternions / np.linalg.norm(quaternions, axis=1)[:, None]
 
 
 def read_slip_file(path, referenced_from=None):
@@ -136,11 +188,17 @@ def write_vertex_file(path, reference_configuration, comment=None):
             f.write('%s %s %s\n' % (repr(float(x)), repr(float(y)), repr(float(z))))
 
 
-def write_clones_file(path, locations, orientations):
-    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision)."""
+def write_clones_file(path, locations, orientations, comment=None):
+    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision).
+
+    ``comment``: text written first, each line behind ``# ``.
+    """
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     with open(path, 'w') as f:
+        if comment:
+            for line in comment.splitlines():
+                f.write('# %s\n' % line)
         f.write('%d\n' % locations.shape[0])
         for row in np.concatenate((locations, orientations), axis=1):
             f.write(' '.join(repr(float(v)) for v in row) + '\n')

@@ -10,6 +10,9 @@
 * The boomerang of the manual: an apex at the origin and two straight arms
   along +x and +y with equally spaced blobs (15 blobs, spacing 0.3).
 * A straight rod of equally spaced blobs along x, centred at the origin.
+* A single blob at the origin (the body of the roller schemes), and
+  ``.clones`` files of bodies on a square lattice at one height, all with the
+  identity orientation.
 
 Command line (run from the repository root or anywhere the package is
 importable)::
@@ -18,6 +21,8 @@ importable)::
     python -m multi_bodies.structure_generators shell --blobs 12 --shell-radius 1 --output multi_bodies/Structures
     python -m multi_bodies.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
     python -m multi_bodies.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
+    python -m multi_bodies.structure_generators blob --output multi_bodies/Structures
+    python -m multi_bodies.structure_generators lattice --nx 2 --ny 2 --spacing 5 --height 1 --name four_rollers --output multi_bodies/Structures
 
 Each command prints the file it wrote and the blob radius to use with it.
 """
@@ -30,7 +35,7 @@ import numpy as np
 if __package__ in (None, ''):
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from multi_bodies.structure_files import write_vertex_file  # noqa: E402
+from multi_bodies.structure_files import write_clones_file, write_vertex_file  # noqa: E402
 
 
 def icosahedron_vertices():
@@ -148,6 +153,17 @@ def rod(num_blobs, spacing):
     return np.column_stack((x, np.zeros(num_blobs), np.zeros(num_blobs)))
 
 
+def lattice(nx, ny, spacing, height):
+    """Body locations on an ``nx`` by ``ny`` square lattice centred above the origin at ``height``, shape (nx ny, 3).
+
+    x runs fastest; the orientations to go with them are the identity quaternion.
+    """
+    x = spacing * (np.arange(nx) - 0.5 * (nx - 1))
+    y = spacing * (np.arange(ny) - 0.5 * (ny - 1))
+    yy, xx = np.meshgrid(y, x, indexing='ij')
+    return np.column_stack((xx.ravel(), yy.ravel(), np.full(nx * ny, float(height))))
+
+
 def squirmer_slip(blobs, B1=1.0, beta=0.0, axis=(1.0, 0.0, 0.0)):
     """Tangential slip of a squirmer on a shell of blobs (body frame), shape (n, 3).
 
@@ -185,12 +201,36 @@ def main(argv=None):
     p_slip.add_argument('--blobs', type=int, required=True, help='12, 42, 162, ... blobs of the shell')
     p_slip.add_argument('--B1', type=float, default=1.0, help='first squirming mode (swimming speed 2 B1/3)')
     p_slip.add_argument('--beta', type=float, default=0.0, help='B2/B1 (pusher < 0 < puller)')
-    for p in (p_shell, p_boom, p_rod, p_slip):
-        p.add_argument('--output', default='.', help='folder for the .vertex file (default: .)')
+    p_blob = sub.add_parser('blob', help='one blob at the origin (blob.vertex, the body of the roller schemes)')
+    p_lattice = sub.add_parser('lattice', help='.clones file of bodies on a square lattice at one height')
+    p_lattice.add_argument('--nx', type=int, required=True)
+    p_lattice.add_argument('--ny', type=int, default=1)
+    p_lattice.add_argument('--spacing', type=float, required=True, help='distance between neighbours')
+    p_lattice.add_argument('--height', type=float, required=True, help='z of every body location')
+    p_lattice.add_argument('--name', required=True, help='file name without .clones')
+    for p in (p_shell, p_boom, p_rod, p_slip, p_blob, p_lattice):
+        p.add_argument('--output', default='.', help='folder for the file (default: .)')
     args = parser.parse_args(argv)
 
     command = 'python -m multi_bodies.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
-    if args.kind == 'shell' and args.shell_radius is not None:
+    if args.kind == 'lattice':
+        if args.nx < 1 or args.ny < 1:
+            parser.error('--nx and --ny must be positive')
+        locations = lattice(args.nx, args.ny, args.spacing, args.height)
+        orientations = np.tile([1.0, 0.0, 0.0, 0.0], (locations.shape[0], 1))
+        os.makedirs(args.output, exist_ok=True)
+        path = os.path.join(args.output, args.name + '.clones')
+        write_clones_file(path, locations, orientations,
+                          comment='made by: %s\n%d x %d bodies, spacing %g, height %g'
+                          % (command, args.nx, args.ny, args.spacing, args.height))
+        print('wrote %s (%d bodies)' % (path, locations.shape[0]))
+        return path
+    if args.kind == 'blob':
+        blobs = np.zeros((1, 3))
+        blob_radius = None
+        name = 'blob.vertex'
+        note = 'one blob at the origin'
+    elif args.kind == 'shell' and args.shell_radius is not None:
         blobs = icosahedral_shell(args.blobs) * args.shell_radius
         blob_radius = 0.5 * smallest_distance(blobs)
         name = 'shell_N_%d_Rg_%s.vertex' % (args.blobs, ('%g' % args.shell_radius).replace('.', '_'))

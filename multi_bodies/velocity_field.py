@@ -1,4 +1,4 @@
-"""Fluid velocity on a rectilinear grid, written as a legacy VTK file (SPEC section 2.3).
+"""Fluid velocity on a rectilinear grid, written as a legacy VTK file.
 
 The grid option ``x0 x1 Nx y0 y1 Ny z0 z1 Nz`` splits the box into
 ``Nx Ny Nz`` cells; the velocity is computed at the cell centres (x fastest,
@@ -51,11 +51,13 @@ def write_velocity_field_vtk(path, grid, velocity):
     """Write the velocity (shape (Nx Ny Nz, 3), x fastest) on the grid as a legacy ASCII VTK file.
 
     The file is a rectilinear grid whose cell data ``velocity`` holds one
-    vector per cell; ParaView, VisIt and ``pyvista.read`` open it.
+    vector per cell, written as the active vectors (``VECTORS velocity
+    double``), so that ParaView, VisIt and ``pyvista.read`` offer glyphs and
+    streamlines of it at once.
     """
     import pyvista
     x_edges, y_edges, z_edges = grid_edges(grid)
     mesh = pyvista.RectilinearGrid(x_edges, y_edges, z_edges)
-    mesh.cell_data['velocity'] = np.asarray(velocity, dtype=float).reshape(-1, 3)
+    mesh.cell_data.set_vectors(np.asarray(velocity, dtype=float).reshape(-1, 3), 'velocity')
     mesh.save(path, binary=False)
     return path

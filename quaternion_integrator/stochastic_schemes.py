@@ -71,12 +71,14 @@ class StochasticScheme(Scheme):
         self.kT = float(getattr(options, 'kT', 1.0))
         self.delta = float(getattr(options, 'rf_delta', 1e-3))
         self.update_PC = int(getattr(options, 'update_PC', 1))
-        if self.kT < 0:
-            raise UserInputError('kT must be >= 0, got %g' % self.kT)
-        if not self.delta > 0:
-            raise UserInputError('rf_delta must be positive, got %g' % self.delta)
+        where = getattr(options, 'where', lambda name: name)
+        if not (self.kT >= 0 and np.isfinite(self.kT)):
+            raise UserInputError('%s: kT must be >= 0, got %g' % (where('kT'), self.kT))
+        if not (self.delta > 0 and np.isfinite(self.delta)):
+            raise UserInputError('%s: rf_delta must be positive (1e-3 is the default), got %g'
+                                 % (where('rf_delta'), self.delta))
         if self.update_PC < 1:
-            raise UserInputError('update_PC must be at least 1, got %d' % self.update_PC)
+            raise UserInputError('%s: update_PC must be at least 1, got %d' % (where('update_PC'), self.update_PC))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
         self._preconditioner = None
         self._preconditioner_step = None

@@ -86,7 +86,7 @@ def test_missing_input_file(tmp_path):
 
 # ---------------------------------------------------------------- structure files
 def test_vertex_and_clones_readers(tmp_path):
-    vertex = write(tmp_path / 'b.vertex', '# blobs\n2  0.5 extra\n0 0 1   # top\n\n0 0 -1 7\n')
+    vertex = write(tmp_path / 'b.vertex', '# blobs\n2  0.5 extra\n0 0 1   # top\n\n0 0 -1\n')
     np.testing.assert_array_equal(read_vertex_file(vertex), [[0, 0, 1], [0, 0, -1]])
     clones = write(tmp_path / 'b.clones', '2\n1 2 3 2 0 0 0\n4 5 6 0 0 0 3\n7 7 7 1 0 0 0\n')
     locations, quaternions = read_clones_file(clones)

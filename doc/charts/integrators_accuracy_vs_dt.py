@@ -12,7 +12,7 @@ Adams-Bashforth run at dt = 0.00625:
 * error at t = 20 (resting on the wall: shows stability),
 
 as the largest distance between a body location and its reference.  A run
-that puts a blob below the wall stops (SPEC decision 2) and is marked as
+that puts a blob below the wall stops and is marked as
 failed.  The script runs ``multi_bodies.py`` itself, as a user would.
 
     python doc/charts/integrators_accuracy_vs_dt.py [--debye-length 0.1] [--png chart.png]

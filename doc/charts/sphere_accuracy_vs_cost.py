@@ -6,7 +6,7 @@ icosahedral shell of 12, 42, 162 or 642 blobs (blob radius calibrated so that
 the bulk translational radius is 1, as made by
 ``multi_bodies.structure_generators``).  For each model and height the script
 computes the 6x6 mobility and compares five scalars with the exact values of
-a sphere above a wall (VALIDATION.md §2.1: Brenner, O'Neill, Dean-O'Neill,
+a sphere above a wall (Brenner, O'Neill, Dean-O'Neill,
 Jeffery series): parallel and perpendicular translation, parallel and
 perpendicular rotation, and the translation-rotation coupling.  Cost: the
 time of one blob mobility product M f for a suspension of 100 such spheres
@@ -24,7 +24,7 @@ import numpy as np
 import mobility
 from multi_bodies.structure_generators import calibrated_shell
 
-# VALIDATION.md §2.1: h/R -> (mu_par, mu_perp, rot_par, rot_perp, coupling), exact.
+# Exact values (Brenner 1961, O'Neill 1964, Dean and O'Neill 1963, Jeffery 1915): h/R -> (mu_par, mu_perp, rot_par, rot_perp, coupling), exact.
 EXACT = {1.1: (0.44305, 0.08727, 0.68955, 0.89520, 2.703e-2),
          1.5: (0.62681, 0.31197, 0.90069, 0.96237, 9.355e-3),
          2.0: (0.72321, 0.47047, 0.95991, 0.98432, 3.488e-3),
