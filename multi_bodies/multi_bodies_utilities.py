@@ -47,6 +47,7 @@ import mobility  # noqa: E402
 import utils  # noqa: E402
 from multi_bodies import body_solver  # noqa: E402
 from multi_bodies.input_options import read_input_file  # noqa: E402
+from multi_bodies import run_output  # noqa: E402
 from multi_bodies.run_setup import STATIC_SCHEMES, prepare, write_bodies_info  # noqa: E402
 from multi_bodies.structure_files import read_body_table  # noqa: E402
 
@@ -67,9 +68,12 @@ def run_body_mobility(options, system, r_vectors):
     return 0
 
 
-def forces_and_slip(options, system, r_vectors):
-    """Force-torque (Nb, 6) from ``force_file`` or the hooks, and the slip (N, 3), as the dynamics computes them."""
-    if options.force_file is not None:
+def forces_and_slip(options, system, r_vectors, force_table=None):
+    """Force-torque (Nb, 6) from ``force_file`` (read beforehand: ``force_table``) or the hooks, and the
+    slip (N, 3), as the dynamics computes them."""
+    if force_table is not None:
+        force_torque = force_table
+    elif options.force_file is not None:
         force_torque = read_body_table(options.force_file, system.num_bodies, 'force', options.where('force_file'))
     else:
         force_torque = system.forces_torques(r_vectors)
@@ -77,8 +81,8 @@ def forces_and_slip(options, system, r_vectors):
     return np.asarray(force_torque, dtype=float).reshape(-1, 6), slip
 
 
-def run_mobility(options, system, r_vectors):
-    force_torque, slip = forces_and_slip(options, system, r_vectors)
+def run_mobility(options, system, r_vectors, force_table=None):
+    force_torque, slip = forces_and_slip(options, system, r_vectors, force_table)
     with utils.Timer() as timer:
         operator = body_solver.saddle_point_operator(system.arrays, r_vectors, system.mobility_product, system.eta,
                                                      system.blob_radius, system.periodic_length)
@@ -103,8 +107,10 @@ def run_mobility(options, system, r_vectors):
     return 0
 
 
-def run_resistance(options, system, r_vectors):
-    if options.velocity_file is not None:
+def run_resistance(options, system, r_vectors, velocity_table=None):
+    if velocity_table is not None:
+        velocities = velocity_table
+    elif options.velocity_file is not None:
         velocities = read_body_table(options.velocity_file, system.num_bodies, 'velocity',
                                      options.where('velocity_file'))
     else:
@@ -147,10 +153,22 @@ def run(options):
     # Shared with multi_bodies.py: checks, hooks, bodies, arrays, backends, System, start check.
     setup = prepare(options, 'static', log=print)
     system = setup.system
+    # Everything is validated before the first byte is written: the tables the problem reads, the
+    # source-target backend of the velocity field, the output folder.
+    force_table = velocity_table = None
+    if options.scheme == 'mobility' and options.force_file is not None:
+        force_table = read_body_table(options.force_file, system.num_bodies, 'force', options.where('force_file'))
+    if options.scheme == 'resistance' and options.velocity_file is not None:
+        velocity_table = read_body_table(options.velocity_file, system.num_bodies, 'velocity',
+                                         options.where('velocity_file'))
+    if options.plot_velocity_field is not None and options.scheme != 'body_mobility':
+        try:
+            mobility.source_target_product(system.vector_product_name)
+        except utils.UserInputError as err:
+            raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
+                                       % (options.where('mobility_vector_prod_implementation'), err))
+    run_output.prepare_output_directory(options.output_name, options.where('output_name'))
 
-    output_dir = os.path.dirname(options.output_name)
-    if output_dir:
-        os.makedirs(output_dir, exist_ok=True)
     copy = options.output_name + '.inputfile'
     if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
         shutil.copyfile(options.input_file, copy)
@@ -160,10 +178,14 @@ def run(options):
         if options.scheme == 'body_mobility':
             return run_body_mobility(options, system, r_vectors)
         if options.scheme == 'mobility':
-            return run_mobility(options, system, r_vectors)
-        return run_resistance(options, system, r_vectors)
+            return run_mobility(options, system, r_vectors, force_table)
+        return run_resistance(options, system, r_vectors, velocity_table)
     except utils.SimulationStopped as err:  # a user-defined function failed, or forces/slip are not finite
         print('error: %s' % err, file=sys.stderr)
+        return 1
+    except np.linalg.LinAlgError as err:  # a singular blob mobility: blobs of a body merged in double precision
+        print('error: the blob mobility is singular (%s): the blobs of a body coincide in double precision, '
+              'for example a body very far from the origin; check the clones files' % err, file=sys.stderr)
         return 1
 
 

@@ -265,19 +265,10 @@ def check_run(kind, folder, input_name):
     return status
 
 
-# Findings in files this test's author does not own, reported to their owner (issue 10 report); each has a
-# strict xfail test below that reproduces it, so that the entry is removed when the owner fixes it.
-KNOWN_FOREIGN = (
-    # multi_bodies_utilities.py copies the input file (and writes .bodies_info) before it checks the
-    # backends and reads the force/velocity file.
-    'static: earlier outputs changed by a failed validation',
-    # A body far from the origin (|location| ~ 1e20 with blobs ~ 1 apart): its blob positions coincide in
-    # double precision and the blob mobility is singular; the static script has no check and no handler.
-    'static: LinAlgError in multi_bodies/body_solver.py',
-    # output_name inside a file: multi_bodies_utilities.py calls os.makedirs itself.
-    'static: FileExistsError in multi_bodies/multi_bodies_utilities.py',
-    'static: NotADirectoryError in multi_bodies/multi_bodies_utilities.py',
-)
+# Findings of earlier runs in files owned by others, now fixed (each reproduced by a test below):
+# the static script wrote before validating, created the output folder itself, and let a singular blob
+# mobility (a body at 1e20) through as a traceback.  Nothing is tolerated any more.
+KNOWN_FOREIGN = ()
 FINDINGS = collections.defaultdict(list)
 COLLECT = os.environ.get('RMB_FUZZ_COLLECT', '') not in ('', '0')
 
@@ -331,9 +322,7 @@ def test_report_fuzz_outcomes():
     assert OUTCOMES['cases'] > 0
 
 
-# ---------------------------------------------------------------------- the known findings, reproduced
-@pytest.mark.xfail(strict=True, reason='multi_bodies_utilities.py writes .inputfile before reading force_file '
-                                       '(issue 10 report); remove this mark and the KNOWN_FOREIGN entry when fixed')
+# ---------------------------------------------------------------------- earlier findings in the static script, now fixed
 def test_known_static_writes_before_validation(earlier_run, tmp_path):
     folder = tmp_path / 'case'
     shutil.copytree(earlier_run, folder)
@@ -342,9 +331,6 @@ def test_known_static_writes_before_validation(earlier_run, tmp_path):
     check_run('static', folder, 'inputfile.dat')
 
 
-@pytest.mark.xfail(strict=True, reason='static script: singular blob mobility of a body at z = 1e20 is a '
-                                       'traceback (issue 10 report); remove this mark and the KNOWN_FOREIGN '
-                                       'entry when fixed')
 def test_known_static_singular_far_body(earlier_run, tmp_path):
     folder = tmp_path / 'case'
     shutil.copytree(earlier_run, folder)
@@ -353,8 +339,6 @@ def test_known_static_singular_far_body(earlier_run, tmp_path):
     check_run('static', folder, 'inputfile.dat')
 
 
-@pytest.mark.xfail(strict=True, reason='multi_bodies_utilities.py creates the output folder with os.makedirs: a '
-                                       'traceback when output_name lies inside a file (issue 10 report)')
 def test_known_static_output_folder_is_a_file(earlier_run, tmp_path):
     folder = tmp_path / 'case'
     shutil.copytree(earlier_run, folder)
