@@ -92,16 +92,22 @@ def blob_system(n_bodies, b, seed, backend):
 
 
 def run(scheme_name, n_bodies, n_steps, dt, b=SOFT, seed=1, backend='C++'):
-    """Per-body mean heights, all heights (for histograms), invalid count, seconds per unit time."""
+    """Per-body mean heights, all heights (for histograms), invalid count, seconds per unit time.
+
+    A whole step of all bodies is retried when one blob crosses the wall, so at large dt and many bodies
+    the scheme stops (100 rejections in a row, utils.SimulationStopped), as a user's run would.
+    """
     system = blob_system(n_bodies, b, seed, backend if scheme_name not in DENSE else 'python')
     scheme = make_scheme(scheme_name, dt, SimpleNamespace(kT=KT, rf_delta=1e-3, update_PC=1))
-    scheme.max_consecutive_rejections = 10 ** 6
     rng = np.random.default_rng(seed + 1)
     sums = np.zeros(n_bodies)
     samples = []
     start = time.perf_counter()
+    import contextlib
+    import io
     for step in range(n_steps):
-        scheme.step(system, step, rng)
+        with contextlib.redirect_stdout(io.StringIO()):  # the 'Invalid configuration number' lines
+            scheme.step(system, step, rng)
         z = system.arrays.locations[:, 2]
         sums += z
         if step % 5 == 0:
@@ -121,6 +127,36 @@ def sizes(scheme, quick):
     if scheme in ROLLERS:
         return (300, 4.0) if quick else (400, 30.0)
     return (150, 3.0) if quick else (200, 15.0)
+
+
+def weak_chart(curves, out, plt):
+    """Table of observed orders and the chart |bias| against dt and against cost; curves: name -> (n, 4)."""
+    print('\n| scheme | observed weak order (fit of log|bias| on log dt, points with |bias| > 2 SE) | claimed |')
+    print('|---|---|---|')
+    for name, p in curves.items():
+        use = np.abs(p[:, 1]) > 2 * p[:, 2]
+        slope = np.polyfit(np.log(p[use, 0]), np.log(np.abs(p[use, 1])), 1)[0] if use.sum() >= 2 else np.nan
+        print('| %s | %s | %d |' % (name, 'n/a (fewer than 2 points with bias > 2 SE)' if np.isnan(slope)
+                                    else '%.2f' % slope, CLAIMED_ORDER[name]))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for name, p in curves.items():
+        label = name.replace('stochastic_', '')
+        ax1.errorbar(p[:, 0], np.abs(p[:, 1]), yerr=p[:, 2], marker='o', ms=3, label=label, capsize=2)
+        ax2.errorbar(p[:, 3], np.abs(p[:, 1]), yerr=p[:, 2], marker='o', ms=3, label=label, capsize=2)
+    dts = np.unique(np.concatenate([p[:, 0] for p in curves.values()]))
+    ax1.plot(dts, 0.1 * dts, 'k--', lw=0.8, label='slope 1')
+    for ax in (ax1, ax2):
+        ax.set_xscale('log')
+        ax.set_yscale('log')
+        ax.set_ylabel('|<z> - exact| / a (error bar: 1 SE)')
+    ax1.set_xlabel('dt (units a^2 / (kT mu0))')
+    ax2.set_xlabel('wall-clock seconds per unit of simulated time (this machine)')
+    ax1.legend(fontsize=6)
+    fig.tight_layout()
+    path = os.path.join(out, 'brownian_weak_error.png')
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    print('\n' + path)
 
 
 def chart_heights(results, out, plt):
@@ -153,6 +189,8 @@ def main(argv=None):
     parser.add_argument('--schemes', nargs='+', default=ITERATIVE + DENSE + ROLLERS)
     parser.add_argument('--dts', type=float, nargs='+', default=[0.01, 0.02, 0.04, 0.08])
     parser.add_argument('--parts', nargs='+', default=['heights', 'weak', 'invalid', 'boomerang'])
+    parser.add_argument('--weak-from', nargs='+', metavar='LOG',
+                        help='redraw the weak-error chart from the tables printed by earlier runs (no simulation)')
     args = parser.parse_args(argv)
     import matplotlib
     matplotlib.use('Agg')
@@ -175,6 +213,19 @@ def main(argv=None):
                   flush=True)
         print('\n%s' % chart_heights(histograms, args.out, plt))
 
+    if args.weak_from:
+        curves = {}
+        for log in args.weak_from:
+            for line in open(log):
+                cells = [c.strip() for c in line.strip().strip('|').split('|')]
+                if len(cells) == 5 and cells[0] in CLAIMED_ORDER:
+                    try:
+                        curves.setdefault(cells[0], []).append([float(c) for c in cells[1:]])
+                    except ValueError:
+                        pass
+        weak_chart({k: np.array(v) for k, v in curves.items()}, args.out, plt)
+        return
+
     if 'weak' in args.parts:
         print('\n## Weak error of <z> against dt\n')
         print('| scheme | dt | <z> - exact | SE | s per unit time |')
@@ -184,36 +235,16 @@ def main(argv=None):
             n_bodies, t = sizes(name, args.quick)
             points = []
             for dt in args.dts:
-                per_body, _, invalid, cost = run(name, n_bodies, int(round(2 * t / dt)), dt, seed=7)
+                try:
+                    per_body, _, invalid, cost = run(name, n_bodies, int(round(2 * t / dt)), dt, seed=7)
+                except Exception as err:  # 100 rejected steps in a row: the scheme fails at this dt
+                    print('| %s | %g | stopped: %s | | |' % (name, dt, str(err).split(';')[0][:90]), flush=True)
+                    continue
                 m, se = mean_and_error(per_body)
                 points.append((dt, m - exact, se, cost))
                 print('| %s | %g | %+.4f | %.4f | %.3g |' % (name, dt, m - exact, se, cost), flush=True)
-            curves[name] = np.array(points)
-        print('\n| scheme | observed weak order (fit of log|bias| on log dt, points with |bias| > 2 SE) | claimed |')
-        print('|---|---|---|')
-        for name, p in curves.items():
-            use = np.abs(p[:, 1]) > 2 * p[:, 2]
-            slope = np.polyfit(np.log(p[use, 0]), np.log(np.abs(p[use, 1])), 1)[0] if use.sum() >= 2 else np.nan
-            print('| %s | %s | %d |' % (name, 'n/a (bias below 2 SE)' if np.isnan(slope) else '%.2f' % slope,
-                                        CLAIMED_ORDER[name]))
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-        for name, p in curves.items():
-            label = name.replace('stochastic_', '')
-            ax1.errorbar(p[:, 0], np.abs(p[:, 1]), yerr=p[:, 2], marker='o', ms=3, label=label, capsize=2)
-            ax2.plot(p[:, 3], np.abs(p[:, 1]), marker='o', ms=3, label=label)
-        ax1.plot(args.dts, 0.5 * np.array(args.dts), 'k--', lw=0.8, label='slope 1')
-        for ax in (ax1, ax2):
-            ax.set_xscale('log')
-            ax.set_yscale('log')
-            ax.set_ylabel('|<z> - exact| / a')
-        ax1.set_xlabel('dt')
-        ax2.set_xlabel('wall-clock seconds per unit of simulated time (this machine)')
-        ax1.legend(fontsize=6)
-        fig.tight_layout()
-        path = os.path.join(args.out, 'brownian_weak_error.png')
-        fig.savefig(path, dpi=80)
-        plt.close(fig)
-        print('\n' + path)
+            curves[name] = np.array(points).reshape(-1, 4)
+        weak_chart(curves, args.out, plt)
 
     if 'invalid' in args.parts:
         print('\n## Invalid configurations per 1000 body-steps\n')
@@ -230,8 +261,8 @@ def main(argv=None):
                     try:
                         _, _, invalid, _ = run(name, n_bodies, n_steps, dt, b=b, seed=11)
                         rates.append(1000.0 * invalid / (n_bodies * n_steps))
-                    except Exception as err:  # a scheme that stops (NaN, GMRES) at this dt
-                        print('  %s at dt %g, b %g stopped: %s' % (name, dt, b, str(err)[:80]))
+                    except Exception as err:  # 100 rejections in a row (or NaN, GMRES) at this dt
+                        print('  %s at dt %g, b %g stopped: %s' % (name, dt, b, str(err).split(';')[0][:90]))
                         rates.append(np.nan)
                 print('| %s | %g | %s |' % (name, b, ' | '.join('%.3g' % r for r in rates)), flush=True)
                 ax.plot(dts, np.array(rates) + 1e-3, marker='o', ms=3, label=name.replace('stochastic_', ''))
