@@ -11,9 +11,7 @@ and ``.MCMC_info``.  A restart with ``initial_step`` equal to a saved step
 continues the uninterrupted chain exactly.
 """
 import os
-import signal
 import sys
-import threading
 import time
 
 import numpy as np
@@ -76,30 +74,6 @@ def _no_slip(body, slip, **kwargs):
     body.slip_reference = None
 
 
-SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
-
-
-class _StopRequest:
-    """SIGINT/SIGTERM set ``signal_number``; the loop stops after the step in progress (a second signal at once)."""
-
-    def __init__(self):
-        self.signal_number, self._previous = None, {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for sig in SIGNAL_EXIT_STATUS:
-                self._previous[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, signal_number, frame):
-        if self.signal_number is not None:
-            raise KeyboardInterrupt
-        self.signal_number = signal_number
-
-    def __exit__(self, *exc):
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-        return False
 
 
 class MCMCRun:
@@ -225,7 +199,7 @@ class MCMCRun:
             self.write_info()
             progress.at_save(index, sampler.invalid, extra=', acceptance ratio = %.4g' % sampler.acceptance_ratio())
 
-        stop = _StopRequest()
+        stop = run_output.StopRequest()
         try:
             with stop:
                 for step in range(first, last):
@@ -242,8 +216,8 @@ class MCMCRun:
                     if last > first and last % options.n_save == 0:
                         save(last)
             if stop.signal_number is not None:
-                stopped_line = 'run stopped by %s at step %d' % (signal.Signals(stop.signal_number).name, step)
-                status = SIGNAL_EXIT_STATUS[stop.signal_number]
+                stopped_line = stop.stopped_line(step)
+                status = stop.exit_status
             if last <= first:
                 self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
         except KeyboardInterrupt:
@@ -251,10 +225,7 @@ class MCMCRun:
             status = 130
         finally:
             progress.close()
-            elapsed = time.perf_counter() - start
-            run_output.append_time(options.output_name + '.time', elapsed, restart=restart,
-                                   note=('restart segment, steps %d to %d' % (first, step)) if restart else None)
-            self.write_info([stopped_line] if stopped_line else [])
+            run_output.finish_run(options.output_name, start, first, step, restart, self.write_info, stopped_line)
         if stopped_line:
             print('%s; outputs are complete up to the last saved step; restart with initial_step set to that step'
                   % stopped_line, file=sys.stderr, flush=True)

@@ -11,9 +11,6 @@ Exact restarts (SPEC decision 11): every save appends a record to
 counters; ``initial_step k`` picks the record of step k up, so the restarted
 run continues bit for bit the trajectory of an uninterrupted one.
 """
-import os
-import signal
-import threading
 import time
 
 import numpy as np
@@ -22,33 +19,6 @@ import utils
 from multi_bodies import run_output
 from multi_bodies.run_setup import prepare
 from quaternion_integrator.schemes import make_scheme
-
-SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
-
-
-class _StopRequest:
-    """Set by SIGINT/SIGTERM; the time loop stops after the step (and write) in progress."""
-
-    def __init__(self):
-        self.signal_number = None
-        self._previous = {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for sig in SIGNAL_EXIT_STATUS:
-                self._previous[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, signal_number, frame):
-        if self.signal_number is not None:  # a second signal: stop at once
-            raise KeyboardInterrupt
-        self.signal_number = signal_number
-
-    def __exit__(self, *exc):
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-        return False
-
 
 def check_options(options):
     """Ranges the dynamic run needs, checked before anything is written."""
@@ -147,7 +117,7 @@ class DynamicRun:
             self.write_info()
             progress.at_save(index, scheme.invalid_configurations)
 
-        with _StopRequest() as stop:
+        with run_output.StopRequest() as stop:
             try:
                 for step in range(first, last):
                     if step % options.n_save == 0:
@@ -162,10 +132,9 @@ class DynamicRun:
                     if last > first and last % options.n_save == 0:
                         save(last)
                 if stop.signal_number is not None:
-                    name = signal.Signals(stop.signal_number).name
-                    stopped_line = 'run stopped by %s at step %d (last saved step %d)' % (
-                        name, step, ((step - 1) // options.n_save) * options.n_save if step > first else first)
-                    status = SIGNAL_EXIT_STATUS[stop.signal_number]
+                    stopped_line = stop.stopped_line(
+                        step, ((step - 1) // options.n_save) * options.n_save if step > first else first)
+                    status = stop.exit_status
                 if last <= first:
                     self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
             except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
@@ -184,10 +153,7 @@ class DynamicRun:
                 status = 130
             finally:
                 progress.close()
-                elapsed = time.perf_counter() - start
-                run_output.append_time(options.output_name + '.time', elapsed, restart=restart,
-                                       note=('restart segment, steps %d to %d' % (first, step)) if restart else None)
-                self.write_info([stopped_line] if stopped_line else [])
+                run_output.finish_run(options.output_name, start, first, step, restart, self.write_info, stopped_line)
         if stopped_line and status != 1:
             self.log_error('%s; outputs are complete up to the last saved step; restart with initial_step '
                            'set to that step' % stopped_line)

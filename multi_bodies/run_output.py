@@ -30,7 +30,9 @@ import io
 import os
 import pickle
 import shutil
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -319,6 +321,59 @@ def read_config_snapshot(path, offset):
         rows = [f.readline().split() for _ in range(count)]
     data = np.array(rows, dtype=float).reshape(count, 7)
     return data[:, :3], data[:, 3:]
+
+
+# ------------------------------------------------------------------ ending a run
+SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+class StopRequest:
+    """Context manager: SIGINT/SIGTERM set ``signal_number``; the loop stops after the step in progress.
+
+    A second signal raises KeyboardInterrupt at once.  Handlers are only
+    installed in the main thread (Dask workers run tasks in other threads).
+    """
+
+    def __init__(self):
+        self.signal_number = None
+        self._previous = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in SIGNAL_EXIT_STATUS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signal_number, frame):
+        if self.signal_number is not None:  # a second signal: stop at once
+            raise KeyboardInterrupt
+        self.signal_number = signal_number
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+    @property
+    def exit_status(self):
+        return SIGNAL_EXIT_STATUS.get(self.signal_number, 0)
+
+    def stopped_line(self, step, last_saved=None):
+        """'run stopped by SIGTERM at step k (last saved step s)'."""
+        text = 'run stopped by %s at step %d' % (signal.Signals(self.signal_number).name, step)
+        return text + (' (last saved step %d)' % last_saved if last_saved is not None else '')
+
+
+def finish_run(output_name, start, first, step, restart, write_info_lines, stopped_line=None):
+    """End of a time loop, however it ended: ``.time`` (appended on a restart) and the last ``.info``.
+
+    ``write_info_lines(extra_lines)`` writes the script's info file (``.info``,
+    ``.MCMC_info``) with the given extra lines.
+    """
+    elapsed = time.perf_counter() - start
+    append_time(output_name + '.time', elapsed, restart=restart,
+                note=('restart segment, steps %d to %d' % (first, step)) if restart else None)
+    write_info_lines([stopped_line] if stopped_line else [])
 
 
 # ------------------------------------------------------------------ progress

@@ -151,6 +151,21 @@ class StochasticScheme(Scheme):
         y = system.solve(plus, rhs=rhs, preconditioner=preconditioner, kind='stochastic')
         return (self.kT / self.delta) * y.velocities
 
+    def slip_rfd(self, system, old, problem, W_s, preconditioner, factor):
+        """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
+
+        ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
+        by ``delta W_R`` (no body-length scaling) the slip is ``factor (M' W_s - M W_s)`` and the force
+        ``-factor (K'^T W_s - K^T W_s)``, with ``factor = 2 kT / delta`` (trapezoidal) or ``kT / delta``
+        (midpoint).  Zero when ``thermal_drift`` is off.
+        """
+        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
+                           preconditioner=preconditioner, kind='stochastic').velocities
+        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
+        factor = factor if self.thermal_drift else 0.0
+        return (factor * (plus.M_dot(W_s) - problem.M_dot(W_s)),
+                -factor * (plus.KT_dot(W_s) - problem.KT_dot(W_s)))
+
     def noise_factor(self, dt_fraction=1.0):
         """``sqrt(2 kT / (dt_fraction dt))``."""
         return np.sqrt(2.0 * self.kT / (dt_fraction * self.dt))
@@ -326,26 +341,18 @@ class StochasticSlipTrapz(StochasticScheme):
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         problem = system.mobility_problem(*old)
-        MW, KW = problem.M_dot(W_s), problem.KT_dot(W_s)
         pc = self.preconditioner(system, step_index, problem)
         n1 = system.lanczos_noise(problem, W1, self.noise_factor(), pc)
         _, force_torque, slip = system.current_forces_and_slip()
-        first = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
-                             guess='deterministic', keep_guess=True)
-        U1 = first.velocities
-        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
-                           preconditioner=pc, kind='stochastic').velocities
-        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
-        c = 2.0 * self.kT / self.delta if self.thermal_drift else 0.0
-        slip_c = n1 + c * (plus.M_dot(W_s) - MW)
-        force_c = -c * (plus.KT_dot(W_s) - KW)
+        U1 = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
+                          guess='deterministic', keep_guess=True).velocities
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
         self.move(system, old, U1, self.dt)  # predictor
         self.check(system)
         _, force_p, slip_p = system.current_forces_and_slip()
-        predictor = system.mobility_problem()
-        U2 = system.solve(predictor, slip=slip_p, force_torque=force_p, noise_slip=slip_c, noise_force=force_c,
-                          preconditioner=pc if self.reuse_preconditioner else None, guess='deterministic',
-                          keep_guess=True).velocities
+        U2 = system.solve(system.mobility_problem(), slip=slip_p, force_torque=force_p, noise_slip=n1 + drift_slip,
+                          noise_force=drift_force, preconditioner=pc if self.reuse_preconditioner else None,
+                          guess='deterministic', keep_guess=True).velocities
         U = 0.5 * (U1 + U2)
         self.move(system, old, U, self.dt)
         return U
@@ -364,24 +371,18 @@ class StochasticSlipMid(StochasticScheme):
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
         problem = system.mobility_problem(*old)
-        MW, KW = problem.M_dot(W_s), problem.KT_dot(W_s)
         pc = self.preconditioner(system, step_index, problem)
         n1 = system.lanczos_noise(problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
         n_c = system.lanczos_noise(problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
         _, force_torque, slip = system.current_forces_and_slip()
         U_m = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
                            guess='deterministic', keep_guess=True).velocities
-        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
-                           preconditioner=pc, kind='stochastic').velocities
-        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
-        c = self.kT / self.delta if self.thermal_drift else 0.0
-        slip_c = n_c + c * (plus.M_dot(W_s) - MW)
-        force_c = -c * (plus.KT_dot(W_s) - KW)
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
         self.move(system, old, U_m, 0.5 * self.dt)  # midpoint
         self.check(system)
         _, force_m, slip_m = system.current_forces_and_slip()
-        U = system.solve(system.mobility_problem(), slip=slip_m, force_torque=force_m, noise_slip=slip_c,
-                         noise_force=force_c, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
+        U = system.solve(system.mobility_problem(), slip=slip_m, force_torque=force_m, noise_slip=n_c + drift_slip,
+                         noise_force=drift_force, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
         self.move(system, old, U, self.dt)
         return U
 
