@@ -1,7 +1,10 @@
-"""One dynamic run from validated options: the library function behind ``multi_bodies.py`` (floor 3).
+"""One dynamic run from validated options: the library half of ``multi_bodies.py`` (top floor, with the scripts).
 
 ``run_dynamics(options)`` is what the dynamic script, the ensemble runner
-and the tests call: it sets the run up, writes every output through
+and the tests call.  It wires the rooms together as the scripts do (set-up,
+the scheme registry of ``quaternion_integrator``, the writers of
+``run_output``), so it sits on the scripts' floor and only scripts and the
+ensemble runner import it.  It sets the run up, writes every output through
 ``multi_bodies.run_output`` and returns the exit status (0 done, 1 stopped
 by the simulation, 130/143 stopped by SIGINT/SIGTERM).  User mistakes raise
 ``utils.UserInputError`` before the first byte is written.
