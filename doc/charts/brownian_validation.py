@@ -215,14 +215,16 @@ def main(argv=None):
 
     if args.weak_from:
         curves = {}
-        for log in args.weak_from:
+        for log in args.weak_from:  # a scheme's rows in a later log replace those of an earlier one
+            rows = {}
             for line in open(log):
                 cells = [c.strip() for c in line.strip().strip('|').split('|')]
                 if len(cells) == 5 and cells[0] in CLAIMED_ORDER:
                     try:
-                        curves.setdefault(cells[0], []).append([float(c) for c in cells[1:]])
+                        rows.setdefault(cells[0], []).append([float(c) for c in cells[1:]])
                     except ValueError:
                         pass
+            curves.update(rows)
         weak_chart({k: np.array(v) for k, v in curves.items()}, args.out, plt)
         return
 
