@@ -166,6 +166,20 @@ class StochasticScheme(Scheme):
         return (factor * (plus.M_dot(W_s) - problem.M_dot(W_s)),
                 -factor * (plus.KT_dot(W_s) - problem.KT_dot(W_s)))
 
+    def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
+        """Move from ``old`` by ``velocities * dt`` (predictor or midpoint), check it, and solve there.
+
+        The solve uses the forces and slip of the moved configuration, the given noise slip (3N,) and
+        force (Nb, 6), the preconditioner (None: one built there) and the deterministic guess.
+        Raises _Rejected when the moved configuration is invalid.  Returns velocities (Nb, 6).
+        """
+        self.move(system, old, velocities, dt)
+        self.check(system)
+        _, force_torque, slip = system.current_forces_and_slip()
+        return system.solve(system.mobility_problem(), slip=slip, force_torque=force_torque, noise_slip=noise_slip,
+                            noise_force=noise_force, preconditioner=preconditioner, guess='deterministic',
+                            keep_guess=True).velocities
+
     def noise_factor(self, dt_fraction=1.0):
         """``sqrt(2 kT / (dt_fraction dt))``."""
         return np.sqrt(2.0 * self.kT / (dt_fraction * self.dt))
@@ -347,12 +361,8 @@ class StochasticSlipTrapz(StochasticScheme):
         U1 = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
                           guess='deterministic', keep_guess=True).velocities
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
-        self.move(system, old, U1, self.dt)  # predictor
-        self.check(system)
-        _, force_p, slip_p = system.current_forces_and_slip()
-        U2 = system.solve(system.mobility_problem(), slip=slip_p, force_torque=force_p, noise_slip=n1 + drift_slip,
-                          noise_force=drift_force, preconditioner=pc if self.reuse_preconditioner else None,
-                          guess='deterministic', keep_guess=True).velocities
+        U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
+                                       pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
         self.move(system, old, U, self.dt)
         return U
@@ -378,11 +388,7 @@ class StochasticSlipMid(StochasticScheme):
         U_m = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
                            guess='deterministic', keep_guess=True).velocities
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
-        self.move(system, old, U_m, 0.5 * self.dt)  # midpoint
-        self.check(system)
-        _, force_m, slip_m = system.current_forces_and_slip()
-        U = system.solve(system.mobility_problem(), slip=slip_m, force_torque=force_m, noise_slip=n_c + drift_slip,
-                         noise_force=drift_force, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
+        U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
         self.move(system, old, U, self.dt)
         return U
 
