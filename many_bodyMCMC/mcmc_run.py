@@ -191,7 +191,7 @@ class MCMCRun:
         first, last = options.initial_step, options.n_steps
         name = 'MCMC_' + options.mcmc_move
         progress = run_output.Progress(name, first, last)
-        status, step, stopped_line = 0, first, None
+        status, stopped_line = 0, None
         start = time.perf_counter()
 
         def save(index):
@@ -199,33 +199,29 @@ class MCMCRun:
             self.write_info()
             progress.at_save(index, sampler.invalid, extra=', acceptance ratio = %.4g' % sampler.acceptance_ratio())
 
+        # a restart does not write its first snapshot again (the run before wrote it)
+        loop = run_output.TimeLoop(first, last, options.n_save, save_first=not restart)
+
+        def advance(step):
+            sampler.step(step, self.rng)
+            progress.after_step(step, 0, sampler.invalid)
+
         stop = run_output.StopRequest()
         try:
             with stop:
-                for step in range(first, last):
-                    # a restart does not write its first snapshot again (the run before wrote it)
-                    if step % options.n_save == 0 and not (restart and step == first):
-                        save(step)
-                    sampler.step(step, self.rng)
-                    progress.after_step(step, 0, sampler.invalid)
-                    if stop.signal_number is not None:
-                        step += 1
-                        break
-                else:
-                    step = last
-                    if last > first and last % options.n_save == 0:
-                        save(last)
+                loop.run(save, advance, stop)
             if stop.signal_number is not None:
-                stopped_line = stop.stopped_line(step)
+                stopped_line = stop.stopped_line(loop.step)
                 status = stop.exit_status
             if last <= first:
                 self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
         except KeyboardInterrupt:
-            stopped_line = 'run interrupted at step %d' % step
+            stopped_line = 'run interrupted at step %d' % loop.step
             status = 130
         finally:
             progress.close()
-            run_output.finish_run(options.output_name, start, first, step, restart, self.write_info, stopped_line)
+            run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
+                                  stopped_line)
         if stopped_line:
             print('%s; outputs are complete up to the last saved step; restart with initial_step set to that step'
                   % stopped_line, file=sys.stderr, flush=True)

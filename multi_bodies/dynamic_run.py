@@ -110,7 +110,7 @@ class DynamicRun:
             writer = AlsoWriteVtk(writer, options, self.types, system)
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)
-        status, step, stopped_line = 0, first, None
+        status, stopped_line = 0, None
         start = time.perf_counter()
 
         def save(index):
@@ -120,23 +120,17 @@ class DynamicRun:
             self.write_info()
             progress.at_save(index, scheme.invalid_configurations)
 
+        loop = run_output.TimeLoop(first, last, options.n_save)
+
+        def advance(step):
+            scheme.step(system, step, self.rng)
+            progress.after_step(step, system.last_iterations, scheme.invalid_configurations)
+
         with run_output.StopRequest() as stop:
             try:
-                for step in range(first, last):
-                    if step % options.n_save == 0:
-                        save(step)
-                    scheme.step(system, step, self.rng)
-                    progress.after_step(step, system.last_iterations, scheme.invalid_configurations)
-                    if stop.signal_number is not None:
-                        step += 1
-                        break
-                else:
-                    step = last
-                    if last > first and last % options.n_save == 0:
-                        save(last)
+                loop.run(save, advance, stop)
                 if stop.signal_number is not None:
-                    stopped_line = stop.stopped_line(
-                        step, ((step - 1) // options.n_save) * options.n_save if step > first else first)
+                    stopped_line = stop.stopped_line(loop.step, loop.last_saved)
                     status = stop.exit_status
                 if last <= first:
                     self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
@@ -145,18 +139,19 @@ class DynamicRun:
                     err = utils.SimulationStopped('step %d of %s: the linear algebra failed (%s); the blobs of a '
                                                   'body are too close to each other for their distance to the '
                                                   'origin (check the positions and forces)'
-                                                  % (step, options.scheme, err))
+                                                  % (loop.step, options.scheme, err))
                 progress.close()
                 self.log_error('error: run stopped: %s. Snapshots up to the last saved step are complete; .info '
                                'and .time are written.' % str(err).rstrip('.'))
-                stopped_line = 'run stopped at step %d: %s' % (step, str(err).rstrip('.'))
+                stopped_line = 'run stopped at step %d: %s' % (loop.step, str(err).rstrip('.'))
                 status = 1
             except KeyboardInterrupt:
-                stopped_line = 'run interrupted at step %d' % step
+                stopped_line = 'run interrupted at step %d' % loop.step
                 status = 130
             finally:
                 progress.close()
-                run_output.finish_run(options.output_name, start, first, step, restart, self.write_info, stopped_line)
+                run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
+                                      stopped_line)
         if stopped_line and status != 1:
             self.log_error('%s; outputs are complete up to the last saved step; restart with initial_step '
                            'set to that step' % stopped_line)

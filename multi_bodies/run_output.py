@@ -364,6 +364,40 @@ class StopRequest:
         return text + (' (last saved step %d)' % last_saved if last_saved is not None else '')
 
 
+class TimeLoop:
+    """The loop over steps ``first .. last - 1`` of a dynamic or Monte Carlo run.
+
+    ``run(save, advance, stop)`` calls ``save(k)`` before step k when k is a
+    multiple of ``n_save`` (and after the last step when ``last`` is one),
+    ``advance(k)`` for every step, and stops after the step in progress once
+    ``stop.signal_number`` is set.  ``step`` is always the index of the step
+    being (or next to be) run, so an error handler can name it.
+    ``save_first=False`` skips the save at ``first`` (a restart whose
+    snapshot the earlier run wrote).
+    """
+
+    def __init__(self, first, last, n_save, save_first=True):
+        self.first, self.last, self.n_save, self.save_first = first, last, n_save, save_first
+        self.step = first
+
+    def run(self, save, advance, stop):
+        for self.step in range(self.first, self.last):
+            if self.step % self.n_save == 0 and (self.save_first or self.step != self.first):
+                save(self.step)
+            advance(self.step)
+            if stop.signal_number is not None:
+                self.step += 1
+                return
+        self.step = self.last
+        if self.last > self.first and self.last % self.n_save == 0:
+            save(self.last)
+
+    @property
+    def last_saved(self):
+        """The last step saved before ``step`` (for the stop message)."""
+        return ((self.step - 1) // self.n_save) * self.n_save if self.step > self.first else self.first
+
+
 def finish_run(output_name, start, first, step, restart, write_info_lines, stopped_line=None):
     """End of a time loop, however it ended: ``.time`` (appended on a restart) and the last ``.info``.
 
