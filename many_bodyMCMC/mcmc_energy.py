@@ -33,7 +33,6 @@ to round-off.  A one-body change costs O(blobs of the body x N) on each.
 
 Shapes: blob positions (N, 3); locations (Nb, 3); quaternions (Nb, 4), scalar first.
 """
-import importlib.util
 import math
 import os
 
@@ -41,6 +40,7 @@ import numpy as np
 
 from body.body import blob_positions
 from multi_bodies.multi_bodies_functions import minimum_image
+from multi_bodies.user_hooks import import_module_file
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 65536  # pairs per chunk of the NumPy sums (bounded memory)
@@ -90,17 +90,6 @@ class PotentialHooks:
         self.blob_blob_cuda_source = None
 
 
-def _import_user_file(path, module_name):
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
-    except Exception as err:
-        raise UserInputError('%s: could not be imported (%s: %s); fix the file or remove it from the run directory'
-                             % (path, type(err).__name__, err))
-    return module
-
-
 def _take_hooks(module, hooks):
     for name in POTENTIAL_HOOKS:
         function = getattr(module, name, None)
@@ -136,7 +125,7 @@ def load_user_potentials(directory='.', default_body_body=False):
         hooks.body_body_potential = body_body_potential
     path = os.path.join(directory, USER_POTENTIAL_FILE)
     if os.path.isfile(path):
-        _take_hooks(_import_user_file(path, 'user_defined_potentials'), hooks)
+        _take_hooks(import_module_file(path, 'user_defined_potentials'), hooks)
         hooks.sources.append(path)
     path = os.path.join(directory, GPU_POTENTIAL_FILE)
     if os.path.isfile(path):
@@ -146,7 +135,7 @@ def load_user_potentials(directory='.', default_body_body=False):
 
 def load_gpu_potentials(hooks):
     """Read ``hooks.gpu_file`` (``potential_pycuda_user_defined.py``) into ``hooks``; for the pycuda backend only."""
-    module = _import_user_file(hooks.gpu_file, 'potential_pycuda_user_defined')
+    module = import_module_file(hooks.gpu_file, 'potential_pycuda_user_defined')
     _take_hooks(module, hooks)
     source = getattr(module, 'BLOB_BLOB_POTENTIAL_SOURCE', None)
     if source is not None:

@@ -345,6 +345,19 @@ class PhysicsHooks:
         return body_pairs
 
 
+def import_module_file(path, module_name):
+    """Import the Python file ``path`` as a module; a UserInputError naming the file when it fails."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as err:
+        raise UserInputError('%s: could not be imported (%s: %s); fix the file or remove it from the run directory'
+                             % (path, type(err).__name__, err))
+    return module
+
+
 def _fresh_copy_of_this_module():
     """A new module object with this file's defaults, importable as ``multi_bodies_functions``.
 
@@ -496,14 +509,7 @@ def load_user_pycuda_forces(path):
         raise UserInputError('%s replaces the GPU blob-blob force kernel, but no GPU is usable here (%s: %s); run '
                              'on a machine with a CUDA GPU, or set blob_blob_force_implementation to python or '
                              'C++ (and move the file away)' % (path, type(err).__name__, err))
-    import importlib.util
-    spec = importlib.util.spec_from_file_location('forces_pycuda_user_defined', path)
-    module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
-    except Exception as err:
-        raise UserInputError('%s: could not be imported (%s: %s); fix the file or remove it from the run directory'
-                             % (path, type(err).__name__, err))
+    module = import_module_file(path, 'forces_pycuda_user_defined')
     function = getattr(module, 'calc_blob_blob_forces_pycuda', None)
     if not callable(function):
         raise UserInputError('%s must define calc_blob_blob_forces_pycuda(r_vectors, **kwargs) -> (N, 3)' % path)
