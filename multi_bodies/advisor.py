@@ -1,6 +1,7 @@
 """The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
 
-Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md).  It reads
+Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md); its tables, models and scene are in
+``advisor_models``, its output in ``advisor_report``.  It reads
 the scene as the scripts do (``read_input_file``, ``read_bodies``,
 ``bodies_to_arrays``, the user's hooks from the run directory) and measures,
 for each choice a user makes in the input file, the error of each option and
@@ -29,345 +30,46 @@ Mobilities here are dense (one body or one pair, or the whole scene for the
 dense solve): shapes (6, 6) per body, torques about the body centre; lengths
 and times in the user's units.
 """
-import json
-import os
 import time
-from collections import namedtuple
 
 import numpy as np
-import scipy.linalg
 
 import mobility
-from body.body import K_matrices, bodies_to_arrays
 from mobility import choose
 from multi_bodies import body_solver
-from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies import sphere_tables
-from multi_bodies.input_options import read_input_file
-from multi_bodies.run_setup import read_bodies
-from multi_bodies.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
+from multi_bodies.structure_generators import smallest_distance
 
-SHELL_SIZES = (12, 42, 162, 642)
-RICHARDSON_LEVELS = (42, 162, 642)
-GMRES_WARNING_ITERATIONS = 100
-NO_WALL = '_no_wall'
-DENSE_BLOB_LIMIT = 3000           # blobs above which one dense solve is modelled, not measured
-MEASURE_BUDGET_S = 1.0            # a single timing predicted to take longer is modelled instead
-ROLLER_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_rollers',
-                  'deterministic_adams_bashforth': 'deterministic_adams_bashforth_rollers',
-                  'stochastic_adams_bashforth': 'stochastic_adams_bashforth_rollers',
-                  'stochastic_first_order_RFD': 'stochastic_first_order_rollers'}
-DENSE_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_dense_algebra',
-                 'stochastic_first_order_RFD': 'stochastic_first_order_RFD_dense_algebra'}
-STATIC_SCHEMES = ('mobility', 'resistance', 'body_mobility')
-
-# Scheme cost/accuracy tables shipped with the package, by scheme name: a dict with 'order',
-# 'solves_per_step', 'stability' (dt * mu * k limit) and 'source'.  The deterministic rows are the
-# textbook stability limits of the schemes on the negative real axis, confirmed by the chart of
-# doc/integrators_accuracy_vs_dt.md.  The weak-error table of the stochastic schemes follows.
-SCHEME_TABLE = {
-    'deterministic_forward_euler': {'order': 1, 'solves_per_step': 1, 'stability': 2.0,
-                                    'source': 'forward Euler: |1 + z| <= 1'},
-    'deterministic_adams_bashforth': {'order': 2, 'solves_per_step': 1, 'stability': 1.0,
-                                      'source': 'AB2: real stability interval [-1, 0]'},
-}
-# One row per stochastic scheme whose weak error was resolved by the validation runs of
-# doc/brownian_validation.md (python doc/charts/brownian_validation.py --parts weak): relative error of the
-# mean height <z> ~ C dt^p for single-blob bodies above a soft wall (kT/(g a) = 0.5, wall b = a/4), dt in
-# units of a^2/(kT mu0); 'solves_per_step' counts GMRES solves plus Lanczos calls (rollers: the Lanczos
-# call).  Schemes whose bias stayed within 2 standard errors up to dt = 0.32 (Fixman, Slip_Mid, the
-# dense schemes) are left out rather than given a made-up constant.
-_WEAK_SOURCE = 'doc/brownian_validation.md, single blobs above a soft wall, 2026-12-01'
-STOCHASTIC_SCHEME_TABLE = {
-    'stochastic_first_order_RFD': {'solves_per_step': 4, 'lanczos_per_step': 1, 'weak_error': (0.061, 1.0),
-                                   'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_traction_EM': {'solves_per_step': 3, 'lanczos_per_step': 1, 'weak_error': (0.076, 1.0),
-                               'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_Slip_Trapz': {'solves_per_step': 4, 'lanczos_per_step': 1, 'weak_error': (0.07, 1.0),
-                              'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_adams_bashforth_rollers': {'solves_per_step': 1, 'lanczos_per_step': 1,
-                                           'weak_error': (0.055, 0.66), 'time_unit': 'a^2/(kT mu0)',
-                                           'source': _WEAK_SOURCE},
-    'stochastic_trapezoidal_rollers': {'solves_per_step': 1, 'lanczos_per_step': 1, 'weak_error': (0.06, 1.0),
-                                       'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-}
-
-
-def cheapest_scheme(table, accuracy, solve_seconds):
-    """The scheme of a weak-error table that reaches ``accuracy`` at the smallest cost per unit time.
-
-    For each row, the time step that gives the target is ``dt* = (accuracy / C)^(1/p)`` and the cost
-    per unit of simulated time is ``solves_per_step * solve_seconds / dt*``.  Returns a list of
-    (cost per unit time, scheme, dt*) sorted cheapest first (empty for an empty table).
-    """
-    ranked = []
-    for scheme, row in table.items():
-        constant, order = row['weak_error']
-        dt_target = (accuracy / constant) ** (1.0 / order)
-        ranked.append((row['solves_per_step'] * solve_seconds / dt_target, scheme, dt_target))
-    return sorted(ranked)
-
-Choice = namedtuple('Choice', ['topic', 'structure', 'candidate', 'blobs', 'estimated_error', 'cost_s',
-                               'meets_target', 'note'])
-Choice.__doc__ = """One row of a choice table (the JSON rows of ``.advice.json``, plus a free-text note)."""
-
-
-# ------------------------------------------------------------------ dense mobilities of small sets of bodies
-def _dense_matrix(wall, backend):
-    return mobility.blob_mobility_matrix(backend + ('' if wall else NO_WALL))
-
-
-def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='python'):
-    """Body mobility (6 nb, 6 nb) of rigid bodies made of the given blobs, torques about ``centres``.
-
-    blob_sets: list of (n_k, 3) lab-frame blob positions; centres (nb, 3).
-    A body of one blob is a roller: its 6x6 block is the blob's grand
-    mobility (translation and rotation couplings, Rotne-Prager(-Blake)).
-    """
-    if all(len(b) == 1 for b in blob_sets):
-        return roller_grand_mobility(np.concatenate(blob_sets), blob_radius, eta, wall, backend)
-    r = np.concatenate(blob_sets)
-    M = _dense_matrix(wall, backend)(r, eta, blob_radius)
-    K = np.zeros((3 * r.shape[0], 6 * len(blob_sets)))
-    row = 0
-    for k, (blobs, centre) in enumerate(zip(blob_sets, centres)):
-        n = len(blobs)
-        K[row:row + 3 * n, 6 * k:6 * k + 6] = K_matrices(np.asarray(blobs)[None], np.asarray(centre)[None])[0]
-        row += 3 * n
-    factor = scipy.linalg.cho_factor(M)
-    resistance = K.T @ scipy.linalg.cho_solve(factor, K)
-    return np.linalg.pinv(resistance)  # pinv: a straight rod has no resistance to spinning about its axis
-
-
-def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='python'):
-    """Grand mobility (6n, 6n) of single blobs ``positions`` (n, 3), ordered ``[v_k, w_k]`` per blob."""
-    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
-    n = positions.shape[0]
-    name = backend + ('' if wall else NO_WALL)
-    products = {kind: mobility.blob_product(name, kind) for kind in mobility.PRODUCT_KINDS}
-    G = np.zeros((6 * n, 6 * n))
-    for col in range(6 * n):
-        body, component = divmod(col, 6)
-        e = np.zeros(3 * n)
-        e[3 * body + component % 3] = 1.0
-        if component < 3:
-            v = products['trans_times_force'](positions, e, eta, blob_radius)
-            w = products['rot_times_force'](positions, e, eta, blob_radius)
-        else:
-            v = products['trans_times_torque'](positions, e, eta, blob_radius)
-            w = products['rot_times_torque'](positions, e, eta, blob_radius)
-        G[:, col] = np.concatenate((np.reshape(v, (n, 3)), np.reshape(w, (n, 3))), axis=1).reshape(-1)
-    return G
-
-
-def normalised_diagonal(body_mobility, sphere_radius, eta):
-    """The six self-mobility diagonal entries of body 0 in units of the bulk sphere values, shape (6,)."""
-    d = np.diag(body_mobility)[:6]
-    bulk = np.array([1.0 / (6 * np.pi * eta * sphere_radius)] * 3 + [1.0 / (8 * np.pi * eta * sphere_radius ** 3)] * 3)
-    return d / bulk
-
-
-def exact_diagonal(h_over_R):
-    """Exact normalised diagonal (xx, yy, zz, rxx, ryy, rzz) of a sphere at h/R, or None below the table."""
-    exact = sphere_tables.exact_self_mobilities(h_over_R)
-    if exact is None:
-        return None
-    par, perp, rot_par, rot_perp = exact
-    return np.array([par, par, perp, rot_par, rot_par, rot_perp])
-
-
-def worst_error(values, reference):
-    """Largest relative error ``max |values / reference - 1|`` (the advisor's error measure).
-
-    Entries whose reference vanishes (the spin of a straight rod about its axis) are left out.
-    """
-    values, reference = np.asarray(values, dtype=float), np.asarray(reference, dtype=float)
-    keep = np.abs(reference) > 1e-12 * np.max(np.abs(reference))
-    return float(np.max(np.abs(values[keep] / reference[keep] - 1.0)))
-
-
-def richardson(levels, smallest_rate=2.0):
-    """Extrapolate a sequence of values (each (6,)) of three successive shell levels.
-
-    With differences ``d1 = v2 - v1``, ``d2 = v3 - v2`` and ``q = d1 / d2``,
-    entries that converge at a clear geometric rate (``q >= smallest_rate``:
-    the difference at least halves per fourfold refinement) are extrapolated
-    as ``v3 + d2 / (q - 1)``; other entries (no clear rate, or a change of
-    sign) keep ``v3 + d2``, the last difference taken as the remaining error.
-    Returns the extrapolated values (6,).
-    """
-    v1, v2, v3 = (np.asarray(v, dtype=float) for v in levels)
-    d1, d2 = v2 - v1, v3 - v2
-    with np.errstate(divide='ignore', invalid='ignore'):
-        q = d1 / d2
-    geometric = np.isfinite(q) & (q >= smallest_rate)
-    extrapolated = np.where(geometric, v3 + d2 / np.where(geometric, q - 1.0, 1.0), v3 + d2)
-    return np.where(d2 == 0.0, v3, extrapolated)
-
-
-def distance_to_other_bodies(r_vectors, owner):
-    """Distance from every blob to the closest blob of another body, shape (N,) (inf with one body).
-
-    r_vectors (N, 3); owner (N,) body index of each blob.  A k-d tree query of
-    as many neighbours as the largest body has blobs (plus one) must contain
-    a blob of another body, so the search costs O(N n log N), not O(N^2).
-    """
-    from scipy.spatial import cKDTree
-    owner = np.asarray(owner)
-    if len(np.unique(owner)) < 2:
-        return np.full(len(owner), np.inf)
-    k = min(len(owner), int(np.max(np.bincount(owner))) + 1)
-    distance, index = cKDTree(r_vectors).query(r_vectors, k=k)
-    return np.min(np.where(owner[index] != owner[:, None], distance, np.inf), axis=1)
-
-
-# ------------------------------------------------------------------ sphere models
-_CALIBRATED = {}
-
-
-def calibrated_model(num_blobs, sphere_radius):
-    """Calibrated shell of hydrodynamic radius ``sphere_radius``: (blobs (n, 3) about 0, blob radius)."""
-    if num_blobs not in _CALIBRATED:
-        _CALIBRATED[num_blobs] = calibrated_shell(num_blobs)[:2]
-    blobs, a = _CALIBRATED[num_blobs]
-    return blobs * sphere_radius, a * sphere_radius
-
-
-def bulk_radius(blobs, blob_radius):
-    """Hydrodynamic radius (translation, far from walls) of a rigid body of RPY blobs (n, 3)."""
-    centre = np.mean(blobs, axis=0)
-    arms = np.asarray(blobs, dtype=float) - centre
-    backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
-    M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
-    K = K_matrices(arms[None], np.zeros((1, 3)))[0]
-    N = np.linalg.pinv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
-    return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
-
-
-def fixed_radius_model(num_blobs, sphere_radius, blob_radius):
-    """Shell of ``num_blobs`` blobs of the given blob radius with hydrodynamic radius ``sphere_radius``.
-
-    The shell radius solves ``R_h(shell radius) = sphere_radius`` by secant
-    steps (R_h grows about one for one with the shell radius).  Returns
-    (blobs (n, 3), blob_radius), or None when the blobs would overlap by more
-    than their radius (spacing < a) or no shell radius fits.
-    """
-    unit = icosahedral_shell(num_blobs)
-    unit_spacing = smallest_distance(unit)
-    if unit_spacing * sphere_radius < blob_radius:  # the shell radius is below R: spacing < a for sure
-        return None
-
-    def excess(radius):
-        return bulk_radius(unit * radius, blob_radius) - sphere_radius
-    x0 = max(sphere_radius - blob_radius, 0.5 * sphere_radius)
-    x1 = x0 + 0.05 * sphere_radius
-    f0, f1 = excess(x0), excess(x1)
-    for _ in range(20):
-        if f1 == f0:
-            break
-        x0, x1, f0 = x1, x1 - f1 * (x1 - x0) / (f1 - f0), f1
-        if not x1 > 0:
-            return None
-        f1 = excess(x1)
-        if abs(f1) < 1e-9 * sphere_radius:
-            break
-    if abs(f1) > 1e-6 * sphere_radius or unit_spacing * x1 < blob_radius:
-        return None
-    return unit * x1, blob_radius
-
-
-def recognise_sphere(reference, blob_radius):
-    """Sphere model of a structure, or None: dict(kind 'blob' or 'shell', blobs, radius R, offset (3,)).
-
-    A single blob is a sphere of radius ``a``.  A shell is recognised when its
-    blobs lie on a sphere about their centroid (radii equal to 1e-3) and their
-    count and smallest spacing are those of an icosahedral shell; its radius
-    is the hydrodynamic radius of the model (bulk translational mobility).
-    """
-    reference = np.asarray(reference, dtype=float).reshape(-1, 3)
-    n = reference.shape[0]
-    if n == 1:
-        return dict(kind='blob', blobs=n, radius=blob_radius, offset=reference[0].copy())
-    sizes = [12]
-    while sizes[-1] < n:
-        sizes.append(4 * sizes[-1] - 6)
-    if sizes[-1] != n:
-        return None
-    centroid = reference.mean(axis=0)
-    radii = np.linalg.norm(reference - centroid, axis=1)
-    if np.std(radii) > 1e-3 * np.mean(radii):
-        return None
-    unit_spacing = smallest_distance(icosahedral_shell(n))
-    if abs(smallest_distance(reference) / np.mean(radii) - unit_spacing) > 1e-3 * unit_spacing:
-        return None
-    return dict(kind='shell', blobs=n, radius=bulk_radius(reference, blob_radius), offset=centroid)
-
-
-# ------------------------------------------------------------------ the scene
-class Scene:
-    """The scene of an input file, read as the scripts read it.
-
-    Attributes: ``options``, ``bodies``, ``types`` (list of (ID, count)),
-    ``arrays`` (BodyArrays), ``r_vectors`` (N, 3), ``hooks`` (the user's
-    physics hooks of the run directory), ``structures`` (list of dicts per
-    type: ID, spec, reference (n, 3), bodies slice, sphere model or None,
-    centres (nb, 3) of the bodies (blob centroids), lowest (index in the type),
-    nearest_pair ((i, j) in the type or None), nearest_gap (centre distance)).
-    """
-
-    def __init__(self, input_file, directory=None):
-        self.directory = os.path.dirname(os.path.abspath(input_file)) if directory is None else directory
-        self.options = read_input_file(input_file)
-        self.hooks = mbf.load_user_hooks(os.getcwd(), load_pycuda=False)
-        self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
-                                              single_blob_bodies='rollers' in self.options.scheme)
-        self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
-        slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]
-        self.arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
-        self.r_vectors = self.arrays.blob_positions()
-        self.a = self.options.blob_radius
-        self.eta = self.options.eta
-        if not (self.a > 0 and self.eta > 0):
-            from utils import UserInputError
-            raise UserInputError('%s: blob_radius and eta must be positive' % self.options.input_file)
-        self.structures = []
-        offsets = self.arrays.blob_offsets
-        for (structure_id, count), spec, (bodies, blobs), n in zip(
-                self.types, self.options.structures, self.arrays.type_slices, self.arrays.type_blobs):
-            reference = self.arrays.reference_blobs[offsets[bodies.start]:offsets[bodies.start] + n]
-            r_type = self.r_vectors[blobs].reshape(count, n, 3)
-            centres = r_type.mean(axis=1)
-            lowest = int(np.argmin(centres[:, 2])) if count else 0
-            info = dict(ID=structure_id, spec=spec, reference=reference, bodies=bodies, blobs=blobs,
-                        num_blobs=n, count=count, centres=centres, lowest=lowest, r_type=r_type,
-                        sphere=recognise_sphere(reference, self.a), nearest_pair=None, nearest_gap=None)
-            if count > 1:
-                distance = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
-                distance[np.diag_indices(count)] = np.inf
-                i, j = np.unravel_index(np.argmin(distance), distance.shape)
-                info['nearest_pair'], info['nearest_gap'] = (int(i), int(j)), float(distance[i, j])
-            self.structures.append(info)
-
-    @property
-    def num_blobs(self):
-        return self.arrays.num_blobs
-
-    @property
-    def wall(self):
-        names = (self.options.mobility_vector_prod_implementation, self.options.mobility_blobs_implementation)
-        if 'rollers' in self.options.scheme:
-            return self.options.domain != 'no_wall'
-        return not all(name.endswith(NO_WALL) for name in names)
-
-    def physics(self):
-        o = self.options
-        return dict(g=o.g, repulsion_strength_wall=o.repulsion_strength_wall, debye_length_wall=o.debye_length_wall,
-                    repulsion_strength=o.repulsion_strength, debye_length=o.debye_length,
-                    periodic_length=np.array(o.periodic_length), blob_radius=o.blob_radius, blob_mass=1.0)
+from multi_bodies.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
+                                        apply_recommendation, recommendation_lines)
+from multi_bodies.advisor_models import (  # noqa: F401  (also re-exported)
+    Choice,
+    Scene,
+    DENSE_BLOB_LIMIT,
+    DENSE_SCHEMES,
+    GMRES_WARNING_ITERATIONS,
+    MEASURE_BUDGET_S,
+    NO_WALL,
+    RICHARDSON_LEVELS,
+    ROLLER_SCHEMES,
+    SCHEME_TABLE,
+    SHELL_SIZES,
+    STATIC_SCHEMES,
+    STOCHASTIC_SCHEME_TABLE,
+    bodies_mobility,
+    bulk_radius,
+    calibrated_model,
+    cheapest_scheme,
+    distance_to_other_bodies,
+    exact_diagonal,
+    fixed_radius_model,
+    normalised_diagonal,
+    richardson,
+    worst_error)
 
 
 # ------------------------------------------------------------------ the advisor
-class Advisor:
+class Advisor(AdvisorReport):
     """Measures every choice for one scene; see the module docstring.
 
     Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
@@ -737,7 +439,6 @@ class Advisor:
 
     def write_vertex(self, sid, label, blobs):
         """Write the recommended model next to the output (``output_name.advice.<ID>.<model>.vertex``)."""
-        from multi_bodies.structure_files import write_vertex_file
         name = '%s.advice.%s.%s.vertex' % (self.scene.options.output_name, sid,
                                            label.split(' (')[0].replace(' ', '_'))
         self.files[name] = (blobs, 'model recommended by multi_bodies/advise.py for structure %s: %s' % (sid, label))
@@ -1052,121 +753,6 @@ class Advisor:
                 limit = SCHEME_TABLE[options.scheme]['stability'] / rate
                 self.recommendation['dt'] = '%.3g' % (0.5 * limit)
         self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian)
-
-    # -------------------------------------------------------------- output
-    def as_json(self):
-        return {'target_accuracy': self.accuracy,
-                'choices': [dict(topic=c.topic, structure=c.structure, candidate=c.candidate, blobs=c.blobs,
-                                 estimated_error=c.estimated_error, cost_s=c.cost_s, meets_target=c.meets_target)
-                            for c in self.choices],
-                'recommendation': dict(self.recommendation)}
-
-    def report(self):
-        """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
-        lines = ['# Advice for %s (target accuracy %s%s)' % (self.scene.options.input_file, _percent(self.accuracy),
-                                                          ', --quick' if self.quick else ''),
-                 '', 'Scene: %d bodies, %d blobs, %d structure types; blob_radius %g, eta %g, %s.' % (
-                     self.scene.arrays.num_bodies, self.scene.num_blobs, len(self.scene.structures), self.scene.a,
-                     self.scene.eta, 'wall at z = 0' if self.scene.wall else 'no wall'),
-                 'Error: the largest relative error of the six self-mobility diagonal entries of a body at the '
-                 'smallest gap; cost per step: one M f (%s) x GMRES iterations of the scene (%s).' % (
-                     self.backend, self.iterations)]
-        for structure in self.scene.structures:
-            sphere = structure['sphere']
-            lines.append('- %s: %d bodies of %d blobs, %s' % (
-                structure['ID'], structure['count'], structure['num_blobs'],
-                'sphere of radius %.4g (%s), lowest centre h/R = %.4g%s' % (
-                    sphere['radius'], sphere['kind'], structure['centres'][structure['lowest']][2] / sphere['radius'],
-                    '' if structure['nearest_gap'] is None else
-                    ', nearest pair at %.4g R' % (structure['nearest_gap'] / sphere['radius']))
-                if sphere else 'not a sphere'))
-        for topic in ('resolution', 'wall', 'rollers', 'solver', 'backend', 'dt'):
-            rows = [c for c in self.choices if c.topic == topic]
-            if not rows:
-                continue
-            lines += ['', '## %s' % topic, '',
-                      '| structure | option | blobs | estimated error | cost per step | meets target | note |',
-                      '|---|---|---|---|---|---|---|']
-            for c in rows:
-                lines.append('| %s | %s | %s | %s | %s | %s | %s |' % (
-                    c.structure or '', c.candidate, '' if c.blobs is None else c.blobs, _percent(c.estimated_error),
-                    _seconds(c.cost_s), 'yes' if c.meets_target else 'no', c.note))
-        if self.sources:
-            lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
-            if self.quick:
-                lines.append('- --quick: errors of the calibrated shells at the wall gap (h/R >= 1.1) come from '
-                             'the shipped table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, '
-                             'interpolated in h/R); pair errors are not measured; costs of other models are '
-                             'modelled as M f x (N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 '
-                             'from a 600-blob inversion')
-        if self.notes:
-            lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
-        lines += ['', '## recommendation', '']
-        if not self.recommendation:
-            lines.append('The input already uses the cheapest adequate choices measured here: no line to change.')
-        else:
-            lines.append('Change these input lines:')
-            lines.append('')
-            lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
-        return '\n'.join(lines) + '\n'
-
-    def write(self):
-        """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
-        from multi_bodies.structure_files import write_vertex_file
-        output = self.scene.options.output_name
-        folder = os.path.dirname(output)
-        if folder:
-            os.makedirs(folder, exist_ok=True)
-        for path, (blobs, comment) in self.files.items():
-            write_vertex_file(path, blobs, comment=comment)
-        path = output + '.advice.json'
-        with open(path, 'w') as f:
-            json.dump(self.as_json(), f, indent=1)
-        return path
-
-
-def recommendation_lines(recommendation):
-    """Input-file lines ``option value`` of a recommendation (``structure:<ID>`` keys become ``structure``)."""
-    return ['%-40s %s' % (key.split(':')[0], value) for key, value in recommendation.items()]
-
-
-def apply_recommendation(text, recommendation, structure_ids):
-    """Input text with the recommended lines in place of the old ones.
-
-    ``structure_ids``: the structure ID of each ``structure`` line, in order.
-    Options not present are appended.
-    """
-    lines = text.splitlines()
-    done = set()
-    structure_index = 0
-    for i, raw in enumerate(lines):
-        words = raw.split('#', 1)[0].split()
-        if not words:
-            continue
-        name = words[0]
-        if name == 'structure':
-            key = 'structure:%s' % structure_ids[structure_index]
-            structure_index += 1
-            if key in recommendation:
-                lines[i] = 'structure %s' % recommendation[key]
-                done.add(key)
-        elif name in recommendation:
-            lines[i] = '%s %s' % (name, recommendation[name])
-            done.add(name)
-    lines += ['%s %s' % (key, value) for key, value in recommendation.items() if key not in done]
-    return '\n'.join(lines) + '\n'
-
-
-def _percent(value):
-    if value is None:
-        return '-'
-    return '%.3g%%' % (100.0 * value)
-
-
-def _seconds(value):
-    if value is None:
-        return '-'
-    return '%.3g ms' % (1e3 * value) if value < 1.0 else '%.3g s' % value
 
 
 def advise(input_file, accuracy=0.01, quick=False, coarsen=False, log=None):
