@@ -51,8 +51,8 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
-        'multi_bodies._forces_cpp',
-        ['multi_bodies/cpp/forces_module.cpp'],
+        'multi_bodies.solver._forces_cpp',
+        ['multi_bodies/solver/cpp/forces_module.cpp'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -67,7 +67,8 @@ extensions = [
 ]
 
 setup(
-    packages=['body', 'mobility', 'multi_bodies', 'quaternion_integrator',
+    packages=['body', 'mobility', 'multi_bodies', 'multi_bodies.solver', 'multi_bodies.files', 'multi_bodies.run',
+              'multi_bodies.ensembles', 'multi_bodies.advice', 'quaternion_integrator',
               'stochastic_forcing', 'many_bodyMCMC', 'boomerang', 'sphere'],
     py_modules=['utils'],
     package_data={'mobility': ['cpp/*.h', 'cuda/*.cu']},

@@ -392,3 +392,23 @@ def read_text_file(path, what, hint):
         line = data.count(b'\n', 0, err.start) + 1
         raise UserInputError("%s '%s', line %d: byte 0x%02x is not UTF-8 text; save the file as plain UTF-8 "
                              "(or ASCII) text" % (what, path, line, data[err.start]))
+
+
+def prepare_script_path(script_file):
+    """Make the package importable from a script run by path (``python multi_bodies.py ...``).
+
+    The one path prelude of every script.  Each script first puts the
+    repository root on ``sys.path`` (two lines: it cannot import this module
+    before that), then calls this function, which takes the script's own
+    folder off the path (``multi_bodies.py``, ``boomerang.py`` and
+    ``sphere.py`` share their package's name, and would otherwise shadow it)
+    and forgets a module that such a script left under the package's name.
+    """
+    import os
+    import sys
+    folder = os.path.dirname(os.path.abspath(script_file))
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != folder]
+    package = os.path.basename(folder)
+    module = sys.modules.get(package)
+    if module is not None and not hasattr(module, '__path__'):
+        del sys.modules[package]

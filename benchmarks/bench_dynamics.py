@@ -27,9 +27,10 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
-from multi_bodies import multi_bodies_functions as mbf  # noqa: E402
-from multi_bodies.structure_generators import boomerang  # noqa: E402
-from multi_bodies.system import System  # noqa: E402
+from multi_bodies.solver import physics as mbf  # noqa: E402
+from multi_bodies.solver import user_hooks  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang  # noqa: E402
+from multi_bodies.solver.system import System  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 PYTHON_LIMIT = 100  # bodies; above this the dense-chunked python M f takes minutes per step
@@ -52,7 +53,7 @@ def boomerang_system(num_bodies, backend, seed=1):
         bodies.append(body)
     physics = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, repulsion_strength=1.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=0.25, blob_mass=1.0)
-    return System(bodies, bodies_to_arrays(bodies), mbf.load_user_hooks('/nonexistent'), physics, 1.0, 0.25, 1e-8,
+    return System(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.25, 1e-8,
                   vector_product_name=backend, blobs_name=backend, blob_blob_name=backend)
 
 

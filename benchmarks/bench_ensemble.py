@@ -5,7 +5,7 @@ boomerangs (15 blobs, blob radius 0.25, a square grid of spacing 4 at
 z = 2.5, random orientations, gravity and the default soft repulsions) with
 the C++ backend.  For every cluster configuration (worker processes x
 OpenMP threads per worker) the benchmark starts a ``LocalCluster``, runs
-all replicas through ``multi_bodies.ensemble_runner.run_on_client`` and
+all replicas through ``multi_bodies.ensembles.ensemble_runner.run_on_client`` and
 prints
 
 * the wall time of the ensemble and the replicas per minute;
@@ -31,9 +31,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from multi_bodies import ensemble_runner as runner  # noqa: E402
-from multi_bodies.structure_files import write_clones_file, write_vertex_file  # noqa: E402
-from multi_bodies.structure_generators import boomerang  # noqa: E402
+from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
+from multi_bodies.files.structure_files import write_clones_file, write_vertex_file  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 
 
 def write_scene(folder, num_bodies, steps, backend):

@@ -31,7 +31,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from body.body import Body, bodies_to_arrays  # noqa: E402
 from many_bodyMCMC import mcmc_energy as me  # noqa: E402
 from many_bodyMCMC.sampler import MetropolisSampler  # noqa: E402
-from multi_bodies.structure_generators import boomerang  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 from utils import UserInputError  # noqa: E402
 
 PHYSICS = dict(g=1.539384e-4, repulsion_strength_wall=0.0957137, debye_length_wall=0.1622787,

@@ -20,8 +20,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import mobility  # noqa: E402
 from body.body import Body, bodies_to_arrays  # noqa: E402
-from multi_bodies import body_solver  # noqa: E402
-from multi_bodies.structure_generators import boomerang  # noqa: E402
+from multi_bodies.solver import body_solver  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 
 
 def boomerang_suspension(count, seed=0):

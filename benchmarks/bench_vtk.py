@@ -23,8 +23,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
 from body.body import bodies_to_arrays, Body  # noqa: E402
-from multi_bodies.structure_generators import boomerang  # noqa: E402
-from multi_bodies.vtk_output import VtkSeries  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang  # noqa: E402
+from multi_bodies.run.vtk_output import VtkSeries  # noqa: E402
 
 SCRIPT_DIR = os.path.join(REPO, 'multi_bodies')
 
@@ -111,8 +111,8 @@ def main(argv=None):
                                         100.0 * wall_extra / min(r[1] for r in plain)))
     plain = min(r[0] for r in plain)
     sys.path.insert(0, SCRIPT_DIR)
-    from multi_bodies.input_options import read_input_file
-    from multi_bodies.run_setup import read_bodies
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.run_setup import read_bodies
     cwd = os.getcwd()
     os.chdir(SCRIPT_DIR)
     try:

@@ -33,18 +33,13 @@ import runpy
 import sys
 import time
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# This script is called boomerang.py, like its package: keep its folder off sys.path.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'boomerang' in sys.modules and not hasattr(sys.modules['boomerang'], '__path__'):
-    del sys.modules['boomerang']
-# Run the package this script belongs to (its repository root first on the path).
-if os.path.dirname(_SCRIPT_DIR) not in [os.path.abspath(p or os.curdir) for p in sys.path]:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import utils  # noqa: E402
+utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
-import utils  # noqa: E402
 from body.body import Body  # noqa: E402
 from boomerang import boomerang_model as bm  # noqa: E402
 from sphere.single_body_integrators import SCHEMES, SingleBodyIntegrator  # noqa: E402
@@ -58,7 +53,8 @@ def find_data_dir(data_dir=None):
     """
     if data_dir:
         return data_dir
-    for folder in (os.getcwd(), _SCRIPT_DIR, os.path.dirname(_SCRIPT_DIR)):
+    script_dir = os.path.dirname(os.path.abspath(__file__))
+    for folder in (os.getcwd(), script_dir, os.path.dirname(script_dir)):
         path = os.path.join(folder, 'config_local.py')
         if os.path.isfile(path):
             namespace = runpy.run_path(path)

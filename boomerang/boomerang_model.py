@@ -3,7 +3,7 @@
 A rigid L-shaped colloid of 15 blobs above a no-slip wall at ``z = 0``:
 the apex (cross point) at the body's location and two perpendicular arms of
 7 blobs each along the body axes +x and +y, spacing 0.3 um (made by
-``multi_bodies.structure_generators.boomerang``).  Units: um, s, mg.
+``multi_bodies.files.structure_generators.boomerang``).  Units: um, s, mg.
 
 Physical constants (as in the paper and the published code):
 
@@ -31,8 +31,8 @@ import numpy as np
 
 import mobility
 from body.body import BodyArrays, KT_dot, K_matrices, blob_positions
-from multi_bodies.body_solver import dense_body_mobility
-from multi_bodies.structure_generators import boomerang as boomerang_blobs
+from multi_bodies.solver.body_solver import dense_body_mobility
+from multi_bodies.files.structure_generators import boomerang as boomerang_blobs
 
 A = 0.265 * np.sqrt(3.0 / 2.0)
 ETA = 8.9e-4
@@ -131,7 +131,7 @@ class BoomerangModel:
         """6x6 body mobility of each boomerang alone above the wall, shape (nb, 6, 6).
 
         Rows ``[v, w]``, columns ``[F, T]``, about the apex.  One body goes
-        through ``multi_bodies.body_solver.dense_body_mobility``; a stack is
+        through ``multi_bodies.solver.body_solver.dense_body_mobility``; a stack is
         computed with the same formula, ``pinv(K^T M^-1 K)``, for all bodies at once.
         """
         locations = np.asarray(locations, dtype=float).reshape(-1, 3)

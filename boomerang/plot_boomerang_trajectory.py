@@ -13,14 +13,13 @@ import argparse
 import os
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if os.path.dirname(_SCRIPT_DIR) not in [os.path.abspath(p or os.curdir) for p in sys.path]:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import utils  # noqa: E402
+utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
-import utils  # noqa: E402
 from boomerang.boomerang_model import BoomerangModel  # noqa: E402
 from quaternion_integrator.quaternion import rotation_matrices  # noqa: E402
 

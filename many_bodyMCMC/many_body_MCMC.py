@@ -21,15 +21,13 @@ import argparse
 import os
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
-
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
+utils.prepare_script_path(__file__)
+
 from many_bodyMCMC.mcmc_run import run_mcmc  # noqa: E402
-from multi_bodies.input_options import read_input_file  # noqa: E402
+from multi_bodies.files.input_options import read_input_file  # noqa: E402
 
 
 def main(argv=None):

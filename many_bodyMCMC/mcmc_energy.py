@@ -39,8 +39,8 @@ import os
 import numpy as np
 
 from body.body import blob_positions
-from multi_bodies.multi_bodies_functions import minimum_image
-from multi_bodies.user_hooks import import_module_file
+from multi_bodies.solver.physics import minimum_image
+from multi_bodies.solver.user_hooks import import_module_file
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 65536  # pairs per chunk of the NumPy sums (bounded memory)

@@ -1,7 +1,7 @@
 """One Monte Carlo run from validated options: the library function behind ``many_body_MCMC.py``.
 
 ``run_mcmc(options)`` sets the run up (bodies, potentials, energy backend,
-generator), writes every output through ``multi_bodies.run_output`` and
+generator), writes every output through ``multi_bodies.run.run_output`` and
 returns the exit status (0 done; 130 or 143 when SIGINT or SIGTERM stopped it after
 the step in progress, with every file complete).  Outputs, prefixed by
 ``output_name``: ``.inputfile``, ``.random_state``, ``.bodies_info``,
@@ -20,9 +20,10 @@ import utils
 from body.body import bodies_to_arrays
 from many_bodyMCMC import mcmc_energy
 from many_bodyMCMC.sampler import MOVES, MetropolisSampler
-from multi_bodies import multi_bodies_functions, run_output
-from multi_bodies.input_options import OPTION_TABLE
-from multi_bodies.run_setup import read_bodies
+from multi_bodies.solver import physics as multi_bodies_functions
+from multi_bodies.run import run_output
+from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.run.run_setup import read_bodies
 
 # Options the sampler reads; any other option that the input file sets is reported as unused.
 USED_OPTIONS = ('n_steps', 'initial_step', 'n_save', 'g', 'blob_radius', 'kT', 'output_name', 'random_state',

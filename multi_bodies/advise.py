@@ -20,18 +20,12 @@ import argparse
 import os
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# The script's folder holds multi_bodies.py, which would hide the package of the same name.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
-    del sys.modules['multi_bodies']
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
-
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
-from multi_bodies import advisor  # noqa: E402
+utils.prepare_script_path(__file__)
+
+from multi_bodies.advice import advisor  # noqa: E402
 
 
 def main(argv=None):

@@ -18,7 +18,7 @@ that the run left (finished or stopped):
 
 It writes ``output_name.blobs.<step>.vtp``, ``output_name.bodies.<step>.vtp``
 and the collections ``output_name.blobs.pvd`` and ``output_name.bodies.pvd``
-(times ``step * dt``; see ``multi_bodies/vtk_output.py`` and
+(times ``step * dt``; see ``multi_bodies/run/vtk_output.py`` and
 doc/visualisation.md); ``--output-name`` gives them another prefix.  ``--wrap-periodic`` draws every body in the primary
 box ``[0, L)`` of the periodic axes of ``periodic_length``.
 """
@@ -26,19 +26,13 @@ import argparse
 import os
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# The script's own folder holds multi_bodies.py, which would hide the package of the same name.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
-    del sys.modules['multi_bodies']
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
-
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
-from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies.vtk_output import (STATIC_SCHEMES, VtkSeries, collection_name, load_run,  # noqa: E402
+utils.prepare_script_path(__file__)
+
+from multi_bodies.files.input_options import read_input_file  # noqa: E402
+from multi_bodies.run.vtk_output import (STATIC_SCHEMES, VtkSeries, collection_name, load_run,  # noqa: E402
                                      run_configurations, static_velocities)
 
 def convert(options, wrap_periodic=False, vtk_name=None):

@@ -22,18 +22,12 @@ import os
 import signal
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# This folder holds multi_bodies.py, named like its package: keep the folder off sys.path.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
-    del sys.modules['multi_bodies']
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
-
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
-from multi_bodies import ensemble_runner as runner  # noqa: E402
+utils.prepare_script_path(__file__)
+
+from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
 
 REPORT_LIMIT = 20  # failed replicas listed at the end (all are reported as they fail)
 
@@ -183,7 +177,7 @@ def main(argv=None):
     """Command line entry; returns the exit status."""
     args = make_parser().parse_args(argv)
     if args.aggregate:
-        from multi_bodies import ensemble_statistics
+        from multi_bodies.ensembles import ensemble_statistics
         ensemble_statistics.aggregate(args.aggregate, bins=args.bins, height_range=args.height_range,
                                       max_lag=args.max_lag, discard=args.discard, charts=not args.no_charts)
         return 0

@@ -7,7 +7,7 @@ Run from inside ``multi_bodies/`` (the manual's sections 5.1 to 5.3)::
 The input file names the scheme (the deterministic schemes of doc/dynamics.md
 and the stochastic schemes of doc/brownian.md, e.g. ``stochastic_Slip_Trapz``
 and ``stochastic_adams_bashforth_rollers``), the time step and the bodies.
-The run itself is ``multi_bodies.dynamic_run.run_dynamics``.  Outputs, all
+The run itself is ``multi_bodies.run.dynamic_run.run_dynamics``.  Outputs, all
 prefixed by ``output_name``:
 
 * ``.inputfile`` (copy of the input), ``.bodies_info``, ``.random_state``
@@ -30,19 +30,13 @@ import argparse
 import os
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# This script is called multi_bodies.py, like its package: keep its folder off sys.path.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
-    del sys.modules['multi_bodies']
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
-
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
-from multi_bodies.dynamic_run import run_dynamics  # noqa: E402
-from multi_bodies.input_options import read_input_file  # noqa: E402
+utils.prepare_script_path(__file__)
+
+from multi_bodies.run.dynamic_run import run_dynamics  # noqa: E402
+from multi_bodies.files.input_options import read_input_file  # noqa: E402
 
 
 def main(argv=None):

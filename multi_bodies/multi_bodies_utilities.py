@@ -33,23 +33,19 @@ import os
 import shutil
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# The script's own folder holds multi_bodies.py, which would hide the package of the same name.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import utils  # noqa: E402
+utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
 import mobility  # noqa: E402
-import utils  # noqa: E402
-from multi_bodies import body_solver  # noqa: E402
-from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies import run_output  # noqa: E402
-from multi_bodies.run_setup import STATIC_SCHEMES, prepare, write_bodies_info  # noqa: E402
-from multi_bodies.structure_files import read_body_table  # noqa: E402
+from multi_bodies.solver import body_solver  # noqa: E402
+from multi_bodies.files.input_options import read_input_file  # noqa: E402
+from multi_bodies.run import run_output  # noqa: E402
+from multi_bodies.run.run_setup import STATIC_SCHEMES, prepare, write_bodies_info  # noqa: E402
+from multi_bodies.files.structure_files import read_body_table  # noqa: E402
 
 SCHEMES = STATIC_SCHEMES
 
@@ -129,7 +125,7 @@ def write_velocity_field(options, system, r_vectors, lambda_blobs):
     """Write ``.velocity_field.vtk`` when ``plot_velocity_field`` is given."""
     if options.plot_velocity_field is None:
         return
-    from multi_bodies import velocity_field
+    from multi_bodies.run import velocity_field
     try:
         product = mobility.source_target_product(system.vector_product_name)
     except utils.UserInputError as err:

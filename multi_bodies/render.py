@@ -24,21 +24,15 @@ import os
 import subprocess
 import sys
 
-_SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
-# The script's own folder holds multi_bodies.py, which would hide the package of the same name.
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _SCRIPT_DIR]
-if 'multi_bodies' in sys.modules and not hasattr(sys.modules['multi_bodies'], '__path__'):
-    del sys.modules['multi_bodies']
-try:
-    import multi_bodies.input_options  # noqa: F401
-except ImportError:
-    sys.path.insert(0, os.path.dirname(_SCRIPT_DIR))
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import utils  # noqa: E402
+utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
-import utils  # noqa: E402
-from multi_bodies.input_options import read_input_file  # noqa: E402
-from multi_bodies.vtk_output import load_run, periodic_shifts, run_configurations  # noqa: E402
+from multi_bodies.files.input_options import read_input_file  # noqa: E402
+from multi_bodies.run.vtk_output import load_run, periodic_shifts, run_configurations  # noqa: E402
 
 WALL_RGB = (0.78, 0.78, 0.78)
 SHADOW_RGB = (0.62, 0.62, 0.62)  # each blob's footprint on the wall, straight below it: shows the height

@@ -32,7 +32,7 @@ import numpy as np
 
 from stochastic_forcing import rfd_configuration, symmetric_root_matrix
 from utils import SimulationStopped, UserInputError
-from quaternion_integrator.schemes import Scheme, euler_update
+from quaternion_integrator.scheme_base import Scheme, euler_update
 
 MAX_CONSECUTIVE_REJECTIONS = 100
 

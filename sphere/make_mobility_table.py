@@ -5,11 +5,11 @@ Run from the repository root (or from inside ``sphere/``)::
     python sphere/make_mobility_table.py --blobs 162 --output sphere/mobility.162-blob.dat
 
 The sphere is the package's calibrated icosahedral shell
-(``multi_bodies.structure_generators.calibrated_shell``: hydrodynamic radius
+(``multi_bodies.files.structure_generators.calibrated_shell``: hydrodynamic radius
 R = 1, blob radius half the nearest-neighbour distance) with its centre at
 height ``h`` above the wall.  Its 6x6 body mobility about the centre is
 ``pinv(K^T M^-1 K)`` with the Rotne-Prager-Blake blob mobility
-(``multi_bodies.body_solver.dense_body_mobility``).  Columns of the table:
+(``multi_bodies.solver.body_solver.dense_body_mobility``).  Columns of the table:
 
 ``h/R, par, perp, rot_par, rot_perp, coupling``
 
@@ -28,15 +28,15 @@ import sys
 
 import numpy as np
 
-_REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if _REPO not in [os.path.abspath(p or os.curdir) for p in sys.path]:
-    sys.path.insert(0, _REPO)
+# The one path prelude of the scripts: the repository root first, then utils.prepare_script_path.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import utils  # noqa: E402
+utils.prepare_script_path(__file__)
 
 import mobility  # noqa: E402
-import utils  # noqa: E402
 from body.body import BodyArrays  # noqa: E402
-from multi_bodies.body_solver import dense_body_mobility  # noqa: E402
-from multi_bodies.structure_generators import calibrated_shell  # noqa: E402
+from multi_bodies.solver.body_solver import dense_body_mobility  # noqa: E402
+from multi_bodies.files.structure_generators import calibrated_shell  # noqa: E402
 
 DEFAULT_HEIGHTS = np.concatenate((1.0 + np.geomspace(0.002, 1.0, 40), np.arange(2.25, 10.01, 0.25),
                                   np.arange(11.0, 20.01, 1.0), [25.0, 30.0, 40.0, 50.0]))
@@ -87,7 +87,7 @@ def main(argv=None):
     with open(output, 'w') as f:
         f.write('# Wall mobilities of a rigid multiblob sphere (hydrodynamic radius R = 1) above a no-slip wall.\n')
         f.write('# made by: %s (%s UTC)\n' % (command.strip(), datetime.datetime.utcnow().strftime('%Y-%m-%d %H:%M')))
-        f.write('# shell: %d blobs (multi_bodies.structure_generators.calibrated_shell), shell radius %.12g, '
+        f.write('# shell: %d blobs (multi_bodies.files.structure_generators.calibrated_shell), shell radius %.12g, '
                 'blob radius %.12g\n' % (args.blobs, shell['shell_radius'], shell['blob_radius']))
         f.write('# body mobility pinv(K^T M^-1 K), Rotne-Prager-Blake blobs, tracking point the centre\n')
         f.write('# rot_par, rot_perp divided by the free-space value of the shell (8 pi eta R^3 mu_rr = %.12g)\n'

@@ -1,4 +1,4 @@
-"""The model advisor (multi_bodies/advisor.py, multi_bodies/advise.py) on scenes whose answer is known.
+"""The model advisor (multi_bodies/advice/advisor.py, multi_bodies/advise.py) on scenes whose answer is known.
 
 Outside numbers used here: the exact self mobilities of a sphere above a
 wall and the shell errors of VALIDATION.md §2.1 and §2.2 (typed below), the
@@ -15,10 +15,10 @@ import pytest
 
 import mobility
 from body.body import K_matrices
-from multi_bodies import advisor, sphere_tables
-from multi_bodies.input_options import read_input_file
-from multi_bodies.structure_files import read_vertex_file, write_clones_file, write_vertex_file
-from multi_bodies.structure_generators import calibrated_shell as _calibrated_shell
+from multi_bodies.advice import advisor, sphere_tables
+from multi_bodies.files.input_options import read_input_file
+from multi_bodies.files.structure_files import read_vertex_file, write_clones_file, write_vertex_file
+from multi_bodies.files.structure_generators import calibrated_shell as _calibrated_shell
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCRIPT = os.path.join(REPO, 'multi_bodies', 'advise.py')
@@ -202,7 +202,7 @@ def test_near_contact_richardson_is_flagged_as_a_lower_bound(tmp_path, monkeypat
 
 def test_auto_backend_is_the_cheapest_measured():
     from mobility import choose
-    from multi_bodies.system import resolve_implementation
+    from multi_bodies.solver.system import resolve_implementation
     messages = []
     chosen = resolve_implementation('auto', 'vector_product', log=messages.append, num_blobs=1000)
     costs = choose.backend_costs('vector_product', 1000)
@@ -230,7 +230,7 @@ def test_script_on_the_manual_example_and_bad_input(tmp_path):
 
 def test_coarsened_rod_keeps_its_drag_and_reports_its_error(tmp_path, monkeypatch):
     """--coarsen: every other blob with a radius that keeps the bulk drag (checked with the RPY matrix directly)."""
-    from multi_bodies.structure_generators import rod
+    from multi_bodies.files.structure_generators import rod
     monkeypatch.chdir(tmp_path)
     blobs = rod(10, 0.5)
     scene = advisor.Scene(write_scene(str(tmp_path), [('rod', blobs, [[0.0, 0.0, 1.0]])], 0.25))

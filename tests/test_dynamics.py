@@ -16,9 +16,9 @@ import pytest
 import mobility
 from body.body import Body, bodies_to_arrays
 from multi_bodies import multi_bodies_functions as mbf
-from multi_bodies import structure_generators as gen
-from multi_bodies.structure_files import write_clones_file, write_vertex_file
-from multi_bodies.system import System
+from multi_bodies.files import structure_generators as gen
+from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
+from multi_bodies.solver.system import System
 from quaternion_integrator.schemes import make_scheme
 from utils import UserInputError
 
@@ -286,7 +286,7 @@ def test_nan_forces_stop_the_run(tmp_path, monkeypatch, capsys):
 
 
 def test_non_converged_solve_stops_the_run(tmp_path, monkeypatch, capsys):
-    from multi_bodies import body_solver
+    from multi_bodies.solver import body_solver
     monkeypatch.setattr(body_solver, 'GMRES_MAXITER', 1)
     boomerang_scene(tmp_path, n_steps=3, extra={'solver_tolerance': 1e-300})
     assert run_script(tmp_path, 'input.dat', monkeypatch) == 1

@@ -23,9 +23,9 @@ import textwrap
 import numpy as np
 import pytest
 
-from multi_bodies import ensemble_runner as runner
-from multi_bodies import ensemble_statistics as stats
-from multi_bodies import run_output
+from multi_bodies.ensembles import ensemble_runner as runner
+from multi_bodies.ensembles import ensemble_statistics as stats
+from multi_bodies.run import run_output
 from utils import UserInputError, read_clones_frame, read_clones_frames as read_clones_series, read_config_frames as read_config_series
 
 # The scheme of the test scene.  The stochastic schemes are not on main yet

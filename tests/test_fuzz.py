@@ -47,7 +47,7 @@ hypothesis = pytest.importorskip('hypothesis', reason='hypothesis is a test extr
 from hypothesis import HealthCheck, assume, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from multi_bodies.input_options import OPTION_TABLE, parse_input_text  # noqa: E402
+from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text  # noqa: E402
 from utils import UserInputError  # noqa: E402
 
 from run_scenes import (REPO_ROOT, add_generated_inputs, copy_scene, edit_input, run_in_process,  # noqa: E402

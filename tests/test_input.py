@@ -6,10 +6,10 @@ import sys
 import numpy as np
 import pytest
 
-from multi_bodies.input_options import OPTION_TABLE, parse_input_text, read_input_file
-from multi_bodies.structure_files import (read_body_table, read_clones_file, read_slip_file, read_vertex_file,
+from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text, read_input_file
+from multi_bodies.files.structure_files import (read_body_table, read_clones_file, read_slip_file, read_vertex_file,
                                           write_clones_file, write_vertex_file)
-from multi_bodies import structure_generators as gen
+from multi_bodies.files import structure_generators as gen
 from utils import UserInputError
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -22,9 +22,9 @@ import pytest
 from body.body import Body, bodies_to_arrays
 from many_bodyMCMC import mcmc_energy as me
 from many_bodyMCMC.sampler import MetropolisSampler
-from multi_bodies import structure_generators as gen
+from multi_bodies.files import structure_generators as gen
 from multi_bodies.multi_bodies_functions import minimum_image
-from multi_bodies.structure_files import write_clones_file, write_vertex_file
+from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
 from quaternion_integrator.quaternion import rotation_matrices
 from utils import UserInputError
 

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 import utils
-from multi_bodies import run_output
-from multi_bodies.input_options import OPTION_TABLE, parse_input_text
-from multi_bodies.structure_files import read_clones_file
+from multi_bodies.run import run_output
+from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text
+from multi_bodies.files.structure_files import read_clones_file
 
 from run_scenes import (REPO_ROOT, SCRIPT_DIR, add_generated_inputs, copy_scene, edit_input, run_in_process,
                         snapshot_files, start_child)
@@ -546,7 +546,7 @@ def test_coinciding_blobs_in_a_vertex_file_are_refused(tmp_path):
     """Found by tests/test_fuzz.py (a duplicated line and a fixed count): a singular blob mobility."""
     path = tmp_path / 'b.vertex'
     path.write_text('# two blobs at one point\n3\n0 0 0\n1 0 0\n0 0 0\n')
-    from multi_bodies.structure_files import read_vertex_file
+    from multi_bodies.files.structure_files import read_vertex_file
     with pytest.raises(utils.UserInputError, match='b.vertex, lines 3 and 5: two blobs at the same position'):
         read_vertex_file(str(path))
 

@@ -13,9 +13,9 @@ import pytest
 
 import mobility
 from body.body import Body, bodies_to_arrays
-from multi_bodies import body_solver
-from multi_bodies import structure_generators as gen
-from multi_bodies.structure_files import read_vertex_file
+from multi_bodies.solver import body_solver
+from multi_bodies.files import structure_generators as gen
+from multi_bodies.files.structure_files import read_vertex_file
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REFERENCE = os.path.abspath(os.environ.get('RMB_REFERENCE_DIR', os.path.join(REPO_ROOT, '..', 'shared', 'reference')))

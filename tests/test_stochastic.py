@@ -23,8 +23,8 @@ import pytest
 import mobility
 from body.body import Body, bodies_to_arrays, rotation_matrices
 from multi_bodies import multi_bodies_functions as mbf
-from multi_bodies import structure_generators as gen
-from multi_bodies.system import System
+from multi_bodies.files import structure_generators as gen
+from multi_bodies.solver.system import System
 from quaternion_integrator import stochastic_schemes
 from quaternion_integrator.schemes import make_scheme
 from stochastic_forcing import lanczos_square_root, symmetric_root
@@ -358,7 +358,7 @@ def test_in_plane_diffusion_equals_kT_mean_parallel_mobility():
 # ====================================================================== reproducibility and exact restart
 def write_scene(tmp_path, scheme, n_steps, extra=None, initial_step=0):
     bodies = equilibrium_blobs(6, 300) if 'rollers' in scheme else None
-    from multi_bodies.structure_files import write_clones_file, write_vertex_file
+    from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
     if 'rollers' in scheme:
         write_vertex_file(tmp_path / 'blob.vertex', np.zeros((1, 3)))
         write_clones_file(tmp_path / 'blobs.clones', np.array([b.location for b in bodies]),

@@ -20,8 +20,8 @@ import pytest
 
 import utils
 from body.body import Body
-from multi_bodies.structure_files import read_clones_file, read_vertex_file, write_clones_file, write_vertex_file
-from multi_bodies.vtk_output import periodic_shifts
+from multi_bodies.files.structure_files import read_clones_file, read_vertex_file, write_clones_file, write_vertex_file
+from multi_bodies.run.vtk_output import periodic_shifts
 
 REPO = Path(__file__).resolve().parents[1]
 STRUCTURES = REPO / 'multi_bodies' / 'Structures'

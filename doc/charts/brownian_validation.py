@@ -37,9 +37,10 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
-from multi_bodies import multi_bodies_functions as mbf  # noqa: E402
-from multi_bodies import structure_generators as gen  # noqa: E402
-from multi_bodies.system import System  # noqa: E402
+from multi_bodies.solver import physics as mbf  # noqa: E402
+from multi_bodies.solver import user_hooks  # noqa: E402
+from multi_bodies.files import structure_generators as gen  # noqa: E402
+from multi_bodies.solver.system import System  # noqa: E402
 from quaternion_integrator.quaternion import rotation_matrices  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
@@ -87,7 +88,7 @@ def blob_system(n_bodies, b, seed, backend):
         bodies.append(body)
     physics = dict(g=G, repulsion_strength_wall=EPS_WALL, debye_length_wall=b, repulsion_strength=1.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=A, blob_mass=1.0)
-    return System(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'), physics, ETA,
+    return System(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
                   A, 1e-6, vector_product_name=backend, blobs_name='python')
 
 
@@ -315,7 +316,7 @@ def boomerang_chart(args, plt):
         bodies.append(body)
     physics = dict(g=g, repulsion_strength_wall=eps, debye_length_wall=b, repulsion_strength=1.0, debye_length=1.0,
                    periodic_length=np.zeros(3), blob_radius=a, blob_mass=1.0)
-    system = System(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'), physics, ETA,
+    system = System(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
                     a, 1e-4, vector_product_name='C++', blobs_name='C++')
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, SimpleNamespace(kT=KT, rf_delta=1e-3, update_PC=1))
     heights, tilts = [], []

@@ -4,7 +4,7 @@ A sphere of radius R = 1 at centre height h is modelled by one blob (the
 minimally resolved model of the microroller papers, blob radius R) or by an
 icosahedral shell of 12, 42, 162 or 642 blobs (blob radius calibrated so that
 the bulk translational radius is 1, as made by
-``multi_bodies.structure_generators``).  For each model and height the script
+``multi_bodies.files.structure_generators``).  For each model and height the script
 computes the 6x6 mobility and compares five scalars with the exact values of
 a sphere above a wall (Brenner, O'Neill, Dean-O'Neill,
 Jeffery series): parallel and perpendicular translation, parallel and
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import mobility
-from multi_bodies.structure_generators import calibrated_shell
+from multi_bodies.files.structure_generators import calibrated_shell
 
 # Exact values (Brenner 1961, O'Neill 1964, Dean and O'Neill 1963, Jeffery 1915): h/R -> (mu_par, mu_perp, rot_par, rot_perp, coupling), exact.
 EXACT = {1.1: (0.44305, 0.08727, 0.68955, 0.89520, 2.703e-2),

@@ -43,9 +43,9 @@ import numpy as np
 
 import utils
 from body.body import K_dot, bodies_to_arrays
-from multi_bodies import multi_bodies_functions
-from multi_bodies.run_setup import read_bodies
-from multi_bodies.structure_files import read_body_table
+from multi_bodies.solver import user_hooks
+from multi_bodies.run.run_setup import read_bodies
+from multi_bodies.files.structure_files import read_body_table
 from quaternion_integrator.quaternion import rotation_matrices
 
 BLOBS = 'blobs'
@@ -367,7 +367,7 @@ STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 
 def load_run(options):
     """Bodies of the input file: (BodyArrays with the slip of the slip files and hooks, types)."""
-    hooks = multi_bodies_functions.load_user_hooks(os.getcwd(), load_pycuda=False)
+    hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
     bodies, types = read_bodies(options, hooks.set_slip_by_ID)
     body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]

@@ -17,12 +17,12 @@
 Command line (run from the repository root or anywhere the package is
 importable)::
 
-    python -m multi_bodies.structure_generators shell --blobs 42 --output multi_bodies/Structures
-    python -m multi_bodies.structure_generators shell --blobs 12 --shell-radius 1 --output multi_bodies/Structures
-    python -m multi_bodies.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
-    python -m multi_bodies.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
-    python -m multi_bodies.structure_generators blob --output multi_bodies/Structures
-    python -m multi_bodies.structure_generators lattice --nx 2 --ny 2 --spacing 5 --height 1 --name four_rollers --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators shell --blobs 42 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators shell --blobs 12 --shell-radius 1 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators blob --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators lattice --nx 2 --ny 2 --spacing 5 --height 1 --name four_rollers --output multi_bodies/Structures
 
 Each command prints the file it wrote and the blob radius to use with it.
 """
@@ -33,9 +33,9 @@ import sys
 import numpy as np
 
 if __package__ in (None, ''):
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
-from multi_bodies.structure_files import write_clones_file, write_vertex_file  # noqa: E402
+from multi_bodies.files.structure_files import write_clones_file, write_vertex_file  # noqa: E402
 
 
 def icosahedron_vertices():
@@ -212,7 +212,7 @@ def main(argv=None):
         p.add_argument('--output', default='.', help='folder for the file (default: .)')
     args = parser.parse_args(argv)
 
-    command = 'python -m multi_bodies.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    command = 'python -m multi_bodies.files.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
     if args.kind == 'lattice':
         if args.nx < 1 or args.ny < 1:
             parser.error('--nx and --ny must be positive')

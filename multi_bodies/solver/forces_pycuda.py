@@ -8,7 +8,7 @@ law as ``multi_bodies_functions.blob_blob_force``.
 
 A file ``forces_pycuda_user_defined.py`` in the run directory that defines
 ``calc_blob_blob_forces_pycuda(r_vectors, **kwargs)`` replaces
-:func:`calc_blob_blob_forces_pycuda` (see ``multi_bodies_functions.load_user_hooks``).
+:func:`calc_blob_blob_forces_pycuda` (see ``multi_bodies.solver.user_hooks.load_user_hooks``).
 """
 import numpy as np
 import cupy as cp

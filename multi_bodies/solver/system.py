@@ -24,8 +24,9 @@ import scipy.sparse.linalg as spla
 
 import mobility
 from body.body import reference_slip_in_lab_frame
-from multi_bodies import body_solver
-from multi_bodies import multi_bodies_functions as mbf
+from multi_bodies.solver import body_solver
+from multi_bodies.solver import physics as mbf
+from multi_bodies.solver import user_hooks
 from quaternion_integrator.quaternion import Quaternion
 from utils import SimulationStopped, UserInputError
 
@@ -88,7 +89,7 @@ class System:
     body_arrays : body.body.BodyArrays
         The state: ``locations`` (Nb, 3) and ``orientations`` (Nb, 4) are
         updated in place by the schemes through ``set_state``.
-    hooks : multi_bodies_functions.PhysicsHooks
+    hooks : multi_bodies.solver.user_hooks.PhysicsHooks
     physics : dict
         Keywords of the hooks: g, repulsion_strength_wall, debye_length_wall,
         repulsion_strength, debye_length, periodic_length, blob_radius, blob_mass.
@@ -253,8 +254,8 @@ class System:
         for k in self.slip_function_bodies:
             body = bodies[k]
             function = body.function_slip
-            value = mbf.call_user_function(function, 'function_slip', body)
-            slip[offsets[k]:offsets[k + 1]] = mbf.checked_array(
+            value = user_hooks.call_user_function(function, 'function_slip', body)
+            slip[offsets[k]:offsets[k + 1]] = user_hooks.checked_array(
                 value, [(body.Nblobs, 3), (3 * body.Nblobs,)], function, 'function_slip',
                 'the lab-frame slip of the %d blobs of body %d (%s)' % (body.Nblobs, k, body.ID))
         return slip
@@ -573,7 +574,7 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     if forces == 'pycuda' and getattr(hooks, 'pycuda_file', None) is not None \
             and hooks.calc_blob_blob_forces_pycuda is None:
         hooks.calc_blob_blob_forces_pycuda = checked('blob_blob_force_implementation',
-                                                     lambda: mbf.load_user_pycuda_forces(hooks.pycuda_file))
+                                                     lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
         hooks.overridden.append('calc_blob_blob_forces_pycuda')
         if log is not None:
             log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)

@@ -5,7 +5,7 @@ and the tests call.  It wires the rooms together as the scripts do (set-up,
 the scheme registry of ``quaternion_integrator``, the writers of
 ``run_output``), so it sits on the scripts' floor and only scripts and the
 ensemble runner import it.  It sets the run up, writes every output through
-``multi_bodies.run_output`` and returns the exit status (0 done, 1 stopped
+``multi_bodies.run.run_output`` and returns the exit status (0 done, 1 stopped
 by the simulation, 130/143 stopped by SIGINT/SIGTERM).  User mistakes raise
 ``utils.UserInputError`` before the first byte is written.
 
@@ -19,8 +19,8 @@ import time
 import numpy as np
 
 import utils
-from multi_bodies import run_output
-from multi_bodies.run_setup import prepare
+from multi_bodies.run import run_output
+from multi_bodies.run.run_setup import prepare
 from quaternion_integrator.schemes import make_scheme
 
 def check_options(options):
@@ -106,7 +106,7 @@ class DynamicRun:
                                            options.where('save_clones'), restart=restart,
                                            restart_from=self.restart)
         if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
-            from multi_bodies.vtk_output import AlsoWriteVtk
+            from multi_bodies.run.vtk_output import AlsoWriteVtk
             writer = AlsoWriteVtk(writer, options, self.types, system)
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)

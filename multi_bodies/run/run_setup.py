@@ -26,11 +26,12 @@ import numpy as np
 
 import utils
 from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
-from multi_bodies import multi_bodies_functions as mbf
-from multi_bodies.run_output import (RESTART_SUFFIX, clones_name, config_name, read_config_snapshot,  # noqa: F401
+from multi_bodies.solver import physics as mbf
+from multi_bodies.solver import user_hooks
+from multi_bodies.run.run_output import (RESTART_SUFFIX, clones_name, config_name, read_config_snapshot,  # noqa: F401
                                      write_bodies_info)
-from multi_bodies.structure_files import read_clones_file, read_slip_file, read_vertex_file
-from multi_bodies.system import make_system
+from multi_bodies.files.structure_files import read_clones_file, read_slip_file, read_vertex_file
+from multi_bodies.solver.system import make_system
 
 
 def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
@@ -152,9 +153,9 @@ def check_common_options(options):
 
 
 def load_hooks(options, directory, log=print):
-    """The run's hooks from ``directory`` (see ``multi_bodies_functions.load_user_hooks``), logged."""
+    """The run's hooks from ``directory`` (see ``multi_bodies.solver.user_hooks.load_user_hooks``), logged."""
     implementation = options.blob_blob_force_implementation
-    hooks = mbf.load_user_hooks(directory, load_pycuda=implementation in ('pycuda', 'auto'),
+    hooks = user_hooks.load_user_hooks(directory, load_pycuda=implementation in ('pycuda', 'auto'),
                                 physics=mbf.physics_keywords(options))
     if hooks.sources:
         log('user-defined physics from %s' % ', '.join(hooks.sources))
@@ -213,7 +214,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         bodies, types = read_bodies(options, hooks.set_slip_by_ID,
                                     single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
                                     restart_record=restart_record)
-    except mbf.UserFunctionError as err:
+    except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
     body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]

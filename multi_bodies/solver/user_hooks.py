@@ -1,12 +1,15 @@
 """Loading the user's override files and adapting their functions to the package's hooks (floor 3).
 
-``multi_bodies_functions`` holds the default physics; this module reads
+:mod:`multi_bodies.solver.physics` holds the default physics; this module reads
 ``user_defined_functions.py`` (this package's style or the published one,
 see doc/overrides.md) and ``forces_pycuda_user_defined.py``, and builds a
 :class:`PhysicsHooks` whose functions all follow the package's vectorised
 conventions, whatever the signature of the user's function, with checks of
-the shapes and finiteness of what they return.  ``multi_bodies_functions``
-re-exports these names, so ``mbf.load_user_hooks`` keeps working.
+the shapes and finiteness of what they return.  The published override
+module ``multi_bodies/multi_bodies_functions.py`` (on the scripts' floor)
+re-exports the physics and these names; this module never imports it: it
+copies that file for each user file and looks the package-style module up
+in ``sys.modules`` only when the user's file imported it.
 """
 import inspect
 import os
@@ -16,7 +19,7 @@ from functools import partial
 
 import numpy as np
 
-from multi_bodies import multi_bodies_functions as mbf
+from multi_bodies.solver import physics as mbf
 from quaternion_integrator.quaternion import Quaternion
 from utils import SimulationStopped, UserInputError
 
@@ -358,6 +361,12 @@ def import_module_file(path, module_name):
     return module
 
 
+# The published override module, a file beside this package's folder (read as a file, never imported here).
+PUBLISHED_MODULE_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                     'multi_bodies_functions.py')
+PACKAGE_MODULE_NAME = 'multi_bodies.multi_bodies_functions'
+
+
 def _fresh_copy_of_this_module():
     """A new module object with this file's defaults, importable as ``multi_bodies_functions``.
 
@@ -367,7 +376,7 @@ def _fresh_copy_of_this_module():
     ``multi_bodies_functions.X`` at run time see their own replacements.
     """
     import importlib.util
-    spec = importlib.util.spec_from_file_location('multi_bodies_functions', os.path.abspath(mbf.__file__))
+    spec = importlib.util.spec_from_file_location('multi_bodies_functions', PUBLISHED_MODULE_FILE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -389,9 +398,12 @@ def import_user_file(path):
     importing is a UserInputError naming the file and line.
     """
     import importlib.util
-    this = mbf
     copy = _fresh_copy_of_this_module()
-    before_copy, before_this = _public_callables(copy), _public_callables(this)
+    # The package-style module ``multi_bodies.multi_bodies_functions`` has the same defaults as the copy; it is
+    # checked for rebindings only when it was imported (by the user's file or before).
+    before_copy = _public_callables(copy)
+    this_before = sys.modules.get(PACKAGE_MODULE_NAME)
+    before_this = _public_callables(this_before) if this_before is not None else dict(before_copy)
     saved = {name: sys.modules.get(name) for name in ('multi_bodies_functions', 'user_defined_functions')}
     module_name = os.path.splitext(os.path.basename(path))[0]
     spec = importlib.util.spec_from_file_location(module_name, path)
@@ -415,8 +427,9 @@ def import_user_file(path):
                 sys.modules.pop(name, None)
             else:
                 sys.modules[name] = value
-        rebound_here = {name: value for name, value in _public_callables(this).items()
-                        if before_this.get(name) is not value}
+        this = sys.modules.get(PACKAGE_MODULE_NAME)
+        rebound_here = {} if this is None else {name: value for name, value in _public_callables(this).items()
+                                                if before_this.get(name) is not value}
         for name in rebound_here:  # keep the package module clean for other runs
             if name in before_this:
                 setattr(this, name, before_this[name])
@@ -424,7 +437,8 @@ def import_user_file(path):
                 delattr(this, name)
     rebound_copy = {name: value for name, value in _public_callables(copy).items()
                     if before_copy.get(name) is not value}
-    defaults = set(map(id, before_copy.values())) | set(map(id, before_this.values()))
+    defaults = set(map(id, before_copy.values())) | set(map(id, before_this.values())) | \
+        set(map(id, _public_callables(mbf).values()))
     found, notes = {}, []
     for name in mbf.HOOK_NAMES:
         candidates = []
@@ -503,7 +517,7 @@ def load_user_pycuda_forces(path):
     does not import, or when it lacks the function.
     """
     try:
-        from multi_bodies import forces_pycuda
+        from multi_bodies.solver import forces_pycuda
         forces_pycuda.check_usable()
     except Exception as err:
         raise UserInputError('%s replaces the GPU blob-blob force kernel, but no GPU is usable here (%s: %s); run '

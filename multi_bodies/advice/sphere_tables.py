@@ -25,7 +25,7 @@
    ``jeffery_rotation_perpendicular``), which reproduce the table.
 
 2. ``SHELL_MODEL_ERRORS``: relative errors of the four self mobilities of
-   the calibrated icosahedral shells (``multi_bodies.structure_generators
+   the calibrated icosahedral shells (``multi_bodies.files.structure_generators
    calibrated_shell``, blob radius and shell radius scaled with R) against
    table 1, measured by ``doc/charts/sphere_accuracy_vs_cost.py`` (the chart
    of ``doc/accuracy_vs_cost.md``).  Used by the advisor's ``--quick`` mode.

@@ -1,6 +1,6 @@
 """The advisor's output: the table of every choice, the recommendation, the input lines and ``.advice.json``.
 
-Helpers of ``multi_bodies/advisor.py`` (floor 3).  ``AdvisorReport`` is the
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 3).  ``AdvisorReport`` is the
 output half of ``advisor.Advisor`` (it reads ``choices``, ``recommendation``,
 ``notes``, ``scene`` and ``accuracy``); ``apply_recommendation`` rewrites an
 input file with the recommended lines.
@@ -53,7 +53,7 @@ class AdvisorReport:
             lines += ['', '## where the numbers come from', ''] + ['- ' + s for s in self.sources]
             if self.quick:
                 lines.append('- --quick: errors of the calibrated shells at the wall gap (h/R >= 1.1) come from '
-                             'the shipped table of doc/accuracy_vs_cost.md (multi_bodies/sphere_tables.py, '
+                             'the shipped table of doc/accuracy_vs_cost.md (multi_bodies/advice/sphere_tables.py, '
                              'interpolated in h/R); pair errors are not measured; costs of other models are '
                              'modelled as M f x (N/N_scene)^2; above 600 blobs the dense solve is modelled as N^3 '
                              'from a 600-blob inversion')
@@ -70,7 +70,7 @@ class AdvisorReport:
 
     def write(self):
         """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
-        from multi_bodies.structure_files import write_vertex_file
+        from multi_bodies.files.structure_files import write_vertex_file
         output = self.scene.options.output_name
         folder = os.path.dirname(output)
         if folder:

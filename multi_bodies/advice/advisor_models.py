@@ -1,6 +1,6 @@
 """What the advisor measures with: scheme tables, dense mobilities of small sets of bodies, sphere models.
 
-Helpers of ``multi_bodies/advisor.py`` (floor 3): the shipped scheme tables
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 3): the shipped scheme tables
 (deterministic stability limits, the measured weak-error table of the
 stochastic schemes) and the cost ranking over them; dense body mobilities of
 one body, a pair of bodies or single-blob rollers, with and without the
@@ -19,11 +19,11 @@ import scipy.linalg
 
 import mobility
 from body.body import K_matrices, bodies_to_arrays
-from multi_bodies import multi_bodies_functions as mbf
-from multi_bodies import sphere_tables
-from multi_bodies.input_options import read_input_file
-from multi_bodies.run_setup import read_bodies
-from multi_bodies.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
+from multi_bodies.solver import user_hooks
+from multi_bodies.advice import sphere_tables
+from multi_bodies.files.input_options import read_input_file
+from multi_bodies.run.run_setup import read_bodies
+from multi_bodies.files.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
 
 SHELL_SIZES = (12, 42, 162, 642)
 RICHARDSON_LEVELS = (42, 162, 642)
@@ -296,7 +296,7 @@ class Scene:
     def __init__(self, input_file, directory=None):
         self.directory = os.path.dirname(os.path.abspath(input_file)) if directory is None else directory
         self.options = read_input_file(input_file)
-        self.hooks = mbf.load_user_hooks(os.getcwd(), load_pycuda=False)
+        self.hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
         self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
                                               single_blob_bodies='rollers' in self.options.scheme)
         self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])

@@ -11,7 +11,7 @@ with its own seed.  This module
   per point and once per replica in the point (spawn key ``(point, replica)``),
   and the manifest ``D/ensemble.json``;
 * runs one replica in the calling process (:func:`run_replica`, the Dask
-  task) through :func:`multi_bodies.dynamic_run.run_dynamics`, in the folder
+  task) through :func:`multi_bodies.run.dynamic_run.run_dynamics`, in the folder
   of the user's input file (relative structure paths and
   ``user_defined_functions.py`` are found there), resuming from the last
   complete restart record when an earlier attempt was killed, and writing
@@ -24,7 +24,7 @@ with its own seed.  This module
 Dask (``distributed``, ``dask_jobqueue``) is imported only by the functions
 that need it; without it :func:`require_distributed` raises a UserInputError
 that names the extra to install.  The statistics of a finished ensemble are
-in :mod:`multi_bodies.ensemble_statistics`.
+in :mod:`multi_bodies.ensembles.ensemble_statistics`.
 """
 import contextlib
 import hashlib
@@ -86,7 +86,7 @@ def parse_vary(items):
     reader's message.  Raises UserInputError for a malformed item, an unknown
     option, an option the ensemble owns, or a name given twice.
     """
-    from multi_bodies.input_options import OPTION_TABLE
+    from multi_bodies.files.input_options import OPTION_TABLE
     import difflib
     parsed, seen = [], set()
     for item in items or ():
@@ -193,7 +193,7 @@ def build_plan(input_file, replicas, vary=(), output_dir='ensemble', master_seed
     ``input_sha256`` of the replica's input), ``output_dir`` (absolute), and
     ``_inputs`` (folder -> input text; not saved).
     """
-    from multi_bodies.input_options import parse_input_text
+    from multi_bodies.files.input_options import parse_input_text
     if replicas < 1:
         raise UserInputError('--replicas must be at least 1, got %d' % replicas)
     if master_seed is not None and master_seed < 0:
@@ -404,7 +404,7 @@ def prepare_resume(options):
     ``.config`` is cut where snapshot k starts (the resumed run writes it
     again), so the resumed outputs equal those of an undisturbed run.
     """
-    from multi_bodies import run_output
+    from multi_bodies.run import run_output
     path = options.output_name + run_output.RESTART_SUFFIX
     if not os.path.isfile(path):
         return 0
@@ -470,8 +470,8 @@ def run_replica(spec):
     ``pid``, ``skipped`` (finished before).  Exceptions other than user
     errors are raised (Dask retries them) after being logged.
     """
-    from multi_bodies.dynamic_run import run_dynamics
-    from multi_bodies.input_options import read_input_file
+    from multi_bodies.run.dynamic_run import run_dynamics
+    from multi_bodies.files.input_options import read_input_file
     if is_finished(spec):
         return dict(read_status(spec['path']), folder=spec['folder'], skipped=True)
     log_path = os.path.join(spec['path'], LOG_NAME)

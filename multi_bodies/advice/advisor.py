@@ -22,7 +22,7 @@ self-mobility diagonal entries (translation along x, y (parallel to the
 wall) and z (perpendicular); rotation about x, y and z), at the scene's
 smallest gap: the wall gap of the lowest body of the type, and, separately,
 the nearest pair of bodies of the type.  For a sphere at the wall gap the
-reference is exact (``multi_bodies.sphere_tables``, for h/R >= 1.01);
+reference is exact (``multi_bodies.advice.sphere_tables``, for h/R >= 1.01);
 otherwise it is the Richardson extrapolation of the 42-, 162- and 642-blob
 shells, whose own error is estimated by the same extrapolation.
 
@@ -36,13 +36,13 @@ import numpy as np
 
 import mobility
 from mobility import choose
-from multi_bodies import body_solver
-from multi_bodies import sphere_tables
-from multi_bodies.structure_generators import smallest_distance
+from multi_bodies.solver import body_solver
+from multi_bodies.advice import sphere_tables
+from multi_bodies.files.structure_generators import smallest_distance
 
-from multi_bodies.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
+from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
-from multi_bodies.advisor_models import (  # noqa: F401  (also re-exported)
+from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
     Choice,
     Scene,
     DENSE_BLOB_LIMIT,
@@ -158,7 +158,7 @@ class Advisor(AdvisorReport):
     def scene_rhs(self):
         """Force-torque (Nb, 6) and slip (N, 3) of the scene (seeded random forces when they vanish)."""
         scene = self.scene
-        from multi_bodies.system import System
+        from multi_bodies.solver.system import System
         system = System(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
                         scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
                         blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
@@ -429,7 +429,7 @@ class Advisor(AdvisorReport):
         if spec.slip_file:
             self.notes.append('%s has a slip file for %d blobs, so its model is not changed automatically: the %s '
                               'model (written to %s%s) needs its own slip file, e.g. for squirmers python -m '
-                              'multi_bodies.structure_generators squirmer-slip --blobs %d (radius 1)'
+                              'multi_bodies.files.structure_generators squirmer-slip --blobs %d (radius 1)'
                               % (sid, structure['num_blobs'], label, vertex,
                                  ', blob_radius %.12g' % a if abs(a - scene.a) > 1e-9 * a else '', len(blobs)))
             return

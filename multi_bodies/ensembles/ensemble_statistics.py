@@ -1,7 +1,7 @@
 """Statistics of a finished ensemble: heights, mean-square displacements, ``.info`` counts (library floor 3).
 
 :func:`aggregate` reads the manifest ``D/ensemble.json`` written by
-:mod:`multi_bodies.ensemble_runner` and, for every parameter point, every
+:mod:`multi_bodies.ensembles.ensemble_runner` and, for every parameter point, every
 replica whose ``status.json`` says done.  Paths are taken relative to ``D``,
 so an ensemble run on a cluster can be copied elsewhere and aggregated
 there.  Per replica it computes
@@ -33,9 +33,9 @@ import os
 import numpy as np
 
 import utils
-from multi_bodies import ensemble_runner
-from multi_bodies import run_output
-from multi_bodies.input_options import parse_input_text
+from multi_bodies.ensembles import ensemble_runner
+from multi_bodies.run import run_output
+from multi_bodies.files.input_options import parse_input_text
 from utils import UserInputError
 
 MSD_QUANTITIES = ('msd_xy', 'msd_z', 'msd_location', 'msd_orientation')

@@ -1,0 +1,1 @@
+"""Replicas and parameter sweeps on Dask, and their statistics."""

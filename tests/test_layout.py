@@ -1,0 +1,172 @@
+"""The house plan, measured from the imports between files (ARCHITECTURE: floors, no loops).
+
+Every ``import`` and ``from ... import`` of the package's Python files is
+read with ``ast`` (also those inside functions, which run later but still tie
+the files together), resolved to a file of the repository, and checked:
+
+* no import loop between files (strongly connected components of size 1);
+* no import from a higher floor (floors below, lowest first);
+* ``stochastic_forcing`` imports nothing of the package but ``utils``;
+* ``multi_bodies/`` top level holds only the scripts, ``__init__`` and the
+  published override module; the library sits in subpackages.
+
+The floors are a law of the design, not of the code under test: a new
+import that runs back up fails here.
+"""
+import ast
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ('body', 'mobility', 'multi_bodies', 'quaternion_integrator', 'stochastic_forcing', 'many_bodyMCMC',
+            'boomerang', 'sphere')
+
+# The scripts (floor 9) and the published override module (floor 8, re-exports the physics for user files).
+SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', 'multi_bodies.advise',
+           'multi_bodies.clones_to_vtk', 'multi_bodies.ensemble', 'multi_bodies.render',
+           'many_bodyMCMC.many_body_MCMC', 'boomerang.boomerang', 'boomerang.calculate_boomerang_msd_from_trajectories',
+           'boomerang.plot_boomerang_msd', 'boomerang.plot_boomerang_trajectory', 'sphere.sphere_rotational_msd',
+           'sphere.make_mobility_table'}
+TOP_LEVEL_ALLOWED = {'__init__', 'multi_bodies_functions'} | {s.split('.', 1)[1] for s in SCRIPTS
+                                                               if s.startswith('multi_bodies.')}
+
+
+def floor(module):
+    """Floor of a dotted module name (lower floors are imported by higher ones, never the reverse)."""
+    if module in SCRIPTS:
+        return 9
+    if module == 'multi_bodies.multi_bodies_functions':
+        return 8
+    rules = [('utils', 1), ('quaternion_integrator.quaternion', 1), ('mobility', 1),
+             ('body', 2), ('stochastic_forcing', 2),
+             ('multi_bodies.files', 3), ('multi_bodies.solver', 4),
+             ('quaternion_integrator', 5), ('sphere', 5),
+             ('multi_bodies.run', 6), ('many_bodyMCMC', 6), ('boomerang', 6),
+             ('multi_bodies.advice', 7), ('multi_bodies.ensembles', 7), ('multi_bodies', 7)]
+    for prefix, level in rules:
+        if module == prefix or module.startswith(prefix + '.'):
+            return level
+    raise AssertionError('no floor for %s: add it to the plan' % module)
+
+
+def package_modules():
+    """Dotted name -> path of every Python file of the package (tests, benchmarks and doc charts excluded)."""
+    modules = {'utils': REPO / 'utils.py'}
+    for package in PACKAGES:
+        for path in (REPO / package).rglob('*.py'):
+            if 'examples' in path.parts or 'Structures' in path.parts:
+                continue
+            parts = list(path.relative_to(REPO).with_suffix('').parts)
+            if parts[-1] == '__init__':
+                parts = parts[:-1]
+            modules['.'.join(parts)] = path
+    return modules
+
+
+def imports_of(path, name, modules):
+    """The package modules that file ``path`` (module ``name``) imports."""
+    tree = ast.parse(path.read_text(), str(path))
+    is_package = path.name == '__init__.py'
+    found = set()
+
+    def resolve(dotted):
+        while dotted:
+            if dotted in modules:
+                return dotted
+            dotted = dotted.rpartition('.')[0]
+        return None
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                target = resolve(alias.name)
+                if target:
+                    found.add(target)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = name.split('.') if is_package else name.split('.')[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                prefix = '.'.join(base + ([node.module] if node.module else []))
+            else:
+                prefix = node.module
+            for alias in node.names:
+                target = resolve(prefix + '.' + alias.name) or resolve(prefix)
+                if target:
+                    found.add(target)
+    found.discard(name)
+    return found
+
+
+@pytest.fixture(scope='module')
+def graph():
+    modules = package_modules()
+    return {name: imports_of(path, name, modules) for name, path in modules.items()}
+
+
+def strongly_connected(graph):
+    """Tarjan's components of the import graph (lists of module names)."""
+    index, low, stack, on_stack, components, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            components.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return components
+
+
+def test_no_import_loops(graph):
+    loops = [sorted(c) for c in strongly_connected(graph) if len(c) > 1]
+    assert not loops, 'import loops between files: %s' % loops
+
+
+def test_no_import_runs_back_up(graph):
+    upward = ['%s (floor %d) imports %s (floor %d)' % (a, floor(a), b, floor(b))
+              for a, targets in sorted(graph.items()) for b in sorted(targets) if floor(b) > floor(a)]
+    assert not upward, '\n'.join(upward)
+
+
+@pytest.mark.xfail(strict=True, reason='rfd_configuration still rotates quaternions itself (being moved)')
+def test_stochastic_forcing_imports_nothing_above_it(graph):
+    above = sorted(b for a, targets in graph.items() if a.startswith('stochastic_forcing')
+                   for b in targets if not (b == 'utils' or b.startswith('stochastic_forcing')))
+    assert not above, above
+
+
+def test_multi_bodies_top_level_holds_scripts_and_override_module():
+    names = {p.stem for p in (REPO / 'multi_bodies').glob('*.py')}
+    assert names - TOP_LEVEL_ALLOWED == set(), 'library modules at the top of multi_bodies/: %s' % sorted(
+        names - TOP_LEVEL_ALLOWED)
+
+
+def test_floor_checker_catches_an_upward_import(tmp_path):
+    """Negative control: a planted import of a script from the solver is reported."""
+    modules = dict(package_modules())
+    planted = tmp_path / 'planted.py'
+    planted.write_text('def f():\n    from multi_bodies.run import dynamic_run\n')
+    modules['multi_bodies.solver.planted'] = planted
+    targets = imports_of(planted, 'multi_bodies.solver.planted', modules)
+    assert 'multi_bodies.run.dynamic_run' in targets
+    assert floor('multi_bodies.run.dynamic_run') > floor('multi_bodies.solver.planted')
+    loop = {'a': {'b'}, 'b': {'a'}, 'c': set()}
+    assert sorted(map(sorted, strongly_connected(loop))) == [['a', 'b'], ['c']]
