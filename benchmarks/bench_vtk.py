@@ -22,7 +22,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
-from body.body import bodies_to_arrays, Body  # noqa: E402
+from body.body import Body, Configuration, bodies_to_arrays  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 from multi_bodies.run.vtk_output import VtkSeries  # noqa: E402
 
@@ -70,9 +70,11 @@ def write_cost(body_arrays, names, counts, steps, rng):
     with tempfile.TemporaryDirectory() as folder:
         series = VtkSeries(os.path.join(folder, 'run'), names, counts, 0.1)
         start = time.perf_counter()
+        configuration = body_arrays.configuration
         for step in range(steps):
-            body_arrays.locations = body_arrays.locations + 0.01 * rng.normal(size=body_arrays.locations.shape)
-            series.write(step, body_arrays)
+            configuration = Configuration(configuration.locations + 0.01 * rng.normal(
+                size=configuration.locations.shape), configuration.orientations)
+            series.write(step, body_arrays, configuration)
         return time.perf_counter() - start
 
 

@@ -15,6 +15,16 @@ For many bodies, ``BodyArrays`` holds every body in contiguous arrays (bodies
 in the order of the structure lines, blobs of a body next to each other) and
 the module functions ``K_dot`` and ``KT_dot`` apply ``K`` and ``K^T`` to all
 bodies at once with array operations, without a Python loop over bodies.
+
+A body kind is fixed structure plus a configuration value: ``BodyArrays``
+holds what never changes during a run (reference blobs, offsets, slip in the
+body frame, blob radius), a :class:`Configuration` holds where the bodies
+are (locations and quaternions, read-only).  Every method that depends on
+where the bodies are (blob positions, K, K^T, lab-frame slip, the wall
+check) takes the configuration as an argument, so two configurations can be
+used side by side (a step's start and its predictor) without one overwriting
+the other.  ``BodyArrays.configuration`` is the configuration the arrays were
+built at (the input files), a convenience for set-up and viewers only.
 """
 import numpy as np
 
@@ -130,6 +140,62 @@ def reference_body_length(reference_configuration, blob_radius):
     return float(np.sqrt(np.max(np.einsum('ijk,ijk->ij', diff, diff)))) + 2.0 * blob_radius
 
 
+class Configuration:
+    """Where the bodies are: a value (read-only arrays, never changed after it is made).
+
+    Parameters
+    ----------
+    locations : array_like, shape (Nb, 3)
+        Body locations (tracking points), length units of the input.  For
+        single-blob rollers, the blob positions.
+    orientations : array_like, shape (Nb, 4)
+        Scalar-first quaternions (not renormalised: SPEC section 3).
+
+    The arrays are copied when the configuration is made and marked
+    read-only, so a configuration handed to a solver stays what it was.
+    """
+    __slots__ = ('locations', 'orientations')
+
+    def __init__(self, locations, orientations):
+        locations = np.array(locations, dtype=float).reshape(-1, 3)
+        orientations = np.array(orientations, dtype=float).reshape(-1, 4)
+        if locations.shape[0] != orientations.shape[0]:
+            raise ValueError('a configuration needs one quaternion per location, got %d locations and %d '
+                             'quaternions' % (locations.shape[0], orientations.shape[0]))
+        locations.setflags(write=False)
+        orientations.setflags(write=False)
+        object.__setattr__(self, 'locations', locations)
+        object.__setattr__(self, 'orientations', orientations)
+
+    def __setattr__(self, name, value):
+        raise AttributeError('a Configuration is a value: make a new one instead of setting %s' % name)
+
+    def __iter__(self):
+        """``locations, orientations = configuration``."""
+        return iter((self.locations, self.orientations))
+
+    def __repr__(self):
+        return 'Configuration(%d bodies)' % self.num_bodies
+
+    @property
+    def num_bodies(self):
+        return self.locations.shape[0]
+
+    def copy_arrays(self):
+        """Writable copies (locations (Nb, 3), orientations (Nb, 4))."""
+        return self.locations.copy(), self.orientations.copy()
+
+
+def as_configuration(configuration_or_locations, orientations=None):
+    """A :class:`Configuration` from one, or from ``(locations, orientations)`` arrays."""
+    if isinstance(configuration_or_locations, Configuration):
+        return configuration_or_locations
+    if orientations is None:
+        locations, orientations = configuration_or_locations
+        return Configuration(locations, orientations)
+    return Configuration(configuration_or_locations, orientations)
+
+
 class BodyArrays:
     """All bodies of a problem as contiguous arrays.
 
@@ -139,9 +205,10 @@ class BodyArrays:
 
     Attributes
     ----------
-    locations : ndarray, shape (Nb, 3)
-    orientations : ndarray, shape (Nb, 4)
-        Scalar-first quaternions.
+    configuration : Configuration
+        Where the bodies were when the arrays were made (the input files).
+    locations, orientations : (Nb, 3), (Nb, 4)
+        Read-only views of ``configuration``.
     reference_blobs : ndarray, shape (N, 3)
         Body-frame position of every blob, blobs of body 0 first.
     blob_body_index : ndarray of int, shape (N,)
@@ -159,19 +226,18 @@ class BodyArrays:
 
     def __init__(self, locations, orientations, reference_per_type, bodies_per_type,
                  blob_radius, reference_slip_per_type=None):
-        self.locations = np.array(locations, dtype=float).reshape(-1, 3)
-        self.orientations = np.array(orientations, dtype=float).reshape(-1, 4)
+        self.configuration = Configuration(locations, orientations)
         self.blob_radius = float(blob_radius)
         reference_per_type = [np.asarray(r, dtype=float).reshape(-1, 3) for r in reference_per_type]
         bodies_per_type = [int(n) for n in bodies_per_type]
-        if sum(bodies_per_type) != self.locations.shape[0]:
+        if sum(bodies_per_type) != self.configuration.num_bodies:
             raise ValueError('bodies_per_type does not add up to the number of locations')
         if reference_slip_per_type is None:
             reference_slip_per_type = [None] * len(reference_per_type)
         self.type_blobs = [r.shape[0] for r in reference_per_type]
         blobs_per_body = np.repeat(self.type_blobs, bodies_per_type)
         self.blob_offsets = np.concatenate(([0], np.cumsum(blobs_per_body))).astype(int)
-        self.blob_body_index = np.repeat(np.arange(self.locations.shape[0]), blobs_per_body)
+        self.blob_body_index = np.repeat(np.arange(self.configuration.num_bodies), blobs_per_body)
         self.reference_blobs = np.concatenate(
             [np.tile(r, (n, 1)) for r, n in zip(reference_per_type, bodies_per_type)]) \
             if bodies_per_type else np.zeros((0, 3))
@@ -190,38 +256,60 @@ class BodyArrays:
 
     @property
     def num_bodies(self):
-        return self.locations.shape[0]
+        return self.blob_offsets.shape[0] - 1
 
     @property
     def num_blobs(self):
         return self.reference_blobs.shape[0]
 
-    def rotation_matrices(self):
-        """``R(q_k)`` of every body, shape (Nb, 3, 3)."""
-        return rotation_matrices(self.orientations)
+    @property
+    def locations(self):
+        """Locations (Nb, 3) of ``configuration`` (read-only)."""
+        return self.configuration.locations
 
-    def blob_positions(self):
-        """Lab-frame positions of all blobs, shape (N, 3)."""
-        return blob_positions(self.locations, self.orientations, self.reference_blobs,
+    @property
+    def orientations(self):
+        """Quaternions (Nb, 4) of ``configuration`` (read-only)."""
+        return self.configuration.orientations
+
+    def rotation_matrices(self, configuration):
+        """``R(q_k)`` of every body, shape (Nb, 3, 3)."""
+        return rotation_matrices(configuration.orientations)
+
+    def blob_positions(self, configuration):
+        """Lab-frame positions of all blobs at ``configuration``, shape (N, 3)."""
+        return blob_positions(configuration.locations, configuration.orientations, self.reference_blobs,
                               self.blob_body_index)
 
-    def lab_frame_slip(self):
-        """Reference slip rotated into the lab frame, shape (N, 3)."""
-        rot = self.rotation_matrices()[self.blob_body_index]
+    def lab_frame_slip(self, configuration):
+        """Reference slip rotated into the lab frame at ``configuration``, shape (N, 3)."""
+        rot = self.rotation_matrices(configuration)[self.blob_body_index]
         return np.einsum('nij,nj->ni', rot, self.reference_slip)
 
-    def K_dot(self, r_vectors, body_velocities):
-        """``K U`` for all bodies: blob velocities, shape (N, 3); see ``K_dot``."""
-        return K_dot(r_vectors, self.locations, self.blob_body_index, body_velocities)
+    def K_dot(self, configuration, body_velocities, r_vectors=None):
+        """``K U`` at ``configuration``: blob velocities, shape (N, 3); see ``K_dot``.
 
-    def KT_dot(self, r_vectors, blob_forces):
-        """``K^T lambda`` for all bodies, shape (Nb, 6); see ``KT_dot``."""
-        return KT_dot(r_vectors, self.locations, self.blob_offsets, self.blob_body_index, blob_forces)
+        ``r_vectors`` (N, 3): the blob positions of that configuration when the caller has them.
+        """
+        r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        return K_dot(r_vectors, configuration.locations, self.blob_body_index, body_velocities)
 
-    def check_positions(self, r_vectors=None):
-        """Indices of the bodies with a blob centre below the wall (empty when valid)."""
-        r_vectors = self.blob_positions() if r_vectors is None else r_vectors
-        return np.unique(self.blob_body_index[r_vectors[:, 2] < 0.0])
+    def KT_dot(self, configuration, blob_forces, r_vectors=None):
+        """``K^T lambda`` at ``configuration``, shape (Nb, 6); see ``KT_dot``.
+
+        ``r_vectors`` (N, 3): the blob positions of that configuration when the caller has them.
+        """
+        r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        return KT_dot(r_vectors, configuration.locations, self.blob_offsets, self.blob_body_index, blob_forces)
+
+    def K_dense(self, configuration, r_vectors=None):
+        """Dense block-diagonal ``K`` at ``configuration``, shape (3N, 6 Nb)."""
+        r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        return K_dense(r_vectors, configuration.locations, self.blob_body_index)
+
+    def check_positions(self, r_vectors):
+        """Indices of the bodies with a blob centre below the wall (empty when valid); r_vectors (N, 3)."""
+        return np.unique(self.blob_body_index[np.asarray(r_vectors)[:, 2] < 0.0])
 
 
 def blob_positions(locations, orientations, reference_blobs, blob_body_index):

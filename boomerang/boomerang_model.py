@@ -31,7 +31,7 @@ import numpy as np
 
 import mobility
 from body.body import BodyArrays, KT_dot, K_matrices, blob_positions
-from multi_bodies.solver.body_solver import dense_body_mobility
+from multi_bodies.solver.body_solver import body_mobility_from_resistance, dense_body_mobility
 from multi_bodies.files.structure_generators import boomerang as boomerang_blobs
 
 A = 0.265 * np.sqrt(3.0 / 2.0)
@@ -140,12 +140,11 @@ class BoomerangModel:
         nb = locations.shape[0]
         if nb == 1:
             bodies = BodyArrays(locations, orientations, [self.reference], [1], A)
-            N, _ = dense_body_mobility(bodies, r[0], self.blob_mobility_matrix, ETA, A)
+            N, _ = dense_body_mobility(bodies, bodies.configuration, self.blob_mobility_matrix, ETA, A)
             return N[None]
         M = self.blob_mobility_matrix(r, ETA, A)
         K = K_matrices(r, locations)
-        resistance = np.matmul(np.swapaxes(K, 1, 2), np.linalg.solve(M, K))
-        return np.linalg.pinv(resistance)
+        return body_mobility_from_resistance(np.matmul(np.swapaxes(K, 1, 2), np.linalg.solve(M, K)))
 
 
 def transfer_mobility(body_mobility, point):

@@ -31,6 +31,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
 utils.prepare_script_path(__file__)
 
+from body.body import Configuration  # noqa: E402
 from multi_bodies.files.input_options import read_input_file  # noqa: E402
 from multi_bodies.run.vtk_output import (STATIC_SCHEMES, VtkSeries, collection_name, load_run,  # noqa: E402
                                      run_configurations, static_velocities)
@@ -50,8 +51,7 @@ def convert(options, wrap_periodic=False, vtk_name=None):
     steps, locations, orientations = run_configurations(options, body_arrays, types)
     velocities = static_velocities(options, body_arrays.num_bodies) if options.scheme in STATIC_SCHEMES else None
     for step, step_locations, step_orientations in zip(steps, locations, orientations):
-        body_arrays.locations, body_arrays.orientations = step_locations, step_orientations
-        series.write(int(step), body_arrays, velocities)
+        series.write(int(step), body_arrays, Configuration(step_locations, step_orientations), velocities)
     series.close()
     written = len(steps)
     print('wrote %d step(s): %s and %s (open them in ParaView, see doc/visualisation.md)'

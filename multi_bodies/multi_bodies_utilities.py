@@ -54,46 +54,42 @@ def save_table(path, table):
     np.savetxt(path, table, delimiter='  ')
 
 
-def run_body_mobility(options, system, r_vectors):
+def run_body_mobility(options, system, configuration):
     with utils.Timer() as timer:
         body_mobility, slip_mobility = body_solver.dense_body_mobility(
-            system.arrays, r_vectors, system.blob_mobility_matrix, system.eta, system.blob_radius)
+            system.arrays, configuration, system.blob_mobility_matrix, system.eta, system.blob_radius)
     print('Time to compute body mobility = %s' % timer.elapsed)
     save_table(options.output_name + '.body_mobility.dat', body_mobility)
     save_table(options.output_name + '.body_slip_mobility.dat', slip_mobility)
     return 0
 
 
-def forces_and_slip(options, system, r_vectors, force_table=None):
+def forces_and_slip(options, system, configuration, force_table=None):
     """Force-torque (Nb, 6) from ``force_file`` (read beforehand: ``force_table``) or the hooks, and the
-    slip (N, 3), as the dynamics computes them."""
+    slip (N, 3), at ``configuration``, as the dynamics computes them."""
     if force_table is not None:
         force_torque = force_table
     elif options.force_file is not None:
         force_torque = read_body_table(options.force_file, system.num_bodies, 'force', options.where('force_file'))
     else:
-        force_torque = system.forces_torques(r_vectors)
-    slip = system.slip() if system.has_slip else np.zeros_like(r_vectors)
+        force_torque = system.forces_torques(configuration)
+    slip = system.slip(configuration) if system.has_slip else np.zeros((system.num_blobs, 3))
     return np.asarray(force_torque, dtype=float).reshape(-1, 6), slip
 
 
-def run_mobility(options, system, r_vectors, force_table=None):
-    force_torque, slip = forces_and_slip(options, system, r_vectors, force_table)
+def run_mobility(options, system, configuration, force_table=None):
+    force_torque, slip = forces_and_slip(options, system, configuration, force_table)
     with utils.Timer() as timer:
-        operator = body_solver.saddle_point_operator(system.arrays, r_vectors, system.mobility_product, system.eta,
-                                                     system.blob_radius, system.periodic_length)
-        preconditioner = body_solver.BlockDiagonalPreconditioner(system.arrays, r_vectors,
-                                                                 system.blob_mobility_matrix, system.eta,
-                                                                 system.blob_radius)
-        result = body_solver.solve_mobility_problem(operator, preconditioner,
-                                                    body_solver.mobility_rhs(force_torque, slip),
-                                                    system.num_blobs, options.solver_tolerance)
+        # The same solve as every scheme: body_solver.solve (torques on single blobs and rods projected).
+        problem = system.mobility_problem(configuration)
+        result = body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
+                                   system.build_preconditioner(configuration), tolerance=options.solver_tolerance)
     print('Time to solve mobility problem = %s' % timer.elapsed)
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))
     save_table(options.output_name + '.velocities.dat', result.velocities)
     save_table(options.output_name + '.force.dat', force_torque)
-    write_velocity_field(options, system, r_vectors, result.lambda_blobs)
+    write_velocity_field(options, system, problem.r_vectors, result.lambda_blobs)
     if not result.converged:
         print('error: GMRES did not converge to solver_tolerance %g in %d iterations (relative residual '
               '%.3e); the velocities written to %s are not converged'
@@ -103,7 +99,7 @@ def run_mobility(options, system, r_vectors, force_table=None):
     return 0
 
 
-def run_resistance(options, system, r_vectors, velocity_table=None):
+def run_resistance(options, system, configuration, velocity_table=None):
     if velocity_table is not None:
         velocities = velocity_table
     elif options.velocity_file is not None:
@@ -111,13 +107,14 @@ def run_resistance(options, system, r_vectors, velocity_table=None):
                                      options.where('velocity_file'))
     else:
         velocities = np.zeros((system.num_bodies, 6))
-    slip = system.slip() if system.has_slip else np.zeros_like(r_vectors)
+    slip = system.slip(configuration) if system.has_slip else np.zeros((system.num_blobs, 3))
     with utils.Timer() as timer:
         force_torque, lambda_blobs = body_solver.solve_resistance_problem(
-            system.arrays, r_vectors, velocities, slip, system.blob_mobility_matrix, system.eta, system.blob_radius)
+            system.arrays, configuration, velocities, slip, system.blob_mobility_matrix, system.eta,
+            system.blob_radius)
     print('Time to solve resistance problem = %s' % timer.elapsed)
     save_table(options.output_name + '.force.dat', force_torque)
-    write_velocity_field(options, system, r_vectors, lambda_blobs)
+    write_velocity_field(options, system, system.blob_positions(configuration), lambda_blobs)
     return 0
 
 
@@ -168,14 +165,14 @@ def run(options):
     copy = options.output_name + '.inputfile'
     if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
         shutil.copyfile(options.input_file, copy)
-    r_vectors = system.blob_positions()
+    configuration = system.configuration
     write_bodies_info(options.output_name + '.bodies_info', setup.types, system.num_blobs)
     try:
         if options.scheme == 'body_mobility':
-            return run_body_mobility(options, system, r_vectors)
+            return run_body_mobility(options, system, configuration)
         if options.scheme == 'mobility':
-            return run_mobility(options, system, r_vectors, force_table)
-        return run_resistance(options, system, r_vectors, velocity_table)
+            return run_mobility(options, system, configuration, force_table)
+        return run_resistance(options, system, configuration, velocity_table)
     except utils.SimulationStopped as err:  # a user-defined function failed, or forces/slip are not finite
         print('error: %s' % err, file=sys.stderr)
         return 1

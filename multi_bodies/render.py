@@ -31,6 +31,7 @@ utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
+from body.body import Configuration  # noqa: E402
 from multi_bodies.files.input_options import read_input_file  # noqa: E402
 from multi_bodies.run.vtk_output import load_run, periodic_shifts, run_configurations  # noqa: E402
 
@@ -268,8 +269,7 @@ def main(argv=None):
 
     def blob_positions(i):
         """Blob positions (N, 3) of saved step number ``i``."""
-        body_arrays.locations, body_arrays.orientations = locations[i], orientations[i]
-        r_vectors = body_arrays.blob_positions()
+        r_vectors = body_arrays.blob_positions(Configuration(locations[i], orientations[i]))
         if args.wrap_periodic:
             r_vectors = r_vectors + periodic_shifts(locations[i], options.periodic_length)[body_arrays.blob_body_index]
         return r_vectors

@@ -95,15 +95,18 @@ def rotation_matrices(quaternions):
 
     Parameters
     ----------
-    quaternions : array_like, shape (Nb, 4)
-        Scalar-first quaternions (not renormalised here).
+    quaternions : array_like, shape (Nb, 4) (or (..., 4): any leading axes)
+        Scalar-first quaternions (not renormalised here: the published
+        formula, which for an unnormalised q is not a rotation).
 
     Returns
     -------
-    ndarray, shape (Nb, 3, 3)
+    ndarray, shape (Nb, 3, 3) (or (..., 3, 3))
         ``R(q_k)`` for every row ``k``.
     """
-    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    q = np.asarray(quaternions, dtype=float)
+    leading = q.shape[:-1] if q.ndim > 1 else (1,)
+    q = q.reshape(-1, 4)
     s, p1, p2, p3 = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     rot = np.empty((q.shape[0], 3, 3))
     rot[:, 0, 0] = p1 * p1 + s * s - 0.5
@@ -115,22 +118,36 @@ def rotation_matrices(quaternions):
     rot[:, 2, 0] = p3 * p1 - s * p2
     rot[:, 2, 1] = p3 * p2 + s * p1
     rot[:, 2, 2] = p3 * p3 + s * s - 0.5
-    return 2.0 * rot
+    return (2.0 * rot).reshape(leading + (3, 3))
+
+
+def quaternions_from_rotations(rotation_vectors):
+    """``from_rotation(phi_k)`` of many rotation vectors (Nb, 3) (radians): unit quaternions (Nb, 4).
+
+    ``(cos(|phi|/2), sin(|phi|/2) phi/|phi|)``, the identity where ``phi = 0``.
+    """
+    phi = np.asarray(rotation_vectors, dtype=float).reshape(-1, 3)
+    angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
+    safe = np.where(angle > 0, angle, 1.0)
+    p = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
+    return np.column_stack((np.cos(0.5 * angle), p))
+
+
+def quaternion_products(left, right):
+    """Hamilton products ``left_k * right_k`` of stacks of scalar-first quaternions (Nb, 4) -> (Nb, 4)."""
+    left = np.asarray(left, dtype=float).reshape(-1, 4)
+    right = np.asarray(right, dtype=float).reshape(-1, 4)
+    s, p = left[:, 0], left[:, 1:]
+    t, v = right[:, 0], right[:, 1:]
+    scalar = s * t - np.einsum('ij,ij->i', p, v)
+    vector = s[:, None] * v + t[:, None] * p + np.cross(p, v)
+    return np.column_stack((scalar, vector))
 
 
 def rotate_quaternions(orientations, rotation_vectors):
-    """``from_rotation(phi_k) * q_k`` for every body at once.
+    """``from_rotation(phi_k) * q_k`` for every body at once: the quaternion step of every scheme.
 
     orientations: (Nb, 4) scalar-first; rotation_vectors: (Nb, 3) lab-frame
     rotation vectors (radians).  Returns (Nb, 4); not renormalised.
     """
-    q = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    phi = np.asarray(rotation_vectors, dtype=float).reshape(-1, 3)
-    angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
-    safe = np.where(angle > 0, angle, 1.0)
-    s = np.cos(0.5 * angle)
-    p = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
-    t, v = q[:, 0], q[:, 1:]
-    scalar = s * t - np.einsum('ij,ij->i', p, v)
-    vector = s[:, None] * v + t[:, None] * p + np.cross(p, v)
-    return np.column_stack((scalar, vector))
+    return quaternion_products(quaternions_from_rotations(rotation_vectors), orientations)

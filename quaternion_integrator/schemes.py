@@ -1,12 +1,15 @@
 """Time-stepping schemes of the manual, behind one registry keyed by the scheme name.
 
-A scheme object is made once per run by ``make_scheme(name, dt)`` and then
-``scheme.step(system, step_index, rng)`` advances the system by one step of
-length ``dt``.  The *system* (``multi_bodies.solver.system.System``) is passed in;
-schemes only use its methods (``get_state``, ``set_state``,
-``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
-``preprocess``, ``postprocess``, ``invalid_bodies``, ``blob_positions``) and
-never import the scripts or any global.  The random generator ``rng``
+A scheme object is made once per run by ``make_scheme(name, dt)``;
+``scheme.advance(system, configuration, step_index, rng)`` returns the
+configuration one step of length ``dt`` later and ``scheme.step(system,
+step_index, rng)`` applies it to the system's current configuration.  The
+*system* (``multi_bodies.solver.system.System``) is passed in; schemes only
+use its methods, each of which takes the configuration it is about
+(``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
+``forces_and_slip``, ``mobility_problem``, ``solve``, ``preprocess``,
+``postprocess``, ``invalid_bodies``, ``blob_positions``) and never import
+the scripts or any global.  The random generator ``rng``
 (``numpy.random.Generator``) is unused by the deterministic schemes here but
 is part of the signature.
 
@@ -16,7 +19,7 @@ locations (Nb, 3); scalar-first quaternions (Nb, 4), updated by
 
 Invalid configurations (SPEC decision 2): when a deterministic step would
 put a blob centre below the wall, retrying would give the same result, so
-the scheme restores the start-of-step state, counts the attempt in
+the scheme keeps the start-of-step configuration, counts the attempt in
 ``invalid_configurations`` and raises ``InvalidConfiguration`` naming the
 step and the bodies.  NaN velocities raise ``utils.SimulationStopped``.
 """
@@ -34,16 +37,16 @@ class DeterministicForwardEuler(Scheme):
     """``x += U dt``, ``q = from_rotation(w dt) q`` with U from the iterative mobility solve."""
     name = 'deterministic_forward_euler'
 
-    def velocities(self, system):
-        return system.deterministic_velocities()
+    def velocities(self, system, configuration):
+        return self.rigid_velocities(system, configuration)
 
 
 class DeterministicForwardEulerDenseAlgebra(DeterministicForwardEuler):
     """Forward Euler with the dense solve ``U = N (F - K^T M^{-1} slip)`` (cost O(N^3))."""
     name = 'deterministic_forward_euler_dense_algebra'
 
-    def velocities(self, system):
-        return system.dense_velocities()
+    def velocities(self, system, configuration):
+        return system.dense_velocities(configuration)
 
 
 class AdamsBashforthMixin:
@@ -82,8 +85,8 @@ class DeterministicForwardEulerRollers(Scheme):
     name = 'deterministic_forward_euler_rollers'
     rollers = True
 
-    def velocities(self, system):
-        return system.roller_velocities()
+    def velocities(self, system, configuration):
+        return self.roller_velocities(system, configuration)
 
 
 class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwardEulerRollers):

@@ -14,14 +14,21 @@ produced: by Lanczos on the blob mobility and random finite differences
 (iterative schemes), or by dense algebra (``*_dense_algebra``, ``Fixman``,
 ``*_DLA``).
 
-A scheme is made by ``make_scheme(name, dt, options)`` and advanced by
-``scheme.step(system, step_index, rng)``; the random numbers come only from
-``rng`` (``numpy.random.Generator``), drawn in a fixed order stated in each
-scheme, so a run is a function of its input and its generator state.
+A scheme is made by ``make_scheme(name, dt, options)``;
+``scheme.advance(system, configuration, step_index, rng)`` returns the next
+configuration (``scheme.step`` applies it to the system).  Predictors and
+midpoints are configurations of their own (``body.body.Configuration``
+values): forces, slip and solves are evaluated at them without touching the
+step's start.  The random numbers come only from ``rng``
+(``numpy.random.Generator``), drawn in a fixed order stated in each scheme,
+so a run is a function of its input and its generator state.  Random finite
+differences go through :func:`stochastic_forcing.rfd` with the rigid-body
+displacement :func:`quaternion_integrator.scheme_base.displace_bodies` (or
+:func:`stochastic_forcing.displace_positions` for rollers).
 
 Invalid configurations: a step (or predictor, or midpoint) that puts a blob
-centre below the wall is rejected, the state restored, the rejection counted
-and printed, and the step retried with fresh noise.  More than
+centre below the wall is rejected, the rejection counted and printed, and
+the step retried from the same start with fresh noise.  More than
 ``max_consecutive_rejections`` rejections in a row stop the run with a
 message naming the step and the bodies.
 
@@ -30,9 +37,10 @@ Shapes: body velocities (Nb, 6) ``[v, w]``; locations (Nb, 3); quaternions
 """
 import numpy as np
 
-from stochastic_forcing import rfd_configuration, symmetric_root_matrix
+from body.body import Configuration
+from quaternion_integrator.scheme_base import Scheme, displace_bodies
+from stochastic_forcing import rfd, symmetric_root_matrix
 from utils import SimulationStopped, UserInputError
-from quaternion_integrator.scheme_base import Scheme, euler_update
 
 MAX_CONSECUTIVE_REJECTIONS = 100
 
@@ -91,7 +99,8 @@ class StochasticScheme(Scheme):
         history = super().get_history()
         history['previous_velocities'] = None if self.previous_velocities is None else self.previous_velocities.copy()
         history['preconditioner_step'] = self._preconditioner_step
-        history['preconditioner_configuration'] = self._preconditioner_configuration
+        history['preconditioner_configuration'] = None if self._preconditioner_configuration is None \
+            else self._preconditioner_configuration.copy_arrays()
         return history
 
     def set_history(self, history):
@@ -101,7 +110,8 @@ class StochasticScheme(Scheme):
         if history.get('previous_velocities') is not None:
             self.previous_velocities = np.array(history['previous_velocities'], copy=True)
         self._preconditioner_step = history.get('preconditioner_step')
-        self._preconditioner_configuration = history.get('preconditioner_configuration')
+        saved = history.get('preconditioner_configuration')
+        self._preconditioner_configuration = None if saved is None else Configuration(*saved)
         self._preconditioner = None  # rebuilt at the saved configuration when first needed
 
     # -------------------------------------------------------------- helpers
@@ -110,25 +120,30 @@ class StochasticScheme(Scheme):
         rebuild = self._preconditioner_step is None or (
             step_index % self.update_PC == 0 and self._preconditioner_step != step_index)
         if rebuild:
-            self._preconditioner = system.build_preconditioner(problem)
+            self._preconditioner = system.build_preconditioner(problem.configuration)
             self._preconditioner_step = step_index
-            self._preconditioner_configuration = (problem.locations.copy(), problem.orientations.copy())
+            self._preconditioner_configuration = problem.configuration
         elif self._preconditioner is None:  # after a restart: the configuration it was built at
-            self._preconditioner = system.build_preconditioner(
-                system.mobility_problem(*self._preconditioner_configuration))
+            self._preconditioner = system.build_preconditioner(self._preconditioner_configuration)
         return self._preconditioner
 
     @staticmethod
     def body_lengths(system):
         return np.array([getattr(b, 'body_length', 1.0) for b in system.bodies], dtype=float)
 
-    def check(self, system):
-        """Raise _Rejected when the current configuration has a blob centre below the wall."""
-        invalid = system.invalid_bodies()
+    def check(self, system, configuration):
+        """Raise _Rejected when ``configuration`` has a blob centre below the wall."""
+        invalid = system.invalid_bodies(configuration)
         if invalid.size:
             raise _Rejected(invalid)
 
-    def rfd_drift(self, system, locations, orientations, W, preconditioner):
+    def noise_solve(self, system, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
+        """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
+        if rhs is None:
+            rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
+        return system.solve(problem, rhs, preconditioner, kind='stochastic')
+
+    def rfd_drift(self, system, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
 
         W (Nb, 6) ~ N(0, 1); translations are displaced by ``delta * body_length * W_t``
@@ -143,42 +158,53 @@ class StochasticScheme(Scheme):
             return np.zeros_like(W)
         W_tilde = W.copy()
         W_tilde[:, :3] /= lengths[:, None]
-        minus = system.mobility_problem(*rfd_configuration(locations, orientations, W, -0.5 * self.delta, lengths))
-        plus = system.mobility_problem(*rfd_configuration(locations, orientations, W, 0.5 * self.delta, lengths))
-        y_minus = system.solve(minus, force_torque=W_tilde, preconditioner=preconditioner, kind='stochastic')
-        x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
-        rhs = np.concatenate((np.zeros(3 * system.num_blobs), -W_tilde.reshape(-1))) - plus.matvec(x_minus)
-        y = system.solve(plus, rhs=rhs, preconditioner=preconditioner, kind='stochastic')
-        return (self.kT / self.delta) * y.velocities
 
-    def slip_rfd(self, system, old, problem, W_s, preconditioner, factor):
+        def difference(q_plus, q_minus):
+            minus, plus = system.mobility_problem(q_minus), system.mobility_problem(q_plus)
+            y_minus = self.noise_solve(system, minus, preconditioner, noise_force=W_tilde)
+            x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
+            rhs = minus.rhs(force_torque=W_tilde) - plus.matvec(x_minus)
+            return self.noise_solve(system, plus, preconditioner, rhs=rhs).velocities
+
+        def displace(q, scale, direction):
+            return displace_bodies(q, scale, direction, lengths)
+        return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
+
+    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
-        by ``delta W_R`` (no body-length scaling) the slip is ``factor (M' W_s - M W_s)`` and the force
-        ``-factor (K'^T W_s - K^T W_s)``, with ``factor = 2 kT / delta`` (trapezoidal) or ``kT / delta``
-        (midpoint).  Zero when ``thermal_drift`` is off.
+        by ``delta W_R`` (no body-length scaling) the slip is ``factor delta (M' W_s - M W_s) / delta`` and
+        the force ``-factor delta (K'^T W_s - K^T W_s) / delta``, with ``factor = 2 kT / delta``
+        (trapezoidal) or ``kT / delta`` (midpoint).  Zero when ``thermal_drift`` is off.
         """
-        W_R = system.solve(problem, rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies))),
-                           preconditioner=preconditioner, kind='stochastic').velocities
-        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_R, self.delta))
-        factor = factor if self.thermal_drift else 0.0
-        return (factor * (plus.M_dot(W_s) - problem.M_dot(W_s)),
-                -factor * (plus.KT_dot(W_s) - problem.KT_dot(W_s)))
+        W_R = self.noise_solve(system, problem, preconditioner,
+                               rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+
+        def products(q):
+            moved = system.mobility_problem(q)
+            return moved.M_dot(W_s), moved.KT_dot(W_s)
+        D_M, D_KT = rfd(products, configuration, W_R, self.delta, displace_bodies, centred=False,
+                        at_configuration=(problem.M_dot(W_s), problem.KT_dot(W_s)))
+        scale = factor * self.delta if self.thermal_drift else 0.0
+        return scale * D_M, -scale * D_KT
 
     def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
-        """Move from ``old`` by ``velocities * dt`` (predictor or midpoint), check it, and solve there.
+        """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
 
         The solve uses the forces and slip of the moved configuration, the given noise slip (3N,) and
-        force (Nb, 6), the preconditioner (None: one built there) and the deterministic guess.
-        Raises _Rejected when the moved configuration is invalid.  Returns velocities (Nb, 6).
+        force (Nb, 6), the preconditioner (None: one built at the moved configuration) and the
+        deterministic warm start.  Raises _Rejected when the moved configuration is invalid.
+        Returns velocities (Nb, 6).
         """
-        self.move(system, old, velocities, dt)
-        self.check(system)
-        _, force_torque, slip = system.current_forces_and_slip()
-        return system.solve(system.mobility_problem(), slip=slip, force_torque=force_torque, noise_slip=noise_slip,
-                            noise_force=noise_force, preconditioner=preconditioner, guess='deterministic',
-                            keep_guess=True).velocities
+        moved = self.move(old, velocities, dt)
+        self.check(system, moved)
+        _, force_torque, slip = system.forces_and_slip(moved)
+        problem = system.mobility_problem(moved)
+        if preconditioner is None:
+            preconditioner = system.build_preconditioner(moved)
+        rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
+        return self.deterministic_solve(system, problem, rhs, preconditioner).velocities
 
     def noise_factor(self, dt_fraction=1.0):
         """``sqrt(2 kT / (dt_fraction dt))``."""
@@ -186,31 +212,31 @@ class StochasticScheme(Scheme):
 
     # -------------------------------------------------------------- the step
     def attempt(self, system, step_index, rng, old):
-        """One try of the step from ``old`` (locations, orientations); sets the new state or raises _Rejected.
+        """One try of the step from the Configuration ``old``: (new Configuration, velocities used).
 
-        Returns the velocities used (Nb, 6) (rollers (N, 3)).
+        Velocities (Nb, 6) (rollers (N, 3)).  Raises _Rejected when a trial configuration is invalid.
         """
         raise NotImplementedError
 
-    def step(self, system, step_index, rng=None):
-        """Advance one step, retrying with fresh noise while the trial configuration is invalid."""
+    def advance(self, system, configuration, step_index, rng=None):
+        """One step from ``configuration``, retried with fresh noise while a trial configuration is invalid.
+
+        Returns (the new Configuration, the velocities used); the system's configuration is not changed.
+        """
         if rng is None:
             raise UserInputError('%s needs a random generator' % self.name)
-        old = system.get_state()
         rejections = 0
         while True:
-            system.preprocess()
+            system.preprocess(configuration)
             try:
-                used = self.attempt(system, step_index, rng, old)
+                new, used = self.attempt(system, step_index, rng, configuration)
                 if not np.all(np.isfinite(used)):
-                    system.set_state(*old)
                     raise SimulationStopped('step %d of %s: the velocities are not finite (NaN or inf); check the '
                                             'forces (user-defined functions), the time step and the configuration'
                                             % (step_index, self.name))
-                system.postprocess()
-                self.check(system)
+                new = system.postprocess(new)
+                self.check(system, new)
             except _Rejected as rejected:
-                system.set_state(*old)
                 self.invalid_configurations += 1
                 rejections += 1
                 print('Invalid configuration number %d (step %d, bodies %s)'
@@ -221,7 +247,7 @@ class StochasticScheme(Scheme):
                 continue
             self.accept_step()
             self.last_velocities = used
-            return used
+            return new, used
 
     def accept_step(self):
         """Called once when a step is accepted (multistep schemes store their history here)."""
@@ -236,8 +262,11 @@ class StochasticScheme(Scheme):
             return current + noise_part
         return 1.5 * current - 0.5 * self.previous_velocities + noise_part
 
-    def move(self, system, old, velocities, dt):
-        system.set_state(*euler_update(old[0], old[1], velocities, dt))
+    def deterministic_part(self, system, problem, old, preconditioner, noise_slip=None, noise_force=None):
+        """The warm-started solve at ``old`` of its forces and slip plus the given noise terms: velocities (Nb, 6)."""
+        _, force_torque, slip = system.forces_and_slip(old)
+        rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
+        return self.deterministic_solve(system, problem, rhs, preconditioner).velocities
 
 
 # ====================================================================== rigid multiblob, iterative
@@ -251,15 +280,12 @@ class StochasticFirstOrderRFD(StochasticScheme):
     def attempt(self, system, step_index, rng, old):
         W_rfd = rng.standard_normal(6 * system.num_bodies)
         z = rng.standard_normal(3 * system.num_blobs)
-        problem = system.mobility_problem(*old)
+        problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
-        _, force_torque, slip = system.current_forces_and_slip()
-        U = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=noise, preconditioner=pc,
-                         guess='deterministic', keep_guess=True).velocities
-        U = U + self.rfd_drift(system, old[0], old[1], W_rfd, pc)
-        self.move(system, old, U, self.dt)
-        return U
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
+        U = U + self.rfd_drift(system, old, W_rfd, pc)
+        return self.move(old, U, self.dt), U
 
 
 class StochasticAdamsBashforth(StochasticScheme):
@@ -272,17 +298,14 @@ class StochasticAdamsBashforth(StochasticScheme):
     def attempt(self, system, step_index, rng, old):
         W_rfd = rng.standard_normal(6 * system.num_bodies)
         z = rng.standard_normal(3 * system.num_blobs)
-        problem = system.mobility_problem(*old)
+        problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
-        U_s = system.solve(problem, noise_slip=noise, preconditioner=pc, kind='stochastic').velocities
-        _, force_torque, slip = system.current_forces_and_slip()
-        U_d = system.solve(problem, slip=slip, force_torque=force_torque, preconditioner=pc, guess='deterministic',
-                           keep_guess=True).velocities
-        U_s = U_s + self.rfd_drift(system, old[0], old[1], W_rfd, pc)
+        U_s = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
+        U_d = self.deterministic_part(system, problem, old, pc)
+        U_s = U_s + self.rfd_drift(system, old, W_rfd, pc)
         U = self.multistep(U_d, U_s)
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 class StochasticTractionEM(StochasticScheme):
@@ -296,27 +319,34 @@ class StochasticTractionEM(StochasticScheme):
         W_rfd = rng.standard_normal(6 * system.num_bodies).reshape(-1, 6)
         lengths = self.body_lengths(system)
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
-        problem = system.mobility_problem(*old)
+        problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        R = system.solve(problem, force_torque=W_s, preconditioner=pc, kind='stochastic')
-        plus = system.mobility_problem(*rfd_configuration(old[0], old[1], W_rfd, self.delta, lengths))
+        R = self.noise_solve(system, problem, pc, rhs=problem.rhs(force_torque=W_s))
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
-        D_M = plus.M_dot(lam) - problem.M_dot(lam)
-        D_KT = plus.KT_dot(lam) - problem.KT_dot(lam)
-        D_K = (plus.K_dot(U_R) - problem.K_dot(U_R)).reshape(-1)
+
+        def products(q):
+            moved = system.mobility_problem(q)
+            return moved.M_dot(lam), moved.KT_dot(lam), moved.K_dot(U_R).reshape(-1)
+
+        def displace(q, scale, direction):
+            return displace_bodies(q, scale, direction, lengths)
+        D_M, D_KT, D_K = rfd(products, old, W_rfd, self.delta, displace, centred=False,
+                             at_configuration=products_at(problem, lam, U_R))
         z = rng.standard_normal(3 * system.num_blobs)
         noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
         if not self.thermal_drift:
             return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
-        return problem, pc, noise, (D_M - D_K) / self.delta, -D_KT / self.delta
+        return problem, pc, noise, D_M - D_K, -D_KT
 
     def attempt(self, system, step_index, rng, old):
         problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
-        _, force_torque, slip = system.current_forces_and_slip()
-        U = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=noise + drift_slip,
-                         noise_force=drift_force, preconditioner=pc, guess='deterministic', keep_guess=True).velocities
-        self.move(system, old, U, self.dt)
-        return U
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force)
+        return self.move(old, U, self.dt), U
+
+
+def products_at(problem, lam, U_R):
+    """``(M lam, K^T lam, K U_R)`` at ``problem`` (the unmoved side of the traction schemes' RFD)."""
+    return problem.M_dot(lam), problem.KT_dot(lam), problem.K_dot(U_R).reshape(-1)
 
 
 class StochasticTractionAB(StochasticTractionEM):
@@ -328,14 +358,10 @@ class StochasticTractionAB(StochasticTractionEM):
 
     def attempt(self, system, step_index, rng, old):
         problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
-        _, force_torque, slip = system.current_forces_and_slip()
-        U_new = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=drift_slip,
-                             noise_force=drift_force, preconditioner=pc, guess='deterministic',
-                             keep_guess=True).velocities
-        U_n = system.solve(problem, noise_slip=noise, preconditioner=pc, kind='stochastic').velocities
+        U_new = self.deterministic_part(system, problem, old, pc, noise_slip=drift_slip, noise_force=drift_force)
+        U_n = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
         U = self.multistep(U_new, U_n)
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 class StochasticSlipTrapz(StochasticScheme):
@@ -354,18 +380,15 @@ class StochasticSlipTrapz(StochasticScheme):
         n3 = 3 * system.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
-        problem = system.mobility_problem(*old)
+        problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         n1 = system.lanczos_noise(problem, W1, self.noise_factor(), pc)
-        _, force_torque, slip = system.current_forces_and_slip()
-        U1 = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
-                          guess='deterministic', keep_guess=True).velocities
+        U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
         U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
                                        pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 class StochasticSlipMid(StochasticScheme):
@@ -380,17 +403,14 @@ class StochasticSlipMid(StochasticScheme):
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        problem = system.mobility_problem(*old)
+        problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         n1 = system.lanczos_noise(problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
         n_c = system.lanczos_noise(problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
-        _, force_torque, slip = system.current_forces_and_slip()
-        U_m = system.solve(problem, slip=slip, force_torque=force_torque, noise_slip=n1, preconditioner=pc,
-                           guess='deterministic', keep_guess=True).velocities
+        U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
         U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 # ====================================================================== rigid multiblob, dense algebra
@@ -399,10 +419,10 @@ class DenseScheme(StochasticScheme):
     dense = True
 
     @staticmethod
-    def dense_velocity(system, matrices):
-        """``N (F - K^T M^{-1} slip)`` at the current configuration with the given dense matrices."""
+    def dense_velocity(system, configuration, matrices):
+        """``N (F - K^T M^{-1} slip)`` at ``configuration`` with the given dense matrices (built there)."""
         M, M_inv, K, N = matrices
-        _, force_torque, slip = system.current_forces_and_slip()
+        _, force_torque, slip = system.forces_and_slip(configuration)
         return (N @ (force_torque.reshape(-1) - K.T @ (M_inv @ slip.reshape(-1)))).reshape(-1, 6)
 
 
@@ -417,19 +437,22 @@ class StochasticFirstOrderRFDDense(DenseScheme):
         nb6 = 6 * system.num_bodies
         W_rfd = rng.standard_normal(nb6)
         z = rng.standard_normal(nb6)
-        matrices = system.dense_matrices(*old)
+        matrices = system.dense_matrices(old)
         N = matrices[3]
-        U = self.dense_velocity(system, matrices).reshape(-1)
+        U = self.dense_velocity(system, old, matrices).reshape(-1)
         U = U + self.noise_factor() * (symmetric_root_matrix(N) @ z)
         lengths = self.body_lengths(system)
-        plus = rfd_configuration(old[0], old[1], W_rfd, self.delta, lengths)
-        N_plus = system.dense_matrices(*plus)[3]
         W_tilde = W_rfd.reshape(-1, 6).copy()
         W_tilde[:, :3] /= lengths[:, None]
-        c = self.kT / self.delta if self.thermal_drift else 0.0
-        U = (U + c * ((N_plus - N) @ W_tilde.reshape(-1))).reshape(-1, 6)
-        self.move(system, old, U, self.dt)
-        return U
+        W_tilde = W_tilde.reshape(-1)
+
+        def displace(q, scale, direction):
+            return displace_bodies(q, scale, direction, lengths)
+        drift = rfd(lambda q: system.dense_matrices(q)[3] @ W_tilde, old, W_rfd, self.delta, displace,
+                    centred=False, at_configuration=N @ W_tilde)
+        c = self.kT if self.thermal_drift else 0.0
+        U = (U + c * drift).reshape(-1, 6)
+        return self.move(old, U, self.dt), U
 
 
 class Fixman(DenseScheme):
@@ -443,19 +466,17 @@ class Fixman(DenseScheme):
         nb6 = 6 * system.num_bodies
         W1 = rng.standard_normal(nb6)
         W2 = rng.standard_normal(nb6)
-        matrices = system.dense_matrices(*old)
+        matrices = system.dense_matrices(old)
         N = matrices[3]
         root = symmetric_root_matrix(N)
-        U_p = self.dense_velocity(system, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
+        U_p = self.dense_velocity(system, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
         corrector = np.linalg.pinv(N, rcond=1e-14) @ (np.sqrt(self.kT / self.dt) * (root @ (W1 + W2)))
-        self.move(system, old, U_p, 0.5 * self.dt)
-        self.check(system)
-        mid = system.get_state()
-        matrices_mid = system.dense_matrices(*mid)
-        U = self.dense_velocity(system, matrices_mid).reshape(-1) + matrices_mid[3] @ corrector
+        mid = self.move(old, U_p, 0.5 * self.dt)
+        self.check(system, mid)
+        matrices_mid = system.dense_matrices(mid)
+        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + matrices_mid[3] @ corrector
         U = U.reshape(-1, 6)
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 class StochasticSlipMidDLA(DenseScheme):
@@ -470,27 +491,27 @@ class StochasticSlipMidDLA(DenseScheme):
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        matrices = system.dense_matrices(*old)
+        matrices = system.dense_matrices(old)
         M, M_inv, K, N = matrices
-        U_m = self.dense_velocity(system, matrices).reshape(-1)
+        U_m = self.dense_velocity(system, old, matrices).reshape(-1)
         W_R = N @ (K.T @ (M_inv @ W_s))
         M_half = symmetric_root_matrix(M)
         U_m = U_m + np.sqrt(4.0 * self.kT / self.dt) * (N @ (K.T @ (M_inv @ (M_half @ W1))))
-        plus = rfd_configuration(old[0], old[1], W_R.reshape(-1, 6), self.delta)
-        M_plus, _, K_plus, _ = system.dense_matrices(*plus, inverse=False)
-        D_M = M_plus @ W_s - M @ W_s
-        D_KT = K_plus.T @ W_s - K.T @ W_s
-        self.move(system, old, U_m.reshape(-1, 6), 0.5 * self.dt)
-        self.check(system)
-        mid = system.get_state()
-        matrices_mid = system.dense_matrices(*mid)
+
+        def products(q):
+            M_q, _, K_q, _ = system.dense_matrices(q, inverse=False)
+            return M_q @ W_s, K_q.T @ W_s
+        D_M, D_KT = rfd(products, old, W_R.reshape(-1, 6), self.delta, displace_bodies, centred=False,
+                        at_configuration=(M @ W_s, K.T @ W_s))
+        mid = self.move(old, U_m.reshape(-1, 6), 0.5 * self.dt)
+        self.check(system, mid)
+        matrices_mid = system.dense_matrices(mid)
         _, M_inv_mid, K_mid, N_mid = matrices_mid
-        c = self.kT / self.delta if self.thermal_drift else 0.0
-        U = self.dense_velocity(system, matrices_mid).reshape(-1) + N_mid @ (
+        c = self.kT if self.thermal_drift else 0.0
+        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + N_mid @ (
             -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
         U = U.reshape(-1, 6)
-        self.move(system, old, U, self.dt)
-        return U
+        return self.move(old, U, self.dt), U
 
 
 # ====================================================================== rollers (SPEC §5.2)
@@ -516,19 +537,15 @@ class StochasticRollerScheme(StochasticScheme):
             return np.zeros_like(r_vectors)
         return system.roller_drift(r_vectors, W, self.kT, self.delta)
 
-    def move(self, system, old, velocities, dt):
-        system.set_state(old[0] + dt * np.asarray(velocities).reshape(-1, 3), old[1])
-
 
 class StochasticFirstOrderRollers(StochasticRollerScheme):
     """``r += dt (v_det + noise + drift)``.  Draws: z, W (3N each)."""
     name = 'stochastic_first_order_rollers'
 
     def attempt(self, system, step_index, rng, old):
-        r = system.blob_positions()
-        v = system.roller_velocities() + self.stochastic_velocity(system, rng, r)
-        self.move(system, old, v, self.dt)
-        return v
+        r = system.blob_positions(old)
+        v = self.roller_velocities(system, old) + self.stochastic_velocity(system, rng, r)
+        return self.move(old, v, self.dt), v
 
 
 class StochasticAdamsBashforthRollers(StochasticRollerScheme):
@@ -536,11 +553,10 @@ class StochasticAdamsBashforthRollers(StochasticRollerScheme):
     name = 'stochastic_adams_bashforth_rollers'
 
     def attempt(self, system, step_index, rng, old):
-        r = system.blob_positions()
-        v_det = system.roller_velocities()
+        r = system.blob_positions(old)
+        v_det = self.roller_velocities(system, old)
         v = self.multistep(v_det, self.stochastic_velocity(system, rng, r))
-        self.move(system, old, v, self.dt)
-        return v
+        return self.move(old, v, self.dt), v
 
 
 class StochasticMidPointRollers(StochasticRollerScheme):
@@ -548,17 +564,16 @@ class StochasticMidPointRollers(StochasticRollerScheme):
     name = 'stochastic_mid_point_rollers'
 
     def attempt(self, system, step_index, rng, old):
-        r = system.blob_positions()
+        r = system.blob_positions(old)
         d = self.drift(system, rng, r)
         s1 = self.stochastic_velocity(system, rng, r, dt_fraction=0.5, with_drift=False)
-        v_det = system.roller_velocities()
-        self.move(system, old, v_det + s1, 0.5 * self.dt)
-        self.check(system)
-        r_mid = system.blob_positions()
+        v_det = self.roller_velocities(system, old)
+        mid = self.move(old, v_det + s1, 0.5 * self.dt)
+        self.check(system, mid)
+        r_mid = system.blob_positions(mid)
         s2 = self.stochastic_velocity(system, rng, r_mid, dt_fraction=0.5, with_drift=False)
-        v = system.roller_velocities() + d + 0.5 * (s1 + s2)
-        self.move(system, old, v, self.dt)
-        return v
+        v = self.roller_velocities(system, mid) + d + 0.5 * (s1 + s2)
+        return self.move(old, v, self.dt), v
 
 
 class StochasticTrapezoidalRollers(StochasticRollerScheme):
@@ -569,15 +584,14 @@ class StochasticTrapezoidalRollers(StochasticRollerScheme):
     name = 'stochastic_trapezoidal_rollers'
 
     def attempt(self, system, step_index, rng, old):
-        r = system.blob_positions()
+        r = system.blob_positions(old)
         d = self.drift(system, rng, r)
         s = self.stochastic_velocity(system, rng, r, with_drift=False)
-        v1 = system.roller_velocities()
-        self.move(system, old, v1 + s, self.dt)
-        self.check(system)
-        v = 0.5 * (v1 + system.roller_velocities()) + d + s
-        self.move(system, old, v, self.dt)
-        return v
+        v1 = self.roller_velocities(system, old)
+        predictor = self.move(old, v1 + s, self.dt)
+        self.check(system, predictor)
+        v = 0.5 * (v1 + self.roller_velocities(system, predictor)) + d + s
+        return self.move(old, v, self.dt), v
 
 
 STOCHASTIC_SCHEME_CLASSES = (StochasticFirstOrderRFD, StochasticAdamsBashforth, StochasticFirstOrderRFDDense,

@@ -46,7 +46,7 @@ def shell_mobility(blobs, blob_radius, height, blob_mobility_matrix, eta=1.0):
     """6x6 body mobility of the shell (blobs (n, 3) about its centre) with its centre at ``height``."""
     location = np.array([[0.0, 0.0, height]])
     bodies = BodyArrays(location, [[1.0, 0.0, 0.0, 0.0]], [blobs], [1], blob_radius)
-    N, _ = dense_body_mobility(bodies, blobs + location, blob_mobility_matrix, eta, blob_radius)
+    N, _ = dense_body_mobility(bodies, bodies.configuration, blob_mobility_matrix, eta, blob_radius)
     return N
 
 

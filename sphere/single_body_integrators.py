@@ -47,35 +47,11 @@ functions of ``locations (nb, 3)`` and ``orientations (nb, 4)``:
 """
 import numpy as np
 
+from quaternion_integrator.quaternion import quaternion_products, quaternions_from_rotations  # noqa: F401
+from stochastic_forcing import rfd
 from utils import SimulationStopped
 
 SCHEMES = ('RFD', 'FIXMAN', 'EM')
-
-
-def quaternions_from_rotations(phi):
-    """Quaternions of the rotations by the vectors ``phi`` (shape (nb, 3), radians), shape (nb, 4).
-
-    ``(cos(|phi|/2), sin(|phi|/2) phi/|phi|)``; the identity where ``phi = 0``
-    (vectorised ``Quaternion.from_rotation``).
-    """
-    phi = np.asarray(phi, dtype=float).reshape(-1, 3)
-    angle = np.linalg.norm(phi, axis=1)
-    half = 0.5 * angle
-    # sin(|phi|/2)/|phi| -> 1/2 as |phi| -> 0.
-    safe = np.where(angle > 0.0, angle, 1.0)
-    factor = np.where(angle > 0.0, np.sin(half) / safe, 0.5)
-    return np.concatenate((np.cos(half)[:, None], factor[:, None] * phi), axis=1)
-
-
-def quaternion_products(left, right):
-    """Hamilton products ``left * right`` of stacks of quaternions, shapes (nb, 4) -> (nb, 4)."""
-    left = np.asarray(left, dtype=float).reshape(-1, 4)
-    right = np.asarray(right, dtype=float).reshape(-1, 4)
-    s, p = left[:, 0], left[:, 1:]
-    t, q = right[:, 0], right[:, 1:]
-    scalar = s * t - np.einsum('ij,ij->i', p, q)
-    vector = s[:, None] * q + t[:, None] * p + np.cross(p, q)
-    return np.concatenate((scalar[:, None], vector), axis=1)
 
 
 def move(locations, orientations, displacement):
@@ -191,9 +167,9 @@ class SingleBodyIntegrator:
         L = symmetric_cholesky(N)
         W = self._noise(nb)
         W_rfd = self._noise(nb)
-        displaced = move(locations, orientations, self.rfd_delta * W_rfd)
-        N_displaced = self.mobility(*displaced)
-        drift = (self.kT / self.rfd_delta) * _matvec(N_displaced - N, W_rfd)
+        drift = self.kT * rfd(lambda q: _matvec(self.mobility(*q), W_rfd), (locations, orientations), W_rfd,
+                              self.rfd_delta, lambda q, scale, W: move(q[0], q[1], scale * W), centred=False,
+                              at_configuration=_matvec(N, W_rfd))
         velocity = _matvec(N, self.force_torque(locations, orientations)) \
             + np.sqrt(2.0 * self.kT / dt) * _matvec(L, W) + drift
         new_locations, new_orientations = move(locations, orientations, dt * velocity)

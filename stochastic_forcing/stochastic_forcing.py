@@ -19,18 +19,19 @@ The caller always passes ``z``: the order of random draws is the caller's.
 
 Random finite differences (Delong et al. 2015; Sprinkle et al. 2017):
 ``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W`` has mean
-``kT div N + O(delta^2)`` for ``W ~ N(0, I)``; ``rfd_configuration`` moves
-bodies by such a displacement, translations scaled by the body length so that
-``delta`` is dimensionless.
+``kT div N + O(delta^2)`` for ``W ~ N(0, I)``.  :func:`rfd` is that
+difference for any product ``apply_at(configuration)`` and any way of
+moving a configuration (``displace``): blob positions
+(:func:`displace_positions`), or rigid bodies (the schemes pass their own
+displacement, which turns quaternions).
 
-Nothing here knows about bodies beyond locations and quaternions.
+Nothing here knows about bodies or imports anything of the package: every
+function works on a matvec, a vector or a caller's callable.
 """
 from collections import namedtuple
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
-
-from quaternion_integrator.quaternion import rotate_quaternions
 
 LANCZOS_MAX_ITERATIONS = 1000
 
@@ -134,23 +135,50 @@ def symmetric_root(matrix, z):
     return symmetric_root_matrix(matrix) @ np.asarray(z, dtype=float)
 
 
-def rfd_configuration(locations, orientations, displacement, delta, body_lengths=None):
-    """Configuration moved by ``delta * displacement`` (random finite differences).
+def displace_positions(positions, scale, W):
+    """``positions + scale * W``: positions (N, 3), W (3N,) or (N, 3); the ``displace`` of rollers' RFD."""
+    positions = np.asarray(positions, dtype=float)
+    return positions + scale * np.asarray(W, dtype=float).reshape(positions.shape)
+
+
+def _difference(plus, minus, delta):
+    if isinstance(plus, tuple):
+        return tuple(_difference(p, m, delta) for p, m in zip(plus, minus))
+    return (plus - minus) / delta
+
+
+def _divided(value, delta):
+    if isinstance(value, tuple):
+        return tuple(_divided(v, delta) for v in value)
+    return value / delta
+
+
+def rfd(apply_at, configuration, W, delta, displace, centred=True, at_configuration=None, difference=None):
+    """Random finite difference of a product along a random direction ``W``.
 
     Parameters
     ----------
-    locations : (Nb, 3); orientations : (Nb, 4) scalar-first quaternions
-    displacement : (Nb, 6), ``[W_t, W_r]`` per body
-    delta : float
-    body_lengths : (Nb,) or None
-        Translations are ``delta * body_length * W_t`` when given (SPEC
-        decision 6), else ``delta * W_t``; rotations ``from_rotation(delta W_r) q``.
+    apply_at : callable ``configuration -> ndarray`` (or a tuple of arrays)
+        The product to differentiate, e.g. ``M(q) W`` or ``N(q) W``.
+    configuration : whatever ``displace`` takes (blob positions (N, 3), a body Configuration, ...)
+    W : ndarray, the random direction (drawn by the caller)
+    delta : float, the size of the difference (in the units ``displace`` gives it)
+    displace : callable ``(configuration, scale, W) -> configuration``, moves by ``scale * W``
+    centred : True (default): ``[f(q + delta/2 W) - f(q - delta/2 W)] / delta``;
+        False: one-sided ``[f(q + delta W) - f(q)] / delta``, with ``f(q)`` taken from
+        ``at_configuration`` when the caller has it already.
+    difference : callable ``(q_plus, q_minus) -> f(q_plus) - f(q_minus)`` or None
+        For a product whose difference is better computed directly than as a
+        difference of two values (two solves of which the second is for the
+        difference itself, so the solver tolerance applies to the drift).
 
-    Returns new (locations (Nb, 3), orientations (Nb, 4)).
+    Returns ``(f(q+) - f(q-)) / delta`` (arrays, or a tuple of arrays like ``apply_at``'s).
     """
-    displacement = np.asarray(displacement, dtype=float).reshape(-1, 6)
-    translation = displacement[:, :3] * delta
-    if body_lengths is not None:
-        translation = translation * np.asarray(body_lengths, dtype=float).reshape(-1, 1)
-    return (np.asarray(locations, dtype=float) + translation,
-            rotate_quaternions(orientations, delta * displacement[:, 3:]))
+    if centred:
+        plus, minus = displace(configuration, 0.5 * delta, W), displace(configuration, -0.5 * delta, W)
+    else:
+        plus, minus = displace(configuration, delta, W), configuration
+    if difference is not None:
+        return _divided(difference(plus, minus), delta)
+    value_minus = at_configuration if (not centred and at_configuration is not None) else apply_at(minus)
+    return _difference(apply_at(plus), value_minus, delta)

@@ -146,7 +146,6 @@ def test_no_import_runs_back_up(graph):
     assert not upward, '\n'.join(upward)
 
 
-@pytest.mark.xfail(strict=True, reason='rfd_configuration still rotates quaternions itself (being moved)')
 def test_stochastic_forcing_imports_nothing_above_it(graph):
     above = sorted(b for a, targets in graph.items() if a.startswith('stochastic_forcing')
                    for b in targets if not (b == 'utils' or b.startswith('stochastic_forcing')))

@@ -170,8 +170,8 @@ def boomerang_bodies(count, spacing=3.0, height=2.0, seed=0):
 
 def test_body_mobility_is_symmetric_positive_definite():
     arrays = bodies_to_arrays(boomerang_bodies(3))
-    r = arrays.blob_positions()
-    N, _ = body_solver.dense_body_mobility(arrays, r, mobility.single_wall_fluid_mobility, 1.0, 0.25)
+    N, _ = body_solver.dense_body_mobility(arrays, arrays.configuration, mobility.single_wall_fluid_mobility, 1.0,
+                                           0.25)
     assert np.max(np.abs(N - N.T)) < 1e-12 * np.max(np.abs(N))
     assert np.min(np.linalg.eigvalsh(0.5 * (N + N.T))) > 0
 
@@ -181,29 +181,29 @@ def test_gmres_matches_dense_and_resistance_round_trip(implementation):
     if not implementation_usable(implementation):
         pytest.skip('%s not usable' % implementation)
     arrays = bodies_to_arrays(boomerang_bodies(4))
-    r = arrays.blob_positions()
+    configuration = arrays.configuration
     rng = np.random.default_rng(3)
     forces = rng.normal(size=(4, 6))
     slip = 0.1 * rng.normal(size=(arrays.num_blobs, 3))
     matrix = mobility.blob_mobility_matrix(implementation)
-    operator = body_solver.saddle_point_operator(arrays, r, mobility.mobility_vector_product(implementation),
-                                                 1.0, 0.25)
-    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, r, matrix, 1.0, 0.25)
-    result = body_solver.solve_mobility_problem(operator, preconditioner, body_solver.mobility_rhs(forces, slip),
-                                                arrays.num_blobs, 1e-10)
+    problem = body_solver.MobilityProblem(arrays, configuration, mobility.mobility_vector_product(implementation),
+                                          1.0, 0.25)
+    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, configuration, matrix, 1.0, 0.25)
+    result = body_solver.solve(problem, body_solver.mobility_rhs(forces, slip), preconditioner, tolerance=1e-10)
     assert result.converged and 0 < result.iterations < 30
-    dense = body_solver.dense_mobility_velocities(arrays, r, forces, slip, matrix, 1.0, 0.25)
+    dense = body_solver.dense_mobility_velocities(arrays, configuration, forces, slip, matrix, 1.0, 0.25)
     assert relative_error(result.velocities, dense) < 1e-8
-    back, _ = body_solver.solve_resistance_problem(arrays, r, result.velocities, slip, matrix, 1.0, 0.25)
+    back, _ = body_solver.solve_resistance_problem(arrays, configuration, result.velocities, slip, matrix, 1.0,
+                                                   0.25)
     assert relative_error(back, forces) < 1e-8
 
 
 def test_preconditioner_is_exact_for_one_body():
     arrays = bodies_to_arrays(boomerang_bodies(1))
-    r = arrays.blob_positions()
     matrix = mobility.single_wall_fluid_mobility
-    operator = body_solver.saddle_point_operator(arrays, r, mobility.mobility_vector_product('python'), 1.0, 0.25)
-    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, r, matrix, 1.0, 0.25)
+    operator = body_solver.MobilityProblem(arrays, arrays.configuration, mobility.mobility_vector_product('python'),
+                                           1.0, 0.25).operator
+    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, arrays.configuration, matrix, 1.0, 0.25)
     x = np.random.default_rng(0).normal(size=operator.shape[0])
     np.testing.assert_allclose(operator.matvec(preconditioner.apply(x)), x, rtol=0, atol=1e-10 * np.abs(x).max())
 
@@ -212,13 +212,13 @@ def test_gmres_iterations_do_not_grow_with_bodies():
     counts = []
     for count in (1, 16):
         arrays = bodies_to_arrays(boomerang_bodies(count))
-        r = arrays.blob_positions()
-        operator = body_solver.saddle_point_operator(arrays, r, mobility.mobility_vector_product('python'),
+        problem = body_solver.MobilityProblem(arrays, arrays.configuration,
+                                              mobility.mobility_vector_product('python'), 1.0, 0.25)
+        pc = body_solver.BlockDiagonalPreconditioner(arrays, arrays.configuration, mobility.single_wall_fluid_mobility,
                                                      1.0, 0.25)
-        pc = body_solver.BlockDiagonalPreconditioner(arrays, r, mobility.single_wall_fluid_mobility, 1.0, 0.25)
         forces = np.tile([0, 0, -1.0, 0, 0, 0], (count, 1))
-        result = body_solver.solve_mobility_problem(operator, pc, body_solver.mobility_rhs(
-            forces, np.zeros((arrays.num_blobs, 3))), arrays.num_blobs, 1e-8)
+        result = body_solver.solve(problem, body_solver.mobility_rhs(forces, np.zeros((arrays.num_blobs, 3))), pc,
+                                   tolerance=1e-8)
         assert result.converged
         counts.append(result.iterations)
     assert counts[1] <= 4 * max(counts[0], 3)
@@ -226,12 +226,12 @@ def test_gmres_iterations_do_not_grow_with_bodies():
 
 def test_unconverged_solve_is_reported():
     arrays = bodies_to_arrays(boomerang_bodies(9, spacing=2.2))
-    r = arrays.blob_positions()
-    operator = body_solver.saddle_point_operator(arrays, r, mobility.mobility_vector_product('python'), 1.0, 0.25)
+    problem = body_solver.MobilityProblem(arrays, arrays.configuration, mobility.mobility_vector_product('python'),
+                                          1.0, 0.25)
     forces = np.random.default_rng(1).normal(size=(9, 6))
-    result = body_solver.solve_mobility_problem(operator, None, body_solver.mobility_rhs(
-        forces, np.zeros((arrays.num_blobs, 3))), arrays.num_blobs, 1e-14, restart=2, maxiter=1)
-    assert not result.converged and result.info > 0 and result.residual > 1e-14
+    result = body_solver.solve(problem, body_solver.mobility_rhs(forces, np.zeros((arrays.num_blobs, 3))), None,
+                               tolerance=1e-14, restart=2, maxiter=1)
+    assert not result.converged and result.iterations > 0 and result.residual > 1e-14
 
 
 # ------------------------------------------------------------------ spheres of blobs vs exact sphere-wall values
@@ -250,7 +250,7 @@ def sphere_mobility(vertex_name, blob_radius, height, matrix=mobility.single_wal
     blobs = read_vertex_file(os.path.join(REFERENCE, 'structures', vertex_name + '.vertex'))
     body = Body([0, 0, height], [1, 0, 0, 0], blobs, blob_radius)
     arrays = bodies_to_arrays([body])
-    N, _ = body_solver.dense_body_mobility(arrays, arrays.blob_positions(), matrix, 1.0, blob_radius)
+    N, _ = body_solver.dense_body_mobility(arrays, arrays.configuration, matrix, 1.0, blob_radius)
     return N
 
 
@@ -332,7 +332,7 @@ def test_default_forces_follow_the_formulas():
 def test_hooks_can_be_replaced():
     from multi_bodies import multi_bodies_functions as mbf
     arrays = bodies_to_arrays(boomerang_bodies(2))
-    r = arrays.blob_positions()
+    r = arrays.blob_positions(arrays.configuration)
     original = mbf.blob_external_forces
     try:
         mbf.blob_external_forces = lambda r_vectors, **kw: np.tile([1.0, 0, 0], (len(r_vectors), 1))

@@ -220,8 +220,8 @@ def test_preconditioned_lanczos_covariance_multiblob():
     system = make_system(bodies, types)
     system.blob_radius = 0.3
     system.eta = ETA
-    problem = system.mobility_problem()
-    pc = system.build_preconditioner(problem)
+    problem = system.mobility_problem(system.configuration)
+    pc = system.build_preconditioner(problem.configuration)
     M = mobility.blob_mobility_matrix('python')(problem.r_vectors, ETA, 0.3)
     probes = probe_directions(M, 7)
     ours = preconditioned_samples(system, problem, pc, np.random.default_rng(8), 1000)
@@ -241,7 +241,7 @@ def test_lanczos_non_convergence_is_reported():
     system = make_system(bodies, [40], tolerance=1e-12)
     system.lanczos_max_iterations = 3
     with pytest.warns(RuntimeWarning, match='Lanczos did not converge'):
-        system.lanczos_noise(system.mobility_problem(), np.ones(120), 1.0)
+        system.lanczos_noise(system.mobility_problem(system.configuration), np.ones(120), 1.0)
     assert system.counters()['lanczos_not_converged_count'] == 1
 
 
@@ -249,13 +249,14 @@ def test_operator_is_a_value():
     """An operator built at a configuration gives the same product after the bodies move."""
     bodies, types = multiblob_scene()
     system = make_system(bodies, types)
-    problem = system.mobility_problem()
+    problem = system.mobility_problem(system.configuration)
     x = np.random.default_rng(11).standard_normal(problem.size)
     before = problem.matvec(x)
     locations, orientations = system.get_state()
     system.set_state(locations + 0.3, orientations[::-1])
     np.testing.assert_array_equal(problem.matvec(x), before)
-    assert np.linalg.norm(system.mobility_problem().matvec(x) - before) > 1e-3 * np.linalg.norm(before)
+    assert np.linalg.norm(system.mobility_problem(system.configuration).matvec(x) - before) > \
+        1e-3 * np.linalg.norm(before)
 
 
 # ====================================================================== random finite differences
@@ -292,10 +293,10 @@ def test_rigid_body_rfd_drift_of_one_blob():
     bodies[0].location = np.array([0.0, 0.0, 1.5 * A])
     system = make_system(bodies, [1], tolerance=1e-10)
     scheme = make_scheme('stochastic_first_order_RFD', 0.01, Opts(rf_delta=1e-4))
-    old = system.get_state()
-    pc = system.build_preconditioner(system.mobility_problem())
+    old = system.configuration
+    pc = system.build_preconditioner(old)
     rng = np.random.default_rng(15)
-    draws = np.array([scheme.rfd_drift(system, old[0], old[1], rng.standard_normal((1, 6)), pc)[0]
+    draws = np.array([scheme.rfd_drift(system, old, rng.standard_normal((1, 6)), pc)[0]
                       for _ in range(1000)])
     mean, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(draws.shape[0])
     exact = np.zeros(6)

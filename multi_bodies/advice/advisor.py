@@ -128,7 +128,7 @@ class Advisor(AdvisorReport):
         parts = []
         for other in self.scene.structures:
             if other is structure:
-                rotations = self.scene.arrays.rotation_matrices()[other['bodies']]
+                rotations = self.scene.arrays.rotation_matrices(self.scene.arrays.configuration)[other['bodies']]
                 parts.append((other['centres'][:, None, :] + np.einsum('kij,nj->kni', rotations, model_blobs)
                               ).reshape(-1, 3))
             else:
@@ -162,8 +162,8 @@ class Advisor(AdvisorReport):
         system = System(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
                         scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
                         blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
-        force_torque = system.forces_torques(scene.r_vectors)
-        slip = system.slip() if system.has_slip else np.zeros_like(scene.r_vectors)
+        force_torque = system.forces_torques(scene.arrays.configuration, scene.r_vectors)
+        slip = system.slip(scene.arrays.configuration) if system.has_slip else np.zeros_like(scene.r_vectors)
         if not np.any(force_torque) and not np.any(slip):
             force_torque = np.random.default_rng(3).standard_normal((scene.arrays.num_bodies, 6))
         return force_torque, slip
@@ -184,13 +184,14 @@ class Advisor(AdvisorReport):
         results = []
 
         def gmres_solve():
-            operator = body_solver.saddle_point_operator(scene.arrays, scene.r_vectors, product, scene.eta, scene.a,
-                                                         scene.options.periodic_length)
-            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, scene.r_vectors, matrix,
+            # The same solve as the scripts and schemes (body_solver.solve), from a zero guess.
+            configuration = scene.arrays.configuration
+            problem = body_solver.MobilityProblem(scene.arrays, configuration, product, scene.eta, scene.a,
+                                                  scene.options.periodic_length)
+            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, configuration, matrix,
                                                                      scene.eta, scene.a, stacked_mobility=matrix)
-            results.append(body_solver.solve_mobility_problem(operator, preconditioner,
-                                                              body_solver.mobility_rhs(force_torque, slip),
-                                                              scene.num_blobs, tolerance, true_residual=False))
+            results.append(body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
+                                             preconditioner, tolerance=tolerance))
         # One solve (preconditioner built, GMRES from a zero guess); repeated when short, best time kept.
         gmres_seconds = choose.time_call(gmres_solve, repeats=2)
         result = results[-1]
@@ -219,7 +220,7 @@ class Advisor(AdvisorReport):
         n = scene.num_blobs
         if n <= DENSE_BLOB_LIMIT and (not self.quick or n <= 600):
             dense_seconds = choose.time_call(lambda: body_solver.dense_mobility_velocities(
-                scene.arrays, scene.r_vectors, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
+                scene.arrays, scene.arrays.configuration, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
             how = 'measured'
         else:
             probe = min(n, 600)
@@ -500,8 +501,8 @@ class Advisor(AdvisorReport):
                 high = middle
         a_coarse = np.sqrt(low * high)
         low_index = structure['lowest']
-        rotation = scene.arrays.rotation_matrices()[structure['bodies']][low_index]
-        location = scene.arrays.locations[structure['bodies']][low_index]
+        rotation = scene.arrays.rotation_matrices(scene.arrays.configuration)[structure['bodies']][low_index]
+        location = scene.arrays.configuration.locations[structure['bodies']][low_index]
         centre = structure['centres'][low_index]
         fine = bodies_mobility([structure['r_type'][low_index]], [centre], a, scene.eta, scene.wall, self.backend)
         coarse_blobs = location + coarse @ rotation.T

@@ -302,7 +302,7 @@ class Scene:
         self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
         slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]
         self.arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
-        self.r_vectors = self.arrays.blob_positions()
+        self.r_vectors = self.arrays.blob_positions(self.arrays.configuration)
         self.a = self.options.blob_radius
         self.eta = self.options.eta
         if not (self.a > 0 and self.eta > 0):

@@ -33,6 +33,7 @@ import os
 import numpy as np
 
 import utils
+from quaternion_integrator.quaternion import rotation_matrices as _rotation_matrices
 from multi_bodies.ensembles import ensemble_runner
 from multi_bodies.run import run_output
 from multi_bodies.files.input_options import parse_input_text
@@ -43,20 +44,8 @@ MSD_QUANTITIES = ('msd_xy', 'msd_z', 'msd_location', 'msd_orientation')
 
 # ------------------------------------------------------------------ per replica
 def rotation_matrices(quaternions):
-    """Rotation matrices of unit quaternions (scalar first): (..., 4) -> (..., 3, 3)."""
-    q = np.asarray(quaternions, dtype=float)
-    s, p1, p2, p3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    matrices = np.empty(q.shape[:-1] + (3, 3))
-    matrices[..., 0, 0] = 1 - 2 * (p2 * p2 + p3 * p3)
-    matrices[..., 0, 1] = 2 * (p1 * p2 - s * p3)
-    matrices[..., 0, 2] = 2 * (p1 * p3 + s * p2)
-    matrices[..., 1, 0] = 2 * (p1 * p2 + s * p3)
-    matrices[..., 1, 1] = 1 - 2 * (p1 * p1 + p3 * p3)
-    matrices[..., 1, 2] = 2 * (p2 * p3 - s * p1)
-    matrices[..., 2, 0] = 2 * (p1 * p3 - s * p2)
-    matrices[..., 2, 1] = 2 * (p2 * p3 + s * p1)
-    matrices[..., 2, 2] = 1 - 2 * (p1 * p1 + p2 * p2)
-    return matrices
+    """Rotation matrices of scalar-first quaternions (..., 4) -> (..., 3, 3): the package's one formula."""
+    return _rotation_matrices(quaternions)
 
 
 def mean_square_displacements(frames, max_lag):

@@ -70,13 +70,12 @@ class DynamicRun:
                 self.rng_from_restart = True
             self.scheme.set_history(state.get('scheme'))
             self.system.set_counters(state.get('counters') or {})
-            self.system.set_solver_state(state.get('solver'))
             saved = state.get('locations'), state.get('orientations')
             # The snapshot files hold the same numbers, but their quaternions are renormalised when read
             # (SPEC 1.3); the record keeps them exactly as the uninterrupted run has them.
-            if saved[0] is not None and np.shape(saved[0]) == self.system.arrays.locations.shape and \
-                    np.allclose(saved[0], self.system.arrays.locations, rtol=0, atol=1e-12 * (
-                        1 + np.max(np.abs(saved[0])))):
+            current = self.system.configuration.locations
+            if saved[0] is not None and np.shape(saved[0]) == current.shape and \
+                    np.allclose(saved[0], current, rtol=0, atol=1e-12 * (1 + np.max(np.abs(saved[0])))):
                 self.system.set_state(saved[0], saved[1])
         elif options.initial_step > 0:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
@@ -86,10 +85,10 @@ class DynamicRun:
 
     # -------------------------------------------------------------- output helpers
     def restart_state(self):
-        return {'locations': self.system.arrays.locations.copy(),
-                'orientations': self.system.arrays.orientations.copy(),
+        locations, orientations = self.system.configuration.copy_arrays()
+        return {'locations': locations, 'orientations': orientations,
                 'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
-                'counters': self.system.counters(self.scheme), 'solver': self.system.solver_state()}
+                'counters': self.system.counters(self.scheme)}
 
     def write_info(self, extra_lines=()):
         run_output.write_info(self.options.output_name + '.info', self.system.counters(self.scheme), extra_lines)
@@ -114,7 +113,8 @@ class DynamicRun:
         start = time.perf_counter()
 
         def save(index):
-            writer.save(index, system.arrays.locations, system.arrays.orientations, self.restart_state())
+            writer.save(index, system.configuration.locations, system.configuration.orientations,
+                        self.restart_state())
             if options.save_blobs_mobility or options.save_body_mobility:
                 self.save_mobilities(index)
             self.write_info()
@@ -161,8 +161,7 @@ class DynamicRun:
         """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities of the saved step (SPEC 2.1)."""
         system = self.system
         stem = '%s.%%s.%s.dat' % (self.options.output_name, str(step).zfill(8))
-        M, M_inv, _, N = system.dense_matrices(system.arrays.locations, system.arrays.orientations,
-                                               inverse=self.options.save_body_mobility)
+        M, M_inv, _, N = system.dense_matrices(system.configuration, inverse=self.options.save_body_mobility)
         if self.options.save_blobs_mobility:
             np.savetxt(stem % 'blobs_mobility', M, delimiter='  ')
         if self.options.save_body_mobility:

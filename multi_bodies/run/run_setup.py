@@ -178,7 +178,7 @@ def check_start(options, system, types):
     """Refuse a start with a blob centre below the wall (when the wall is seen), naming the structure line."""
     if not system.check_wall:
         return
-    invalid = system.invalid_bodies()
+    invalid = system.invalid_bodies(system.configuration)
     if invalid.size:
         first = int(invalid[0])
         start = 0

@@ -294,21 +294,21 @@ class VtkSeries:
         self._blob_structure = None
         self.collections = {kind: PvdCollection(collection_name(output_name, kind), keep) for kind in (BLOBS, BODIES)}
 
-    def write(self, step, body_arrays, body_velocities=None, blob_slip=None):
-        """Write the files of ``step`` from the configuration in ``body_arrays`` (a ``BodyArrays``).
+    def write(self, step, body_arrays, configuration, body_velocities=None, blob_slip=None):
+        """Write the files of ``step``: bodies of ``body_arrays`` (a ``BodyArrays``) at ``configuration``.
 
         ``body_velocities``: (Nb, 6) or None.  ``blob_slip``: (N, 3) lab-frame
         slip or None; by default the slip of the slip files, rotated with the
         bodies, when any blob has one.  Returns the two paths written.
         """
-        locations, orientations = body_arrays.locations, body_arrays.orientations
-        r_vectors = body_arrays.blob_positions()
+        locations = configuration.locations
+        r_vectors = body_arrays.blob_positions(configuration)
         blob_velocities = None
         if body_velocities is not None:
             body_velocities = np.asarray(body_velocities, dtype=float).reshape(-1, 6)
             blob_velocities = K_dot(r_vectors, locations, body_arrays.blob_body_index, body_velocities)
         if blob_slip is None and np.any(body_arrays.reference_slip):
-            blob_slip = body_arrays.lab_frame_slip()
+            blob_slip = body_arrays.lab_frame_slip(configuration)
         if self.wrap_periodic:
             shifts = periodic_shifts(locations, self.periodic_length)
             locations = locations + shifts
@@ -319,7 +319,8 @@ class VtkSeries:
             self._blob_structure = (blob_structure_index, StringArray(self.structure_names, blob_structure_index))
         files = ((BLOBS, r_vectors, blob_point_arrays(body_arrays.blob_radius, blob_index, self._blob_structure,
                                                       blob_velocities, blob_slip)),
-                 (BODIES, locations, body_point_arrays(orientations, self._body_structure, body_velocities)))
+                 (BODIES, locations, body_point_arrays(configuration.orientations, self._body_structure,
+                                                       body_velocities)))
         time = step_time(step, self.dt)
         paths = []
         for kind, points, arrays in files:
@@ -352,7 +353,7 @@ class AlsoWriteVtk:
     def save(self, step, *args, **kwargs):
         """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step``."""
         result = self.snapshot_writer.save(step, *args, **kwargs)
-        self.series.write(step, self.system.arrays)
+        self.series.write(step, self.system.arrays, self.system.configuration)
         return result
 
     def __getattr__(self, name):

@@ -20,55 +20,63 @@ loop over bodies.
 
 Dense path: the full blob matrix, ``N = pinv(K^T M^{-1} K)`` and the
 resistance problem ``lambda = M^{-1} (slip + K U)``, ``[F; T] = K^T lambda``.
+
+Everything here is a function of a :class:`body.body.Configuration` passed
+in: a problem, a preconditioner or a dense matrix is built at the
+configuration it is given and copies what it needs, so it stays valid when
+the bodies move.  There is one iterative solve, :func:`solve` (and the GMRES
+wrapper :func:`gmres_solve` it shares with the roller torque solve): it
+builds nothing behind the caller's back (the preconditioner and the first
+guess are arguments) and returns the true residual of its answer.  The body
+mobility ``pinv(K^T M^{-1} K)`` of dense blocks is computed in one place,
+:func:`body_mobility_from_resistance`, for the preconditioner and the dense
+schemes alike.
 """
 from collections import namedtuple
 
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from body.body import K_dense, K_matrices
+from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions
 
 GMRES_RESTART = 60
 GMRES_MAXITER = 1000
+PINV_RCOND = 1e-14  # singular values below this fraction of the largest are dropped (rank-deficient bodies)
 
-SolveResult = namedtuple('SolveResult', ['lambda_blobs', 'velocities', 'iterations', 'converged', 'info',
-                                         'residual'])
-SolveResult.__doc__ = """Result of an iterative mobility solve.
+SolveResult = namedtuple('SolveResult', ['lambda_blobs', 'velocities', 'iterations', 'converged', 'residual',
+                                         'normalised_solution'])
+SolveResult.__doc__ = """Result of :func:`solve`.
 
-lambda_blobs : ndarray (N, 3), blob constraint forces.
+lambda_blobs : ndarray (N, 3), blob constraint forces (force units).
 velocities : ndarray (Nb, 6), ``[v, w]`` per body.
-iterations : int, GMRES inner iterations (callbacks).
-converged : bool.
-info : int, SciPy's GMRES flag (0 converged, > 0 iterations done without convergence).
-residual : float, ``|b - A x| / |b|`` of the returned solution (true residual).
+iterations : int, GMRES inner iterations.
+converged : bool, GMRES reached ``tolerance``.
+residual : float, ``|b - A x| / |b|`` of the returned solution (the true residual, one more product).
+normalised_solution : ndarray (3N + 6Nb,), the solution of the normalised system ``A y = b / |b|``:
+    the first guess for the next solve of a similar right-hand side (SPEC 4.2); None for a zero
+    right-hand side (nothing was solved: keep the guess you had).
 """
 
+GmresResult = namedtuple('GmresResult', ['x', 'iterations', 'converged', 'residual'])
+GmresResult.__doc__ = """Result of :func:`gmres_solve`: solution ``x``, inner iterations, converged, true relative residual."""
 
-def saddle_point_operator(body_arrays, r_vectors, mobility_product, eta, blob_radius,
-                          periodic_length=(0.0, 0.0, 0.0), locations=None):
-    """The saddle-point matrix ``A`` as a SciPy LinearOperator of size 3N + 6Nb.
 
-    Parameters
-    ----------
-    body_arrays : body.body.BodyArrays
-    r_vectors : ndarray, shape (N, 3)
-        Blob positions.
-    mobility_product : callable
-        ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)``, the
-        matrix-free ``M f`` of a backend (``mobility.mobility_vector_product``).
-    eta, blob_radius : float
-    periodic_length : sequence of 3 floats
-        Passed to the product (pseudo-periodic boxes, SPEC decision 5).
-    locations : ndarray (Nb, 3) or None
-        Body locations of the configuration (default: ``body_arrays.locations``).
+def body_mobility_from_resistance(resistance):
+    """Body mobility ``N = pinv(R)`` of resistance matrices ``R = K^T M^{-1} K``, symmetrised.
 
-    ``A [lambda; U] = [M lambda - K U; -K^T lambda]``.  The operator is a
-    value: it copies the blob positions and locations it is built at, so a
-    later change of the bodies does not change its product.
+    resistance : ndarray (..., 6n, 6n), one matrix or a stack.  Singular
+    values below ``PINV_RCOND`` times the largest are dropped, so a body
+    whose blobs cannot resist every rigid motion (one blob, blobs on a line)
+    gets zero velocity along the null space of its ``K`` (SPEC section 3).
     """
-    locations = body_arrays.locations if locations is None else locations
-    return MobilityProblem(body_arrays, np.array(locations, dtype=float), None, mobility_product, eta, blob_radius,
-                           periodic_length, r_vectors=r_vectors).operator
+    N = np.linalg.pinv(resistance, rcond=PINV_RCOND)
+    return 0.5 * (N + np.swapaxes(N, -1, -2))
+
+
+def mobility_rhs(force_torque, slip):
+    """Right-hand side ``[slip (3N); -F (6 Nb)]`` from force-torque (Nb, 6) or (2Nb, 3) and slip (N, 3)."""
+    return np.concatenate((np.asarray(slip, dtype=float).reshape(-1),
+                           -np.asarray(force_torque, dtype=float).reshape(-1)))
 
 
 class MobilityProblem:
@@ -77,27 +85,22 @@ class MobilityProblem:
     Parameters
     ----------
     body_arrays : body.body.BodyArrays
-        Only its fixed structure is used (reference blobs, blob-body index,
-        offsets); its live locations and orientations are not read later.
-    locations : (Nb, 3); orientations : (Nb, 4) or None (then ``r_vectors`` must be given)
+        Only its fixed structure is used (reference blobs, blob-body index, offsets).
+    configuration : body.body.Configuration (or (locations (Nb, 3), orientations (Nb, 4)))
     mobility_product : callable ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)``
     eta, blob_radius : float; periodic_length : (3,) floats
-    r_vectors : (N, 3) or None, blob positions (computed from the configuration when None)
 
-    Attributes: ``locations``, ``orientations``, ``r_vectors`` (copies),
-    ``operator`` (SciPy LinearOperator of size 3N + 6Nb), ``size``.
+    Attributes: ``configuration``, ``locations``, ``orientations``,
+    ``r_vectors`` (N, 3), ``operator`` (SciPy LinearOperator of size 3N + 6Nb), ``size``.
     """
 
-    def __init__(self, body_arrays, locations, orientations, mobility_product, eta, blob_radius,
-                 periodic_length=(0.0, 0.0, 0.0), r_vectors=None):
-        from body.body import blob_positions
+    def __init__(self, body_arrays, configuration, mobility_product, eta, blob_radius,
+                 periodic_length=(0.0, 0.0, 0.0)):
         self.body_arrays = body_arrays
-        self.locations = np.array(locations, dtype=float).reshape(-1, 3)
-        self.orientations = None if orientations is None else np.array(orientations, dtype=float).reshape(-1, 4)
-        if r_vectors is None:
-            r_vectors = blob_positions(self.locations, self.orientations, body_arrays.reference_blobs,
-                                       body_arrays.blob_body_index)
-        self.r_vectors = np.array(r_vectors, dtype=float).reshape(-1, 3)
+        self.configuration = as_configuration(configuration)
+        self.locations, self.orientations = self.configuration.locations, self.configuration.orientations
+        self.r_vectors = blob_positions(self.locations, self.orientations, body_arrays.reference_blobs,
+                                        body_arrays.blob_body_index)
         self.mobility_product = mobility_product
         self.eta, self.blob_radius = float(eta), float(blob_radius)
         self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3).copy()
@@ -105,6 +108,7 @@ class MobilityProblem:
         self.num_bodies = self.locations.shape[0]
         self.size = 3 * self.num_blobs + 6 * self.num_bodies
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
+        self._projectors = None
 
     def project_forces(self, force_torque):
         """Remove from force-torque (Nb, 6) the part that no blob force can balance.
@@ -113,10 +117,11 @@ class MobilityProblem:
         rotation about its location; blobs on a line: rotation about that line)
         has a rank-deficient ``K``; its velocity along the null space of ``K``
         is undetermined and the body mobility ``pinv(K^T M^{-1} K)`` gives it
-        zero.  A torque along that null space (random finite differences draw
-        such torques) would make the saddle-point system inconsistent, so it
-        is projected out, which gives the iterative solve the ``pinv`` answer.
-        Full-rank bodies are returned unchanged.
+        zero.  A torque along that null space (a torque on a single blob, or
+        the random torques of random finite differences) would make the
+        saddle-point system inconsistent, so it is projected out, which gives
+        the iterative solve the ``pinv`` answer.  Full-rank bodies are
+        returned unchanged.
         """
         force_torque = np.asarray(force_torque, dtype=float).reshape(-1, 6)
         projectors = self._range_projectors()
@@ -128,8 +133,7 @@ class MobilityProblem:
         return out
 
     def _range_projectors(self):
-        if getattr(self, '_projectors', None) is None:
-            from body.body import K_matrices
+        if self._projectors is None:
             self._projectors = []
             for (bodies, blobs), n_blobs in zip(self.body_arrays.type_slices, self.body_arrays.type_blobs):
                 nb = bodies.stop - bodies.start
@@ -153,12 +157,10 @@ class MobilityProblem:
 
     def K_dot(self, body_velocities):
         """``K U``: blob velocities (N, 3) of body velocities (Nb, 6) or (6Nb,)."""
-        from body.body import K_dot
         return K_dot(self.r_vectors, self.locations, self.body_arrays.blob_body_index, body_velocities)
 
     def KT_dot(self, blob_forces):
         """``K^T lambda``: force-torque (Nb, 6) of blob forces (N, 3) or (3N,)."""
-        from body.body import KT_dot
         return KT_dot(self.r_vectors, self.locations, self.body_arrays.blob_offsets,
                       self.body_arrays.blob_body_index, blob_forces)
 
@@ -171,14 +173,40 @@ class MobilityProblem:
         force_part = -self.KT_dot(lambda_blobs).reshape(-1)
         return np.concatenate((slip_part, force_part))
 
+    def rhs(self, slip=None, force_torque=None, noise_slip=None, noise_force=None):
+        """``[slip - noise_slip; -(F + noise_force)]`` (3N + 6Nb,); each argument None for zero.
+
+        slip (N, 3) or (3N,), force_torque (Nb, 6), noise_slip (3N,), noise_force (Nb, 6).
+        """
+        n3 = 3 * self.num_blobs
+        rhs = np.zeros(self.size)
+        if slip is not None:
+            rhs[:n3] += np.asarray(slip, dtype=float).reshape(-1)
+        if noise_slip is not None:
+            rhs[:n3] -= np.asarray(noise_slip, dtype=float).reshape(-1)
+        if force_torque is not None:
+            rhs[n3:] -= np.asarray(force_torque, dtype=float).reshape(-1)
+        if noise_force is not None:
+            rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
+        return rhs
+
 
 class BlockDiagonalPreconditioner:
-    """Exact inverse of the saddle-point system of each body alone.
+    """Exact inverse of the saddle-point system of each body alone, at one configuration.
 
     For body k with dense blob mobility ``M_k`` (wall included, no periodic
     images) and ``K_k``: ``N_k = pinv(K_k^T M_k^{-1} K_k)``; applied to
     ``[s; f]`` it returns ``U_k = -N_k (f_k + K_k^T M_k^{-1} s_k)`` and
     ``lambda_k = M_k^{-1} (s_k + K_k U_k)``.
+
+    Parameters
+    ----------
+    body_arrays : body.body.BodyArrays (fixed structure only)
+    configuration : body.body.Configuration
+    blob_mobility_matrix : callable ``f(r (n, 3), eta, a) -> (3n, 3n)``
+    eta, blob_radius : float
+    stacked_mobility : callable ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` or None
+        Builds the dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks).
 
     Attributes (one entry per structure type; ``nb`` bodies of ``n`` blobs)
     -----------------------------------------------------------------------
@@ -187,17 +215,14 @@ class BlockDiagonalPreconditioner:
         failed and a plain inverse was used).
     inverse_mobilities : list of ndarray (nb, 3n, 3n)
     body_mobilities : list of ndarray (nb, 6, 6)
+    configuration : the configuration it was built at.
     """
 
-    def __init__(self, body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
-                 locations=None):
-        """``stacked_mobility`` (optional): ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` that builds the
-        dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks).
-        ``locations`` (Nb, 3): body locations of the configuration (default ``body_arrays.locations``);
-        the preconditioner copies what it needs, so it stays valid when the bodies move."""
+    def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None):
         self.body_arrays = body_arrays
-        locations = np.array(body_arrays.locations if locations is None else locations, dtype=float)
-        self.locations = locations
+        self.configuration = as_configuration(configuration)
+        locations = self.configuration.locations
+        r_vectors = body_arrays.blob_positions(self.configuration)
         self.inverse_cholesky_factors = []
         self.cholesky_factors = []
         self.inverse_mobilities = []
@@ -227,10 +252,14 @@ class BlockDiagonalPreconditioner:
             self.inverse_mobilities.append(M_inv)
             self.inverse_mobility_times_K.append(M_inv_K)
             self.K.append(K)
-            self.body_mobilities.append(np.linalg.pinv(resistance))
+            self.body_mobilities.append(body_mobility_from_resistance(resistance))
         n_blob_unknowns = 3 * body_arrays.num_blobs
         size = n_blob_unknowns + 6 * body_arrays.num_bodies
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+
+    @property
+    def locations(self):
+        return self.configuration.locations
 
     def _blockwise(self, vector, factors):
         """Apply per-body dense blocks ``factors`` (list per type, (nb, 3n, 3n) or None = identity) to (3N,)."""
@@ -276,38 +305,18 @@ class BlockDiagonalPreconditioner:
         return np.concatenate((lambda_out.reshape(-1), velocity_out.reshape(-1)))
 
 
-def mobility_rhs(force_torque, slip):
-    """Right-hand side ``[slip (3N); -F (6 Nb)]`` from force-torque (Nb, 6) or (2Nb, 3) and slip (N, 3)."""
-    return np.concatenate((np.asarray(slip, dtype=float).reshape(-1),
-                           -np.asarray(force_torque, dtype=float).reshape(-1)))
+def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=GMRES_RESTART,
+                maxiter=GMRES_MAXITER, print_residual=False):
+    """GMRES on ``operator x = rhs`` (relative tolerance, ``atol = 0``): the one GMRES call of the package.
 
-
-def solve_mobility_problem(operator, preconditioner, rhs, num_blobs, tolerance, x0=None,
-                           restart=GMRES_RESTART, maxiter=GMRES_MAXITER, print_residual=False,
-                           true_residual=True):
-    """Solve ``A x = rhs`` by preconditioned GMRES (relative tolerance, ``atol = 0``).
-
-    Parameters
-    ----------
-    operator : LinearOperator from ``saddle_point_operator``
-    preconditioner : BlockDiagonalPreconditioner or LinearOperator or None
-    rhs : ndarray, shape (3N + 6Nb,)
-    num_blobs : int
-        N, to split the solution into ``lambda`` and ``U``.
-    tolerance : float
-        GMRES stops when ``|r| <= tolerance |rhs|`` (SciPy's ``rtol``).
-    x0 : ndarray or None
-        Initial guess (zeros by default).
-    true_residual : bool
-        Compute ``residual`` of the result (one more product) even when GMRES converged.
-
-    Returns
-    -------
-    SolveResult
+    operator : LinearOperator or object with ``matvec``; rhs (n,); preconditioner : LinearOperator or None;
+    x0 (n,) or None (zeros).  Returns :data:`GmresResult` with the true relative residual
+    ``|rhs - A x| / |rhs|`` (one more product).  A zero right-hand side gives ``x = 0`` at once.
     """
     rhs = np.asarray(rhs, dtype=float).reshape(-1)
-    if isinstance(preconditioner, BlockDiagonalPreconditioner):
-        preconditioner = preconditioner.operator
+    rhs_norm = float(np.linalg.norm(rhs))
+    if rhs_norm == 0.0:
+        return GmresResult(np.zeros_like(rhs), 0, True, 0.0)
     iterations = [0]
 
     def count(residual_norm):
@@ -315,31 +324,74 @@ def solve_mobility_problem(operator, preconditioner, rhs, num_blobs, tolerance, 
         if print_residual:
             print('gmres = %d %s' % (iterations[0], residual_norm))
 
-    rhs_norm = np.linalg.norm(rhs)
-    if rhs_norm == 0.0:
-        solution, info = np.zeros_like(rhs), 0
-    else:
-        solution, info = spla.gmres(operator, rhs, x0=x0, rtol=tolerance, atol=0.0, restart=restart,
-                                    maxiter=maxiter, M=preconditioner, callback=count,
-                                    callback_type='legacy')
-    # The true residual costs one more product M f; without ``true_residual`` it is computed only on failure.
-    if rhs_norm == 0.0 or (not true_residual and info == 0):
-        residual = 0.0 if rhs_norm == 0.0 else float('nan')
-    else:
-        residual = float(np.linalg.norm(rhs - operator.matvec(solution)) / rhs_norm)
-    n_blob_unknowns = 3 * num_blobs
-    return SolveResult(solution[:n_blob_unknowns].reshape(-1, 3),
-                       solution[n_blob_unknowns:].reshape(-1, 6),
-                       iterations[0], info == 0, int(info), residual)
+    solution, info = spla.gmres(operator, rhs, x0=x0, rtol=tolerance, atol=0.0, restart=restart, maxiter=maxiter,
+                                M=preconditioner, callback=count, callback_type='legacy')
+    residual = float(np.linalg.norm(rhs - operator.matvec(solution)) / rhs_norm)
+    return GmresResult(solution, iterations[0], info == 0, residual)
 
 
+def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
+          print_residual=False):
+    """Solve the mobility problem ``A [lambda; U] = rhs`` by preconditioned GMRES: the one solve of the package.
+
+    Parameters
+    ----------
+    problem : MobilityProblem, the configuration and the operator.
+    rhs : ndarray (3N + 6Nb,), ``[slip part; -force part]`` (``problem.rhs`` or :func:`mobility_rhs`).
+        Its force part is first projected on what the bodies' blobs can balance
+        (``problem.project_forces``: torques on single blobs and rods).
+    preconditioner : BlockDiagonalPreconditioner, LinearOperator or None (explicitly unpreconditioned).
+        Nothing is built here: build one at the problem's configuration (or reuse one built nearby).
+    x0 : ndarray (3N + 6Nb,) or None
+        First guess of the *normalised* system ``A y = rhs / |rhs|`` (SPEC 4.2: the published code
+        passes the previous normalised solution, ``SolveResult.normalised_solution``); None is zeros.
+    tolerance : float, GMRES stops when ``|r| <= tolerance |rhs|``.
+
+    Returns :data:`SolveResult` (the solution of ``A x = rhs``, un-normalised, and its true residual).
+    Nothing is counted or stored here; the caller decides what a non-converged solve means.
+    """
+    rhs = np.array(rhs, dtype=float).reshape(-1)
+    n3 = 3 * problem.num_blobs
+    if problem.num_bodies:
+        rhs[n3:] = problem.project_forces(rhs[n3:]).reshape(-1)
+    norm = float(np.linalg.norm(rhs))
+    if norm == 0.0:
+        return SolveResult(np.zeros((problem.num_blobs, 3)), np.zeros((problem.num_bodies, 6)), 0, True, 0.0,
+                           None)
+    if isinstance(preconditioner, BlockDiagonalPreconditioner):
+        preconditioner = preconditioner.operator
+    if x0 is not None and np.shape(x0) != rhs.shape:
+        x0 = None
+    result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
+                         restart=restart, maxiter=maxiter, print_residual=print_residual)
+    x = result.x * norm
+    return SolveResult(x[:n3].reshape(-1, 3), x[n3:].reshape(-1, 6), result.iterations, result.converged,
+                       result.residual, result.x)
+
+
+# ---------------------------------------------------------------------------------------------- dense algebra
 def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
     """Dense blob mobility of all blobs, shape (3N, 3N)."""
     return blob_mobility_matrix(np.asarray(r_vectors, dtype=float).reshape(-1, 3), eta, blob_radius)
 
 
-def dense_body_mobility(body_arrays, r_vectors, blob_mobility_matrix, eta, blob_radius):
-    """Body mobility of the whole system by dense algebra.
+def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, inverse=True):
+    """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
+
+    ``M`` from ``blob_mobility_matrix``, ``N = pinv(K^T M^{-1} K)`` (:func:`body_mobility_from_resistance`).
+    """
+    configuration = as_configuration(configuration)
+    r_vectors = body_arrays.blob_positions(configuration)
+    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
+    K = body_arrays.K_dense(configuration, r_vectors)
+    if not inverse:
+        return M, None, K, None
+    M_inv = np.linalg.inv(M)
+    return M, M_inv, K, body_mobility_from_resistance(K.T @ M_inv @ K)
+
+
+def dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius):
+    """Body mobility of the whole system by dense algebra, at ``configuration``.
 
     Returns
     -------
@@ -349,32 +401,32 @@ def dense_body_mobility(body_arrays, r_vectors, blob_mobility_matrix, eta, blob_
     slip_mobility : ndarray, shape (6 Nb, 3N)
         ``N K^T M^{-1}`` (body velocities are ``-slip_mobility @ slip`` for slip alone).
     """
-    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
-    K = K_dense(r_vectors, body_arrays.locations, body_arrays.blob_body_index)
-    M_inv = np.linalg.inv(M)
-    body_mobility = np.linalg.pinv(K.T @ M_inv @ K)
-    return body_mobility, body_mobility @ K.T @ M_inv
+    _, M_inv, K, N = dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius)
+    return N, N @ K.T @ M_inv
 
 
-def dense_mobility_velocities(body_arrays, r_vectors, force_torque, slip, blob_mobility_matrix, eta,
+def dense_mobility_velocities(body_arrays, configuration, force_torque, slip, blob_mobility_matrix, eta,
                               blob_radius):
-    """Body velocities (Nb, 6) by dense algebra: ``U = N (F - K^T M^{-1} slip)``."""
-    body_mobility, slip_mobility = dense_body_mobility(body_arrays, r_vectors, blob_mobility_matrix, eta,
+    """Body velocities (Nb, 6) by dense algebra at ``configuration``: ``U = N (F - K^T M^{-1} slip)``."""
+    body_mobility, slip_mobility = dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta,
                                                        blob_radius)
     U = body_mobility @ np.asarray(force_torque, dtype=float).reshape(-1) \
         - slip_mobility @ np.asarray(slip, dtype=float).reshape(-1)
     return U.reshape(-1, 6)
 
 
-def solve_resistance_problem(body_arrays, r_vectors, body_velocities, slip, blob_mobility_matrix, eta,
+def solve_resistance_problem(body_arrays, configuration, body_velocities, slip, blob_mobility_matrix, eta,
                              blob_radius):
-    """Forces and torques that move the bodies with the given velocities (SPEC 4.4).
+    """Forces and torques that move the bodies at ``configuration`` with the given velocities (SPEC 4.4).
 
     ``lambda = M^{-1} (slip + K U)`` by a dense solve, ``[F; T] = K^T lambda``.
 
     Returns (force_torque (Nb, 6), lambda_blobs (N, 3)).
     """
+    configuration = as_configuration(configuration)
+    r_vectors = body_arrays.blob_positions(configuration)
     M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
-    blob_velocities = np.asarray(slip, dtype=float).reshape(-1, 3) + body_arrays.K_dot(r_vectors, body_velocities)
+    blob_velocities = np.asarray(slip, dtype=float).reshape(-1, 3) + body_arrays.K_dot(configuration,
+                                                                                      body_velocities, r_vectors)
     lambda_blobs = np.linalg.solve(M, blob_velocities.reshape(-1)).reshape(-1, 3)
-    return body_arrays.KT_dot(r_vectors, lambda_blobs), lambda_blobs
+    return body_arrays.KT_dot(configuration, lambda_blobs, r_vectors), lambda_blobs

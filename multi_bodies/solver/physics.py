@@ -296,8 +296,9 @@ def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_
     bodies : list of Body
         Passed to ``bodies_external_force_torque``.
     body_arrays : body.body.BodyArrays
-        The same bodies as arrays (for ``K^T`` and the body locations).
+        The same bodies as arrays; ``K^T`` and the body locations are those of its ``configuration``.
     r_vectors : ndarray, shape (N, 3)
+        The blob positions of that configuration.
     blob_blob_forces, body_body_forces : callables or None
         From ``blob_blob_force_calculator`` and ``body_body_force_calculator``.
     **kwargs
@@ -310,10 +311,11 @@ def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_
     blob_forces = calc_one_blob_forces(r_vectors, **kwargs)
     if blob_blob_forces is not None:
         blob_forces = blob_forces + blob_blob_forces(r_vectors, **kwargs)
-    force_torque = body_arrays.KT_dot(r_vectors, blob_forces).reshape(-1, 3)
+    configuration = body_arrays.configuration
+    force_torque = body_arrays.KT_dot(configuration, blob_forces, r_vectors).reshape(-1, 3)
     force_torque = force_torque + bodies_external_force_torque(bodies, r_vectors, **kwargs)
     if body_body_forces is not None:
-        force_torque = force_torque + body_body_forces(body_arrays.locations, body_arrays.orientations, **kwargs)
+        force_torque = force_torque + body_body_forces(configuration.locations, configuration.orientations, **kwargs)
     return force_torque
 
 

@@ -12,25 +12,40 @@ and body-body forces, roller couplings) and the physics hooks of the run
 * give roller velocities (SPEC 5.2);
 * say which bodies have a blob centre below the wall.
 
+Every one of these takes the configuration it is about
+(``body.body.Configuration``) as an argument: nothing here reads "the
+current state" behind the caller's back, so a scheme can evaluate forces at
+its predictor while the step's start stays what it was.  The run's current
+configuration is ``System.configuration``, a value the time loop replaces
+after each accepted step (``set_configuration``).
+
 Schemes (``quaternion_integrator.schemes``) receive a System and never reach
-into globals.  Counters for ``.info`` live here (``gmres_iterations``); the
-last solve's count is ``last_iterations``.
+into globals.  The warm starts of the solves live in the schemes' history.
+Counters for ``.info`` live here (``gmres_iterations``); the last
+deterministic solve's count is ``last_iterations``.
 
 Units: the user's; lengths as the input file, velocities length/time,
 forces force units, ``eta`` viscosity.
 """
+from collections import namedtuple
+
 import numpy as np
 import scipy.sparse.linalg as spla
 
 import mobility
-from body.body import reference_slip_in_lab_frame
+from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
 from multi_bodies.solver import body_solver
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import user_hooks
 from quaternion_integrator.quaternion import Quaternion
+from stochastic_forcing import displace_positions, lanczos_square_root, rfd
 from utils import SimulationStopped, UserInputError
 
 NO_WALL = '_no_wall'
+
+RollerVelocities = namedtuple('RollerVelocities', ['velocities', 'torque_guess'])
+RollerVelocities.__doc__ = """Roller velocities (N, 3) and the normalised torque solution to start the next
+prescribed-spin solve from (None with ``free_kinematics``)."""
 
 
 # ------------------------------------------------------------------ backend choice
@@ -87,8 +102,8 @@ class System:
         In input order; used by the hooks that take bodies (kept in sync with
         the arrays only when such a hook is user-defined).
     body_arrays : body.body.BodyArrays
-        The state: ``locations`` (Nb, 3) and ``orientations`` (Nb, 4) are
-        updated in place by the schemes through ``set_state``.
+        The fixed structure of the bodies; its ``configuration`` (from the
+        input files) is the run's first ``System.configuration``.
     hooks : multi_bodies.solver.user_hooks.PhysicsHooks
     physics : dict
         Keywords of the hooks: g, repulsion_strength_wall, debye_length_wall,
@@ -109,6 +124,7 @@ class System:
                  domain='single_wall', print_residual=False):
         self.bodies = bodies
         self.arrays = body_arrays
+        self.configuration = body_arrays.configuration
         self.hooks = hooks
         self.physics = dict(physics)
         self.eta, self.blob_radius, self.tolerance = float(eta), float(blob_radius), float(solver_tolerance)
@@ -144,8 +160,6 @@ class System:
         self.lanczos_max_iterations = 1000
         self.solves = {'deterministic': 0, 'stochastic': 0}
         self.last_iterations = 0
-        self.first_guess = None
-        self.roller_torque_guess = None
 
     # -------------------------------------------------------------- counters for .info
     def counters(self, scheme=None):
@@ -183,73 +197,89 @@ class System:
     def num_blobs(self):
         return self.arrays.num_blobs
 
+    def set_configuration(self, configuration):
+        """Make ``configuration`` (a Configuration, or (locations, orientations)) the run's current one."""
+        configuration = as_configuration(configuration)
+        if configuration.num_bodies != self.num_bodies:
+            raise ValueError('a configuration of %d bodies for a system of %d' % (configuration.num_bodies,
+                                                                                   self.num_bodies))
+        self.configuration = configuration
+        self.arrays.configuration = configuration
+
     def get_state(self):
-        """Copies of (locations (Nb, 3), orientations (Nb, 4))."""
-        return self.arrays.locations.copy(), self.arrays.orientations.copy()
+        """Writable copies (locations (Nb, 3), orientations (Nb, 4)) of the current configuration."""
+        return self.configuration.copy_arrays()
 
     def set_state(self, locations, orientations):
-        """Replace the configuration (arrays copied in place, so views stay valid)."""
-        self.arrays.locations[...] = locations
-        self.arrays.orientations[...] = orientations
+        """``set_configuration(Configuration(locations, orientations))``."""
+        self.set_configuration(Configuration(locations, orientations))
 
-    def blob_positions(self):
-        """Lab-frame blob positions, shape (N, 3)."""
-        return self.arrays.blob_positions()
+    def blob_positions(self, configuration):
+        """Lab-frame blob positions at ``configuration``, shape (N, 3)."""
+        return self.arrays.blob_positions(configuration)
 
-    def synced_bodies(self):
-        """The Body objects with the current locations and orientations (one loop over bodies)."""
-        for body, location, orientation in zip(self.bodies, self.arrays.locations, self.arrays.orientations):
+    def synced_bodies(self, configuration):
+        """The Body objects placed at ``configuration`` (for the user hooks that take bodies)."""
+        for body, location, orientation in zip(self.bodies, configuration.locations, configuration.orientations):
             body.location = location.copy()
             body.orientation = Quaternion(orientation)
         return self.bodies
 
-    def preprocess(self):
+    def preprocess(self, configuration):
+        """The user's ``preprocess(bodies)`` at ``configuration`` (nothing with the default)."""
         if not self.hooks.is_default('preprocess'):
-            self.hooks.preprocess(self.synced_bodies())
+            self.hooks.preprocess(self.synced_bodies(configuration))
 
-    def postprocess(self):
-        if not self.hooks.is_default('postprocess'):
-            self.hooks.postprocess(self.synced_bodies())
-            self.set_state(np.array([b.location for b in self.bodies]),
-                           np.array([b.orientation.entries for b in self.bodies]))
+    def postprocess(self, configuration):
+        """The configuration after the user's ``postprocess(bodies)`` (``configuration`` itself with the default)."""
+        if self.hooks.is_default('postprocess'):
+            return configuration
+        bodies = self.synced_bodies(configuration)
+        self.hooks.postprocess(bodies)
+        return Configuration(np.array([b.location for b in bodies]), np.array([b.orientation.entries for b in bodies]))
 
-    def invalid_bodies(self, r_vectors=None):
-        """Indices of bodies with a blob centre below the wall (z < 0), ndarray of int (empty without a wall)."""
+    def invalid_bodies(self, configuration, r_vectors=None):
+        """Indices of bodies with a blob centre below the wall (z < 0) at ``configuration`` (empty without a wall)."""
         if not self.check_wall:
             return np.zeros(0, dtype=int)
-        return self.arrays.check_positions(r_vectors)
+        return self.arrays.check_positions(self.blob_positions(configuration) if r_vectors is None else r_vectors)
 
     # -------------------------------------------------------------- physics
     def blob_forces(self, r_vectors):
-        """One-blob plus blob-blob forces, shape (N, 3)."""
+        """One-blob plus blob-blob forces at blob positions (N, 3), shape (N, 3)."""
         forces = np.asarray(self.hooks.blob_external_forces(r_vectors, **self.physics), dtype=float).reshape(-1, 3)
         if self.blob_blob_forces is not None:
             forces = forces + np.asarray(self.blob_blob_forces(r_vectors, **self.physics)).reshape(-1, 3)
         return forces
 
-    def forces_torques(self, r_vectors):
-        """Force and torque on every body, shape (Nb, 6) = ``[F, T]`` (SPEC section 7)."""
-        force_torque = self.arrays.KT_dot(r_vectors, self.blob_forces(r_vectors))
+    def forces_torques(self, configuration, r_vectors=None):
+        """Force and torque on every body at ``configuration``, shape (Nb, 6) = ``[F, T]`` (SPEC section 7).
+
+        ``r_vectors`` (N, 3): the blob positions of that configuration when the caller has them.
+        """
+        r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        force_torque = self.arrays.KT_dot(configuration, self.blob_forces(r_vectors), r_vectors)
         if not self.hooks.is_default('bodies_external_force_torque'):
-            extra = self.hooks.bodies_external_force_torque(self.synced_bodies(), r_vectors, **self.physics)
+            extra = self.hooks.bodies_external_force_torque(self.synced_bodies(configuration), r_vectors,
+                                                            **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         if self.body_body_forces is not None:
             force_torque = force_torque + np.asarray(self.body_body_forces(
-                self.arrays.locations, self.arrays.orientations, **self.physics)).reshape(-1, 6)
+                configuration.locations, configuration.orientations, **self.physics)).reshape(-1, 6)
         return force_torque
 
-    def slip(self):
-        """Active slip of every blob in the lab frame, shape (N, 3).
+    def slip(self, configuration):
+        """Active slip of every blob in the lab frame at ``configuration``, shape (N, 3).
 
         Bodies with the default slip use the vectorised rotation of the
         reference slip; a body whose ``function_slip`` was set by the user's
         ``set_slip_by_ID`` gets ``function_slip(body)`` (checked: shape
         (Nblobs, 3), finite).
         """
-        slip = self.arrays.lab_frame_slip()
+        slip = self.arrays.lab_frame_slip(configuration)
         if not self.slip_functions:
             return slip
-        bodies = self.synced_bodies()
+        bodies = self.synced_bodies(configuration)
         offsets = self.arrays.blob_offsets
         for k in self.slip_function_bodies:
             body = bodies[k]
@@ -260,98 +290,49 @@ class System:
                 'the lab-frame slip of the %d blobs of body %d (%s)' % (body.Nblobs, k, body.ID))
         return slip
 
-    # -------------------------------------------------------------- mobility problem
-    def mobility_problem(self, locations=None, orientations=None):
-        """The saddle-point problem at a configuration (default: the current one), a value.
+    def forces_and_slip(self, configuration):
+        """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) at ``configuration``, checked finite."""
+        r_vectors = self.blob_positions(configuration)
+        force_torque = self.forces_torques(configuration, r_vectors)
+        slip = self.slip(configuration) if self.has_slip else np.zeros_like(r_vectors)
+        check_finite(force_torque, 'forces and torques')
+        check_finite(slip, 'slip')
+        return r_vectors, force_torque, slip
 
-        locations (Nb, 3), orientations (Nb, 4); returns body_solver.MobilityProblem.
-        """
-        locations = self.arrays.locations if locations is None else locations
-        orientations = self.arrays.orientations if orientations is None else orientations
-        return body_solver.MobilityProblem(self.arrays, locations, orientations, self.mobility_product, self.eta,
+    # -------------------------------------------------------------- mobility problem
+    def mobility_problem(self, configuration):
+        """The saddle-point problem at ``configuration`` (a value; body_solver.MobilityProblem)."""
+        return body_solver.MobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
                                            self.blob_radius, self.periodic_length)
 
-    def build_preconditioner(self, problem):
-        """Block-diagonal preconditioner (and Lanczos factors) at the configuration of ``problem``."""
-        return body_solver.BlockDiagonalPreconditioner(self.arrays, problem.r_vectors, self.blob_mobility_matrix,
+    def build_preconditioner(self, configuration):
+        """Block-diagonal preconditioner (and Lanczos factors) at ``configuration`` (or a problem's)."""
+        configuration = getattr(configuration, 'configuration', configuration)
+        return body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
                                                        self.eta, self.blob_radius,
-                                                       stacked_mobility=self.stacked_mobility,
-                                                       locations=problem.locations)
+                                                       stacked_mobility=self.stacked_mobility)
 
-    def solve(self, problem, slip=None, force_torque=None, noise_slip=None, noise_force=None, rhs=None,
-              preconditioner=None, guess=None, keep_guess=False, kind='deterministic'):
-        """One mobility solve with every input explicit (SPEC §4.2).
+    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic'):
+        """:func:`body_solver.solve` at ``solver_tolerance``, counted for ``.info``; stops the run if it fails.
 
-        Right-hand side ``[slip - noise_slip; -(F + noise_force)]`` (or ``rhs``
-        (3N + 6Nb,) as given); slip (N, 3), force_torque (Nb, 6), noise_slip
-        (3N,), noise_force (Nb, 6), each None for zero.
-
-        preconditioner : BlockDiagonalPreconditioner or None (then one is built at ``problem``)
-        guess : None (zeros), 'deterministic' (the stored normalised solution of the last
-            deterministic solve, SPEC §4.2), or an array (3N + 6Nb,) of the normalised system
-        keep_guess : store the normalised solution as the next deterministic guess
-        kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters
-
-        Returns body_solver.SolveResult with velocities (Nb, 6) and lambda (N, 3)
-        of the un-normalised system; raises SimulationStopped when GMRES fails.
+        rhs (3N + 6Nb,) (``problem.rhs(...)``); preconditioner as body_solver.solve (None: unpreconditioned);
+        x0: first guess of the normalised system (``SolveResult.normalised_solution`` of an earlier solve);
+        kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters.
+        Returns body_solver.SolveResult; raises SimulationStopped when GMRES does not converge.
         """
-        n3, nb6 = 3 * problem.num_blobs, 6 * problem.num_bodies
-        if rhs is None:
-            rhs = np.zeros(n3 + nb6)
-            if slip is not None:
-                rhs[:n3] += np.asarray(slip, dtype=float).reshape(-1)
-            if noise_slip is not None:
-                rhs[:n3] -= np.asarray(noise_slip, dtype=float).reshape(-1)
-            if force_torque is not None:
-                rhs[n3:] -= np.asarray(force_torque, dtype=float).reshape(-1)
-            if noise_force is not None:
-                rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
-        else:
-            rhs = np.array(rhs, dtype=float).reshape(-1)
-        if problem.num_bodies:
-            rhs[n3:] = problem.project_forces(rhs[n3:]).reshape(-1)
+        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=self.tolerance,
+                                   print_residual=self.print_residual)
         self.solves[kind] += 1
-        norm = float(np.linalg.norm(rhs))
-        if self.first_guess is None or self.first_guess.shape != rhs.shape:
-            self.first_guess = np.zeros_like(rhs)
-        if norm == 0.0:
-            if kind == 'deterministic':
-                self.last_iterations = 0
-            return body_solver.SolveResult(np.zeros((problem.num_blobs, 3)), np.zeros((problem.num_bodies, 6)),
-                                           0, True, 0, 0.0)
-        if isinstance(guess, str):
-            x0 = self.first_guess
-        else:
-            x0 = guess
-        if preconditioner is None:
-            preconditioner = self.build_preconditioner(problem)
-        result = body_solver.solve_mobility_problem(problem.operator, preconditioner, rhs / norm, problem.num_blobs,
-                                                    self.tolerance, x0=x0, maxiter=body_solver.GMRES_MAXITER,
-                                                    true_residual=False, print_residual=self.print_residual)
         self.gmres_iterations += result.iterations
         if kind == 'deterministic':
             self.last_iterations = result.iterations
         else:
             self.gmres_stochastic_iterations += result.iterations
-        if keep_guess:
-            self.first_guess = np.concatenate((result.lambda_blobs.reshape(-1), result.velocities.reshape(-1)))
         if not result.converged:
             raise SimulationStopped('GMRES did not converge to solver_tolerance %g in %d iterations (relative '
                                     'residual %.3e); try a larger solver_tolerance or check the configuration'
                                     % (self.tolerance, result.iterations, result.residual))
-        return result._replace(lambda_blobs=result.lambda_blobs * norm, velocities=result.velocities * norm)
-
-    def solve_mobility(self, force_torque, slip, r_vectors=None):
-        """Body velocities (Nb, 6) of the current configuration from force-torque (Nb, 6) and slip (N, 3).
-
-        The deterministic solve of SPEC 4.2: normalised right-hand side, the
-        previous normalised solution as initial guess, a preconditioner built
-        at the current configuration.  Raises SimulationStopped when GMRES
-        does not converge.
-        """
-        problem = self.mobility_problem()
-        return self.solve(problem, slip=slip, force_torque=force_torque, guess='deterministic',
-                          keep_guess=True).velocities
+        return result
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None):
         """``factor * M^{1/2} z`` at the configuration of ``problem`` (3N,), counted for ``.info``.
@@ -360,7 +341,6 @@ class System:
         and the result is multiplied by ``L`` (covariance ``M``; SPEC decision 1).
         A Lanczos call that does not converge is counted and warned about once per call.
         """
-        from stochastic_forcing import lanczos_square_root
         if preconditioner is None:
             matvec, L_mult = problem.M_dot, None
         else:
@@ -381,49 +361,31 @@ class System:
                           '%.3e); the noise is approximate (counted in .info as lanczos_not_converged_count)'
                           % (self.tolerance, result.iterations, result.relative_change), RuntimeWarning)
 
-    def dense_matrices(self, locations, orientations, inverse=True):
-        """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
+    def dense_matrices(self, configuration, inverse=True):
+        """Dense algebra at ``configuration``: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
 
-        ``M`` from the blobs backend, ``N = pinv(K^T M^{-1} K, rcond=1e-14)`` (SPEC §3).
+        ``M`` from the blobs backend, ``N = pinv(K^T M^{-1} K)`` (body_solver.dense_matrices).
         """
-        from body.body import K_dense, blob_positions
-        r = blob_positions(locations, orientations, self.arrays.reference_blobs, self.arrays.blob_body_index)
-        M = body_solver.dense_blob_mobility(r, self.blob_mobility_matrix, self.eta, self.blob_radius)
-        K = K_dense(r, locations, self.arrays.blob_body_index)
-        if not inverse:
-            return M, None, K, None
-        M_inv = np.linalg.inv(M)
-        N = np.linalg.pinv(K.T @ M_inv @ K, rcond=1e-14)
-        return M, M_inv, K, 0.5 * (N + N.T)
+        return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.blob_mobility_matrix,
+                                          self.eta, self.blob_radius, inverse=inverse)
 
-    def solver_state(self):
-        """Initial guesses carried between solves (saved with snapshots for exact restarts)."""
-        return {'first_guess': None if self.first_guess is None else self.first_guess.copy(),
-                'roller_torque_guess': None if self.roller_torque_guess is None else self.roller_torque_guess.copy()}
+    def deterministic_velocities(self, configuration, preconditioner=None, x0=None):
+        """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
 
-    def set_solver_state(self, state):
-        if state:
-            self.first_guess = state.get('first_guess')
-            self.roller_torque_guess = state.get('roller_torque_guess')
+        preconditioner : one built at ``configuration`` when None (the deterministic schemes rebuild it
+        every step, as the published code does); x0 : normalised first guess.
+        Returns body_solver.SolveResult (``velocities`` (Nb, 6), ``normalised_solution`` for the next guess).
+        """
+        _, force_torque, slip = self.forces_and_slip(configuration)
+        problem = self.mobility_problem(configuration)
+        if preconditioner is None:
+            preconditioner = self.build_preconditioner(configuration)
+        return self.solve(problem, problem.rhs(slip=slip, force_torque=force_torque), preconditioner, x0=x0)
 
-    def current_forces_and_slip(self):
-        """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) of the current configuration, checked finite."""
-        r_vectors = self.blob_positions()
-        force_torque = self.forces_torques(r_vectors)
-        slip = self.slip() if self.has_slip else np.zeros_like(r_vectors)
-        check_finite(force_torque, 'forces and torques')
-        check_finite(slip, 'slip')
-        return r_vectors, force_torque, slip
-
-    def deterministic_velocities(self):
-        """Velocities (Nb, 6) of the current configuration under its forces and slip (iterative)."""
-        r_vectors, force_torque, slip = self.current_forces_and_slip()
-        return self.solve_mobility(force_torque, slip, r_vectors)
-
-    def dense_velocities(self):
-        """Velocities (Nb, 6) by dense algebra: ``N (F - K^T M^{-1} slip)``, ``M`` from the blobs backend."""
-        r_vectors, force_torque, slip = self.current_forces_and_slip()
-        return body_solver.dense_mobility_velocities(self.arrays, r_vectors, force_torque, slip,
+    def dense_velocities(self, configuration):
+        """Velocities (Nb, 6) at ``configuration`` by dense algebra: ``N (F - K^T M^{-1} slip)``."""
+        _, force_torque, slip = self.forces_and_slip(configuration)
+        return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
                                                      self.blob_mobility_matrix, self.eta, self.blob_radius)
 
     # -------------------------------------------------------------- rollers
@@ -434,30 +396,30 @@ class System:
         name = base + (NO_WALL if self.domain == 'no_wall' else '')
         return mobility.blob_product(name, kind)
 
-    def roller_velocities(self):
-        """Linear velocities of single-blob rollers, shape (Nb, 3) (SPEC 5.2).
+    def roller_velocities(self, configuration, torque_guess=None):
+        """Linear velocities of single-blob rollers at ``configuration`` (SPEC 5.2): RollerVelocities.
 
         Forces: one-blob plus blob-blob.  ``free_kinematics``: torque
         ``8 pi eta a^3 omega_one_roller`` per blob; otherwise the torque that
-        makes every blob spin at ``omega_one_roller`` (GMRES on ``M_WT``).
-        Then ``v = M_UF F + M_UT T``.
+        makes every blob spin at ``omega_one_roller`` (GMRES on ``M_WT``,
+        started from ``torque_guess``, the normalised torque of the last solve).
+        Then ``v = M_UF F + M_UT T``, shape (N, 3).
         """
-        r_vectors = self.blob_positions()
+        r_vectors = self.blob_positions(configuration)
         forces = self.blob_forces(r_vectors).reshape(-1)
         check_finite(forces, 'blob forces')
         a, eta, L = self.blob_radius, self.eta, self.periodic_length
         if self.free_kinematics:
             torques = np.tile(8.0 * np.pi * eta * a ** 3 * self.omega_one_roller, self.num_blobs)
         else:
-            torques = self._prescribed_spin_torques(r_vectors, forces)
+            torques, torque_guess = self._prescribed_spin_torques(r_vectors, forces, torque_guess)
         velocity = self.roller_product('trans_times_force')(r_vectors, forces, eta, a, L)
         if np.any(torques != 0):
             velocity = velocity + self.roller_product('trans_times_torque')(r_vectors, torques, eta, a, L)
-        return np.asarray(velocity).reshape(-1, 3)
+        return RollerVelocities(np.asarray(velocity).reshape(-1, 3), torque_guess)
 
     def roller_noise(self, r_vectors, z, factor):
         """``factor * M_UF^{1/2} z`` of single-blob rollers at blob positions (N, 3) (Lanczos, no preconditioner)."""
-        from stochastic_forcing import lanczos_square_root
         product = self.roller_product('trans_times_force')
         a, eta, L = self.blob_radius, self.eta, self.periodic_length
         result = lanczos_square_root(lambda v: np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1), z,
@@ -477,39 +439,30 @@ class System:
         product = self.roller_product('trans_times_force')
         a, eta, L = self.blob_radius, self.eta, self.periodic_length
         W = np.asarray(W, dtype=float).reshape(-1)
-        step = (0.5 * delta * a) * W.reshape(-1, 3)
-        plus = np.asarray(product(r_vectors + step, W, eta, a, L)).reshape(-1, 3)
-        minus = np.asarray(product(r_vectors - step, W, eta, a, L)).reshape(-1, 3)
-        return (kT / (delta * a)) * (plus - minus)
+        difference = rfd(lambda r: np.asarray(product(r, W, eta, a, L)).reshape(-1, 3), r_vectors, W, delta * a,
+                         displace_positions)
+        return kT * difference
 
-    def _prescribed_spin_torques(self, r_vectors, forces):
+    def _prescribed_spin_torques(self, r_vectors, forces, torque_guess):
         a, eta, L = self.blob_radius, self.eta, self.periodic_length
         n3 = forces.size
         omega = np.tile(self.omega_one_roller, self.num_blobs)
         rhs = omega - self.roller_product('rot_times_force')(r_vectors, forces, eta, a, L)
         norm = np.linalg.norm(rhs)
         if norm == 0.0:
-            return np.zeros(n3)
+            return np.zeros(n3), torque_guess
         rot_times_torque = self.roller_product('rot_times_torque')
         operator = spla.LinearOperator((n3, n3), matvec=lambda t: rot_times_torque(r_vectors, t, eta, a, L),
                                        dtype=float)
-        if self.roller_torque_guess is None or self.roller_torque_guess.shape != rhs.shape:
-            self.roller_torque_guess = np.zeros(n3)
-        count = [0]
-
-        def callback(residual):
-            count[0] += 1
-            if self.print_residual:
-                print('gmres = %d %s' % (count[0], residual))
-        solution, info = spla.gmres(operator, rhs / norm, x0=self.roller_torque_guess, rtol=self.tolerance,
-                                    atol=0.0, maxiter=1000, callback=callback, callback_type='legacy')
-        self.last_iterations = count[0]
-        self.gmres_iterations += count[0]
-        self.roller_torque_guess = solution
-        if info != 0:
-            raise SimulationStopped('GMRES for the roller torques did not converge to solver_tolerance %g'
-                                    % self.tolerance)
-        return solution * norm
+        x0 = torque_guess if torque_guess is not None and np.shape(torque_guess) == rhs.shape else np.zeros(n3)
+        result = body_solver.gmres_solve(operator, rhs / norm, self.tolerance, x0=x0, restart=20,
+                                         maxiter=1000, print_residual=self.print_residual)
+        self.last_iterations = result.iterations
+        self.gmres_iterations += result.iterations
+        if not result.converged:
+            raise SimulationStopped('GMRES for the roller torques did not converge to solver_tolerance %g '
+                                    '(relative residual %.3e)' % (self.tolerance, result.residual))
+        return result.x * norm, result.x
 
 
 def resolve_blob_blob_implementation(name, hooks, log=None):
