@@ -4,6 +4,8 @@
 OpenMP is used when the compiler accepts -fopenmp; the build still succeeds
 without it (the kernels then run on one thread).  Set RMB_NATIVE=0 to build
 without -march=native (for a binary that must run on other processors).
+The pair laws of all three extensions and of the CUDA kernels are in one
+header, mobility/cpp/pair_laws.h (shipped as package data of ``mobility``).
 """
 import os
 import shutil
@@ -41,11 +43,13 @@ if sys.platform != 'win32':
     else:
         print('setup.py: the compiler does not accept -fopenmp; building the kernels single-threaded')
 
+HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h']
 extensions = [
     Pybind11Extension(
         'mobility._mobility_cpp',
         ['mobility/cpp/mobility_module.cpp'],
         include_dirs=['mobility/cpp'],
+        depends=HEADERS,
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -53,6 +57,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._forces_cpp',
         ['multi_bodies/solver/cpp/forces_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        depends=HEADERS,
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -60,6 +66,8 @@ extensions = [
     Pybind11Extension(
         'many_bodyMCMC._energy_cpp',
         ['many_bodyMCMC/cpp/energy_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        depends=HEADERS,
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,

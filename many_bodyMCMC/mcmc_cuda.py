@@ -14,24 +14,19 @@ text ``BLOB_BLOB_POTENTIAL_SOURCE`` of ``potential_pycuda_user_defined.py``.
 import numpy as np
 import cupy as cp
 
+from mobility.compiled_laws import pair_laws_source
+
 THREADS_PER_BLOCK = 128
 
+# The default law and the minimum image come from mobility/cpp/pair_laws.h, whose text is prepended
+# to every module (namespace rmb, so a user's source may define its own helpers by other names).
 DEFAULT_BLOB_BLOB_SOURCE = r'''
 __device__ double blob_blob_potential(double rx, double ry, double rz, double eps, double b, double a) {
-  const double r = sqrt(rx * rx + ry * ry + rz * rz);
-  const double d = 2.0 * a;
-  const double gap = r > d ? r - d : 0.0;
-  const double overlap = r < d ? d - r : 0.0;
-  return eps * exp(-gap / b) + (eps / b) * overlap;
+  return rmb::blob_blob_energy(sqrt(rx * rx + ry * ry + rz * rz), rmb::soft_repulsion(eps, b, 2.0 * a));
 }
 '''
 
 KERNELS = r'''
-__device__ double minimum_image(double r, double L) {
-  if (L <= 0.0) return r;
-  return r - trunc(r / L + 0.5 * ((r > 0.0) - (r < 0.0))) * L;
-}
-
 extern "C" __global__ void pair_energy_rows(const double *r, const int n, const double Lx, const double Ly,
                                             const double Lz, const double eps, const double b, const double a,
                                             double *out) {
@@ -40,8 +35,8 @@ extern "C" __global__ void pair_energy_rows(const double *r, const int n, const 
   const double xi = r[3 * i], yi = r[3 * i + 1], zi = r[3 * i + 2];
   double sum = 0.0;
   for (int j = i + 1; j < n; ++j)
-    sum += blob_blob_potential(minimum_image(r[3 * j] - xi, Lx), minimum_image(r[3 * j + 1] - yi, Ly),
-                               minimum_image(r[3 * j + 2] - zi, Lz), eps, b, a);
+    sum += blob_blob_potential(rmb::minimum_image(r[3 * j] - xi, Lx), rmb::minimum_image(r[3 * j + 1] - yi, Ly),
+                               rmb::minimum_image(r[3 * j + 2] - zi, Lz), eps, b, a);
   out[i] = sum;
 }
 
@@ -55,8 +50,8 @@ extern "C" __global__ void pair_energy_cross(const double *t, const int m, const
   if (j < exclude_start || j >= exclude_stop) {
     const double xj = r[3 * j], yj = r[3 * j + 1], zj = r[3 * j + 2];
     for (int k = 0; k < m; ++k)
-      sum += blob_blob_potential(minimum_image(xj - t[3 * k], Lx), minimum_image(yj - t[3 * k + 1], Ly),
-                                 minimum_image(zj - t[3 * k + 2], Lz), eps, b, a);
+      sum += blob_blob_potential(rmb::minimum_image(xj - t[3 * k], Lx), rmb::minimum_image(yj - t[3 * k + 1], Ly),
+                                 rmb::minimum_image(zj - t[3 * k + 2], Lz), eps, b, a);
   }
   out[j] = sum;
 }
@@ -67,7 +62,7 @@ _modules = {}
 
 def _module(source):
     if source not in _modules:
-        _modules[source] = cp.RawModule(code=source + KERNELS)
+        _modules[source] = cp.RawModule(code=pair_laws_source() + source + KERNELS)
     return _modules[source]
 
 

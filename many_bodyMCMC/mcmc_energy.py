@@ -39,7 +39,8 @@ import os
 import numpy as np
 
 from body.body import blob_positions
-from multi_bodies.solver.physics import minimum_image
+from mobility.periodic import minimum_image
+from multi_bodies.solver.physics import blob_blob_potential, blob_external_potential, body_body_potential
 from multi_bodies.solver.user_hooks import import_module_file
 from utils import UserInputError
 
@@ -51,27 +52,10 @@ IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')
 
 
 # ---------------------------------------------------------------------------------------------- default laws
-def blob_potential(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, blob_radius=1.0,
-                   blob_mass=1.0, **kwargs):
-    """Gravity plus soft wall of every blob: r_vectors (N, 3) -> energies (N,)."""
-    z = np.asarray(r_vectors, dtype=float).reshape(-1, 3)[:, 2]
-    eps, b, a = repulsion_strength_wall, debye_length_wall, blob_radius
-    return (g * blob_mass * z + eps * np.exp(-np.maximum(z - a, 0.0) / b)
-            + (eps / b) * np.maximum(a - z, 0.0))
-
-
-def blob_blob_potential(r, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0, **kwargs):
-    """Soft repulsion of blob pairs: r (..., 3) from blob i to blob j -> energies (...)."""
-    eps, b, d = repulsion_strength, debye_length, 2.0 * blob_radius
-    distance = np.sqrt(np.einsum('...k,...k->...', r, r))
-    return eps * np.exp(-np.maximum(distance - d, 0.0) / b) + (eps / b) * np.maximum(d - distance, 0.0)
-
-
-def body_body_potential(r, quaternion_i, quaternion_j, repulsion_strength=1.0, debye_length=1.0, **kwargs):
-    """Yukawa energy ``eps exp(-|r|/b)/|r|`` of body pairs: r (..., 3) from body i to body j -> (...)."""
-    eps, b = repulsion_strength, debye_length
-    distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
-    return eps * np.exp(-distance / b) / distance
+# The energies of the dynamic code's default forces, defined beside them in multi_bodies.solver.physics:
+# blob_potential(r_vectors (N, 3), **kw) -> (N,), blob_blob_potential(r (..., 3), **kw) -> (...),
+# body_body_potential(r (..., 3), quaternion_i, quaternion_j, **kw) -> (...).
+blob_potential = blob_external_potential
 
 
 # ---------------------------------------------------------------------------------------------- overrides

@@ -18,6 +18,7 @@ import os
 import numpy as np
 import cupy as cp
 
+from .periodic import wall_regularisation
 from .product_names import product_functions, source_target_functions
 
 _KERNEL_SOURCE = os.path.join(os.path.dirname(__file__), 'cuda', 'mobility_kernels.cu')
@@ -69,8 +70,7 @@ def _packed(r, radius, wall, scale):
     packed[:, :2] = r[:, :2] / scale
     z = r[:, 2]
     if wall:
-        damping = cp.where(z >= radius, 1.0, cp.where(radius > 0, z / cp.where(radius > 0, radius, 1.0), 0.0))
-        z = cp.maximum(z, radius)
+        z, damping = wall_regularisation(z, radius, xp=cp)
     else:
         damping = cp.ones(r.shape[0])
     packed[:, 2] = z / scale

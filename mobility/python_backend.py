@@ -15,6 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import pair_formulas as pf
+from .periodic import wall_regularisation, wrap_axis
 from .product_names import product_functions, source_target_functions
 
 PAIRS_PER_CHUNK = 1 << 17
@@ -60,29 +61,6 @@ def image_shifts(periodic_length):
     return grid * periodic_length
 
 
-def minimum_image(d, L):
-    """Apply the minimum-image convention in place on a displacement component.
-
-    ``d -= trunc(d/L + 0.5 sign(d)) L`` (round half away from zero), as SPEC §8.
-    """
-    if L > 0:
-        d -= np.trunc(d / L + 0.5 * np.sign(d)) * L
-    return d
-
-
-def wall_regularisation(r, radius):
-    """Raised positions and damping factors for blobs closer to the wall than their radius.
-
-    Returns ``(r_eff (N, 3), damping (N,))`` with ``z_eff = max(z, radius)`` and
-    ``damping = min(z / radius, 1)`` (Balboa, Delmotte and Donev 2017).
-    """
-    r_eff = r.copy()
-    r_eff[:, 2] = np.maximum(r[:, 2], radius)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        damping = np.where(r[:, 2] >= radius, 1.0, r[:, 2] / radius)
-    return r_eff, damping
-
-
 def _chunks(n_targets, n_sources):
     rows = max(1, PAIRS_PER_CHUNK // max(1, n_sources))
     return [(i, min(i + rows, n_targets)) for i in range(0, n_targets, rows)]
@@ -107,9 +85,9 @@ def pair_sum(targets, sources, vectors, periodic_length, pair_function, extra_ta
     def work(bounds):
         lo, hi = bounds
         t = targets[lo:hi]
-        dx = minimum_image(t[:, 0:1] - sx, L[0])
-        dy = minimum_image(t[:, 1:2] - sy, L[1])
-        dz = minimum_image(t[:, 2:3] - sz, L[2])
+        dx = wrap_axis(t[:, 0:1] - sx, L[0])
+        dy = wrap_axis(t[:, 1:2] - sy, L[1])
+        dz = wrap_axis(t[:, 2:3] - sz, L[2])
         zt = t[:, 2:3]
         extra = () if extra_target is None else (extra_target[lo:hi, None], es)
         for shift in shifts:
@@ -136,7 +114,7 @@ def _blob_product(pair_function, r_vectors, vector, eta, a, periodic_length, wal
     if wall and L[2] > 0:
         raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
     if wall:
-        r_eff, damping = wall_regularisation(r, a)
+        r_eff, damping = _regularise(r, a)
         v = v * damping[:, None]
     else:
         r_eff, damping = r, None
@@ -175,8 +153,8 @@ def _source_target(source_r, target_r, force, radius_source, radius_target, eta,
         raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
     damping_t = None
     if wall:
-        source, damping_s = _regularise_radii(source, a_s)
-        target, damping_t = _regularise_radii(target, b_t)
+        source, damping_s = _regularise(source, a_s)
+        target, damping_t = _regularise(target, b_t)
         f = f * damping_s[:, None]
 
     def pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz):
@@ -188,15 +166,10 @@ def _source_target(source_r, target_r, force, radius_source, radius_target, eta,
     return (u / (8.0 * np.pi * eta)).reshape(-1)
 
 
-def _regularise_radii(r, radii):
-    """Per-blob version of wall_regularisation: z_eff = max(z, radius), damping = min(z/radius, 1).
-
-    A point target (radius 0) is undamped above the wall and gets zero velocity below it.
-    """
+def _regularise(r, radius):
+    """Positions (N, 3) with z raised to max(z, radius) and the damping (N,) (see periodic.wall_regularisation)."""
     r_eff = r.copy()
-    r_eff[:, 2] = np.maximum(r[:, 2], radii)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        damping = np.where(r[:, 2] >= radii, 1.0, np.where(radii > 0, r[:, 2] / radii, 0.0))
+    r_eff[:, 2], damping = wall_regularisation(r[:, 2], radius)
     return r_eff, damping
 
 
@@ -218,17 +191,15 @@ def _dense_trans_trans(r_vectors, eta, a, wall, periodic_length):
     if wall and L[2] > 0:
         raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
     if wall:
-        z = r[..., 2]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            damping = np.where(z >= a, 1.0, z / a)
-        s = np.concatenate((r[..., :2], np.maximum(z, a)[..., None]), axis=-1) / a
+        z_eff, damping = wall_regularisation(r[..., 2], a)
+        s = np.concatenate((r[..., :2], z_eff[..., None]), axis=-1) / a
     else:
         damping = np.ones((nb, n))
         s = r / a
     La = L / a
-    dx = minimum_image(s[:, :, None, 0] - s[:, None, :, 0], La[0])
-    dy = minimum_image(s[:, :, None, 1] - s[:, None, :, 1], La[1])
-    dz = minimum_image(s[:, :, None, 2] - s[:, None, :, 2], La[2])
+    dx = wrap_axis(s[:, :, None, 0] - s[:, None, :, 0], La[0])
+    dy = wrap_axis(s[:, :, None, 1] - s[:, None, :, 1], La[1])
+    dz = wrap_axis(s[:, :, None, 2] - s[:, None, :, 2], La[2])
     zt, zs = s[:, :, None, 2], s[:, None, :, 2]
     eye = np.eye(3)
     M = np.zeros((nb, n, n, 3, 3))

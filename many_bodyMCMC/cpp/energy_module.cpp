@@ -4,7 +4,9 @@
 //   u(r) = eps + eps (d - r)/b   for r < d,
 //   u(r) = eps exp(-(r - d)/b)   for r >= d,        d = 2a,
 // written branch-free as eps exp(-max(r - d, 0)/b) + (eps/b) max(d - r, 0).  Displacements
-// use the minimum image on the periodic axes (SPEC section 8).
+// use the minimum image on the periodic axes (SPEC section 8).  Both come from
+// mobility/cpp/pair_laws.h (rmb::blob_blob_energy, rmb::minimum_image), the one source of
+// the compiled backends; this file adds only a vectorisable exp and the loops.
 //
 // pair_energy_total visits every unordered pair once (rows i split across OpenMP threads,
 // dynamic schedule because row lengths differ); pair_energy_cross sums the pairs between a
@@ -23,23 +25,17 @@
 #include <omp.h>
 #endif
 
+#include "pair_laws.h"
+
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 namespace {
 
 struct PairLaw {
-  double eps, eps_over_b, inv_b, contact;
+  rmb::SoftRepulsion repulsion;
   double Lx, Ly, Lz;
 };
-
-// Minimum image of one displacement component for box length L (L <= 0: not periodic);
-// r - trunc(r/L + 0.5 sign(r)) L, i.e. rounding half away from zero.
-inline double minimum_image(double r, double L) {
-  if (L <= 0.0) return r;
-  const double sign = (r > 0.0) - (r < 0.0);
-  return r - std::trunc(r / L + 0.5 * sign) * L;
-}
 
 // exp(x) for x <= 0, branch-free so that the pair loops vectorise (std::exp does not without
 // -ffast-math).  x = n ln2 + s with |s| <= ln2/2 (Cody-Waite split of ln2), a degree-12 Taylor
@@ -75,25 +71,25 @@ inline double exp_nonpositive(double x) {
   return underflow ? 0.0 : p * scale;
 }
 
+struct FastExp {
+  double operator()(double x) const { return exp_nonpositive(x); }
+};
+
 template <bool periodic>
 inline double pair_energy(double rx, double ry, double rz, const PairLaw &law) {
   if (periodic) {
-    rx = minimum_image(rx, law.Lx);
-    ry = minimum_image(ry, law.Ly);
-    rz = minimum_image(rz, law.Lz);
+    rx = rmb::minimum_image(rx, law.Lx);
+    ry = rmb::minimum_image(ry, law.Ly);
+    rz = rmb::minimum_image(rz, law.Lz);
   }
-  const double r = std::sqrt(rx * rx + ry * ry + rz * rz);
-  const double gap = r > law.contact ? r - law.contact : 0.0;
-  const double overlap = r < law.contact ? law.contact - r : 0.0;
-  return law.eps * exp_nonpositive(-gap * law.inv_b) + law.eps_over_b * overlap;
+  return rmb::blob_blob_energy(std::sqrt(rx * rx + ry * ry + rz * rz), law.repulsion, FastExp());
 }
 
 PairLaw make_law(const Array &periodic_length, double repulsion_strength, double debye_length, double blob_radius) {
   if (periodic_length.size() != 3) throw std::invalid_argument("periodic_length must hold 3 numbers");
   if (!(debye_length > 0.0)) throw std::invalid_argument("debye_length must be positive");
   const double *L = periodic_length.data();
-  return PairLaw{repulsion_strength, repulsion_strength / debye_length, 1.0 / debye_length, 2.0 * blob_radius,
-                 L[0], L[1], L[2]};
+  return PairLaw{rmb::soft_repulsion(repulsion_strength, debye_length, 2.0 * blob_radius), L[0], L[1], L[2]};
 }
 
 long count_rows(const Array &r, const char *name) {

@@ -19,16 +19,9 @@
 // is the generic wall pair formula at rx = ry = 0 (they agree exactly).
 #pragma once
 
-#ifdef __CUDACC__
-#define RMB_HD __host__ __device__ __forceinline__
-#define RMB_RSQRT(x) rsqrt(x)
-#define RMB_SQRT(x) sqrt(x)
-#else
-#include <cmath>
-#define RMB_HD inline
-#define RMB_RSQRT(x) (1.0 / std::sqrt(x))
-#define RMB_SQRT(x) std::sqrt(x)
-#endif
+// RMB_HD (__host__ __device__ under NVRTC, inline for g++) and the minimum image
+// (rmb::minimum_image) come from pair_laws.h.
+#include "pair_laws.h"
 
 namespace rmb {
 
@@ -379,15 +372,6 @@ RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, doubl
     uy -= w_I * fy + (w_RR * Rg + w_Rz * gz) * ry;
     uz -= w_I * gz + (w_RR * Rg + w_Rz * gz) * Rz + w_J * gz + w_zR * Rg;
   }
-}
-
-// Minimum image, round half away from zero (SPEC §8); L <= 0: not periodic.
-RMB_HD double minimum_image(double d, double L) {
-  if (L > 0.0) {
-    const double t = d / L + (d > 0.0 ? 0.5 : (d < 0.0 ? -0.5 : 0.0));
-    d -= static_cast<double>(static_cast<long long>(t)) * L;
-  }
-  return d;
 }
 
 }  // namespace rmb

@@ -79,13 +79,7 @@ Blobs make_blobs(const Array &r, const Array *vector, const std::vector<double> 
   const double inv = 1.0 / scale;
   for (std::size_t i = 0; i < b.n; ++i) {
     double zi = rp[3 * i + 2];
-    if (wall) {
-      const double rad = radius[i];
-      if (zi < rad) {
-        b.damping[i] = rad > 0.0 ? zi / rad : 0.0;
-        zi = rad;
-      }
-    }
+    if (wall) rmb::wall_regularisation(rp[3 * i + 2], radius[i], zi, b.damping[i]);
     b.x[i] = rp[3 * i] * inv;
     b.y[i] = rp[3 * i + 1] * inv;
     b.z[i] = zi * inv;

@@ -4,7 +4,8 @@ Imported only when ``blob_blob_force_implementation pycuda`` is asked for;
 CuPy is then required and the kernel is compiled once per process by NVRTC.
 One GPU thread per target blob sums the default soft repulsion over every
 other blob (minimum image on periodic axes), in double precision, the same
-law as ``multi_bodies_functions.blob_blob_force``.
+law as ``multi_bodies.solver.physics.blob_blob_force``
+(the device code of ``mobility/cpp/pair_laws.h``, prepended to the kernel).
 
 A file ``forces_pycuda_user_defined.py`` in the run directory that defines
 ``calc_blob_blob_forces_pycuda(r_vectors, **kwargs)`` replaces
@@ -13,26 +14,26 @@ A file ``forces_pycuda_user_defined.py`` in the run directory that defines
 import numpy as np
 import cupy as cp
 
+from mobility.compiled_laws import pair_laws_source
+
 THREADS_PER_BLOCK = 128
 
-KERNEL_SOURCE = r'''
+# The law and the minimum image are those of mobility/cpp/pair_laws.h (prepended here), as in the C++ backend.
+KERNEL_SOURCE = pair_laws_source() + r'''
 extern "C" __global__
 void blob_blob_forces(const double *r, const int n, const double Lx, const double Ly, const double Lz,
-                      const double eps_over_b, const double inv_b, const double contact, double *force) {
+                      const double eps, const double b, const double contact, double *force) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
+  const rmb::SoftRepulsion law = rmb::soft_repulsion(eps, b, contact);
   const double xi = r[3 * i], yi = r[3 * i + 1], zi = r[3 * i + 2];
   double fx = 0.0, fy = 0.0, fz = 0.0;
   for (int j = 0; j < n; ++j) {
     if (j == i) continue;
-    double rx = r[3 * j] - xi, ry = r[3 * j + 1] - yi, rz = r[3 * j + 2] - zi;
-    if (Lx > 0.0) rx -= trunc(rx / Lx + 0.5 * ((rx > 0.0) - (rx < 0.0))) * Lx;
-    if (Ly > 0.0) ry -= trunc(ry / Ly + 0.5 * ((ry > 0.0) - (ry < 0.0))) * Ly;
-    if (Lz > 0.0) rz -= trunc(rz / Lz + 0.5 * ((rz > 0.0) - (rz < 0.0))) * Lz;
-    double distance = sqrt(rx * rx + ry * ry + rz * rz);
-    if (distance < 2.220446049250313e-16) distance = 2.220446049250313e-16;
-    const double gap = distance > contact ? distance - contact : 0.0;
-    const double m = eps_over_b * exp(-gap * inv_b) / distance;
+    const double rx = rmb::minimum_image(r[3 * j] - xi, Lx);
+    const double ry = rmb::minimum_image(r[3 * j + 1] - yi, Ly);
+    const double rz = rmb::minimum_image(r[3 * j + 2] - zi, Lz);
+    const double m = rmb::blob_blob_force_factor(sqrt(rx * rx + ry * ry + rz * rz), law);
     fx -= m * rx; fy -= m * ry; fz -= m * rz;
   }
   force[3 * i] = fx; force[3 * i + 1] = fy; force[3 * i + 2] = fz;
@@ -69,6 +70,5 @@ def calc_blob_blob_forces_pycuda(r_vectors, periodic_length=(0.0, 0.0, 0.0), rep
     blocks = max(1, -(-n // THREADS_PER_BLOCK))
     _kernel()((blocks,), (THREADS_PER_BLOCK,),
               (r, np.int32(n), np.float64(L[0]), np.float64(L[1]), np.float64(L[2]),
-               np.float64(repulsion_strength / debye_length), np.float64(1.0 / debye_length),
-               np.float64(2.0 * blob_radius), out))
+               np.float64(repulsion_strength), np.float64(debye_length), np.float64(2.0 * blob_radius), out))
     return cp.asnumpy(out)

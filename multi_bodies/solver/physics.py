@@ -16,6 +16,12 @@ hooks in either of two styles (see doc/overrides.md and
   the per-blob ``blob_external_force``) and the names such files take from a
   star import (``np``, ``partial``, ``Quaternion``) exist here.
 
+Each default force law has its energy beside it (``blob_external_potential``,
+``blob_blob_potential``, ``body_body_potential``; force = -grad U), which the
+Monte Carlo sampler (``many_bodyMCMC.mcmc_energy``) uses; the compiled
+backends use the same laws from ``mobility/cpp/pair_laws.h``.  The minimum
+image is ``mobility.periodic.minimum_image``, re-exported here.
+
 All defaults are vectorised over blobs and bodies (no Python loop over them);
 the all-pairs sums are done in row chunks to bound memory.  Per-blob and
 per-pair user functions (the published signatures) are called in a Python
@@ -29,25 +35,11 @@ from functools import partial  # noqa: F401  (published override files use it th
 
 import numpy as np
 
+from mobility.periodic import minimum_image  # noqa: F401  (published name of this module; one source in mobility)
 from quaternion_integrator.quaternion import Quaternion  # noqa: F401  (star-imported by published override files)
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 262144  # pairs per chunk in the all-pairs sums (bounded memory, cache friendly)
-
-
-def minimum_image(displacements, periodic_length):
-    """Minimum-image convention on periodic axes (SPEC section 8).
-
-    ``displacements`` has shape (..., 3); for each axis with ``L > 0``,
-    ``r -= trunc(r/L + 0.5 sign(r)) L`` (round half away from zero).
-    """
-    L = np.asarray(periodic_length, dtype=float).reshape(3)
-    if not np.any(L > 0):
-        return displacements
-    r = np.array(displacements, dtype=float, copy=True)
-    for axis in np.nonzero(L > 0)[0]:
-        r[..., axis] -= np.trunc(r[..., axis] / L[axis] + 0.5 * np.sign(r[..., axis])) * L[axis]
-    return r
 
 
 def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0,
@@ -65,6 +57,19 @@ def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_le
     forces = np.zeros_like(r_vectors)
     forces[:, 2] = -g * blob_mass + np.where(z > a, (eps / b) * np.exp(-(z - a) / b), eps / b)
     return forces
+
+
+def blob_external_potential(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, blob_radius=1.0,
+                            blob_mass=1.0, **kwargs):
+    """Energy of gravity and of the soft wall of every blob (the potential of ``blob_external_forces``).
+
+    r_vectors (N, 3) -> energies (N,): ``g blob_mass z + eps exp(-(z - a)/b)``
+    for ``z >= a`` and ``g blob_mass z + eps + eps (a - z)/b`` below.
+    """
+    z = np.asarray(r_vectors, dtype=float).reshape(-1, 3)[:, 2]
+    eps, b, a = repulsion_strength_wall, debye_length_wall, blob_radius
+    return (g * blob_mass * z + eps * np.exp(-np.maximum(z - a, 0.0) / b)
+            + (eps / b) * np.maximum(a - z, 0.0))
 
 
 def blob_external_force(r_vectors, *args, **kwargs):
@@ -89,6 +94,17 @@ def blob_blob_force(r, *args, repulsion_strength=1.0, debye_length=1.0, blob_rad
     # exp(-max(|r| - 2a, 0)/b) is 1 for overlapping blobs: one exponential for both branches.
     magnitude = (eps / b) * np.exp(-np.maximum(distance - d, 0.0) / b) / distance
     return -magnitude[..., None] * r
+
+
+def blob_blob_potential(r, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0, **kwargs):
+    """Energy of the soft repulsion of blob pairs (the potential of ``blob_blob_force``).
+
+    r (..., 3) from blob i to blob j -> energies (...): ``eps exp(-(|r| - 2a)/b)``
+    for ``|r| >= 2a`` and ``eps + eps (2a - |r|)/b`` below.
+    """
+    eps, b, d = repulsion_strength, debye_length, 2.0 * blob_radius
+    distance = np.sqrt(np.einsum('...k,...k->...', r, r))
+    return eps * np.exp(-np.maximum(distance - d, 0.0) / b) + (eps / b) * np.maximum(d - distance, 0.0)
 
 
 def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), pair_force=None, **kwargs):
@@ -128,6 +144,17 @@ def body_body_force_torque(r, quaternion_i=None, quaternion_j=None, *args, repul
     distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
     magnitude = (eps / b + eps / distance) * np.exp(-distance / b) / distance ** 2
     return np.stack((-magnitude[..., None] * r, np.zeros_like(r)))
+
+
+def body_body_potential(r, quaternion_i=None, quaternion_j=None, repulsion_strength=1.0, debye_length=1.0, **kwargs):
+    """Yukawa energy ``eps exp(-|r|/b)/|r|`` of body pairs (the potential of ``body_body_force_torque``).
+
+    r (..., 3) from body i to body j -> energies (...); the orientations
+    (quaternions (..., 4)) are not used by this law.
+    """
+    eps, b = repulsion_strength, debye_length
+    distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
+    return eps * np.exp(-distance / b) / distance
 
 
 def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), pair_force_torque=None, **kwargs):

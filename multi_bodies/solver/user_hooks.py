@@ -19,6 +19,7 @@ from functools import partial
 
 import numpy as np
 
+from mobility.periodic import minimum_image
 from multi_bodies.solver import physics as mbf
 from quaternion_integrator.quaternion import Quaternion
 from utils import SimulationStopped, UserInputError
@@ -289,7 +290,7 @@ class PhysicsHooks:
                     stop = min(n, start + rows)
                     others = np.ones((stop - start, n), dtype=bool)
                     others[np.arange(stop - start), np.arange(start, stop)] = False
-                    r = mbf.minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)[others]
+                    r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)[others]
                     pair = checked_array(call_user_function(function, hook, r, periodic_length=periodic_length, **kw),
                                          [r.shape], function, hook, 'the force on blob i of every pair')
                     # Each row has exactly n - 1 other blobs, in order: sum them per row.
@@ -302,7 +303,7 @@ class PhysicsHooks:
             n = r_vectors.shape[0]
             forces = np.zeros_like(r_vectors)
             for i in range(n - 1):
-                separations = mbf.minimum_image(r_vectors[i + 1:] - r_vectors[i], periodic_length)
+                separations = minimum_image(r_vectors[i + 1:] - r_vectors[i], periodic_length)
                 for k, r in enumerate(separations):
                     force = checked_array(call_user_function(function, hook, r.copy(), periodic_length=periodic_length,
                                                              **kw), [(3,)], function, hook,
@@ -333,7 +334,7 @@ class PhysicsHooks:
             quaternions = [Quaternion(q) for q in np.asarray(orientations, dtype=float).reshape(-1, 4)]
             result = np.zeros((nb, 2, 3))
             for i in range(nb - 1):
-                separations = mbf.minimum_image(locations[i + 1:] - locations[i], periodic_length)
+                separations = minimum_image(locations[i + 1:] - locations[i], periodic_length)
                 for k, r in enumerate(separations):
                     j = i + 1 + k
                     value = call_user_function(function, hook, r.copy(), quaternions[i], quaternions[j],

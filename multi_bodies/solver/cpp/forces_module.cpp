@@ -5,39 +5,30 @@
 // r_j - r_i, so each pair is visited once) and d = 2a:
 //   f_i = -(eps/b) exp(-(|r| - d)/b) r/|r|   for |r| > d,
 //   f_i = -(eps/b) r/|r|                     otherwise,
-// |r| floored by machine epsilon.  OpenMP splits the rows i of the pair
-// triangle; every thread has its own force accumulator.  Edit blob_pair_force below to
-// change the law of the C++ backend (then rebuild with pip install -e .).
+// |r| floored by machine epsilon.  The law and the minimum image are those of
+// mobility/cpp/pair_laws.h (the one source of the compiled backends); edit
+// rmb::blob_blob_force_factor there to change the law of the C++ and CUDA backends
+// (then rebuild with pip install -e .).  OpenMP splits the rows i of the pair
+// triangle; every thread has its own force accumulator.  pair_laws() evaluates the
+// header's three laws, force and energy, for the tests.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
-#include <cfloat>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #ifdef _OPENMP
 #include <omp.h>
 #endif
 
+#include "pair_laws.h"
+
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 namespace {
-
-// Minimum image of one displacement component for box length L (L <= 0: not periodic);
-// r - trunc(r/L + 0.5 sign(r)) L, i.e. rounding half away from zero.
-inline double minimum_image(double r, double L) {
-  if (L <= 0.0) return r;
-  const double sign = (r > 0.0) - (r < 0.0);
-  return r - std::trunc(r / L + 0.5 * sign) * L;
-}
-
-// Magnitude factor m such that the force on i is -m * r (r from i to j).
-inline double blob_pair_force(double distance, double eps_over_b, double inv_b, double contact) {
-  const double overlap_free = distance > contact ? distance - contact : 0.0;
-  return eps_over_b * std::exp(-overlap_free * inv_b) / distance;
-}
 
 int max_threads_available() {
 #ifdef _OPENMP
@@ -66,8 +57,7 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
   const double *rp = r_vectors.data();
   for (long i = 0; i < n; ++i) x[i] = rp[3 * i], y[i] = rp[3 * i + 1], z[i] = rp[3 * i + 2];
   const double Lx = periodic_length.data()[0], Ly = periodic_length.data()[1], Lz = periodic_length.data()[2];
-  const double eps_over_b = repulsion_strength / debye_length, inv_b = 1.0 / debye_length;
-  const double contact = 2.0 * blob_radius;
+  const rmb::SoftRepulsion law = rmb::soft_repulsion(repulsion_strength, debye_length, 2.0 * blob_radius);
   Array result({static_cast<py::ssize_t>(n), static_cast<py::ssize_t>(3)});
   double *out = result.mutable_data();
   {
@@ -83,12 +73,10 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
       double fx = 0.0, fy = 0.0, fz = 0.0;
       const double xi = x[i], yi = y[i], zi = z[i];
       for (long j = i + 1; j < n; ++j) {
-        const double rx = minimum_image(x[j] - xi, Lx);
-        const double ry = minimum_image(y[j] - yi, Ly);
-        const double rz = minimum_image(z[j] - zi, Lz);
-        double distance = std::sqrt(rx * rx + ry * ry + rz * rz);
-        if (distance < DBL_EPSILON) distance = DBL_EPSILON;
-        const double m = blob_pair_force(distance, eps_over_b, inv_b, contact);
+        const double rx = rmb::minimum_image(x[j] - xi, Lx);
+        const double ry = rmb::minimum_image(y[j] - yi, Ly);
+        const double rz = rmb::minimum_image(z[j] - zi, Lz);
+        const double m = rmb::blob_blob_force_factor(std::sqrt(rx * rx + ry * ry + rz * rz), law);
         fx -= m * rx, fy -= m * ry, fz -= m * rz;
         acc[3 * j] += m * rx, acc[3 * j + 1] += m * ry, acc[3 * j + 2] += m * rz;
       }
@@ -102,6 +90,44 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
     }
   }
   return result;
+}
+
+// The laws of pair_laws.h at many points, for the tests: law "wall" (x = heights z,
+// contact a), "blob_blob" (x = distances, contact 2a) or "body_body" (x = distances).
+// Returns (energies, forces) of the shape of x: the wall force f_z, and for the pair laws
+// the factor m of the force -m r on i.
+py::tuple pair_laws(const std::string &law_name, const Array &x, double repulsion_strength, double debye_length,
+                    double blob_radius) {
+  if (!(debye_length > 0.0)) throw std::invalid_argument("debye_length must be positive");
+  int kind;
+  if (law_name == "wall") kind = 0;
+  else if (law_name == "blob_blob") kind = 1;
+  else if (law_name == "body_body") kind = 2;
+  else throw std::invalid_argument("law must be wall, blob_blob or body_body, got " + law_name);
+  const rmb::SoftRepulsion law =
+      rmb::soft_repulsion(repulsion_strength, debye_length, (kind == 1 ? 2.0 : 1.0) * blob_radius);
+  std::vector<py::ssize_t> shape(x.shape(), x.shape() + x.ndim());
+  Array energy(shape), force(shape);
+  const double *xp = x.data();
+  double *e = energy.mutable_data(), *f = force.mutable_data();
+  for (py::ssize_t k = 0; k < x.size(); ++k) {
+    if (kind == 0) e[k] = rmb::wall_energy(xp[k], law), f[k] = rmb::wall_force(xp[k], law);
+    if (kind == 1) e[k] = rmb::blob_blob_energy(xp[k], law), f[k] = rmb::blob_blob_force_factor(xp[k], law);
+    if (kind == 2) e[k] = rmb::body_body_energy(xp[k], law), f[k] = rmb::body_body_force_factor(xp[k], law);
+  }
+  return py::make_tuple(energy, force);
+}
+
+// Minimum image of every entry of d (..., 3) in the box L (3,), for the tests.
+Array minimum_images(const Array &d, const Array &periodic_length) {
+  if (periodic_length.size() != 3) throw std::invalid_argument("periodic_length must hold 3 numbers");
+  if (d.size() % 3 != 0) throw std::invalid_argument("displacements must have shape (..., 3)");
+  std::vector<py::ssize_t> shape(d.shape(), d.shape() + d.ndim());
+  Array out(shape);
+  const double *dp = d.data(), *L = periodic_length.data();
+  double *o = out.mutable_data();
+  for (py::ssize_t k = 0; k < d.size(); ++k) o[k] = rmb::minimum_image(dp[k], L[k % 3]);
+  return out;
 }
 
 int max_threads() {
@@ -119,5 +145,10 @@ PYBIND11_MODULE(_forces_cpp, m) {
   m.def("blob_blob_forces", &blob_blob_forces, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"),
         "Forces (N, 3) of the default soft repulsion between all blob pairs; r_vectors (N, 3).");
+  m.def("pair_laws", &pair_laws, py::arg("law"), py::arg("x"), py::arg("repulsion_strength"),
+        py::arg("debye_length"), py::arg("blob_radius"),
+        "(energies, forces) of the header's law 'wall', 'blob_blob' or 'body_body' at the heights or distances x.");
+  m.def("minimum_images", &minimum_images, py::arg("displacements"), py::arg("periodic_length"),
+        "Minimum image of displacements (..., 3) in the box periodic_length (3,) (L <= 0: not periodic).");
   m.def("max_threads", &max_threads, "Number of OpenMP threads the kernel uses.");
 }
