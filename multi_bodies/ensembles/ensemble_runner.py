@@ -380,21 +380,6 @@ def is_finished(spec):
 
 
 # ------------------------------------------------------------------ one replica (the task)
-def _complete_records(path):
-    """(records, end offset of the last complete one) of a restart file."""
-    import pickle
-    records, end = [], 0
-    with open(path, 'rb') as f:
-        while True:
-            try:
-                record = pickle.load(f)
-            except Exception:  # EOF, or a record cut by a hard stop
-                break
-            records.append(record)
-            end = f.tell()
-    return records, end
-
-
 def prepare_resume(options):
     """Step to resume a killed replica from (0: start afresh), after trimming what the kill left half-written.
 
@@ -404,24 +389,20 @@ def prepare_resume(options):
     ``.config`` is cut where snapshot k starts (the resumed run writes it
     again), so the resumed outputs equal those of an undisturbed run.
     """
+    from multi_bodies.files import snapshots
     from multi_bodies.run import run_output
     path = options.output_name + run_output.RESTART_SUFFIX
     if not os.path.isfile(path):
         return 0
-    records, end = _complete_records(path)
-    records = [r for r in records if isinstance(r, dict) and isinstance(r.get('step'), int)]
-    if not records or records[-1]['step'] <= 0:
+    last, end = run_output.last_valid_restart_record(path)  # damaged or cut records: reported and dropped
+    if last is None or not isinstance(last.get('step'), int) or last['step'] <= 0:
         return 0
-    last = records[-1]
     if os.path.getsize(path) != end:
         with open(path, 'r+b') as f:
             f.truncate(end)
     if options.save_clones == 'one_file':
         for structure_id, offset in (last.get('config_offsets') or {}).items():
-            config = run_output.config_name(options.output_name, structure_id)
-            if os.path.isfile(config) and os.path.getsize(config) > offset:
-                with open(config, 'r+b') as f:
-                    f.truncate(offset)
+            snapshots.truncate_config(snapshots.config_name(options.output_name, structure_id), offset)
     return int(last['step'])
 
 
