@@ -169,15 +169,28 @@ class _PublishedStateUnpickler(pickle.Unpickler):
     """Unpickler for the published ``numpy.random.RandomState().get_state()`` pickle, and nothing else.
 
     ``find_class`` admits only numpy's array reconstruction (``_reconstruct``,
-    ``ndarray``) and ``dtype``: a pickle that names any other callable (the
-    way a pickle runs code) is refused before anything is called.
+    ``_frombuffer``, ``ndarray``), ``dtype`` and the latin-1 bytes of Python 3
+    pickles: a pickle that names any other callable (the way a pickle runs
+    code) is refused before anything is called.
     """
 
-    _RECONSTRUCT = np.ndarray.__reduce__(np.zeros(1))[0]
+    _RECONSTRUCT = np.zeros(1).__reduce__()[0]        # numpy's _reconstruct (protocols 0 to 4)
+    _FROMBUFFER = np.zeros(1).__reduce_ex__(5)[0]     # numpy's _frombuffer (protocol 5)
+
+    @staticmethod
+    def _latin1_bytes(text, encoding):
+        """``_codecs.encode`` as Python 3 pickles (protocols 0-2) use it for bytes: latin-1 only."""
+        if encoding not in ('latin1', 'latin-1') or not isinstance(text, str):
+            raise pickle.UnpicklingError('_codecs.encode with %r is not part of a numpy random state' % encoding)
+        return text.encode('latin1')
+
     ALLOWED = {('numpy.core.multiarray', '_reconstruct'): _RECONSTRUCT,
                ('numpy._core.multiarray', '_reconstruct'): _RECONSTRUCT,
+               ('numpy.core.numeric', '_frombuffer'): _FROMBUFFER,
+               ('numpy._core.numeric', '_frombuffer'): _FROMBUFFER,
                ('numpy', 'ndarray'): np.ndarray,
-               ('numpy', 'dtype'): np.dtype}
+               ('numpy', 'dtype'): np.dtype,
+               ('_codecs', 'encode'): _latin1_bytes}
 
     def find_class(self, module, name):
         try:
