@@ -12,6 +12,7 @@ that admits only numpy arrays and dtypes.
 """
 import hashlib
 import importlib
+import json
 import io
 import os
 import pickle
@@ -256,3 +257,50 @@ def test_no_pickle_reader_outside_the_restricted_one():
                     if bad in text:
                         found.append((name, bad))
     assert found == []
+
+
+# ------------------------------------------------------------------ the ensemble's folders and dashboard
+def small_plan(tmp_path):
+    folder = tmp_path / 'scene'
+    folder.mkdir()
+    shutil.copy(os.path.join(REPO_ROOT, 'multi_bodies', 'Structures', 'shell_N_12_Rg_1.vertex'), folder)
+    (folder / 'spheres.clones').write_text('1\n0 0 3 1 0 0 0\n')
+    (folder / 'input.dat').write_text('scheme deterministic_forward_euler\ndt 0.05\nn_steps 2\nn_save 1\neta 1.0\n'
+                                      'blob_radius 0.25\noutput_name data/run\n'
+                                      'structure shell_N_12_Rg_1.vertex spheres.clones\n')
+    plan = runner.build_plan(str(folder / 'input.dat'), 1, [('g', ['1'])], str(tmp_path / 'deep' / 'er' / 'ens'), 7)
+    runner.write_plan(plan)
+    return plan
+
+
+@pytest.mark.parametrize('field', ['points', 'replicas'])
+def test_aggregate_refuses_manifest_names_outside_the_ensemble_folder(tmp_path, field):
+    from multi_bodies.ensembles import ensemble_statistics
+    plan = small_plan(tmp_path)
+    manifest_path = Path(plan['output_dir']) / runner.MANIFEST_NAME
+    manifest = json.loads(manifest_path.read_text())
+    key = 'name' if field == 'points' else 'folder'
+    manifest[field][0][key] = '../../..'
+    manifest_path.write_text(json.dumps(manifest))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(utils.UserInputError, match=r"'\.\./\.\./\.\.' is not a folder inside the ensemble folder"):
+        ensemble_statistics.aggregate(plan['output_dir'], charts=False, log=lambda *a: None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and not (tmp_path / 'statistics.csv').exists()
+
+
+def test_local_dashboard_on_localhost_and_scratch_in_the_run_folder(tmp_path):
+    assert runner.local_address(':8787') == '127.0.0.1:8787'
+    assert runner.local_address('0.0.0.0:8787') == '0.0.0.0:8787' and runner.local_address(None) is None
+    distributed = pytest.importorskip('distributed')
+    scratch = runner.scratch_directory(str(tmp_path / 'ens'))
+    assert scratch.startswith(str(tmp_path / 'ens'))
+    cluster = runner.make_local_cluster(1, omp_threads=1, dashboard_address=':0', local_directory=scratch)
+    try:
+        with distributed.Client(cluster) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
+            assert cluster.scheduler_address.startswith('tcp://127.0.0.1:')
+            if cluster.dashboard_link:
+                assert '127.0.0.1' in cluster.dashboard_link, cluster.dashboard_link
+            assert os.path.isdir(scratch) and os.listdir(scratch)  # the workers' space is there
+    finally:
+        cluster.close()

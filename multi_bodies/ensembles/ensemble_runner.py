@@ -256,7 +256,30 @@ def read_manifest(output_dir):
     if not isinstance(manifest, dict) or 'replicas' not in manifest:
         raise UserInputError('%s is not an ensemble manifest (no replica list)' % path)
     manifest['output_dir'] = os.path.abspath(output_dir)
+    for point in manifest.get('points') or []:
+        _check_inside(manifest['output_dir'], point.get('name') if isinstance(point, dict) else None,
+                      'point name', path)
+    for replica in manifest['replicas']:
+        _check_inside(manifest['output_dir'], replica.get('folder') if isinstance(replica, dict) else None,
+                      'replica folder', path)
     return manifest
+
+
+def _check_inside(output_dir, name, what, manifest_path):
+    """Refuse a ``name`` from the manifest that is not a relative path inside ``output_dir`` (``../..``, ``/x``).
+
+    The manifest is data: a name that would make the runner or ``--aggregate``
+    read or write outside the ensemble folder is a UserInputError.
+    """
+    root = os.path.realpath(output_dir)
+    ok = isinstance(name, str) and name and not os.path.isabs(name)
+    if ok:
+        target = os.path.realpath(os.path.join(root, name))
+        ok = target != root and os.path.commonpath([root, target]) == root
+    if not ok:
+        raise UserInputError('%s: the %s %r is not a folder inside the ensemble folder %s; the manifest was '
+                             'changed by hand or is not this ensemble\'s, so nothing is read or written'
+                             % (manifest_path, what, name, output_dir))
 
 
 def write_plan(plan):
@@ -657,8 +680,34 @@ def thread_environment(threads):
     return {'OMP_NUM_THREADS': value, 'OPENBLAS_NUM_THREADS': value, 'MKL_NUM_THREADS': value}
 
 
-def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address=':8787'):
+SCRATCH_NAME = 'dask-scratch'
+
+
+def scratch_directory(output_dir):
+    """Dask's scratch space of a local cluster: ``output_dir/dask-scratch`` (not a shared /tmp folder)."""
+    return os.path.join(os.path.abspath(output_dir), SCRATCH_NAME)
+
+
+def local_address(address):
+    """``address`` of a local dashboard bound to this machine only: ':8787' -> '127.0.0.1:8787' (None stays None).
+
+    A bare port (Dask's ':8787') would listen on every interface, so anyone
+    on the network could watch and drive the cluster; give a host
+    explicitly (``--dashboard-address 0.0.0.0:8787``) to serve it wider.
+    """
+    if address is None:
+        return None
+    address = str(address)
+    return '127.0.0.1' + address if address.startswith(':') else address
+
+
+def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address=':8787', local_directory=None):
     """A ``distributed.LocalCluster`` of ``workers`` processes, one task thread each.
+
+    The scheduler and the dashboard listen on 127.0.0.1 only (a bare port
+    ``:8787`` becomes ``127.0.0.1:8787``; see ``local_address``).  Dask's
+    scratch space goes to ``local_directory`` (the ensemble passes a folder
+    inside its output folder; None: Dask's default under the temporary folder).
 
     Every worker gets ``omp_threads`` OpenMP/BLAS threads (default: the
     machine's cores divided by ``workers``, at least 1), set before the
@@ -675,7 +724,8 @@ def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address='
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries),
                           'distributed.nanny.pre-spawn-environ': environment}):
         return distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=dashboard_address)
+                                        host='127.0.0.1', dashboard_address=local_address(dashboard_address),
+                                        local_directory=local_directory)
 
 
 JOBQUEUE_CLASSES = {'slurm': 'SLURMCluster', 'pbs': 'PBSCluster', 'lsf': 'LSFCluster'}
