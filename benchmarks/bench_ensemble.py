@@ -32,7 +32,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
-from multi_bodies.files.structure_files import write_clones_file, write_vertex_file  # noqa: E402
+from multi_bodies.files.snapshots import write_clones_file  # noqa: E402
+from multi_bodies.files.structure_files import write_vertex_file  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 
 

@@ -55,7 +55,8 @@ def make_parser():
                         help='OpenMP/BLAS threads per replica (default: cores / workers locally, 1 on a jobqueue)')
     parser.add_argument('--retries', type=int, default=3,
                         help='attempts a replica may lose to a dying worker or an unexpected error (default 3)')
-    parser.add_argument('--dashboard-address', default=':8787', help='local cluster dashboard (default :8787)')
+    parser.add_argument('--dashboard-address', default=':8787',
+                        help='local cluster dashboard (default :8787, served on 127.0.0.1 only)')
     jobs = parser.add_argument_group('batch jobs (--jobqueue)')
     jobs.add_argument('--jobs', type=int, default=1, help='batch jobs to start (default 1)')
     jobs.add_argument('--job-cores', type=int, default=None, help='cores of one job')
@@ -134,7 +135,8 @@ def _run_locked(args, plan, distributed):
                 cluster = _jobqueue_cluster(args)
             elif not args.scheduler:
                 cluster = runner.make_local_cluster(args.workers or os.cpu_count() or 1, args.omp_threads,
-                                                    retries=args.retries, dashboard_address=args.dashboard_address)
+                                                    retries=args.retries, dashboard_address=args.dashboard_address,
+                                                    local_directory=runner.scratch_directory(plan['output_dir']))
             client = distributed.Client(args.scheduler if args.scheduler else cluster)
             print('ensemble of %d replicas (%d points x %d) in %s, master seed %d'
                   % (len(plan['replicas']), len(plan['points']), args.replicas, plan['output_dir'],

@@ -11,7 +11,7 @@ The run itself is ``multi_bodies.run.dynamic_run.run_dynamics``.  Outputs, all
 prefixed by ``output_name``:
 
 * ``.inputfile`` (copy of the input), ``.bodies_info``, ``.random_state``
-  (pickled state of the run's ``numpy.random.Generator``);
+  (state of the run's ``numpy.random.Generator`` as JSON text);
 * per saved step and structure ``.<ID>.<step, 8 digits>.clones``
   (``save_clones one_file_per_step``) or one ``.<ID>.config`` per structure
   (``save_clones one_file``), numbers with round-trip precision;

@@ -17,7 +17,8 @@ import mobility
 from body.body import K_matrices
 from multi_bodies.advice import advisor, sphere_tables
 from multi_bodies.files.input_options import read_input_file
-from multi_bodies.files.structure_files import read_vertex_file, write_clones_file, write_vertex_file
+from multi_bodies.files.snapshots import write_clones_file
+from multi_bodies.files.structure_files import read_vertex_file, write_vertex_file
 from multi_bodies.files.structure_generators import calibrated_shell as _calibrated_shell
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

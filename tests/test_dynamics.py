@@ -17,7 +17,8 @@ import mobility
 from body.body import Body, bodies_to_arrays
 from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies.files import structure_generators as gen
-from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
+from multi_bodies.files.snapshots import write_clones_file
+from multi_bodies.files.structure_files import write_vertex_file
 from multi_bodies.solver.system import System
 from quaternion_integrator.schemes import make_scheme
 from utils import UserInputError
@@ -128,9 +129,8 @@ def test_output_files(tmp_path, monkeypatch):
     assert (tmp_path / 'run.inputfile').read_text() == (tmp_path / 'input.dat').read_text()
     assert (tmp_path / 'run.bodies_info').read_text().splitlines()[3].split() == ['num_bodies', '1']
     state = np.random.default_rng(7).bit_generator.state
-    import pickle
-    with open(tmp_path / 'run.random_state', 'rb') as f:
-        assert pickle.load(f) == state
+    from multi_bodies.run.run_output import read_random_state
+    assert read_random_state(str(tmp_path / 'run.random_state')) == state
 
 
 # ------------------------------------------------------------------ laws

@@ -16,7 +16,6 @@ import importlib.util
 import io
 import json
 import os
-import pickle
 import shutil
 import textwrap
 
@@ -26,7 +25,9 @@ import pytest
 from multi_bodies.ensembles import ensemble_runner as runner
 from multi_bodies.ensembles import ensemble_statistics as stats
 from multi_bodies.run import run_output
-from utils import UserInputError, read_clones_frame, read_clones_frames as read_clones_series, read_config_frames as read_config_series
+from utils import UserInputError
+from multi_bodies.files.snapshots import (read_clones_frame, read_clones_frames as read_clones_series,
+                                          read_config_frames as read_config_series)
 
 # The scheme of the test scene.  The stochastic schemes are not on main yet
 # (kT and seed have no effect on a deterministic run); once they are, switch
@@ -156,8 +157,7 @@ def test_seeds_distinct_reproducible_and_recorded(serial, scene, tmp_path):
         folder = os.path.join(plan['output_dir'], replica['folder'])
         assert 'seed %d\n' % replica['seed'] in open(os.path.join(folder, 'input.dat')).read()
         # the seed reached the run: its generator starts where default_rng(seed) starts
-        with open(os.path.join(folder, 'run.random_state'), 'rb') as f:
-            state = pickle.load(f)
+        state = run_output.read_random_state(os.path.join(folder, 'run.random_state'))
         assert state == np.random.default_rng(replica['seed']).bit_generator.state
 
 
@@ -315,11 +315,7 @@ def cut_replica(plan, tmp_path):
     spec['input_sha256'] = runner._sha256(text)
     restart = folder / 'run.restart'
     data = restart.read_bytes()
-    ends = []
-    with open(restart, 'rb') as f:
-        while f.tell() < len(data):
-            pickle.load(f)
-            ends.append(f.tell())
+    ends = [end for _, _, end in run_output.restart_index(str(restart))]
     restart.write_bytes(data[:ends[2] + (ends[3] - ends[2]) // 2])  # records of steps 0, 2, 4 and half of 6
     for step in (6, 8, 10):
         os.remove(folder / run_output.clones_name('run', 'spheres', step))

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text, read_input_file
-from multi_bodies.files.structure_files import (read_body_table, read_clones_file, read_slip_file, read_vertex_file,
-                                          write_clones_file, write_vertex_file)
+from multi_bodies.files.snapshots import read_clones_file, write_clones_file
+from multi_bodies.files.structure_files import read_body_table, read_slip_file, read_vertex_file, write_vertex_file
 from multi_bodies.files import structure_generators as gen
 from utils import UserInputError
 

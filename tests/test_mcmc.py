@@ -11,7 +11,6 @@ control (kT wrong by a factor) that must fail the same check.
 """
 import importlib
 import os
-import pickle
 import re
 import shutil
 from pathlib import Path
@@ -24,7 +23,9 @@ from many_bodyMCMC import mcmc_energy as me
 from many_bodyMCMC.sampler import MetropolisSampler
 from multi_bodies.files import structure_generators as gen
 from multi_bodies.multi_bodies_functions import minimum_image
-from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
+from multi_bodies.files.snapshots import write_clones_file
+from multi_bodies.files.structure_files import write_vertex_file
+from multi_bodies.run import run_output
 from quaternion_integrator.quaternion import rotation_matrices
 from utils import UserInputError
 
@@ -416,8 +417,8 @@ def test_acceptance_ratio_in_a_linear_potential(tmp_path, monkeypatch, capsys):
         assert 'run.' + suffix in names
     assert [n for n in names if n.endswith('.clones')] == ['run.blob.%08d.clones' % s for s in range(0, 4001, 1000)]
     assert (tmp_path / 'data/run.inputfile').read_text() == (tmp_path / 'input.dat').read_text()
-    with open(tmp_path / 'data/run.random_state', 'rb') as f:
-        assert pickle.load(f) == np.random.default_rng(5).bit_generator.state
+    assert run_output.read_random_state(str(tmp_path / 'data/run.random_state')) == \
+        np.random.default_rng(5).bit_generator.state
     assert float((tmp_path / 'data/run.time').read_text()) > 0
 
 

@@ -21,7 +21,7 @@ import pytest
 import utils
 from multi_bodies.run import run_output
 from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text
-from multi_bodies.files.structure_files import read_clones_file
+from multi_bodies.files.snapshots import read_clones_file
 
 from run_scenes import (REPO_ROOT, SCRIPT_DIR, add_generated_inputs, copy_scene, edit_input, run_in_process,
                         snapshot_files, start_child)

@@ -359,7 +359,8 @@ def test_in_plane_diffusion_equals_kT_mean_parallel_mobility():
 # ====================================================================== reproducibility and exact restart
 def write_scene(tmp_path, scheme, n_steps, extra=None, initial_step=0):
     bodies = equilibrium_blobs(6, 300) if 'rollers' in scheme else None
-    from multi_bodies.files.structure_files import write_clones_file, write_vertex_file
+    from multi_bodies.files.snapshots import write_clones_file
+    from multi_bodies.files.structure_files import write_vertex_file
     if 'rollers' in scheme:
         write_vertex_file(tmp_path / 'blob.vertex', np.zeros((1, 3)))
         write_clones_file(tmp_path / 'blobs.clones', np.array([b.location for b in bodies]),

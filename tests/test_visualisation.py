@@ -20,7 +20,9 @@ import pytest
 
 import utils
 from body.body import Body
-from multi_bodies.files.structure_files import read_clones_file, read_vertex_file, write_clones_file, write_vertex_file
+from multi_bodies.files import snapshots as snapshot_files
+from multi_bodies.files.snapshots import read_clones_file, write_clones_file
+from multi_bodies.files.structure_files import read_vertex_file, write_vertex_file
 from multi_bodies.run.vtk_output import periodic_shifts
 
 REPO = Path(__file__).resolve().parents[1]
@@ -298,7 +300,7 @@ def test_config_reader_drops_an_incomplete_last_snapshot(tmp_path):
     text = ''.join('3\n' + ''.join(' '.join(repr(float(v)) for v in row) + '\n' for row in snap) for snap in snapshots)
     text += '3\n' + ' '.join(repr(float(v)) for v in snapshots[0][0]) + '\n'  # a stop while the fourth was written
     (tmp_path / 'run.a.config').write_text(text)
-    locations, orientations = utils.read_config_series(str(tmp_path / 'run.a.config'))
+    locations, orientations = snapshot_files.read_config_series(str(tmp_path / 'run.a.config'))
     assert locations.shape == (3, 3, 3) and orientations.shape == (3, 3, 4)
     assert np.allclose(locations, np.array(snapshots)[:, :, :3], rtol=1e-15, atol=0)
     assert np.allclose(orientations, np.array(snapshots)[:, :, 3:], rtol=1e-15, atol=1e-16)
@@ -308,12 +310,12 @@ def test_clones_series_reader_sorts_steps_and_ignores_partial_files(tmp_path):
     for step in (123456789, 20, 3):
         write_clones_file(tmp_path / ('run.a.%s.clones' % str(step).zfill(8)), [[step, 0, 1]], [[2, 0, 0, 0]])
     (tmp_path / 'run.a.00000040.clones.part').write_text('1\n')
-    steps, locations, orientations = utils.read_clones_series(str(tmp_path / 'run'), 'a')
+    steps, locations, orientations = snapshot_files.read_clones_series(str(tmp_path / 'run'), 'a')
     assert steps.tolist() == [3, 20, 123456789]
     assert locations[:, 0, 0].tolist() == [3, 20, 123456789]
     assert np.allclose(orientations[:, 0], [1, 0, 0, 0])  # normalised as the structure reader does
     with pytest.raises(utils.UserInputError, match='saved steps are 3, 20, 123456789'):
-        utils.read_clones_series(str(tmp_path / 'run'), 'a', steps=[7])
+        snapshot_files.read_clones_series(str(tmp_path / 'run'), 'a', steps=[7])
 
 
 # ------------------------------------------------------------------ pictures

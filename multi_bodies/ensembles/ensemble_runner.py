@@ -256,7 +256,30 @@ def read_manifest(output_dir):
     if not isinstance(manifest, dict) or 'replicas' not in manifest:
         raise UserInputError('%s is not an ensemble manifest (no replica list)' % path)
     manifest['output_dir'] = os.path.abspath(output_dir)
+    for point in manifest.get('points') or []:
+        _check_inside(manifest['output_dir'], point.get('name') if isinstance(point, dict) else None,
+                      'point name', path)
+    for replica in manifest['replicas']:
+        _check_inside(manifest['output_dir'], replica.get('folder') if isinstance(replica, dict) else None,
+                      'replica folder', path)
     return manifest
+
+
+def _check_inside(output_dir, name, what, manifest_path):
+    """Refuse a ``name`` from the manifest that is not a relative path inside ``output_dir`` (``../..``, ``/x``).
+
+    The manifest is data: a name that would make the runner or ``--aggregate``
+    read or write outside the ensemble folder is a UserInputError.
+    """
+    root = os.path.realpath(output_dir)
+    ok = isinstance(name, str) and name and not os.path.isabs(name)
+    if ok:
+        target = os.path.realpath(os.path.join(root, name))
+        ok = target != root and os.path.commonpath([root, target]) == root
+    if not ok:
+        raise UserInputError('%s: the %s %r is not a folder inside the ensemble folder %s; the manifest was '
+                             'changed by hand or is not this ensemble\'s, so nothing is read or written'
+                             % (manifest_path, what, name, output_dir))
 
 
 def write_plan(plan):
@@ -380,21 +403,6 @@ def is_finished(spec):
 
 
 # ------------------------------------------------------------------ one replica (the task)
-def _complete_records(path):
-    """(records, end offset of the last complete one) of a restart file."""
-    import pickle
-    records, end = [], 0
-    with open(path, 'rb') as f:
-        while True:
-            try:
-                record = pickle.load(f)
-            except Exception:  # EOF, or a record cut by a hard stop
-                break
-            records.append(record)
-            end = f.tell()
-    return records, end
-
-
 def prepare_resume(options):
     """Step to resume a killed replica from (0: start afresh), after trimming what the kill left half-written.
 
@@ -404,24 +412,20 @@ def prepare_resume(options):
     ``.config`` is cut where snapshot k starts (the resumed run writes it
     again), so the resumed outputs equal those of an undisturbed run.
     """
+    from multi_bodies.files import snapshots
     from multi_bodies.run import run_output
     path = options.output_name + run_output.RESTART_SUFFIX
     if not os.path.isfile(path):
         return 0
-    records, end = _complete_records(path)
-    records = [r for r in records if isinstance(r, dict) and isinstance(r.get('step'), int)]
-    if not records or records[-1]['step'] <= 0:
+    last, end = run_output.last_valid_restart_record(path)  # damaged or cut records: reported and dropped
+    if last is None or not isinstance(last.get('step'), int) or last['step'] <= 0:
         return 0
-    last = records[-1]
     if os.path.getsize(path) != end:
         with open(path, 'r+b') as f:
             f.truncate(end)
     if options.save_clones == 'one_file':
         for structure_id, offset in (last.get('config_offsets') or {}).items():
-            config = run_output.config_name(options.output_name, structure_id)
-            if os.path.isfile(config) and os.path.getsize(config) > offset:
-                with open(config, 'r+b') as f:
-                    f.truncate(offset)
+            snapshots.truncate_config(snapshots.config_name(options.output_name, structure_id), offset)
     return int(last['step'])
 
 
@@ -676,8 +680,34 @@ def thread_environment(threads):
     return {'OMP_NUM_THREADS': value, 'OPENBLAS_NUM_THREADS': value, 'MKL_NUM_THREADS': value}
 
 
-def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address=':8787'):
+SCRATCH_NAME = 'dask-scratch'
+
+
+def scratch_directory(output_dir):
+    """Dask's scratch space of a local cluster: ``output_dir/dask-scratch`` (not a shared /tmp folder)."""
+    return os.path.join(os.path.abspath(output_dir), SCRATCH_NAME)
+
+
+def local_address(address):
+    """``address`` of a local dashboard bound to this machine only: ':8787' -> '127.0.0.1:8787' (None stays None).
+
+    A bare port (Dask's ':8787') would listen on every interface, so anyone
+    on the network could watch and drive the cluster; give a host
+    explicitly (``--dashboard-address 0.0.0.0:8787``) to serve it wider.
+    """
+    if address is None:
+        return None
+    address = str(address)
+    return '127.0.0.1' + address if address.startswith(':') else address
+
+
+def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address=':8787', local_directory=None):
     """A ``distributed.LocalCluster`` of ``workers`` processes, one task thread each.
+
+    The scheduler and the dashboard listen on 127.0.0.1 only (a bare port
+    ``:8787`` becomes ``127.0.0.1:8787``; see ``local_address``).  Dask's
+    scratch space goes to ``local_directory`` (the ensemble passes a folder
+    inside its output folder; None: Dask's default under the temporary folder).
 
     Every worker gets ``omp_threads`` OpenMP/BLAS threads (default: the
     machine's cores divided by ``workers``, at least 1), set before the
@@ -694,7 +724,8 @@ def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address='
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries),
                           'distributed.nanny.pre-spawn-environ': environment}):
         return distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=dashboard_address)
+                                        host='127.0.0.1', dashboard_address=local_address(dashboard_address),
+                                        local_directory=local_directory)
 
 
 JOBQUEUE_CLASSES = {'slurm': 'SLURMCluster', 'pbs': 'PBSCluster', 'lsf': 'LSFCluster'}

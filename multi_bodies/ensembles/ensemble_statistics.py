@@ -32,9 +32,9 @@ import os
 
 import numpy as np
 
-import utils
 from quaternion_integrator.quaternion import rotation_matrices as _rotation_matrices
 from multi_bodies.ensembles import ensemble_runner
+from multi_bodies.files import snapshots
 from multi_bodies.run import run_output
 from multi_bodies.files.input_options import parse_input_text
 from utils import UserInputError
@@ -86,9 +86,9 @@ def replica_trajectories(output_dir, replica):
     trajectories = {}
     for structure_id in dict.fromkeys(spec.ID for spec in options.structures):
         if options.save_clones == 'one_file':
-            frames = utils.read_config_frames(run_output.config_name(output_name, structure_id))
+            frames = snapshots.read_config_frames(snapshots.config_name(output_name, structure_id))
         else:
-            frames = utils.read_clones_frames(output_name, structure_id)[1]
+            frames = snapshots.read_clones_frames(output_name, structure_id)[1]
         trajectories[structure_id] = frames
     return options, output_name, trajectories
 

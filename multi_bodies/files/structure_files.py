@@ -8,7 +8,8 @@ lines are skipped.
   positions in the body frame.
 * ``.clones``: first line the number of bodies; then one line per body
   ``x y z s p1 p2 p3`` (location and scalar-first quaternion, normalised
-  when read).
+  when read).  Its reader and writer are in ``snapshots.py`` (with the
+  saved snapshots of runs), built on ``_read_counted_table`` here.
 * ``.slip``: first line the number of blobs; then ``n`` lines ``ux uy uz``,
   the active slip of each blob in the body frame.
 * force file (scheme ``mobility``): one line per body ``Fx Fy Fz Tx Ty Tz``.
@@ -138,20 +139,6 @@ def read_vertex_file(path, referenced_from=None):
     return blobs
 
 
-def read_clones_file(path, referenced_from=None):
-    """Body locations, shape (Nb, 3), and normalised quaternions, shape (Nb, 4)."""
-    table = _read_counted_table(path, 'clones', 7, 'body location and quaternion x y z s p1 p2 p3',
-                                referenced_from, exact_count=False)
-    quaternions = table[:, 3:].copy()
-    scale = np.max(np.abs(quaternions), axis=1)
-    if np.any(scale == 0.0):
-        raise UserInputError("%s: body %d has a zero quaternion; give a unit quaternion s p1 p2 p3"
-                             % (path, int(np.argmax(scale == 0.0))))
-    tiny = scale < 1e-100  # squares would underflow: rescale those rows first (others as published)
-    quaternions[tiny] /= scale[tiny, None]
-    return table[:, :3].copy(), quaternions / np.linalg.norm(quaternions, axis=1)[:, None]
-
-
 def read_slip_file(path, referenced_from=None):
     """Active slip of every blob in the body frame, shape (n, 3)."""
     return _read_counted_table(path, 'slip', 3, 'blob slip ux uy uz', referenced_from, exact_count=True)
@@ -186,19 +173,3 @@ def write_vertex_file(path, reference_configuration, comment=None):
         f.write('%d\n' % blobs.shape[0])
         for x, y, z in blobs:
             f.write('%s %s %s\n' % (repr(float(x)), repr(float(y)), repr(float(z))))
-
-
-def write_clones_file(path, locations, orientations, comment=None):
-    """Write locations (Nb, 3) and quaternions (Nb, 4) as a ``.clones`` file (round-trip precision).
-
-    ``comment``: text written first, each line behind ``# ``.
-    """
-    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
-    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    with open(path, 'w') as f:
-        if comment:
-            for line in comment.splitlines():
-                f.write('# %s\n' % line)
-        f.write('%d\n' % locations.shape[0])
-        for row in np.concatenate((locations, orientations), axis=1):
-            f.write(' '.join(repr(float(v)) for v in row) + '\n')

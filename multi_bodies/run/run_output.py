@@ -6,8 +6,11 @@ the same files with the same names (the manual's section 5.1):
 
 * ``output_name.inputfile``: a copy of the input file (a restart appends the
   new input below a separator line, so both segments are kept);
-* ``output_name.random_state``: the pickled state of the run's generator
-  at the start of the run (or of the restart segment);
+* ``output_name.random_state``: the state of the run's generator at the
+  start of the run (or of the restart segment), as JSON text
+  (``write_state_text``; arrays as base64 of their bytes): reading it never
+  runs code.  A pickled numpy ``RandomState`` state of the published code is
+  read with a restricted unpickler that admits only arrays and dtypes;
 * ``output_name.<ID>.<step, 8 digits>.clones`` per structure and saved step
   (``save_clones one_file_per_step``), or ``output_name.<ID>.config`` with all
   snapshots of a structure one after another (``save_clones one_file``);
@@ -17,7 +20,10 @@ the same files with the same names (the manual's section 5.1):
   scheme history (Adams-Bashforth previous velocities, the configuration the
   preconditioner was built at, ...) and where the snapshot starts inside the
   ``.config`` files (restart from ``save_clones one_file``).  Records are
-  appended, so what was saved before a hard stop stays readable;
+  appended, each a fixed header (step, length, SHA-256 of the payload) and
+  a JSON payload, so what was saved before a hard stop stays readable, one
+  record is found by reading the headers only, and a record cut by a hard
+  stop or with flipped bits is refused or skipped with a message;
 * ``output_name.info``: counters (invalid configurations, iterations of the
   deterministic solves and of the noise), rewritten at every save, so even a
   killed run loses at most one save interval;
@@ -26,31 +32,27 @@ the same files with the same names (the manual's section 5.1):
 
 Nothing here knows about physics: the caller passes arrays and counters.
 """
+import base64
+import hashlib
 import io
+import json
 import os
 import pickle
 import shutil
 import signal
+import struct
 import sys
 import threading
 import time
 
 import numpy as np
 
-from utils import UserInputError
+from utils import UserInputError, warn_user
+from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, config_name,  # noqa: F401
+                                          format_clones, read_config_snapshot, truncate_config,
+                                          write_clones_file)
 
 RESTART_SUFFIX = '.restart'
-
-
-# ------------------------------------------------------------------ names
-def clones_name(output_name, structure_id, step):
-    """Name of a saved snapshot: ``output_name.ID.<step, 8 digits>.clones`` (SPEC §2.1)."""
-    return '%s.%s.%s.clones' % (output_name, structure_id, str(step).zfill(8))
-
-
-def config_name(output_name, structure_id):
-    """Name of the ``save_clones one_file`` series of one structure: ``output_name.ID.config``."""
-    return '%s.%s.config' % (output_name, structure_id)
 
 
 # ------------------------------------------------------------------ set-up of the output folder
@@ -88,29 +90,181 @@ def copy_input_file(input_file, output_name, restart=False):
     return copy
 
 
-# ------------------------------------------------------------------ random generator
-def load_random_state(path, where='random_state'):
-    """The generator state in ``path``: the dict this package writes, or the published legacy tuple.
+# ------------------------------------------------------------------ run state as data (never code)
+# The generator state and the restart records are written as JSON: dicts,
+# lists, strings, ints (any size: PCG64 state words) and floats (repr, so they
+# round-trip exactly); a numpy array or scalar becomes {"__ndarray__": dtype,
+# shape, base64 of its bytes}, a tuple {"__tuple__": [...]}, a dict whose keys
+# are not all strings {"__dict__": [[key, value], ...]}.  Reading them builds
+# only these types: no file can make the reader run code.
 
-    Returns a ``numpy.random.Generator``.  Raises UserInputError (naming
-    ``where``) when the file is missing or does not hold a numpy state.
+STATE_FORMAT = 'rigid_multiblob run state'
+STATE_VERSION = 1
+
+
+def encode_state(value):
+    """``value`` (nested dict/list/tuple of None, bool, int, float, str, numpy arrays and scalars) as JSON data.
+
+    Raises TypeError for anything else (an object the restart cannot hold as data).
+    """
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (np.ndarray, np.generic)):
+        array = np.asarray(value)
+        if array.dtype.hasobject or array.dtype.fields is not None:
+            raise TypeError('cannot save an array of dtype %s as run state' % array.dtype)
+        return {'__ndarray__': {'dtype': array.dtype.str, 'shape': list(array.shape),
+                                'scalar': isinstance(value, np.generic),
+                                'data': base64.b64encode(np.ascontiguousarray(array).tobytes()).decode('ascii')}}
+    if isinstance(value, int):  # also subclasses (IntEnum): their plain value
+        return int(value)
+    if isinstance(value, float):
+        return float(value)
+    if isinstance(value, tuple):
+        return {'__tuple__': [encode_state(v) for v in value]}
+    if isinstance(value, list):
+        return [encode_state(v) for v in value]
+    if isinstance(value, dict):
+        if all(isinstance(k, str) and not k.startswith('__') for k in value):
+            return {k: encode_state(v) for k, v in value.items()}
+        return {'__dict__': [[encode_state(k), encode_state(v)] for k, v in value.items()]}
+    raise TypeError('cannot save %s as run state (only numbers, strings, arrays, lists, tuples and dicts)'
+                    % type(value).__name__)
+
+
+def decode_state(data):
+    """Inverse of ``encode_state`` (arrays come back writable, with their dtype and shape)."""
+    if isinstance(data, list):
+        return [decode_state(v) for v in data]
+    if not isinstance(data, dict):
+        return data
+    if len(data) == 1:
+        (key, inner), = data.items()
+        if key == '__ndarray__':
+            dtype = np.dtype(str(inner['dtype']))
+            if dtype.hasobject or dtype.fields is not None:
+                raise ValueError('run state holds an array of dtype %s' % dtype)
+            shape = tuple(int(n) for n in inner['shape'])
+            array = np.frombuffer(base64.b64decode(inner['data']), dtype=dtype).reshape(shape).copy()
+            return array[()] if inner.get('scalar') else array
+        if key == '__tuple__':
+            return tuple(decode_state(v) for v in inner)
+        if key == '__dict__':
+            return {decode_state(k): decode_state(v) for k, v in inner}
+    return {k: decode_state(v) for k, v in data.items()}
+
+
+def state_to_bytes(value):
+    """UTF-8 JSON text of ``encode_state(value)``."""
+    return json.dumps(encode_state(value), separators=(',', ':')).encode('utf-8')
+
+
+def state_from_bytes(data):
+    """Inverse of ``state_to_bytes``; raises ValueError for text that is not such JSON."""
+    return decode_state(json.loads(data.decode('utf-8')))
+
+
+# ------------------------------------------------------------------ random generator
+class _PublishedStateUnpickler(pickle.Unpickler):
+    """Unpickler for the published ``numpy.random.RandomState().get_state()`` pickle, and nothing else.
+
+    ``find_class`` admits only numpy's array reconstruction (``_reconstruct``,
+    ``_frombuffer``, ``ndarray``), ``dtype`` and the latin-1 bytes of Python 3
+    pickles: a pickle that names any other callable (the way a pickle runs
+    code) is refused before anything is called.
+    """
+
+    _RECONSTRUCT = np.zeros(1).__reduce__()[0]        # numpy's _reconstruct (protocols 0 to 4)
+    _FROMBUFFER = np.zeros(1).__reduce_ex__(5)[0]     # numpy's _frombuffer (protocol 5)
+
+    @staticmethod
+    def _latin1_bytes(text, encoding):
+        """``_codecs.encode`` as Python 3 pickles (protocols 0-2) use it for bytes: latin-1 only."""
+        if encoding not in ('latin1', 'latin-1') or not isinstance(text, str):
+            raise pickle.UnpicklingError('_codecs.encode with %r is not part of a numpy random state' % encoding)
+        return text.encode('latin1')
+
+    ALLOWED = {('numpy.core.multiarray', '_reconstruct'): _RECONSTRUCT,
+               ('numpy._core.multiarray', '_reconstruct'): _RECONSTRUCT,
+               ('numpy.core.numeric', '_frombuffer'): _FROMBUFFER,
+               ('numpy._core.numeric', '_frombuffer'): _FROMBUFFER,
+               ('numpy', 'ndarray'): np.ndarray,
+               ('numpy', 'dtype'): np.dtype,
+               ('_codecs', 'encode'): _latin1_bytes}
+
+    def find_class(self, module, name):
+        try:
+            return self.ALLOWED[(module, name)]
+        except KeyError:
+            raise pickle.UnpicklingError('%s.%s is not part of a numpy random state' % (module, name))
+
+
+def read_published_state(data):
+    """The published legacy state from pickle bytes: ('MT19937', keys uint32 (624,), pos, has_gauss, gauss).
+
+    Raises ValueError when ``data`` is not exactly such a tuple (or names
+    anything but numpy arrays and dtypes).
+    """
+    state = _PublishedStateUnpickler(io.BytesIO(data), encoding='latin1').load()
+    if not (isinstance(state, tuple) and len(state) == 5 and state[0] in ('MT19937', b'MT19937')):
+        raise ValueError('not a numpy RandomState state (MT19937, keys, pos, has_gauss, cached_gaussian)')
+    keys = state[1]
+    if not (isinstance(keys, np.ndarray) and keys.shape == (624,) and keys.dtype.kind in 'ui'):
+        raise ValueError('the MT19937 keys are not 624 unsigned 32-bit integers')
+    pos, has_gauss, gauss = state[2], state[3], state[4]
+    if not (isinstance(pos, (int, np.integer)) and 0 <= int(pos) <= 624 and isinstance(has_gauss, (int, np.integer))
+            and isinstance(gauss, (float, int, np.floating))):
+        raise ValueError('pos, has_gauss or cached_gaussian of the MT19937 state is not a number in range')
+    return ('MT19937', keys.astype(np.uint32), int(pos), int(has_gauss), float(gauss))
+
+
+def read_random_state(path, where='random_state'):
+    """The generator state in ``path`` as a dict (``bit_generator.state``), or the published tuple.
+
+    A file of this package is JSON text (``save_random_state``); a file of
+    the published code is a pickle of ``RandomState().get_state()``, read by
+    the restricted ``_PublishedStateUnpickler`` and returned as that 5-tuple.
+    Raises UserInputError (naming ``where``) for a missing file or anything else.
     """
     try:
         with open(path, 'rb') as f:
-            state = pickle.load(f)
+            data = f.read()
     except FileNotFoundError:
         raise UserInputError('%s: the random state file %s does not exist' % (where, path))
     except IsADirectoryError:
         raise UserInputError('%s: the random state file %s is a folder' % (where, path))
-    except Exception as err:  # not a pickle: any unpickling error
+    except OSError as err:
+        raise UserInputError('%s: cannot read the random state file %s (%s)' % (where, path, err.strerror or err))
+    try:
+        if data.lstrip()[:1] == b'{':
+            document = json.loads(data.decode('utf-8'))
+            if not (isinstance(document, dict) and document.get('format') == STATE_FORMAT):
+                raise ValueError('JSON without "format": "%s"' % STATE_FORMAT)
+            return decode_state(document['state'])
+        return read_published_state(data)
+    except Exception as err:  # any parse error: the file is refused, nothing in it was run
         raise UserInputError('%s: %s is not a random state file written by this package or the published code '
-                             '(%s: %s); give a .random_state file, or use seed instead'
-                             % (where, path, type(err).__name__, err))
-    if isinstance(state, tuple) and state and state[0] == 'MT19937':
-        # numpy.random.get_state() of the published code: ('MT19937', keys, pos, has_gauss, cached_gaussian)
-        state = {'bit_generator': 'MT19937', 'state': {'key': np.asarray(state[1]), 'pos': int(state[2])}}
+                             '(%s: %s); nothing in it was run or used. Give a .random_state file, or use seed '
+                             'instead' % (where, path, type(err).__name__, err))
+
+
+def load_random_state(path, where='random_state'):
+    """The ``numpy.random.Generator`` of the state in ``path`` (see ``read_random_state``).
+
+    A published RandomState state (MT19937) gives a Generator on an MT19937
+    bit generator with the same keys and position; its normal and uniform
+    draws are not those RandomState made from it, so a notice says so.
+    Raises UserInputError (naming ``where``) for a file that holds no valid state.
+    """
+    state = read_random_state(path, where)
+    if isinstance(state, tuple):
+        warn_user('%s: %s holds a published numpy RandomState state (MT19937, position %d); the run uses an '
+                  'MT19937 generator started at that state, whose draws differ from those of the published code'
+                  % (where, path, state[2]))
+        state = {'bit_generator': 'MT19937', 'state': {'key': state[1], 'pos': state[2]}}
     name = state.get('bit_generator') if isinstance(state, dict) else None
-    if not (isinstance(name, str) and isinstance(getattr(np.random, name, None), type)):
+    if not (isinstance(name, str) and isinstance(getattr(np.random, name, None), type)
+            and issubclass(getattr(np.random, name), np.random.BitGenerator)):
         raise UserInputError('%s: %s does not hold a numpy random state; give a .random_state file, or use seed '
                              'instead' % (where, path))
     try:
@@ -136,8 +290,10 @@ def make_generator(options):
 
 
 def save_random_state(path, rng):
-    """Pickle ``rng.bit_generator.state`` to ``path`` (readable by ``load_random_state``)."""
-    atomic_write(path, pickle.dumps(rng.bit_generator.state), binary=True)
+    """Write ``rng.bit_generator.state`` to ``path`` as JSON (readable by ``load_random_state``)."""
+    document = {'format': STATE_FORMAT, 'version': STATE_VERSION, 'kind': 'random_state',
+                'state': encode_state(rng.bit_generator.state)}
+    atomic_write(path, json.dumps(document, indent=1) + '\n')
 
 
 # ------------------------------------------------------------------ files
@@ -147,21 +303,6 @@ def atomic_write(path, data, binary=False):
     with open(part, 'wb' if binary else 'w') as f:
         f.write(data)
     os.replace(part, path)
-
-
-def format_clones(locations, orientations):
-    """Text of one snapshot: the count line, then ``x y z s p1 p2 p3`` per body with repr precision.
-
-    locations: (n, 3); orientations: (n, 4) scalar-first quaternions.
-    """
-    rows = np.concatenate((np.asarray(locations, dtype=float).reshape(-1, 3),
-                           np.asarray(orientations, dtype=float).reshape(-1, 4)), axis=1)
-    out = io.StringIO()
-    out.write('%d\n' % rows.shape[0])
-    for row in rows:
-        out.write(' '.join(repr(float(v)) for v in row))
-        out.write('\n')
-    return out.getvalue()
 
 
 def write_bodies_info(path, types, num_blobs):
@@ -229,6 +370,93 @@ def append_time(path, elapsed, restart=False, note=None):
 
 
 # ------------------------------------------------------------------ snapshots and restart records
+# ``output_name.restart``: RESTART_MAGIC, then records appended one after the
+# other.  A record is a header RECORD_HEADER (b'REC1', step int64, payload
+# length uint64, SHA-256 of the payload) and the payload, UTF-8 JSON of
+# {'step', 'config_offsets', 'state'} (``state_to_bytes``).  Finding the
+# record of one step reads the headers only (seeking over payloads); a
+# record's checksum is checked before it is used.
+RESTART_MAGIC = b'RMB-RESTART 1\n'
+RECORD_HEADER = struct.Struct('>4sqQ32s')
+RECORD_TAG = b'REC1'
+
+
+class RestartFileError(UserInputError):
+    """A ``.restart`` file that is not one of this package (an earlier pickle-based one, or anything else)."""
+
+
+def _not_a_restart_file(path):
+    return RestartFileError(
+        '%s is not a restart file of this version (an older .restart was a Python pickle, which is not read '
+        'because loading a pickle can run code); nothing in it was used. Rename or remove it to restart from '
+        'the snapshot alone (the run continues without the scheme history and generator state of that step)'
+        % path)
+
+
+def restart_index(path, report=warn_user):
+    """Headers of the records of ``path``: list of (step, payload start, record end) in file order.
+
+    Reads only the headers.  A record cut by a hard stop, or bytes that are
+    not a record header, end the list; ``report`` gets one message saying
+    where.  Raises RestartFileError when ``path`` does not start with RESTART_MAGIC.
+    """
+    entries = []
+    size = os.path.getsize(path)
+    with open(path, 'rb') as f:
+        if f.read(len(RESTART_MAGIC)) != RESTART_MAGIC:
+            raise _not_a_restart_file(path)
+        position = len(RESTART_MAGIC)
+        while position < size:
+            header = f.read(RECORD_HEADER.size)
+            if len(header) < RECORD_HEADER.size:
+                report('%s: the record at byte %d is cut short (a hard stop while saving?); it is ignored'
+                       % (path, position))
+                break
+            tag, step, length, _ = RECORD_HEADER.unpack(header)
+            start = position + RECORD_HEADER.size
+            if tag != RECORD_TAG:
+                report('%s: byte %d does not start a record (the file is damaged); it and what follows are '
+                       'ignored' % (path, position))
+                break
+            if start + length > size:
+                report('%s: the record of step %d at byte %d is cut short (a hard stop while saving?); it is '
+                       'ignored' % (path, step, position))
+                break
+            entries.append((int(step), start, start + int(length)))
+            position = start + int(length)
+            f.seek(position)
+    return entries
+
+
+def read_restart_entry(path, entry):
+    """The record of ``entry`` (from ``restart_index``) as a dict, or None when its checksum does not match."""
+    step, start, end = entry
+    with open(path, 'rb') as f:
+        f.seek(start - RECORD_HEADER.size)
+        _, _, _, digest = RECORD_HEADER.unpack(f.read(RECORD_HEADER.size))
+        payload = f.read(end - start)
+    if hashlib.sha256(payload).digest() != digest:
+        return None
+    record = state_from_bytes(payload)
+    if not (isinstance(record, dict) and record.get('step') == step):
+        return None
+    return record
+
+
+def last_valid_restart_record(path, report=warn_user):
+    """(record, end offset) of the last record of ``path`` whose checksum matches; (None, start of records).
+
+    Damaged records after it are reported and left out.
+    """
+    entries = restart_index(path, report)
+    for entry in reversed(entries):
+        record = read_restart_entry(path, entry)
+        if record is not None:
+            return record, entry[2]
+        report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+    return None, len(RESTART_MAGIC)
+
+
 class SnapshotWriter:
     """Writes the configuration of every structure type at the saved steps, and the restart records.
 
@@ -255,72 +483,74 @@ class SnapshotWriter:
             os.remove(self.restart_path)
         if restart and restart_from and save_clones == 'one_file':
             for structure_id, offset in (restart_from.get('config_offsets') or {}).items():
-                path = config_name(output_name, structure_id)
-                if os.path.isfile(path) and os.path.getsize(path) > offset:
-                    os.truncate(path, offset)
+                truncate_config(config_name(output_name, structure_id), offset)
 
     def save(self, step, locations, orientations, restart_state=None):
         """Write snapshot ``step`` of all structures; then append its restart record.
 
-        locations (Nb, 3), orientations (Nb, 4); ``restart_state``: any
-        picklable object the run needs to continue exactly from this step
-        (generator state, scheme history).
+        locations (Nb, 3), orientations (Nb, 4); ``restart_state``: what the
+        run needs to continue exactly from this step (generator state, scheme
+        history), nested dicts/lists/tuples of numbers, strings and arrays
+        (``encode_state``).
         """
         offsets = {}
         start = 0
         for structure_id, count in self.types:
-            text = format_clones(locations[start:start + count], orientations[start:start + count])
+            block = slice(start, start + count)
             start += count
             if self.save_clones == 'one_file_per_step':
-                atomic_write(clones_name(self.output_name, structure_id, step), text)
+                write_clones_file(clones_name(self.output_name, structure_id, step), locations[block],
+                                  orientations[block])
             else:
-                path = config_name(self.output_name, structure_id)
-                mode = 'a' if self._started else 'w'
-                with open(path, mode) as f:
-                    offsets[structure_id] = f.tell() if mode == 'a' else 0
-                    f.write(text)
-                    f.flush()
+                offsets[structure_id] = append_config_snapshot(config_name(self.output_name, structure_id),
+                                                               locations[block], orientations[block],
+                                                               new_file=not self._started)
         self._started = True
-        record = {'step': int(step), 'config_offsets': offsets, 'state': restart_state}
+        payload = state_to_bytes({'step': int(step), 'config_offsets': offsets, 'state': restart_state})
+        header = RECORD_HEADER.pack(RECORD_TAG, int(step), len(payload), hashlib.sha256(payload).digest())
+        new = not os.path.isfile(self.restart_path) or os.path.getsize(self.restart_path) == 0
         with open(self.restart_path, 'ab') as f:
-            pickle.dump(record, f, protocol=pickle.HIGHEST_PROTOCOL)
+            f.write((RESTART_MAGIC if new else b'') + header + payload)
             f.flush()
 
 
 def read_restart_records(output_name):
-    """All complete records of ``output_name.restart`` in the order written (a truncated tail is ignored)."""
+    """All records of ``output_name.restart`` whose checksum matches, in the order written.
+
+    A record cut by a hard stop ends the list; damaged ones are skipped; both with a message.
+    """
     path = output_name + RESTART_SUFFIX
-    records = []
     if not os.path.isfile(path):
-        return records
-    with open(path, 'rb') as f:
-        while True:
-            try:
-                records.append(pickle.load(f))
-            except EOFError:
-                break
-            except Exception:  # a record cut by a hard stop: everything before it is complete
-                break
+        return []
+    records = []
+    for entry in restart_index(path):
+        record = read_restart_entry(path, entry)
+        if record is None:
+            warn_user('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+        else:
+            records.append(record)
     return records
 
 
 def restart_record(output_name, step):
-    """The last restart record saved at ``step``, or None."""
-    found = None
-    for record in read_restart_records(output_name):
-        if isinstance(record, dict) and record.get('step') == step:
-            found = record
-    return found
+    """The last restart record saved at ``step``, or None when there is none.
 
-
-def read_config_snapshot(path, offset):
-    """(locations (n, 3), orientations (n, 4)) of the snapshot starting at byte ``offset`` of a ``.config``."""
-    with open(path) as f:
-        f.seek(offset)
-        count = int(f.readline().split()[0])
-        rows = [f.readline().split() for _ in range(count)]
-    data = np.array(rows, dtype=float).reshape(count, 7)
-    return data[:, :3], data[:, 3:]
+    Only the headers are read, then that one record.  Raises UserInputError
+    when the record of ``step`` fails its checksum (flipped bits) or the
+    file is not a restart file of this package: a damaged record is never used.
+    """
+    path = output_name + RESTART_SUFFIX
+    if not os.path.isfile(path):
+        return None
+    entries = [entry for entry in restart_index(path) if entry[0] == step]
+    if not entries:
+        return None
+    record = read_restart_entry(path, entries[-1])
+    if record is None:
+        raise UserInputError('%s: the record of step %d fails its checksum (the file is damaged); restart from '
+                             'another saved step, or remove the file to restart from the snapshot alone'
+                             % (path, step))
+    return record
 
 
 # ------------------------------------------------------------------ ending a run

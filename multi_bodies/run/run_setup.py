@@ -28,9 +28,9 @@ import utils
 from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import user_hooks
-from multi_bodies.run.run_output import (RESTART_SUFFIX, clones_name, config_name, read_config_snapshot,  # noqa: F401
-                                     write_bodies_info)
-from multi_bodies.files.structure_files import read_clones_file, read_slip_file, read_vertex_file
+from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
+from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
+from multi_bodies.files.structure_files import read_slip_file, read_vertex_file
 from multi_bodies.solver.system import make_system
 
 
@@ -81,8 +81,7 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         if snapshot is None:
             locations, orientations = read_clones_file(clones, spec.where)
         else:
-            locations, orientations = snapshot
-            orientations = orientations / np.linalg.norm(orientations, axis=1)[:, None]
+            locations, orientations = snapshot  # quaternions renormalised by the reader
         slip = None
         if spec.slip_file is not None:
             slip = read_slip_file(spec.slip_file, spec.where)

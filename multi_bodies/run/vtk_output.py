@@ -45,6 +45,7 @@ import utils
 from body.body import K_dot, bodies_to_arrays
 from multi_bodies.solver import user_hooks
 from multi_bodies.run.run_setup import read_bodies
+from multi_bodies.files import snapshots as snapshot_files
 from multi_bodies.files.structure_files import read_body_table
 from quaternion_integrator.quaternion import rotation_matrices
 
@@ -385,13 +386,14 @@ def saved_snapshots(options, types):
     if options.save_clones == 'one_file':
         series = []
         for structure_id, count in types:
-            path = '%s.%s.config' % (options.output_name, structure_id)
-            series.append(utils.read_config_series(path))
+            path = snapshot_files.config_name(options.output_name, structure_id)
+            series.append(snapshot_files.read_config_series(path))
         snapshots = min(s[0].shape[0] for s in series)
         steps = np.arange(snapshots) * options.n_save
         series = [(loc[:snapshots], ori[:snapshots]) for loc, ori in series]
     elif options.save_clones == 'one_file_per_step':
-        saved = [set(utils.clones_series_steps(options.output_name, structure_id)[0]) for structure_id, _ in types]
+        saved = [set(snapshot_files.clones_series_steps(options.output_name, structure_id)[0])
+                 for structure_id, _ in types]
         common = sorted(set.intersection(*saved))
         if not common:
             raise utils.UserInputError(
@@ -401,7 +403,7 @@ def saved_snapshots(options, types):
         dropped = set.union(*saved) - set(common)
         if dropped:
             print('skipping %d step(s) not saved for every structure (a run stopped while saving?)' % len(dropped))
-        series = [utils.read_clones_series(options.output_name, structure_id, common)[1:]
+        series = [snapshot_files.read_clones_series(options.output_name, structure_id, common)[1:]
                   for structure_id, _ in types]
         steps = np.array(common, dtype=int)
     else:

@@ -1,0 +1,306 @@
+"""Data files never run code (issue 17).
+
+A pickle can run any callable while it is read (``__reduce__``).  Each file
+kind a run reads back (``.random_state``, ``.restart`` of a dynamic run, of a
+Monte Carlo run and of an ensemble replica) is planted with a pickle whose
+``__reduce__`` would create a marker folder; the run must refuse the file
+with a clear message (exit status 2, no traceback) and the marker must never
+appear.  A negative control shows that the payload is live (plain
+``pickle.loads`` does create the marker).  The published code's pickled
+``numpy.random.RandomState().get_state()`` is still accepted, by a reader
+that admits only numpy arrays and dtypes.
+"""
+import hashlib
+import importlib
+import json
+import io
+import os
+import pickle
+import shutil
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import utils  # noqa: E402
+from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
+from multi_bodies.files.snapshots import write_clones_file  # noqa: E402
+from multi_bodies.files.structure_files import write_vertex_file  # noqa: E402
+from multi_bodies.run import run_output  # noqa: E402
+from run_scenes import REPO_ROOT, copy_scene, edit_input, run_in_process  # noqa: E402
+
+MCMC_SCRIPT = importlib.import_module('many_bodyMCMC.many_body_MCMC')
+
+
+class Payload:
+    """Unpickling this calls ``os.mkdir(marker)``: the stand-in for any code a crafted file would run."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.mkdir, (self.marker,))
+
+
+def payload_bytes(marker, protocol=pickle.HIGHEST_PROTOCOL):
+    return pickle.dumps({'step': 5, 'state': Payload(marker)}, protocol=protocol)
+
+
+def assert_refused(status, out, err, marker, *words):
+    assert not os.path.exists(marker), 'the payload ran'
+    assert status == 2, (status, out[-2000:], err[-2000:])
+    assert 'Traceback' not in err and 'Traceback' not in out
+    for word in words:
+        assert word in err, err
+
+
+def test_negative_control_the_payload_is_live(tmp_path):
+    """Without the safe readers the payload runs: plain pickle.loads creates the marker."""
+    marker = tmp_path / 'marker'
+    pickle.loads(payload_bytes(marker))
+    assert marker.is_dir()
+
+
+# ------------------------------------------------------------------ .random_state
+def dynamic_scene(folder, **options):
+    copy_scene(folder)
+    edit_input(Path(folder) / 'inputfile_dynamic.dat', **options)
+    return Path(folder)
+
+
+@pytest.mark.parametrize('protocol', [0, 2, pickle.HIGHEST_PROTOCOL])
+def test_random_state_payload_never_runs(tmp_path, protocol):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    marker = tmp_path / 'marker'
+    (folder / 'evil.random_state').write_bytes(pickle.dumps(Payload(marker), protocol=protocol))
+    edit_input(folder / 'inputfile_dynamic.dat', random_state='evil.random_state')
+    status, out, err = run_in_process('dynamic', folder, 'inputfile_dynamic.dat')
+    assert_refused(status, out, err, marker, 'random_state', 'evil.random_state', 'posix.mkdir')
+    assert not (folder / 'data').exists()
+
+
+def test_random_state_payload_inside_a_published_looking_tuple_never_runs(tmp_path):
+    marker = tmp_path / 'marker'
+    state = np.random.RandomState(1).get_state()
+    path = tmp_path / 'evil.random_state'
+    path.write_bytes(pickle.dumps((state[0], state[1], state[2], state[3], Payload(marker))))
+    with pytest.raises(utils.UserInputError, match='nothing in it was run'):
+        run_output.load_random_state(str(path))
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize('protocol', [0, 2, pickle.HIGHEST_PROTOCOL])
+def test_published_random_state_pickle_is_accepted(tmp_path, protocol):
+    """The published file: a pickle of RandomState().get_state(); the same state gives the same MT19937 stream."""
+    published = np.random.RandomState(2026)
+    published.standard_normal(3)  # a state with has_gauss = 1 and pos != 624
+    state = published.get_state()
+    path = tmp_path / 'published.random_state'
+    path.write_bytes(pickle.dumps(state, protocol=protocol))
+    read = run_output.read_random_state(str(path))
+    assert read[0] == 'MT19937' and read[2:4] == state[2:4] and read[4] == state[4]
+    np.testing.assert_array_equal(read[1], state[1])
+    generator = run_output.load_random_state(str(path))
+    assert isinstance(generator.bit_generator, np.random.MT19937)
+    # numpy's law: a RandomState on the bit generator of that state draws what RandomState(2026) draws next
+    # (raw 32-bit words do not depend on the cached Gaussian)
+    np.testing.assert_array_equal(np.random.RandomState(generator.bit_generator).randint(0, 2 ** 31, 20),
+                                  published.randint(0, 2 ** 31, 20))
+
+
+def test_random_state_file_is_json_and_restores_the_generator(tmp_path):
+    rng = np.random.default_rng(11)
+    rng.standard_normal(7)
+    path = str(tmp_path / 'run.random_state')
+    run_output.save_random_state(path, rng)
+    assert open(path, 'rb').read().lstrip()[:1] == b'{'  # text, not a pickle
+    restored = run_output.load_random_state(path)
+    np.testing.assert_array_equal(restored.standard_normal(50), rng.standard_normal(50))
+    mt = np.random.Generator(np.random.MT19937(3))
+    run_output.save_random_state(path, mt)
+    np.testing.assert_array_equal(run_output.load_random_state(path).random(20), mt.random(20))
+
+
+# ------------------------------------------------------------------ .restart of a dynamic run
+@pytest.fixture
+def dynamic_run(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=5, n_save=5)
+    status, _, err = run_in_process('dynamic', folder, 'inputfile_dynamic.dat')
+    assert status == 0, err
+    edit_input(folder / 'inputfile_dynamic.dat', n_steps=6, initial_step=5)
+    return folder
+
+
+def test_dynamic_restart_payload_never_runs(dynamic_run, tmp_path):
+    marker = tmp_path / 'marker'
+    (dynamic_run / 'data' / 'run.restart').write_bytes(payload_bytes(marker))
+    status, out, err = run_in_process('dynamic', dynamic_run, 'inputfile_dynamic.dat')
+    assert_refused(status, out, err, marker, 'run.restart', 'not a restart file')
+
+
+def test_dynamic_restart_record_with_a_flipped_bit_is_refused(dynamic_run):
+    path = dynamic_run / 'data' / 'run.restart'
+    data = bytearray(path.read_bytes())
+    step, start, end = run_output.restart_index(str(path))[-1]
+    assert step == 5
+    data[(start + end) // 2] ^= 0x04
+    path.write_bytes(bytes(data))
+    status, out, err = run_in_process('dynamic', dynamic_run, 'inputfile_dynamic.dat')
+    assert status == 2 and 'Traceback' not in err and 'checksum' in err and 'step 5' in err, err
+
+
+def test_dynamic_restart_record_cut_by_a_hard_stop_is_skipped_with_a_message(dynamic_run):
+    path = dynamic_run / 'data' / 'run.restart'
+    _, start, end = run_output.restart_index(str(path))[-1]
+    path.write_bytes(path.read_bytes()[:(start + end) // 2])
+    status, out, err = run_in_process('dynamic', dynamic_run, 'inputfile_dynamic.dat')
+    assert status == 0, err
+    assert 'cut short' in err and 'no restart record' in out + err
+
+
+def test_restart_records_round_trip_exactly(tmp_path):
+    """Arrays (any dtype, shape), tuples, big ints, nan and non-string keys come back as they went in."""
+    state = {'rng': np.random.default_rng(3).bit_generator.state, 'a': np.arange(12.0).reshape(3, 4) / 7,
+             'b': (1, 2.5, None, 'x', np.float64(np.pi), np.int32(-4)), 'c': [np.nan, float('inf'), True],
+             'd': {1: 'one', (2, 3): np.zeros(0, dtype=np.uint32)}, '__e': 2 ** 130}
+    writer = run_output.SnapshotWriter(str(tmp_path / 'run'), 'one_file', [('a', 1)])
+    writer.save(0, np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), state)
+    record = run_output.restart_record(str(tmp_path / 'run'), 0)['state']
+    assert record['rng'] == state['rng'] and record['__e'] == state['__e']
+    assert record['a'].dtype == np.float64 and np.array_equal(record['a'], state['a'])
+    assert record['b'][:4] == state['b'][:4] and type(record['b'][4]) is np.float64 and record['b'][4] == np.pi
+    assert type(record['b'][5]) is np.int32 and record['b'][5] == -4
+    assert np.isnan(record['c'][0]) and record['c'][1:] == [float('inf'), True]
+    assert record['d'][1] == 'one' and record['d'][(2, 3)].dtype == np.uint32
+
+
+def test_finding_one_record_reads_headers_only(tmp_path):
+    """10,000 records: the index holds every step, and one record is found without reading the others."""
+    path = tmp_path / 'run.restart'
+    payload = b'x' * 1000
+    header = run_output.RECORD_HEADER
+    with open(path, 'wb') as f:
+        f.write(run_output.RESTART_MAGIC)
+        for step in range(10000):
+            f.write(header.pack(run_output.RECORD_TAG, step, len(payload), hashlib.sha256(payload).digest()))
+            f.write(payload)
+    entries = run_output.restart_index(str(path))
+    assert [e[0] for e in entries] == list(range(10000))
+    assert entries[-1][2] == os.path.getsize(path)
+
+
+# ------------------------------------------------------------------ .restart of a Monte Carlo run
+def test_mcmc_restart_payload_never_runs(tmp_path, monkeypatch, capsys):
+    write_vertex_file(tmp_path / 'blob.vertex', np.zeros((1, 3)))
+    write_clones_file(tmp_path / 'blob.clones', [[0.0, 0.0, 1000.0]], [[1.0, 0, 0, 0]])
+    options = {'n_steps': 10, 'n_save': 5, 'kT': 1.0, 'g': 1.0, 'blob_radius': 0.5, 'repulsion_strength_wall': 0.0,
+               'max_translation': 1.0, 'seed': 5, 'output_name': 'data/run'}
+    text = '\n'.join('%s %s' % item for item in options.items()) + '\nstructure blob.vertex blob.clones\n'
+    (tmp_path / 'input.dat').write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert MCMC_SCRIPT.main(['input.dat']) == 0
+    marker = tmp_path / 'marker'
+    (tmp_path / 'data' / 'run.restart').write_bytes(payload_bytes(marker))
+    (tmp_path / 'input.dat').write_text(text.replace('n_steps 10', 'n_steps 15') + 'initial_step 10\n')
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as stop:
+        utils.fail_cleanly(MCMC_SCRIPT.main, ['input.dat'])
+    captured = capsys.readouterr()
+    assert_refused(stop.value.code, captured.out, captured.err, marker, 'run.restart', 'not a restart file')
+
+
+# ------------------------------------------------------------------ .restart of an ensemble replica
+def test_ensemble_replica_restart_payload_never_runs(tmp_path):
+    folder = tmp_path / 'scene'
+    folder.mkdir()
+    shutil.copy(os.path.join(REPO_ROOT, 'multi_bodies', 'Structures', 'shell_N_12_Rg_1.vertex'), folder)
+    (folder / 'spheres.clones').write_text('1\n0 0 3 1 0 0 0\n')
+    (folder / 'input.dat').write_text(textwrap.dedent('''\
+        scheme deterministic_forward_euler
+        mobility_blobs_implementation python
+        mobility_vector_prod_implementation python
+        blob_blob_force_implementation python
+        dt 0.05
+        n_steps 4
+        n_save 2
+        eta 1.0
+        blob_radius 0.25
+        output_name data/run
+        structure shell_N_12_Rg_1.vertex spheres.clones
+        '''))
+    plan = runner.build_plan(str(folder / 'input.dat'), 1, (), str(tmp_path / 'ensemble'), 7)
+    runner.write_plan(plan)
+    spec = runner.replica_specs(plan)[0]
+    marker = tmp_path / 'marker'
+    Path(spec['path'], 'run.restart').write_bytes(payload_bytes(marker))  # as a kill would leave it to resume
+    result = runner.run_replica(spec)
+    assert not marker.exists(), 'the payload ran'
+    assert result['status'] == 'failed' and result['exit_status'] == 2, result
+    assert 'not a restart file' in result['message']
+    assert 'Traceback' not in Path(spec['path'], runner.LOG_NAME).read_text()
+
+
+def test_no_pickle_reader_outside_the_restricted_one():
+    """``git grep`` law of the issue: no pickle.load(s) or allow_pickle=True in the package, tests aside."""
+    found = []
+    for root, _, names in os.walk(REPO_ROOT):
+        if any(part in root for part in ('.git', 'tests', 'build', '__pycache__')):
+            continue
+        for name in names:
+            if name.endswith('.py'):
+                text = io.open(os.path.join(root, name), encoding='utf-8', errors='replace').read()
+                for bad in ('pickle.load(', 'pickle.loads(', 'allow_pickle=True'):
+                    if bad in text:
+                        found.append((name, bad))
+    assert found == []
+
+
+# ------------------------------------------------------------------ the ensemble's folders and dashboard
+def small_plan(tmp_path):
+    folder = tmp_path / 'scene'
+    folder.mkdir()
+    shutil.copy(os.path.join(REPO_ROOT, 'multi_bodies', 'Structures', 'shell_N_12_Rg_1.vertex'), folder)
+    (folder / 'spheres.clones').write_text('1\n0 0 3 1 0 0 0\n')
+    (folder / 'input.dat').write_text('scheme deterministic_forward_euler\ndt 0.05\nn_steps 2\nn_save 1\neta 1.0\n'
+                                      'blob_radius 0.25\noutput_name data/run\n'
+                                      'structure shell_N_12_Rg_1.vertex spheres.clones\n')
+    plan = runner.build_plan(str(folder / 'input.dat'), 1, [('g', ['1'])], str(tmp_path / 'deep' / 'er' / 'ens'), 7)
+    runner.write_plan(plan)
+    return plan
+
+
+@pytest.mark.parametrize('field', ['points', 'replicas'])
+def test_aggregate_refuses_manifest_names_outside_the_ensemble_folder(tmp_path, field):
+    from multi_bodies.ensembles import ensemble_statistics
+    plan = small_plan(tmp_path)
+    manifest_path = Path(plan['output_dir']) / runner.MANIFEST_NAME
+    manifest = json.loads(manifest_path.read_text())
+    key = 'name' if field == 'points' else 'folder'
+    manifest[field][0][key] = '../../..'
+    manifest_path.write_text(json.dumps(manifest))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(utils.UserInputError, match=r"'\.\./\.\./\.\.' is not a folder inside the ensemble folder"):
+        ensemble_statistics.aggregate(plan['output_dir'], charts=False, log=lambda *a: None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and not (tmp_path / 'statistics.csv').exists()
+
+
+def test_local_dashboard_on_localhost_and_scratch_in_the_run_folder(tmp_path):
+    assert runner.local_address(':8787') == '127.0.0.1:8787'
+    assert runner.local_address('0.0.0.0:8787') == '0.0.0.0:8787' and runner.local_address(None) is None
+    distributed = pytest.importorskip('distributed')
+    scratch = runner.scratch_directory(str(tmp_path / 'ens'))
+    assert scratch.startswith(str(tmp_path / 'ens'))
+    cluster = runner.make_local_cluster(1, omp_threads=1, dashboard_address=':0', local_directory=scratch)
+    try:
+        with distributed.Client(cluster) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
+            assert cluster.scheduler_address.startswith('tcp://127.0.0.1:')
+            if cluster.dashboard_link:
+                assert '127.0.0.1' in cluster.dashboard_link, cluster.dashboard_link
+            assert os.path.isdir(scratch) and os.listdir(scratch)  # the workers' space is there
+    finally:
+        cluster.close()
