@@ -6,9 +6,13 @@ replaces the earlier one, except ``structure``, of which every line is kept
 (one per body type, in order).
 
 Unlike the published code, every value is checked when it is read: an
-unknown option, a value of the wrong type or a malformed ``structure`` line
-raises ``utils.UserInputError`` naming the file, the line and what was
-expected.  Options that only later versions of the published code know are
+unknown option, a value of the wrong type, a value outside the option's
+rule in ``OPTION_TABLE`` or a malformed ``structure`` line raises
+``utils.UserInputError`` naming the file, the line and what was expected.
+Each option is declared once, in ``OPTION_TABLE`` (kind, default, rule,
+the programs that use it); ``check_options(options, program)`` applies the
+rules of one program (the scripts call it through ``run_setup.prepare``),
+and the "ignored by" warnings read the table's ``used_by`` column.  Options that only later versions of the published code know are
 refused as unsupported rather than silently ignored (SPEC decision 9).
 """
 import difflib
@@ -139,8 +143,10 @@ _FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'pycuda', 'auto')
 
 OPTION_TABLE = {
     'scheme': _option('str', 'deterministic_forward_euler', SD, Choice(STATIC_SCHEMES + DYNAMIC_SCHEMES),
-                      static=Choice(STATIC_SCHEMES, fix='it is not a static problem: the dynamic schemes run with multi_bodies.py'),
-                      dynamic=Choice(DYNAMIC_SCHEMES, fix='it is a static problem: run it with multi_bodies_utilities.py')),
+                      static=Choice(STATIC_SCHEMES,
+                                    fix='it is not a static problem: the dynamic schemes run with multi_bodies.py'),
+                      dynamic=Choice(DYNAMIC_SCHEMES,
+                                     fix='it is a static problem: run it with multi_bodies_utilities.py')),
     'n_steps': _option('int', 0, DM, Range(0, fix='the index of the last step')),
     'initial_step': _option('int', 0, DM, Range(0, fix='0 starts a new run, k > 0 restarts from saved step k')),
     'n_save': _option('int', 1, DM, Range(1, fix='save every n_save steps')),

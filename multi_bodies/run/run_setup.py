@@ -6,7 +6,7 @@ problems) and ``many_bodyMCMC/many_body_MCMC.py`` (Monte Carlo) call
 
 1. the options the program uses, each against its rule in
    ``input_options.OPTION_TABLE`` (``check_options(options, program)``);
-2. the physics hooks (the Monte Carlo program passes its potential loader): this package's defaults, replaced by the user's
+2. the physics hooks (the Monte Carlo program passes its own loader): this package's defaults, replaced by the user's
    ``user_defined_functions.py`` (either style, doc/overrides.md) and
    ``forces_pycuda_user_defined.py``; the log names every replaced hook and
    every override that cannot take effect;
