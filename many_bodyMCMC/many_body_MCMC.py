@@ -37,7 +37,7 @@ def main(argv=None):
     parser.add_argument('input_file', nargs='?', default='inputMCMC.dat',
                         help='input file (default inputMCMC.dat)')
     args = parser.parse_args(argv)
-    options = read_input_file(args.input_file)
+    options = read_input_file(args.input_file, program='mcmc')  # the sampler's rules and warnings
     status = run_mcmc(options)
     print('\n\n\n# End')
     return status

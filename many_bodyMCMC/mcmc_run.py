@@ -17,64 +17,29 @@ import time
 import numpy as np
 
 import utils
-from body.body import bodies_to_arrays
 from many_bodyMCMC import mcmc_energy
-from many_bodyMCMC.sampler import MOVES, MetropolisSampler
+from many_bodyMCMC.sampler import MetropolisSampler
 from multi_bodies.solver import physics as multi_bodies_functions
 from multi_bodies.run import run_output
-from multi_bodies.files.input_options import OPTION_TABLE
-from multi_bodies.run.run_setup import read_bodies
+from multi_bodies.files.input_options import check_options, unused_options
+from multi_bodies.run.run_setup import prepare, start_output, write_run_start
 
-# Options the sampler reads; any other option that the input file sets is reported as unused.
-USED_OPTIONS = ('n_steps', 'initial_step', 'n_save', 'g', 'blob_radius', 'kT', 'output_name', 'random_state',
-                'seed', 'repulsion_strength_wall', 'debye_length_wall', 'repulsion_strength', 'debye_length',
-                'body_body_force_torque_implementation', 'save_clones', 'periodic_length', 'mcmc_move',
-                'mcmc_energy_implementation', 'max_translation', 'max_angle_shift', 'n_burn_in',
-                'target_acceptance')
 INFO_SUFFIX = '.MCMC_info'
-
-
-def unused_options(options):
-    """Names of options set in the input file that the sampler does not use (dt, scheme, eta, ...)."""
-    return [name for name in OPTION_TABLE if options.is_set(name) and name not in USED_OPTIONS]
-
-
-def check_options(options):
-    """Ranges the sampler needs, checked before anything is written."""
-    positive = ('blob_radius', 'kT', 'debye_length', 'debye_length_wall')
-    for name in positive:
-        if not getattr(options, name) > 0:
-            raise utils.UserInputError('%s: %s must be positive, got %g' % (options.where(name), name,
-                                                                           getattr(options, name)))
-    if options.n_save < 1:
-        raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
-    for name in ('n_steps', 'initial_step', 'n_burn_in'):
-        if getattr(options, name) < 0:
-            raise utils.UserInputError('%s: %s must be >= 0, got %d' % (options.where(name), name,
-                                                                        getattr(options, name)))
-    for name in ('max_translation', 'max_angle_shift'):
-        if getattr(options, name) < 0:
-            raise utils.UserInputError('%s: %s must be >= 0 (0 selects the default), got %g'
-                                       % (options.where(name), name, getattr(options, name)))
-    if not 0.0 < options.target_acceptance < 1.0:
-        raise utils.UserInputError('%s: target_acceptance must lie between 0 and 1, got %g'
-                                   % (options.where('target_acceptance'), options.target_acceptance))
-    if options.mcmc_move not in MOVES:
-        raise utils.UserInputError("%s: mcmc_move must be %s, got '%s'"
-                                   % (options.where('mcmc_move'), ' or '.join(MOVES), options.mcmc_move))
-    if options.body_body_force_torque_implementation not in ('None', 'python'):
-        raise utils.UserInputError("%s: body_body_force_torque_implementation must be None or python, got '%s'"
-                                   % (options.where('body_body_force_torque_implementation'),
-                                      options.body_body_force_torque_implementation))
-    if options.save_clones not in ('one_file_per_step', 'one_file'):
-        raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
-                                   % (options.where('save_clones'), options.save_clones))
 
 
 def _no_slip(body, slip, **kwargs):
     body.slip_reference = None
 
 
+def load_potentials(options, directory, log=print):
+    """The hook loader of the sampler for ``run_setup.prepare``: ``user_defined_potentials.py`` (and the GPU
+    file) of ``directory``; a ``user_defined_functions.py`` there is reported as not read."""
+    hooks = mcmc_energy.load_user_potentials(
+        directory, default_body_body=options.body_body_force_torque_implementation == 'python')
+    if os.path.isfile(os.path.join(directory, multi_bodies_functions.USER_FILE)):
+        log('warning: %s holds forces for multi_bodies.py and is not read by the sampler; its potentials go '
+            'in %s (doc/mcmc.md)' % (multi_bodies_functions.USER_FILE, mcmc_energy.USER_POTENTIAL_FILE))
+    return hooks
 
 
 class MCMCRun:
@@ -85,25 +50,21 @@ class MCMCRun:
 
     def __init__(self, options, directory=None, log=print):
         self.options, self.log = options, log
-        check_options(options)
-        unused = unused_options(options)
+        check_options(options, 'mcmc')  # the table's rules (kT > 0, n_save >= 1, ...) before any file is read
+        unused = unused_options(options, 'mcmc')
         if unused:
             log('warning: %s: the Monte Carlo sampler does not use %s (ignored)'
                 % (options.input_file, ', '.join(unused)))
-        directory = os.getcwd() if directory is None else directory
-        self.hooks = mcmc_energy.load_user_potentials(
-            directory, default_body_body=options.body_body_force_torque_implementation == 'python')
-        if os.path.isfile(os.path.join(directory, multi_bodies_functions.USER_FILE)):
-            log('warning: %s holds forces for multi_bodies.py and is not read by the sampler; its potentials go '
-                'in %s (doc/mcmc.md)' % (multi_bodies_functions.USER_FILE, mcmc_energy.USER_POTENTIAL_FILE))
         self.restart = None
         if options.initial_step > 0:
             self.restart = run_output.restart_record(options.output_name, options.initial_step)
-        bodies, types = read_bodies(options, _no_slip, restart_record=self.restart)
+        # Shared with the dynamic and static scripts: checks, hooks (here the potentials), bodies, arrays.
+        setup = prepare(options, 'mcmc', log=log, directory=directory, restart_record=self.restart,
+                        hook_loader=load_potentials, set_slip_by_ID=_no_slip)
+        self.hooks, self.bodies, self.types, arrays = setup.hooks, setup.bodies, setup.types, setup.body_arrays
+        bodies = self.bodies
         if any(spec.slip_file for spec in options.structures):
             log('warning: slip files on structure lines are ignored by the Monte Carlo sampler')
-        self.bodies, self.types = bodies, types
-        arrays = bodies_to_arrays(bodies, [count for _, count in types])
         keywords = mcmc_energy.physics_keywords(options)
         pair_sums, notes = mcmc_energy.make_pair_sums(options.mcmc_energy_implementation, keywords, self.hooks,
                                                       options.where('mcmc_energy_implementation'))
@@ -141,7 +102,7 @@ class MCMCRun:
         log('Monte Carlo: %d bodies, %d blobs, mcmc_move %s, blob-blob energy %s, max_translation %g, '
             'max_angle_shift %g' % (arrays.num_bodies, arrays.num_blobs, options.mcmc_move, pair_sums.name,
                                     self.sampler.max_translation, self.sampler.max_angle_shift))
-        run_output.prepare_output_directory(options.output_name, options.where('output_name'))
+        start_output(options)
 
     def check_periodic_bodies(self, bodies):
         """One-body moves leave the pairs inside a body out; with a box they must not wrap around it."""
@@ -182,11 +143,7 @@ class MCMCRun:
         """The Monte Carlo loop; returns the exit status."""
         options, sampler = self.options, self.sampler
         restart = options.initial_step > 0
-        run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
-        if not restart:
-            run_output.save_random_state(options.output_name + '.random_state', self.rng)
-        run_output.write_bodies_info(options.output_name + '.bodies_info', self.types,
-                                     self.energy.arrays.num_blobs)
+        write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart)
         first, last = options.initial_step, options.n_steps

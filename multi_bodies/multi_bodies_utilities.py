@@ -138,12 +138,8 @@ def write_velocity_field(options, system, r_vectors, lambda_blobs):
 
 def run(options):
     """Solve the static problem of validated ``options``; returns the exit status."""
-    if options.scheme not in SCHEMES:
-        raise utils.UserInputError("%s: scheme '%s' is not a static problem; use one of %s"
-                                   % (options.where('scheme'), options.scheme, ', '.join(SCHEMES)))
-    if options.tracer_radius < 0:
-        raise utils.UserInputError('%s: tracer_radius must be >= 0' % options.where('tracer_radius'))
-    # Shared with multi_bodies.py: checks, hooks, bodies, arrays, backends, System, start check.
+    # Shared with multi_bodies.py: the option checks of the table (scheme a static problem, tracer_radius >= 0,
+    # ...), hooks, bodies, arrays, backends, System, start check.
     setup = prepare(options, 'static', log=print)
     system = setup.system
     # Everything is validated before the first byte is written: the tables the problem reads, the

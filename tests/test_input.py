@@ -1,5 +1,6 @@
 """Input file parsing, structure-file readers and their error messages."""
 import os
+import re
 import subprocess
 import sys
 
@@ -213,3 +214,149 @@ def test_periodic_z_is_accepted_in_free_space():
     options = parse_input_text('mobility_vector_prod_implementation C++_no_wall\n'
                                'mobility_blobs_implementation python_no_wall\nperiodic_length 4 4 4\n', 'in.dat')
     assert tuple(options.periodic_length) == (4.0, 4.0, 4.0)
+
+
+# ---------------------------------------------------------------- the option table
+from multi_bodies.files import input_options as io_  # noqa: E402
+from multi_bodies.files.input_options import Choice, Range  # noqa: E402
+
+DOC_LETTERS = {'static': 'S', 'dynamic': 'D', 'stochastic': 'D', 'rollers': 'R', 'mcmc': 'M'}
+
+
+def doc_rows():
+    """name -> the 'used by' cell of the table of doc/options.md."""
+    text = open(os.path.join(REPO_ROOT, 'doc', 'options.md'), encoding='utf-8').read()
+    return {m.group(1): m.group(2) for m in re.finditer(r'^\| `(\w+)` \|[^|]*\|[^|]*\|([^|]*)\|', text, flags=re.M)}
+
+
+def test_the_docs_document_every_option_of_the_table_with_its_programs():
+    """doc/options.md has a row for each option of OPTION_TABLE, and its 'used by' letters are the table's."""
+    rows = doc_rows()
+    assert sorted(set(OPTION_TABLE) - set(rows)) == []
+    for name, option in OPTION_TABLE.items():
+        documented = set(re.findall(r'\b([SDRM])\b', rows[name]))
+        assert documented == {DOC_LETTERS[tag] for tag in option.used_by}, name
+        assert bool(option.used_by) == ('no effect' not in rows[name]), name
+
+
+def test_table_names_agree_with_the_registries():
+    """The names the table allows are those the scheme, mobility and Monte Carlo registries know."""
+    from quaternion_integrator import schemes
+    from many_bodyMCMC import mcmc_energy, sampler
+    import mobility.backends
+    assert set(io_.DYNAMIC_SCHEMES) == set(schemes._all_schemes())
+    assert set(io_.STOCHASTIC_SCHEMES) == set(schemes.STOCHASTIC_SCHEMES)
+    assert not set(io_.STATIC_SCHEMES) & set(io_.DYNAMIC_SCHEMES)
+    assert tuple(io_.MCMC_MOVES) == tuple(sampler.MOVES)
+    assert tuple(io_.MCMC_ENERGY_IMPLEMENTATIONS) == tuple(mcmc_energy.IMPLEMENTATIONS)
+    assert set(mobility.backends.all_names()) <= set(OPTION_TABLE['mobility_blobs_implementation'].rule.names)
+
+
+# Options whose default a program refuses on purpose: that program needs them set (dt for the dynamics,
+# a static problem as the scheme of the static script).
+MUST_BE_SET = {('dt', 'dynamic'), ('scheme', 'static')}
+
+
+def test_every_default_satisfies_its_rules():
+    for name, option in OPTION_TABLE.items():
+        if option.default is None:
+            continue
+        assert option.rule is None or option.rule.allows(option.default), name
+        for program, rule in option.program_rules.items():
+            assert rule.allows(option.default) != ((name, program) in MUST_BE_SET), (name, program)
+
+
+def bad_value(rule):
+    """A value the rule refuses, written as in an input file."""
+    if isinstance(rule, Choice):
+        return 'no_such_name'
+    if rule.low is not None:
+        return str(rule.low - 1) if rule.low >= 1 or not rule.low_open else str(rule.low)
+    return str(rule.high * 10)
+
+
+RULED = sorted(name for name, option in OPTION_TABLE.items() if option.rule is not None)
+
+
+@pytest.mark.parametrize('name', RULED)
+def test_each_rule_of_the_table_names_file_line_option_and_values(name):
+    """The parser refuses a value outside each option's rule, naming the file, the line, the option and what
+    is allowed (the table's text)."""
+    rule = OPTION_TABLE[name].rule
+    with pytest.raises(UserInputError) as err:
+        parse_input_text('eta 1\n%s %s\n' % (name, bad_value(rule)), 'in.dat')
+    message = str(err.value)
+    assert message.startswith('in.dat, line 2: ') and name in message and rule.text in message, message
+
+
+@pytest.mark.parametrize('name, value, program, fragment', [
+    ('dt', '0', 'dynamic', 'dt must be positive'),
+    ('kT', '0', 'mcmc', 'kT must be positive'),
+    ('scheme', 'mobility', 'dynamic', 'run it with multi_bodies_utilities.py'),
+    ('scheme', 'deterministic_forward_euler', 'static', 'not a static problem'),
+])
+def test_program_rules_are_stricter_only_for_their_program(name, value, program, fragment):
+    text = '%s %s\n' % (name, value)
+    with pytest.raises(UserInputError, match='in.dat, line 1: .*' + fragment):
+        parse_input_text(text, 'in.dat', program)
+    scheme = {'static': 'scheme mobility\n', 'dynamic': 'dt 0.1\n', 'mcmc': ''}
+    for other in io_.PROGRAMS:
+        if other != program and (name != 'scheme' or other == 'mcmc'):
+            parse_input_text(text + scheme[other], 'in.dat', other)   # the same line is valid for the others
+
+
+@pytest.mark.parametrize('name, value', [('kT', '-1'), ('rf_delta', '0'), ('update_PC', '0')])
+def test_stochastic_scheme_options_are_checked_when_parsed(name, value):
+    """kT >= 0, rf_delta > 0, update_PC >= 1 fail at parse time, with the line (not only in the scheme)."""
+    with pytest.raises(UserInputError, match="in.dat, line 2: %s must be" % name):
+        parse_input_text('scheme stochastic_adams_bashforth\n%s %s\n' % (name, value), 'in.dat')
+
+
+def test_the_monte_carlo_quick_start_does_not_call_kT_ignored():
+    """The sampler uses kT: its input gives no 'ignored' warning about kT when read for the Monte Carlo
+    program; the same file read as a dynamic input (deterministic default scheme) does warn (control)."""
+    text = open(os.path.join(REPO_ROOT, 'many_bodyMCMC', 'inputMCMC.dat')).read()
+    assert 'kT' in text
+    as_mcmc = parse_input_text(text, 'inputMCMC.dat', 'mcmc')
+    assert not any("'kT'" in m for m in as_mcmc.warnings), as_mcmc.warnings
+    assert io_.unused_options(as_mcmc, 'mcmc') == []
+    as_dynamic = parse_input_text(text, 'inputMCMC.dat')
+    assert any("option 'kT' is ignored" in m for m in as_dynamic.warnings)
+
+
+def test_monte_carlo_script_does_not_print_kT_ignored(tmp_path):
+    """The Monte Carlo script itself (a short run of the quick-start input): no 'kT' warning on either stream."""
+    text = open(os.path.join(REPO_ROOT, 'many_bodyMCMC', 'inputMCMC.dat')).read()
+    text = re.sub(r'^n_steps\s+\d+', 'n_steps 10', text, flags=re.M)
+    text = text.replace('../multi_bodies/', os.path.join(REPO_ROOT, 'multi_bodies', ''))
+    write(tmp_path / 'in.dat', text)
+    script = os.path.join(REPO_ROOT, 'many_bodyMCMC', 'many_body_MCMC.py')
+    result = subprocess.run([sys.executable, script, 'in.dat'], cwd=str(tmp_path), capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "'kT'" not in result.stderr + result.stdout and 'warning' not in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize('line, program, fragment', [
+    ('dt 0', 'dynamic', 'dt must be positive'), ('dt -1', None, 'dt must be >= 0'),
+    ('n_steps -1', None, 'n_steps must be >= 0'), ('initial_step -2', None, 'initial_step must be >= 0'),
+    ('n_save 0', None, 'n_save must be at least 1'), ('kT -0.5', None, 'kT must be >= 0'),
+    ('kT 0', 'mcmc', 'kT must be positive'), ('rf_delta 0', None, 'rf_delta must be positive'),
+    ('update_PC 0', None, 'update_PC must be at least 1'), ('solver_tolerance 0', None, 'between 0 and 1'),
+    ('blob_radius 0', None, 'blob_radius must be positive'), ('eta -1', None, 'eta must be positive'),
+    ('save_clones every_step', None, 'save_clones must be one_file_per_step or one_file'),
+    ('domain half_wall', None, 'domain must be single_wall or no_wall'),
+    ('scheme leapfrog', None, "unknown scheme 'leapfrog'"),
+    ('mobility_vector_prod_implementation fortran', None, 'C++_no_wall'),
+    ('blob_blob_force_implementation fortran', None, 'pycuda'),
+    ('body_body_force_torque_implementation C++', None, 'None or python'),
+    ('mcmc_move some_bodies', 'mcmc', 'mcmc_move must be all_bodies or one_body'),
+    ('target_acceptance 1', 'mcmc', 'between 0 and 1'), ('n_burn_in -1', 'mcmc', 'n_burn_in must be >= 0'),
+    ('max_translation -1', 'mcmc', '0 selects the default'), ('seed -3', None, 'non-negative integer'),
+])
+def test_the_ranges_of_the_manual_are_enforced(line, program, fragment):
+    """The allowed values stated in doc/options.md (written here by hand, not read from the table)."""
+    text = ('scheme stochastic_adams_bashforth\n' if program != 'mcmc' and not line.startswith('scheme') else '')
+    with pytest.raises(UserInputError) as err:
+        parse_input_text(text + line + '\n', 'in.dat', program)
+    assert fragment in str(err.value) and str(err.value).startswith('in.dat, line'), str(err.value)

@@ -6,9 +6,13 @@ replaces the earlier one, except ``structure``, of which every line is kept
 (one per body type, in order).
 
 Unlike the published code, every value is checked when it is read: an
-unknown option, a value of the wrong type or a malformed ``structure`` line
-raises ``utils.UserInputError`` naming the file, the line and what was
-expected.  Options that only later versions of the published code know are
+unknown option, a value of the wrong type, a value outside the option's
+rule in ``OPTION_TABLE`` or a malformed ``structure`` line raises
+``utils.UserInputError`` naming the file, the line and what was expected.
+Each option is declared once, in ``OPTION_TABLE`` (kind, default, rule,
+the programs that use it); ``check_options(options, program)`` applies the
+rules of one program (the scripts call it through ``run_setup.prepare``),
+and the "ignored by" warnings read the table's ``used_by`` column.  Options that only later versions of the published code know are
 refused as unsupported rather than silently ignored (SPEC decision 9).
 """
 import difflib
@@ -19,51 +23,177 @@ from collections import namedtuple
 from utils import UserInputError, read_text_file, warn_user
 
 
-# name -> (kind, default).  Kinds: str, int, float, floats3, grid9, bool, optional_str, optional_int.
+# ---------------------------------------------------------------------------------------------- the table
+# Every option is declared once, in OPTION_TABLE below: its kind, default, allowed values (a rule, with the
+# fix a message gives), and the programs that use it.  The parser converts and checks from it
+# (``check_options``), the "option X is ignored by ..." warnings read its ``used_by`` column
+# (``unused_option_warnings``), and the docs test compares doc/options.md with it.
+#
+# Usage tags of ``used_by``: 'static' (multi_bodies_utilities.py), 'dynamic' (multi_bodies.py, every scheme),
+# 'stochastic' (the dynamic stochastic schemes only), 'rollers' (the dynamic roller schemes only), 'mcmc'
+# (many_bodyMCMC/many_body_MCMC.py).  An empty ``used_by``: read for compatibility, no effect.
+PROGRAMS = ('dynamic', 'static', 'mcmc')
+STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+# Names of the dynamic schemes (quaternion_integrator.schemes holds the classes; tests/test_input.py checks
+# that both lists agree).
+DETERMINISTIC_SCHEMES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
+                         'deterministic_adams_bashforth', 'deterministic_forward_euler_rollers',
+                         'deterministic_adams_bashforth_rollers')
+STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
+                      'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
+                      'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
+                      'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
+                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
+DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES
+MCMC_MOVES = ('all_bodies', 'one_body')                        # many_bodyMCMC.sampler.MOVES
+MCMC_ENERGY_IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')  # many_bodyMCMC.mcmc_energy.IMPLEMENTATIONS
+# Largest magnitude of a number option: its square still fits in a double.
+LARGEST_VALUE = 1e150
+# eta and blob_radius beyond these bounds make eta a^3 (rotational resistance) over- or underflow.
+SCALE_RANGE = (1e-50, 1e50)
+
+
+def mobility_implementation_names():
+    """Names of the mobility registry (``mobility.backends``) and ``auto``, ``auto_no_wall``."""
+    from mobility.backends import all_names
+    return tuple(all_names()) + ('auto', 'auto_no_wall')
+
+
+class Range:
+    """Allowed numbers: ``low`` <(=) value <(=) ``high`` (None: no bound).
+
+    ``text`` says it in a message ("positive", ">= 0", ...); ``fix`` (optional)
+    says why or what to do.
+    """
+
+    def __init__(self, low=None, high=None, low_open=False, high_open=False, text=None, fix=''):
+        self.low, self.high, self.low_open, self.high_open, self.fix = low, high, low_open, high_open, fix
+        if text is None:
+            if high is None and low == 0:
+                text = 'positive' if low_open else '>= 0'
+            elif high is None:
+                text = ('> %g' if low_open else 'at least %g') % low
+            else:
+                text = 'between %g and %g' % (low, high)
+        self.text = text
+
+    def allows(self, value):
+        if self.low is not None and not (value > self.low if self.low_open else value >= self.low):
+            return False
+        if self.high is not None and not (value < self.high if self.high_open else value <= self.high):
+            return False
+        return True
+
+    def message(self, where, name, value, known=False):
+        shown = ('%d' % value) if isinstance(value, int) else ('%g' % value)
+        return '%s: %s must be %s%s, got %s' % (where, name, self.text, ' (%s)' % self.fix if self.fix else '',
+                                                 shown)
+
+
+class Choice:
+    """Allowed words: ``names`` (a tuple, or a callable returning one: read when checked)."""
+
+    def __init__(self, names, fix=''):
+        self._names, self.fix = names, fix
+
+    @property
+    def names(self):
+        return tuple(self._names() if callable(self._names) else self._names)
+
+    @property
+    def text(self):
+        names = self.names
+        return ' or '.join(names) if len(names) <= 2 else 'one of ' + ', '.join(names)
+
+    def allows(self, value):
+        return value in self.names
+
+    def message(self, where, name, value, known=False):
+        if known:  # a valid name, but not for this program
+            return "%s: %s '%s' is not for this program; %s must be %s%s" % (
+                where, name, value, name, self.text, ' (%s)' % self.fix if self.fix else '')
+        close = difflib.get_close_matches(str(value), list(self.names), n=1)
+        hint = "; did you mean '%s'?" % close[0] if close else ''
+        return "%s: unknown %s '%s'%s; %s must be %s%s" % (where, name, value, hint, name, self.text,
+                                                            ' (%s)' % self.fix if self.fix else '')
+
+
+class Option(namedtuple('Option', ['kind', 'default', 'rule', 'used_by', 'program_rules'])):
+    """One row of OPTION_TABLE.
+
+    kind : str, int, float, floats3, grid9, bool, optional_str, optional_int
+    default : the value when the file does not set the option
+    rule : Range, Choice or None, checked whatever the program
+    used_by : tuple of usage tags (see above); () = no effect
+    program_rules : {program: rule}, a stricter rule for one program (e.g. dt > 0 for a dynamic run)
+    """
+
+
+def _option(kind, default, used_by, rule=None, **program_rules):
+    return Option(kind, default, rule, tuple(used_by), program_rules)
+
+
+SDM = ('static', 'dynamic', 'mcmc')
+SD = ('static', 'dynamic')
+DM = ('dynamic', 'mcmc')
+_SCALE = Range(SCALE_RANGE[0], SCALE_RANGE[1], text='positive, between %g and %g' % SCALE_RANGE,
+               fix='beyond that eta a^3 over- or underflows in double precision; rescale the units')
+_SAVE_CLONES = Choice(('one_file_per_step', 'one_file'))
+_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'pycuda', 'auto')
+
 OPTION_TABLE = {
-    'scheme': ('str', 'deterministic_forward_euler'),
-    'n_steps': ('int', 0),
-    'initial_step': ('int', 0),
-    'n_save': ('int', 1),
-    'n_relaxation': ('int', 0),
-    'dt': ('float', 0.0),
-    'eta': ('float', 1.0),
-    'g': ('float', 1.0),
-    'blob_radius': ('float', 1.0),
-    'tracer_radius': ('float', 0.0),
-    'kT': ('float', 1.0),
-    'output_name': ('str', 'run'),
-    'random_state': ('optional_str', None),
-    'seed': ('optional_int', None),
-    'repulsion_strength_wall': ('float', 1.0),
-    'debye_length_wall': ('float', 1.0),
-    'repulsion_strength': ('float', 1.0),
-    'debye_length': ('float', 1.0),
-    'mobility_blobs_implementation': ('str', 'python'),
-    'mobility_vector_prod_implementation': ('str', 'python'),
-    'blob_blob_force_implementation': ('str', 'None'),
-    'body_body_force_torque_implementation': ('str', 'None'),
-    'solver_tolerance': ('float', 1e-8),
-    'rf_delta': ('float', 1e-3),
-    'save_clones': ('str', 'one_file_per_step'),
-    'periodic_length': ('floats3', (0.0, 0.0, 0.0)),
-    'omega_one_roller': ('floats3', (0.0, 0.0, 0.0)),
-    'free_kinematics': ('bool', True),
-    'domain': ('str', 'single_wall'),
-    'update_PC': ('int', 1),
-    'plot_velocity_field': ('grid9', None),
-    'force_file': ('optional_str', None),
-    'velocity_file': ('optional_str', None),
-    'save_body_mobility': ('bool', False),
-    'save_blobs_mobility': ('bool', False),
-    'save_velocities': ('bool', False),
-    'save_vtk': ('bool', False),
-    'slip_file': ('optional_str', None),
-    'structure_names': ('optional_str', None),
+    'scheme': _option('str', 'deterministic_forward_euler', SD, Choice(STATIC_SCHEMES + DYNAMIC_SCHEMES),
+                      static=Choice(STATIC_SCHEMES,
+                                    fix='it is not a static problem: the dynamic schemes run with multi_bodies.py'),
+                      dynamic=Choice(DYNAMIC_SCHEMES,
+                                     fix='it is a static problem: run it with multi_bodies_utilities.py')),
+    'n_steps': _option('int', 0, DM, Range(0, fix='the index of the last step')),
+    'initial_step': _option('int', 0, DM, Range(0, fix='0 starts a new run, k > 0 restarts from saved step k')),
+    'n_save': _option('int', 1, DM, Range(1, fix='save every n_save steps')),
+    'n_relaxation': _option('int', 0, ()),
+    'dt': _option('float', 0.0, ('dynamic',), Range(0, fix='the time step'),
+                  dynamic=Range(0, low_open=True, fix='the time step of a dynamic run')),
+    'eta': _option('float', 1.0, SD, _SCALE),
+    'g': _option('float', 1.0, SDM),
+    'blob_radius': _option('float', 1.0, SDM, _SCALE),
+    'tracer_radius': _option('float', 0.0, ('static',), Range(0, fix='0 gives the point velocity')),
+    'kT': _option('float', 1.0, ('stochastic', 'mcmc'), Range(0, fix='the thermal energy'),
+                  mcmc=Range(0, low_open=True, fix='the sampler weighs by exp(-U/kT)')),
+    'output_name': _option('str', 'run', SDM),
+    'random_state': _option('optional_str', None, DM),
+    'seed': _option('optional_int', None, DM, Range(0, text='a non-negative integer')),
+    'repulsion_strength_wall': _option('float', 1.0, SDM),
+    'debye_length_wall': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
+    'repulsion_strength': _option('float', 1.0, SDM),
+    'debye_length': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
+    'mobility_blobs_implementation': _option('str', 'python', SD, Choice(mobility_implementation_names)),
+    'mobility_vector_prod_implementation': _option('str', 'python', SD, Choice(mobility_implementation_names)),
+    'blob_blob_force_implementation': _option('str', 'None', SD, Choice(_FORCE_IMPLEMENTATIONS)),
+    'body_body_force_torque_implementation': _option('str', 'None', SDM, Choice(('None', 'python'))),
+    'solver_tolerance': _option('float', 1e-8, SD, Range(0, 1, True, True, fix='a relative tolerance, e.g. 1e-8')),
+    'rf_delta': _option('float', 1e-3, ('stochastic',), Range(0, low_open=True, fix='1e-3 is the default')),
+    'save_clones': _option('str', 'one_file_per_step', DM, _SAVE_CLONES),
+    'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM),
+    'omega_one_roller': _option('floats3', (0.0, 0.0, 0.0), ('rollers',)),
+    'free_kinematics': _option('bool', True, ('rollers',)),
+    'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall'))),
+    'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
+    'plot_velocity_field': _option('grid9', None, ('static',)),
+    'force_file': _option('optional_str', None, ('static',)),
+    'velocity_file': _option('optional_str', None, ('static',)),
+    'save_body_mobility': _option('bool', False, ('dynamic',)),
+    'save_blobs_mobility': _option('bool', False, ('dynamic',)),
+    'save_velocities': _option('bool', False, ()),
+    'save_vtk': _option('bool', False, ('dynamic',)),
+    'slip_file': _option('optional_str', None, ()),
+    'structure_names': _option('optional_str', None, ()),
     # Monte Carlo sampler only (many_bodyMCMC, doc/mcmc.md); 0 step sizes select the published defaults
-    'mcmc_move': ('str', 'all_bodies'), 'mcmc_energy_implementation': ('str', 'auto'),
-    'max_translation': ('float', 0.0), 'max_angle_shift': ('float', 0.0),
-    'n_burn_in': ('int', 0), 'target_acceptance': ('float', 0.3),
+    'mcmc_move': _option('str', 'all_bodies', ('mcmc',), Choice(MCMC_MOVES)),
+    'mcmc_energy_implementation': _option('str', 'auto', ('mcmc',), Choice(MCMC_ENERGY_IMPLEMENTATIONS)),
+    'max_translation': _option('float', 0.0, ('mcmc',), Range(0, fix='0 selects the default')),
+    'max_angle_shift': _option('float', 0.0, ('mcmc',), Range(0, fix='0 selects the default')),
+    'n_burn_in': _option('int', 0, ('mcmc',), Range(0)),
+    'target_acceptance': _option('float', 0.3, ('mcmc',), Range(0, 1, True, True)),
 }
 
 # Options of later versions of the published code that this package does not implement.
@@ -97,8 +227,8 @@ class Options:
         self._lines = dict(lines)
         self.structures = list(structures)
         self.warnings = []
-        for name, (kind, default) in OPTION_TABLE.items():
-            setattr(self, name, values.get(name, default))
+        for name, option in OPTION_TABLE.items():
+            setattr(self, name, values.get(name, option.default))
 
     def where(self, name):
         """Location of option ``name`` for messages."""
@@ -191,8 +321,14 @@ def structure_id_from_clones(clones_path):
     return base[:-len('.clones')] if base.endswith('.clones') else os.path.splitext(base)[0]
 
 
-def parse_input_text(text, input_file='<input>'):
-    """Parse the text of an input file into ``Options`` (see module docstring)."""
+def parse_input_text(text, input_file='<input>', program=None):
+    """Parse the text of an input file into ``Options`` (see module docstring).
+
+    ``program`` ('dynamic', 'static', 'mcmc' or None) selects the rules and
+    warnings of the program that reads the file; None checks every option by
+    its general rule and warns as the scheme suggests (static schemes: the
+    static script, others: the dynamic one).
+    """
     values, lines, structures, repeated = {}, {}, [], []
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split('#', 1)[0].strip()
@@ -222,74 +358,96 @@ def parse_input_text(text, input_file='<input>'):
             close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure'], n=1)
             hint = " (did you mean '%s'?)" % close[0] if close else ''
             raise UserInputError("%s: unknown option '%s'%s" % (where, name, hint))
-        values[name] = _convert(OPTION_TABLE[name][0], name, value, where)
+        values[name] = _convert(OPTION_TABLE[name].kind, name, value, where)
         if name in lines:
             repeated.append("%s: option '%s' repeats line %d; the later value is used (remove one of the lines)"
                             % (where, name, lines[name]))
         lines[name] = number
     options = Options(input_file, values, lines, structures)
-    check_ranges(options)
+    check_options(options, program)
     check_periodic_box(options)
-    options.warnings = repeated + unused_option_warnings(options)
+    options.warnings = repeated + unused_option_warnings(options, program)
     return options
 
 
-STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
-# Largest magnitude of a number option: its square still fits in a double.
-LARGEST_VALUE = 1e150
-# eta and blob_radius beyond these bounds make eta a^3 (rotational resistance) over- or underflow.
-SCALE_RANGE = (1e-50, 1e50)
-ROLLER_ONLY_OPTIONS = ('domain', 'omega_one_roller', 'free_kinematics')
-# Options of the published input files that are read (and checked) but change nothing in this version;
-# remove a name here when a scheme starts to use it (doc/options.md lists them too).
-NO_EFFECT_OPTIONS = ('n_relaxation', 'save_velocities', 'slip_file', 'structure_names')
-STOCHASTIC_ONLY_OPTIONS = ('kT', 'rf_delta', 'update_PC')
+def usage_tags(program, scheme):
+    """The usage tags (see OPTION_TABLE) that a run of ``program`` with ``scheme`` has."""
+    if program is None:
+        program = 'static' if scheme in STATIC_SCHEMES else 'dynamic'
+    tags = {program}
+    if program == 'dynamic':
+        if not scheme.startswith('deterministic'):
+            tags.add('stochastic')
+        if 'rollers' in scheme:
+            tags.add('rollers')
+    return tags
 
 
-def unused_option_warnings(options):
-    """Messages for options that the chosen scheme does not use although the file sets them."""
+def is_used(name, program, scheme):
+    """True when option ``name`` changes a run of ``program`` (None: as the scheme suggests) with ``scheme``."""
+    return bool(usage_tags(program, scheme) & set(OPTION_TABLE[name].used_by))
+
+
+def unused_options(options, program):
+    """Names of the options the file sets that a run of ``program`` does not use (table order)."""
+    return [name for name in OPTION_TABLE
+            if options.is_set(name) and OPTION_TABLE[name].used_by and not is_used(name, program, options.scheme)]
+
+
+_USERS = {'static': 'the static problems', 'dynamic': 'the dynamic schemes', 'stochastic': 'the stochastic schemes',
+          'rollers': 'the roller schemes', 'mcmc': 'the Monte Carlo sampler'}
+
+
+def unused_option_warnings(options, program=None):
+    """Messages for options the file sets that the program reading it does not use (the ``used_by`` column).
+
+    For the Monte Carlo program the parser makes only the "no effect"
+    messages: the sampler logs its unused options in one line
+    (``unused_options(options, 'mcmc')``).
+    """
     messages = []
-    scheme = options.scheme
-    if 'rollers' not in scheme:
-        for name in ROLLER_ONLY_OPTIONS:
-            if options.is_set(name):
-                extra = (' (the wall is chosen by the mobility implementations: names ending in _no_wall are '
-                         'free space)' if name == 'domain' else '')
-                messages.append("%s: option '%s' is used by the roller schemes only and is ignored by scheme "
-                                "'%s'%s; remove the line" % (options.where(name), name, scheme, extra))
-    for name in NO_EFFECT_OPTIONS:
-        if options.is_set(name):
+    for name in OPTION_TABLE:
+        if options.is_set(name) and not OPTION_TABLE[name].used_by:
             messages.append("%s: option '%s' is accepted for compatibility with the published input files but "
                             "has no effect in this version (see doc/options.md)" % (options.where(name), name))
-    if scheme.startswith('deterministic') or scheme in STATIC_SCHEMES:
-        for name in STOCHASTIC_ONLY_OPTIONS:
-            if options.is_set(name):
-                messages.append("%s: option '%s' is ignored by scheme '%s', which has no thermal noise; choose a "
-                                "stochastic scheme or remove the line" % (options.where(name), name, scheme))
+    if program == 'mcmc':
+        return messages
+    for name in unused_options(options, program):
+        used_by = OPTION_TABLE[name].used_by
+        extra = (' (the wall is chosen by the mobility implementations: names ending in _no_wall are free space)'
+                 if name == 'domain' else '')
+        fix = 'choose a stochastic scheme or remove the line' if 'stochastic' in used_by else 'remove the line'
+        messages.append("%s: option '%s' is ignored by scheme '%s' (it is used by %s only)%s; %s"
+                        % (options.where(name), name, options.scheme,
+                           ' and '.join(_USERS[tag] for tag in used_by), extra, fix))
     return messages
 
 
-def check_ranges(options):
-    """Values that parse but make no sense: caught here, with the line, not deep in a solver."""
-    for name in ('eta', 'blob_radius'):
+def check_options(options, program=None):
+    """Check the options against their rules in OPTION_TABLE; raise UserInputError naming file, line and fix.
+
+    ``program`` None: the general rule of every option (what the parser
+    checks when it does not know the program).  A program name ('dynamic',
+    'static', 'mcmc'): the options that program uses (and ``scheme``), each
+    by its stricter ``program_rules`` entry first (e.g. ``dt`` > 0 for
+    'dynamic'), then by its general rule.  Values that parse but make no
+    sense are caught here, with the line, not deep in a solver.
+    """
+    for name, option in OPTION_TABLE.items():
         value = getattr(options, name)
-        if not SCALE_RANGE[0] <= value <= SCALE_RANGE[1]:
-            raise UserInputError('%s: %s must be positive, between %g and %g (beyond that eta a^3 over- or '
-                                 'underflows in double precision; rescale the units), got %g'
-                                 % (options.where(name), name, SCALE_RANGE[0], SCALE_RANGE[1], value))
-    if not 0.0 < options.solver_tolerance < 1.0:
-        raise UserInputError('%s: solver_tolerance is a relative tolerance between 0 and 1 (e.g. 1e-8), got %g'
-                             % (options.where('solver_tolerance'), options.solver_tolerance))
-    for name in ('debye_length', 'debye_length_wall'):
-        if not getattr(options, name) > 0.0:
-            raise UserInputError('%s: %s must be positive (the repulsion laws divide by it), got %g'
-                                 % (options.where(name), name, getattr(options, name)))
-    if options.tracer_radius < 0.0:
-        raise UserInputError('%s: tracer_radius must be >= 0 (0 gives the point velocity), got %g'
-                             % (options.where('tracer_radius'), options.tracer_radius))
-    if options.n_steps < 0:
-        raise UserInputError('%s: n_steps must be >= 0 (the index of the last step), got %d'
-                             % (options.where('n_steps'), options.n_steps))
+        if value is None:
+            continue
+        rules = [option.rule]
+        if program is not None:
+            if name != 'scheme' and not is_used(name, program, options.scheme):
+                continue
+            if name == 'scheme' and program == 'mcmc':
+                continue
+            rules.insert(0, option.program_rules.get(program))
+        for rule in rules:
+            if rule is not None and not rule.allows(value):
+                known = rule is not option.rule and option.rule is not None and option.rule.allows(value)
+                raise UserInputError(rule.message(options.where(name), name, value, known=known))
 
 
 def check_periodic_box(options):
@@ -308,13 +466,13 @@ def check_periodic_box(options):
                ', domain no_wall' if 'rollers' in options.scheme else ''))
 
 
-def read_input_file(path):
-    """Read and validate the input file at ``path``; returns ``Options``.
+def read_input_file(path, program=None):
+    """Read and validate the input file at ``path`` for ``program`` (see ``parse_input_text``); returns ``Options``.
 
     Warnings about accepted but doubtful lines are printed on standard error.
     """
     text = read_text_file(path, 'input file', 'give the input file with --input-file')
-    options = parse_input_text(text, path)
+    options = parse_input_text(text, path, program)
     for message in options.warnings:
         warn_user(message)
     return options

@@ -19,25 +19,10 @@ import time
 import numpy as np
 
 import utils
+from multi_bodies.files.input_options import check_options
 from multi_bodies.run import run_output
-from multi_bodies.run.run_setup import prepare
+from multi_bodies.run.run_setup import prepare, start_output, write_run_start
 from quaternion_integrator.schemes import make_scheme
-
-def check_options(options):
-    """Ranges the dynamic run needs, checked before anything is written."""
-    if not options.dt > 0:
-        raise utils.UserInputError('%s: dt must be positive for a dynamic run, got %g' % (options.where('dt'), options.dt))
-    if options.n_save < 1:
-        raise utils.UserInputError('%s: n_save must be at least 1' % options.where('n_save'))
-    if options.n_steps < 0:
-        raise utils.UserInputError('%s: n_steps must be >= 0, got %d' % (options.where('n_steps'), options.n_steps))
-    if options.initial_step < 0:
-        raise utils.UserInputError('%s: initial_step must be >= 0, got %d'
-                                   % (options.where('initial_step'), options.initial_step))
-    if options.save_clones not in ('one_file_per_step', 'one_file'):
-        raise utils.UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
-                                   % (options.where('save_clones'), options.save_clones))
-
 
 class DynamicRun:
     """Everything a dynamic run holds once it is set up (no file written yet).
@@ -48,7 +33,7 @@ class DynamicRun:
 
     def __init__(self, options, print_residual=False, log=print):
         self.options, self.log = options, log
-        check_options(options)
+        check_options(options, 'dynamic')  # the table's rules (dt > 0, n_save >= 1, ...) before the scheme is made
         try:
             self.scheme = make_scheme(options.scheme, options.dt, options)
         except utils.UserInputError as err:  # name the line of the scheme option (unless the message names one)
@@ -58,7 +43,7 @@ class DynamicRun:
         self.restart = None
         if options.initial_step > 0:
             self.restart = run_output.restart_record(options.output_name, options.initial_step)
-        # Shared with multi_bodies_utilities.py: checks, hooks, bodies, arrays, backends, System, start check.
+        # Shared with the static and Monte Carlo scripts: checks, hooks, bodies, arrays, backends, System, start check.
         setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
         self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
         self.rng = run_output.make_generator(options)
@@ -81,7 +66,7 @@ class DynamicRun:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
                 % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
-        run_output.prepare_output_directory(options.output_name, options.where('output_name'))
+        start_output(options)
 
     # -------------------------------------------------------------- output helpers
     def restart_state(self):
@@ -97,10 +82,7 @@ class DynamicRun:
         """The time loop; returns the exit status."""
         options, system, scheme = self.options, self.system, self.scheme
         restart = options.initial_step > 0
-        run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
-        if not restart:
-            run_output.save_random_state(options.output_name + '.random_state', self.rng)
-        run_output.write_bodies_info(options.output_name + '.bodies_info', self.types, system.num_blobs)
+        write_run_start(options, self.types, system.num_blobs, self.rng, restart=restart)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=self.restart)

@@ -1,19 +1,26 @@
-"""Set-up shared by the two scripts: input checks, hooks, bodies, backends, the System, start checks.
+"""Set-up shared by the three programs: input checks, hooks, bodies, backends, the System, start checks.
 
-Both ``multi_bodies.py`` (dynamics) and ``multi_bodies_utilities.py`` (static
-problems) call :func:`prepare`, in this order:
+``multi_bodies.py`` (dynamics), ``multi_bodies_utilities.py`` (static
+problems) and ``many_bodyMCMC/many_body_MCMC.py`` (Monte Carlo) call
+:func:`prepare`, in this order:
 
-1. checks of the options both scripts use (``blob_radius``, ``eta``, ``domain``);
-2. the physics hooks: this package's defaults, replaced by the user's
+1. the options the program uses, each against its rule in
+   ``input_options.OPTION_TABLE`` (``check_options(options, program)``);
+2. the physics hooks (the Monte Carlo program passes its own loader): this package's defaults, replaced by the user's
    ``user_defined_functions.py`` (either style, doc/overrides.md) and
    ``forces_pycuda_user_defined.py``; the log names every replaced hook and
    every override that cannot take effect;
 3. the bodies of the ``structure`` lines, each given its slip by the
    ``set_slip_by_ID`` hook;
-4. the bodies as arrays, and the System with the backends (``auto``
-   resolved to the fastest usable one, honouring overrides);
+4. the bodies as arrays, and (dynamics, static problems) the System with
+   the backends (``auto`` resolved to the fastest usable one, honouring
+   overrides);
 5. the start check: no blob centre below the wall when the hydrodynamics
-   sees one.
+   sees one (the Monte Carlo program checks the energy itself).
+
+When everything is checked, :func:`start_output` creates the output folder
+and :func:`write_run_start` the first files (``.inputfile``,
+``.random_state``, ``.bodies_info``).
 
 Library floor (ARCHITECTURE.md floor 3): nothing here writes simulation
 output other than the file it is asked to write.
@@ -28,6 +35,8 @@ import utils
 from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import user_hooks
+from multi_bodies.files.input_options import STATIC_SCHEMES, check_options  # noqa: F401 (STATIC_SCHEMES re-exported)
+from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
 from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
 from multi_bodies.files.structure_files import read_slip_file, read_vertex_file
@@ -137,18 +146,8 @@ RunSetup = namedtuple('RunSetup', ['hooks', 'bodies', 'types', 'body_arrays', 's
 RunSetup.__doc__ = """What :func:`prepare` returns: the hooks, the Body list, (ID, count) per structure type,
 the BodyArrays and the System."""
 
-STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
-
-
-def check_common_options(options):
-    """Options both scripts use: positive ``blob_radius`` and ``eta``, a known ``domain``."""
-    for name in ('blob_radius', 'eta'):
-        if not getattr(options, name) > 0:
-            raise utils.UserInputError('%s: %s must be positive, got %s' % (options.where(name), name,
-                                                                            getattr(options, name)))
-    if options.domain not in ('single_wall', 'no_wall'):
-        raise utils.UserInputError("%s: domain must be single_wall or no_wall, got '%s'"
-                                   % (options.where('domain'), options.domain))
+# prepare's script names -> the program names of input_options.OPTION_TABLE
+PROGRAM_OF_SCRIPT = {'dynamics': 'dynamic', 'static': 'static', 'mcmc': 'mcmc'}
 
 
 def load_hooks(options, directory, log=print):
@@ -189,33 +188,46 @@ def check_start(options, system, types):
             start += count
 
 
-def prepare(options, script, print_residual=False, log=print, directory=None, restart_record=None):
-    """Everything a run needs before its first solve; shared by both scripts.
+def prepare(options, script, print_residual=False, log=print, directory=None, restart_record=None,
+            hook_loader=None, set_slip_by_ID=None):
+    """Everything a run needs before its first solve; shared by the three programs.
 
     Parameters
     ----------
     options : validated input options (``input_options.read_input_file``)
-    script : 'dynamics' (multi_bodies.py) or 'static' (multi_bodies_utilities.py)
+    script : 'dynamics' (multi_bodies.py), 'static' (multi_bodies_utilities.py)
+        or 'mcmc' (many_body_MCMC.py: no System, no hydrodynamic start check)
     print_residual : bool
         Print every GMRES residual.
     log : callable(str)
         Where the set-up lines go (the scripts pass ``print``).
     directory : str
         Run directory holding the override files (default: the current one).
+    restart_record : dict or None
+        The ``.restart`` record of ``initial_step`` (see :func:`read_bodies`).
+    hook_loader : callable ``(options, directory, log) -> hooks`` or None
+        Loader of the user's overrides (default :func:`load_hooks`, the
+        physics hooks of ``user_defined_functions.py``).
+    set_slip_by_ID : callable or None
+        Slip hook (default ``hooks.set_slip_by_ID``).
 
-    Returns a :data:`RunSetup`.  Raises ``utils.UserInputError`` (file, line
-    or option named) for any mistake found before the run starts, including
-    an override file that does not import and a ``set_slip_by_ID`` that fails.
+    Returns a :data:`RunSetup` (``system`` None for 'mcmc').  Raises
+    ``utils.UserInputError`` (file, line or option named) for any mistake
+    found before the run starts, including an override file that does not
+    import and a ``set_slip_by_ID`` that fails.
     """
-    check_common_options(options)
-    hooks = load_hooks(options, os.getcwd() if directory is None else directory, log)
+    check_options(options, PROGRAM_OF_SCRIPT[script])
+    directory = os.getcwd() if directory is None else directory
+    hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
-        bodies, types = read_bodies(options, hooks.set_slip_by_ID,
+        bodies, types = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
                                     single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
                                     restart_record=restart_record)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
     body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    if script == 'mcmc':
+        return RunSetup(hooks, bodies, types, body_arrays, None)
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
     system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=log)
@@ -225,3 +237,17 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     system.check_wall = wall_is_seen(options, system, script)
     check_start(options, system, types)
     return RunSetup(hooks, bodies, types, body_arrays, system)
+
+
+def start_output(options):
+    """Create the output folder of ``output_name`` (after every check: nothing is written before)."""
+    run_output.prepare_output_directory(options.output_name, options.where('output_name'))
+
+
+def write_run_start(options, types, num_blobs, rng=None, restart=False):
+    """The first files of a run: ``.inputfile`` (appended to on a restart), ``.random_state`` (of ``rng``, new
+    runs only) and ``.bodies_info`` (``types``: (ID, count) per structure; ``num_blobs``: int)."""
+    run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
+    if rng is not None and not restart:
+        run_output.save_random_state(options.output_name + '.random_state', rng)
+    write_bodies_info(options.output_name + '.bodies_info', types, num_blobs)
