@@ -250,7 +250,8 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
       :class:`PhysicsHooks` builds around a user's pair law), else
       ``calc_blob_blob_forces`` with the vectorised pair law ``pair_force``
       (default this module's ``blob_blob_force``);
-    * 'C++': the OpenMP kernel of ``multi_bodies.solver._forces_cpp`` (default law);
+    * 'C++' (alias 'numba', the later published name): the OpenMP kernel of
+      ``multi_bodies.solver._forces_cpp`` (default law);
     * 'pycuda': ``pycuda_forces`` if given (the function of a
       ``forces_pycuda_user_defined.py``), else the CuPy kernel of
       ``multi_bodies.solver.forces_pycuda`` (imported only here).
@@ -261,7 +262,7 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
         if python_forces is not None:
             return python_forces
         return lambda r_vectors, **kw: calc_blob_blob_forces(r_vectors, pair_force=pair_force, **kw)
-    if implementation == 'C++':
+    if implementation in ('C++', 'numba'):
         try:
             from multi_bodies.solver import _forces_cpp
         except ImportError as err:
@@ -284,7 +285,7 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
         if pycuda_forces is not None:
             return pycuda_forces
         return forces_pycuda.calc_blob_blob_forces_pycuda
-    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ or pycuda"
+    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ (or numba) or pycuda"
                          % implementation)
 
 
