@@ -39,6 +39,7 @@ import os
 import numpy as np
 
 from body.body import blob_positions
+from quaternion_integrator import quaternion as _quaternion
 from mobility.periodic import minimum_image
 from multi_bodies.solver.physics import blob_blob_potential, blob_external_potential, body_body_potential
 from multi_bodies.solver.user_hooks import import_module_file
@@ -208,48 +209,20 @@ def cpp_available():
 
 
 # ---------------------------------------------------------------------------------------------- quaternions
-def quaternions_from_rotations(phi):
-    """``from_rotation`` of many rotation vectors: phi (n, 3) radians -> quaternions (n, 4)."""
-    phi = np.asarray(phi, dtype=float).reshape(-1, 3)
-    angle = np.sqrt(phi[:, 0] * phi[:, 0] + phi[:, 1] * phi[:, 1] + phi[:, 2] * phi[:, 2])
-    nonzero = angle > 0.0
-    # sin(|phi|/2)/|phi| (1/2 in the limit |phi| -> 0, where the vector part is 0 anyway)
-    factor = np.where(nonzero, np.sin(0.5 * angle) / np.where(nonzero, angle, 1.0), 0.5)
-    q = np.empty((phi.shape[0], 4))
-    q[:, 0] = np.cos(0.5 * angle)
-    q[:, 1:] = factor[:, None] * phi
-    return q
-
-
-def quaternion_products(p, q):
-    """Hamilton products ``p * q`` row by row: (n, 4) x (n, 4) -> (n, 4), scalar first.
-
-    ``(s, u) * (t, v) = (s t - u.v, s v + t u + u x v)``.
-    """
-    p0, p1, p2, p3 = np.asarray(p, dtype=float).reshape(-1, 4).T
-    q0, q1, q2, q3 = np.asarray(q, dtype=float).reshape(-1, 4).T
-    out = np.empty((max(p0.size, q0.size), 4))
-    out[:, 0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
-    out[:, 1] = p0 * q1 + q0 * p1 + p2 * q3 - p3 * q2
-    out[:, 2] = p0 * q2 + q0 * p2 + p3 * q1 - p1 * q3
-    out[:, 3] = p0 * q3 + q0 * p3 + p1 * q2 - p2 * q1
-    return out
+# The quaternion step and rotation matrix are the package's one copy (quaternion_integrator.quaternion);
+# the names stay here for the sampler and for published Monte Carlo override files.
+quaternions_from_rotations = _quaternion.quaternions_from_rotations
+quaternion_products = _quaternion.quaternion_products
 
 
 def quaternion_product_scalars(p, q):
-    """``p * q`` of two quaternions given as 4 floats each (one-body moves: no array overhead); returns a tuple."""
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
-    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + q0 * p1 + p2 * q3 - p3 * q2,
-            p0 * q2 + q0 * p2 + p3 * q1 - p1 * q3, p0 * q3 + q0 * p3 + p1 * q2 - p2 * q1)
+    """``p * q`` of two quaternions given as 4 numbers each (one-body moves); returns a tuple of 4 floats."""
+    return tuple(quaternion_products(p, q)[0].tolist())
 
 
 def rotation_matrix_scalars(q):
-    """``R(q)`` (3, 3) of one quaternion given as 4 floats (SPEC section 3)."""
-    s, p1, p2, p3 = q
-    return 2.0 * np.array([[p1 * p1 + s * s - 0.5, p1 * p2 - s * p3, p1 * p3 + s * p2],
-                           [p2 * p1 + s * p3, p2 * p2 + s * s - 0.5, p2 * p3 - s * p1],
-                           [p3 * p1 - s * p2, p3 * p2 + s * p1, p3 * p3 + s * s - 0.5]])
+    """``R(q)`` (3, 3) of one quaternion given as 4 numbers (SPEC section 3)."""
+    return _quaternion.rotation_matrices(q)[0]
 
 
 # ---------------------------------------------------------------------------------------------- energy
