@@ -38,6 +38,7 @@ Shapes: body velocities (Nb, 6) ``[v, w]``; locations (Nb, 3); quaternions
 import numpy as np
 
 from body.body import Configuration
+from multi_bodies.files.input_options import check_value
 from quaternion_integrator.scheme_base import Scheme, displace_bodies
 from stochastic_forcing import rfd, symmetric_root_matrix
 from utils import SimulationStopped, UserInputError
@@ -80,13 +81,9 @@ class StochasticScheme(Scheme):
         self.delta = float(getattr(options, 'rf_delta', 1e-3))
         self.update_PC = int(getattr(options, 'update_PC', 1))
         where = getattr(options, 'where', lambda name: name)
-        if not (self.kT >= 0 and np.isfinite(self.kT)):
-            raise UserInputError('%s: kT must be >= 0, got %g' % (where('kT'), self.kT))
-        if not (self.delta > 0 and np.isfinite(self.delta)):
-            raise UserInputError('%s: rf_delta must be positive (1e-3 is the default), got %g'
-                                 % (where('rf_delta'), self.delta))
-        if self.update_PC < 1:
-            raise UserInputError('%s: update_PC must be at least 1, got %d' % (where('update_PC'), self.update_PC))
+        # The ranges are the option table's (declared once); checked here too for schemes made directly.
+        for name, value in (('kT', self.kT), ('rf_delta', self.delta), ('update_PC', self.update_PC)):
+            check_value(name, value, where(name))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
         self._preconditioner = None
         self._preconditioner_step = None

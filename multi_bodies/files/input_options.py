@@ -438,17 +438,27 @@ def check_options(options, program=None):
         value = getattr(options, name)
         if value is None:
             continue
-        rules = [option.rule]
         if program is not None:
             if name != 'scheme' and not is_used(name, program, options.scheme):
                 continue
             if name == 'scheme' and program == 'mcmc':
                 continue
-            rules.insert(0, option.program_rules.get(program))
-        for rule in rules:
-            if rule is not None and not rule.allows(value):
-                known = rule is not option.rule and option.rule is not None and option.rule.allows(value)
-                raise UserInputError(rule.message(options.where(name), name, value, known=known))
+        check_value(name, value, options.where(name), program)
+
+
+def check_value(name, value, where=None, program=None):
+    """Check one option's value against its row of OPTION_TABLE (the program's stricter rule first).
+
+    The one check of an option's range or choices: ``check_options`` applies it to a parsed input, and
+    code that takes the value through its Python API (a scheme made directly) applies it too.
+    ``where`` names the file and line (default the option's name).  Raises UserInputError.
+    """
+    option = OPTION_TABLE[name]
+    rules = [option.rule] if program is None else [option.program_rules.get(program), option.rule]
+    for rule in rules:
+        if rule is not None and not rule.allows(value):
+            known = rule is not option.rule and option.rule is not None and option.rule.allows(value)
+            raise UserInputError(rule.message(where or name, name, value, known=known))
 
 
 def check_periodic_box(options):
