@@ -41,12 +41,8 @@ class Quaternion:
         return self.entries[1:4]
 
     def __mul__(self, other):
-        """Hamilton product ``(s,p)*(t,q) = (s t - p.q, s q + t p + p x q)``."""
-        s, p = self.s, self.p
-        t, q = other.s, other.p
-        scalar = s * t - np.dot(p, q)
-        vector = s * q + t * p + np.cross(p, q)
-        return Quaternion(np.concatenate(([scalar], vector)))
+        """Hamilton product ``(s,p)*(t,q) = (s t - p.q, s q + t p + p x q)`` (:func:`quaternion_products`)."""
+        return Quaternion(quaternion_products(self.entries, other.entries)[0])
 
     def __repr__(self):
         return 'Quaternion(%r)' % (self.entries.tolist(),)
@@ -61,11 +57,7 @@ class Quaternion:
         Returns ``(cos(|phi|/2), sin(|phi|/2) phi/|phi|)``, the identity when
         ``|phi| == 0``.
         """
-        phi = np.asarray(phi, dtype=float).reshape(3)
-        angle = np.linalg.norm(phi)
-        if angle == 0.0:
-            return Quaternion([1.0, 0.0, 0.0, 0.0])
-        return Quaternion(np.concatenate(([np.cos(angle / 2.0)], np.sin(angle / 2.0) * phi / angle)))
+        return Quaternion(quaternions_from_rotations(np.asarray(phi, dtype=float).reshape(1, 3))[0])
 
     def rotation_matrix(self):
         """Rotation matrix ``R(q)``, shape (3, 3) (SPEC section 3)."""
