@@ -1,4 +1,4 @@
-"""Brownian time-stepping schemes of the manual (SPEC §5.1 and §5.2), floor 4.
+"""Brownian time-stepping schemes of the manual (SPEC §5.1 and §5.2), floor 5.
 
 Each scheme integrates the overdamped Langevin equation of rigid bodies
 above a wall (Delong, Balboa Usabiaga and Donev, J. Chem. Phys. 143, 144107,
