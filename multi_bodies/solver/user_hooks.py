@@ -1,4 +1,4 @@
-"""Loading the user's override files and adapting their functions to the package's hooks (floor 4, multi_bodies.solver).
+"""Loading the user's override files and adapting their functions to the package's hooks (floor 4).
 
 :mod:`multi_bodies.solver.physics` holds the default physics; this module reads
 ``user_defined_functions.py`` (this package's style or the published one,
