@@ -612,12 +612,20 @@ def test_boomerang_height_and_tilt_keep_gibbs_boltzmann(boomerang_brownian):
 @pytest.mark.slow
 def test_boomerang_equilibrium_of_monte_carlo_and_brownian_dynamics_agree(boomerang_brownian):
     """VALIDATION T4 (short version): the Metropolis sampler of many_bodyMCMC on the same scene (same
-    bodies, potentials and start) gives the same <h>, <cos theta>, <cos^2 theta> as the Brownian run:
-    the difference is within 4 combined standard errors (each from its per-body spread)."""
+    bodies and potentials) gives the same <h>, <cos theta>, <cos^2 theta> as the Brownian run.
+
+    The two start from independent exact equilibrium samples (seeds 404 and 401), so two chains that never
+    move do not agree by construction.  Correlation in time: each body's time average is one block, and
+    the bodies are independent (far apart), so the standard error of each run's grand mean is the spread
+    of its per-body time averages over sqrt(30), whatever the autocorrelation time; the difference must be
+    within 4 combined standard errors.  The Monte Carlo chains must also mix: their effective sample size,
+    var(instantaneous values) / SE^2, above 1.5 per body (a frozen chain gives (n - 1) / n per body), and
+    the Brownian bodies must move at the fluctuation-dissipation rate (shared run, see the test above).
+    """
     from many_bodyMCMC import mcmc_energy
     from many_bodyMCMC.sampler import MetropolisSampler
     n_bodies = 30
-    reference, locations, orientations, _ = boomerang_start(n_bodies, 401)
+    reference, locations, orientations, _ = boomerang_start(n_bodies, 404)
     bodies = []
     for location, orientation in zip(locations, orientations):
         body = Body(location, orientation, reference, BOOM_A)
@@ -632,14 +640,19 @@ def test_boomerang_equilibrium_of_monte_carlo_and_brownian_dynamics_agree(boomer
     sampler = MetropolisSampler(energy, locations, orientations, KT, max_translation=0.2, max_angle_shift=0.3,
                                 move='one_body')
     rng = np.random.default_rng(403)
-    sums = np.zeros((n_bodies, 3))
-    n_sweeps = 150
+    n_sweeps = 1000  # about 2 s; 150 sweeps left an effective sample of about 1.3 per body for h
+    series = np.empty((n_sweeps, n_bodies, 3))
     for sweep in range(n_sweeps):
         sampler.step(sweep, rng)
         c = rotation_matrices(sampler.orientations)[:, 2, 2]
-        sums += np.column_stack((sampler.locations[:, 2], c, c ** 2))
-    monte_carlo = sums / n_sweeps
-    brownian, _, _ = boomerang_brownian
+        series[sweep] = np.column_stack((sampler.locations[:, 2], c, c ** 2))
+    monte_carlo = series.mean(axis=0)
+    brownian, _, motion = boomerang_brownian
     difference = monte_carlo.mean(axis=0) - brownian.mean(axis=0)
-    error = np.sqrt(monte_carlo.var(axis=0, ddof=1) / n_bodies + brownian.var(axis=0, ddof=1) / n_bodies)
+    se_mc = monte_carlo.std(axis=0, ddof=1) / np.sqrt(n_bodies)
+    error = np.sqrt(se_mc ** 2 + brownian.var(axis=0, ddof=1) / n_bodies)
     assert np.all(np.abs(difference) < 4 * error), (monte_carlo.mean(axis=0), brownian.mean(axis=0), error)
+    effective = series.reshape(-1, 3).var(axis=0) / se_mc ** 2
+    assert np.all(effective > 1.5 * n_bodies), ('Monte Carlo chains do not mix', effective)
+    assert 0.15 < sampler.acceptance_ratio() < 0.95, sampler.acceptance_ratio()
+    assert abs(z_score(motion, 1.0)) < 4.0, ('Brownian bodies do not move at the equilibrium rate', motion.mean())
