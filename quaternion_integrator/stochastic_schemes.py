@@ -456,6 +456,12 @@ class Fixman(DenseScheme):
     """Fixman's midpoint scheme with dense algebra (Delong et al. 2015).
 
     Draws: W1 (6 Nb), then W2 (6 Nb); W_c = W1 + W2.
+
+    The thermal drift kT div N comes from evaluating the corrector's mobility at the midpoint: the
+    noise velocity is ``N(mid) N(start)^{-1} N(start)^{1/2} W_c``.  With ``thermal_drift = False`` (a
+    negative control for the tests; wrong physics) the corrector uses the mobility at the start point,
+    so the noise is ``N(start)^{1/2} W_c`` with the right covariance and no drift (Euler-Maruyama noise);
+    the deterministic velocity is still taken at the midpoint.
     """
     name = 'Fixman'
 
@@ -471,7 +477,8 @@ class Fixman(DenseScheme):
         mid = self.move(old, U_p, 0.5 * self.dt)
         self.check(system, mid)
         matrices_mid = system.dense_matrices(mid)
-        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + matrices_mid[3] @ corrector
+        N_corrector = matrices_mid[3] if self.thermal_drift else N
+        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + N_corrector @ corrector
         U = U.reshape(-1, 6)
         return self.move(old, U, self.dt), U
 

@@ -213,6 +213,49 @@ def test_auto_backend_is_the_cheapest_measured():
     assert resolve_implementation('auto_no_wall', 'blobs', num_blobs=20).endswith('_no_wall')
 
 
+@pytest.mark.parametrize('python_ms, cpp_ms, expected', [(1.0, 5.0, 'python'), (5.0, 1.0, 'C++'),
+                                                          (1.0, 1.15, 'C++'), (1.0, 1.3, 'python')])
+def test_auto_backend_follows_planted_costs(monkeypatch, python_ms, cpp_ms, expected):
+    """With a planted cache of known costs, auto picks by the documented rule (mobility/choose.py): the
+    cheapest, except that a backend within TIE_MARGIN (20 %) of it and earlier in the preference order
+    (pycuda, C++, python) is kept; 100 blobs are below every probe size, so every cost is a cache entry."""
+    from mobility import backends, choose
+    from multi_bodies.solver.system import resolve_implementation
+    if not (backends.is_usable('C++') and backends.is_usable('python')):
+        pytest.skip('needs the C++ and python backends')
+    planted = {('python', 'vector_product', True, 100): 1e-3 * python_ms,
+               ('C++', 'vector_product', True, 100): 1e-3 * cpp_ms,
+               ('pycuda', 'vector_product', True, 100): 1.0}  # 1 s: never the cheapest, if usable
+    monkeypatch.setattr(choose, '_cache', dict(planted))
+    messages = []
+    assert resolve_implementation('auto', 'vector_product', log=messages.append, num_blobs=100) == expected
+    assert any('auto chose %s' % expected in m for m in messages)
+    assert resolve_implementation('auto_no_wall', 'vector_product', num_blobs=100).endswith('_no_wall')
+
+
+def test_auto_backend_measures_when_nothing_is_cached(monkeypatch):
+    """Without a cache the choice times every usable backend (best of repeats) and follows those times."""
+    from mobility import backends, choose
+    from multi_bodies.solver.system import resolve_implementation
+    monkeypatch.setattr(choose, '_cache', {})
+    calls = []
+    real_time_call = choose.time_call
+
+    def counting_time_call(function, *args, **kwargs):
+        calls.append(function)
+        return real_time_call(function, *args, **kwargs)
+
+    monkeypatch.setattr(choose, 'time_call', counting_time_call)
+    chosen = resolve_implementation('auto', 'vector_product', num_blobs=100)
+    usable = [b for b in choose.PREFERENCE['vector_product'] if backends.is_usable(b)]
+    measured = {key[0]: seconds for key, seconds in choose._cache.items()}
+    assert sorted(measured) == sorted(usable) and len(calls) == len(usable)
+    assert all(0 < seconds < 10 for seconds in measured.values())
+    best = min(measured.values())
+    assert chosen == next(b for b in choose.PREFERENCE['vector_product']
+                          if b in measured and measured[b] <= (1 + choose.TIE_MARGIN) * best)
+
+
 def test_script_on_the_manual_example_and_bad_input(tmp_path):
     source = os.path.join(REPO, 'multi_bodies')
     os.symlink(os.path.join(source, 'Structures'), tmp_path / 'Structures')

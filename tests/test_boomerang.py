@@ -203,6 +203,7 @@ def test_msd_laws_and_the_analysis_script(tmp_path, monkeypatch):
 
 # ------------------------------------------------------------------ Gibbs-Boltzmann
 GFACTOR, DT, N_STEPS, N_BODIES = 10.0, 0.01, 80, 400
+MOTION_EVERY = 8  # steps between the one-step displacement checks
 
 
 def exact_height_statistics(gfactor):
@@ -306,10 +307,24 @@ def test_height_distribution_stays_gibbs_boltzmann(scheme, equilibrium_ensemble)
                                       np.random.default_rng(6))
     start = observables(model, locations, orientations, quartiles)
     total = np.zeros_like(start)
+    squared, predicted = np.zeros(N_BODIES), np.zeros(N_BODIES)
     loc, orient = locations, orientations
-    for _ in range(N_STEPS):
+    for step in range(N_STEPS):
+        if step % MOTION_EVERY == 0:
+            predicted += 2.0 * bm.KT * DT * np.trace(model.mobility(loc, orient)[:, :3, :3], axis1=1, axis2=2)
+            before = loc
         loc, orient = integrator.step(loc, orient, DT)
+        if step % MOTION_EVERY == 0:
+            squared += np.sum((loc - before) ** 2, axis=1)
         total += observables(model, loc, orient, quartiles)
+    # An integrator that never moves keeps the exact start and passes the checks below: the apex must also
+    # move at the rate of the fluctuation-dissipation law, E[|dr|^2 | state] = 2 kT dt tr N_tt(state) +
+    # O(dt^2), on every MOTION_EVERY-th step (all three schemes have this noise); the ratio of the sums
+    # per body within 4 SE of 1 (SE from the spread over the bodies), and 25 % off (a wrong kT) rejected.
+    ratio = squared / predicted
+    motion_z = (ratio.mean() - np.array([1.0, 1.25])) / (ratio.std(ddof=1) / np.sqrt(N_BODIES))
+    print(scheme, 'motion ratio %.4f, z-scores against 1 and 1.25: %s' % (ratio.mean(), np.round(motion_z, 2)))
+    assert abs(motion_z[0]) < 4.0 and abs(motion_z[1]) > 4.0, (scheme, ratio.mean(), motion_z)
     average = total / N_STEPS
     change = average - start
     deviation = start - exact

@@ -259,6 +259,49 @@ def test_error_bars_of_a_random_walk(serial, tmp_path):
         assert np.any(np.abs(wrong) > 4), wrong
 
 
+def test_error_bars_of_planted_replicas(serial, tmp_path):
+    """Planted replica outputs with a known mean and standard error of the MSD.
+
+    Every replica saves the same random walk B scaled by its own factor s (1 for the first replica of a
+    point, 2 for the second), so its MSD is exactly s^2 MSD_B (MSD_B computed here from the walk): the
+    mean over the two replicas is 2.5 MSD_B and the standard error std(ddof=1)/sqrt(R) is
+    |4 - 1| / sqrt(2) / sqrt(2) = 1.5 MSD_B.  A wrong formula (ddof 0, 1/R, no square root) is off by a
+    factor sqrt(2) or more.
+    """
+    plan, _ = serial
+    walk_dir = tmp_path / 'planted'
+    shutil.copytree(plan['output_dir'], walk_dir)
+    manifest = runner.read_manifest(str(walk_dir))
+    rng = np.random.default_rng(7)
+    frames_count, max_lag = 30, 4
+    base = np.concatenate((np.zeros((1, 20, 3)), np.cumsum(rng.normal(0, 0.3, (frames_count - 1, 20, 3)), axis=0)))
+    scale_of = {}
+    for replica in manifest['replicas']:
+        scale = 1.0 + sum(1 for r in manifest['replicas'] if r['point'] == replica['point'] and r['folder'] in scale_of)
+        scale_of[replica['folder']] = scale
+        folder = walk_dir / replica['folder']
+        for name in os.listdir(folder):
+            if name.endswith('.clones'):
+                os.remove(folder / name)
+        for frame in range(frames_count):
+            text = run_output.format_clones(scale * base[frame] + [0, 0, 10], np.tile([1.0, 0, 0, 0], (20, 1)))
+            (folder / run_output.clones_name('run', 'spheres', 2 * frame)).write_text(text)
+    assert sorted(scale_of.values()) == [1.0, 1.0, 2.0, 2.0]
+    msd_base = {'msd_z': [], 'msd_xy': []}
+    for lag in range(1, max_lag + 1):
+        d = base[lag:] - base[:-lag]
+        msd_base['msd_z'].append(np.mean(d[..., 2] ** 2))
+        msd_base['msd_xy'].append(np.mean(d[..., 0] ** 2 + d[..., 1] ** 2))
+    statistics = stats.aggregate(str(walk_dir), charts=False, max_lag=max_lag, log=lambda *a: None)
+    assert len(statistics) == 2
+    for point in statistics.values():
+        assert point['replicas'] == 2
+        for quantity, values in msd_base.items():
+            mean, error = point['msd']['spheres'][quantity]
+            np.testing.assert_allclose(mean, 2.5 * np.array(values), rtol=1e-9)
+            np.testing.assert_allclose(error, 1.5 * np.array(values), rtol=1e-9)
+
+
 def test_clones_readers(tmp_path):
     output = str(tmp_path / 'run')
     frames = np.random.default_rng(1).normal(size=(3, 2, 7))

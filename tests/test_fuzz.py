@@ -21,7 +21,12 @@ every unmutated input.  Asserted for every run:
 
 * exit status 0, 1 or 2, and no exception escaping ``main`` (a traceback);
 * with status 2, an ``error:`` message naming a file or an option;
-* with status 2, every file written by the earlier run unchanged, byte for byte.
+* with status 2, every file written by the earlier run unchanged, byte for byte;
+* for the classified cases (one in four: one mutation of known meaning of an input file,
+  ``KNOWN_REFUSED`` and ``HARMLESS``): a negative dt, an unknown option, a missing
+  structure file, a non-numeric eta or an unknown scheme is refused (status 2, the
+  message names the input file, the line and the option or file), and an added
+  comment or changed whitespace runs (status 0).
 
 Findings in files owned elsewhere are listed in ``KNOWN_FOREIGN`` (each
 reproduced by a strict xfail test at the end); any other finding fails.
@@ -160,7 +165,53 @@ def mutate(data, mutation):
         return text.encode(value, errors='replace')
     elif kind == 'empty':
         return b''
+    elif kind == 'known':
+        return mutate_known(data, value)
     return b'\n'.join(lines)
+
+
+# Mutations of an input file whose meaning is known (a case holds one of them and nothing else): label ->
+# (which scripts must refuse it: 'dynamic' or 'both'; what the message must name).  The refused ones must end
+# with exit status 2 and an ``error:`` message naming the option or file; the harmless ones with exit 0.
+KNOWN_REFUSED = {'negative dt': ('dynamic', 'dt'), 'unknown option': ('both', 'no_such_option'),
+                 'missing file': ('both', 'missing_file.vertex'), 'non-numeric eta': ('both', 'eta'),
+                 'unknown scheme': ('both', 'no_such_scheme')}
+HARMLESS = ('comment added', 'whitespace')
+
+
+def _replace_option(lines, name, value):
+    pattern = re.compile(r'^\s*%s(\s|$)' % re.escape(name))
+    found = [n for n, line in enumerate(lines) if pattern.match(line)]
+    if found:
+        lines[found[0]] = '%s %s' % (name, value)
+    else:
+        lines.append('%s %s' % (name, value))
+    return lines
+
+
+def mutate_known(data, label):
+    """Apply the known mutation ``label`` (KNOWN_REFUSED or HARMLESS) to the bytes of an input file."""
+    lines = data.decode('utf-8').split('\n')
+    if label == 'negative dt':
+        lines = _replace_option(lines, 'dt', '-0.01')
+    elif label == 'unknown option':
+        lines.insert(len(lines) // 2, 'no_such_option 1')
+    elif label == 'missing file':
+        n = next(n for n, line in enumerate(lines) if line.split()[:1] == ['structure'])
+        words = lines[n].split()
+        lines[n] = ' '.join([words[0], 'Structures/missing_file.vertex'] + words[2:])
+    elif label == 'non-numeric eta':
+        lines = _replace_option(lines, 'eta', 'abc')
+    elif label == 'unknown scheme':
+        lines = _replace_option(lines, 'scheme', 'no_such_scheme')
+    elif label == 'comment added':
+        lines = ['# a comment added by the fuzzer'] + lines + ['   # and an indented one', '#']
+    elif label == 'whitespace':
+        lines = [re.sub(r'[ ]+', '\t ', line) + '  \t' if line.strip() else line for line in lines]
+        lines = ['', '   '] + lines + ['', '\t']
+    else:
+        raise ValueError(label)
+    return '\n'.join(lines).encode('utf-8')
 
 
 def mutations():
@@ -180,9 +231,34 @@ def mutations():
 
 @st.composite
 def cases(draw):
+    """(edits, dynamic input, static input).  One case in four is classified: one known mutation
+    (KNOWN_REFUSED or HARMLESS) of one of the two input files, and nothing else."""
     dynamic_input, static_inputs, files = SCENES[draw(st.sampled_from(SCENE_WEIGHTS))]
+    static_input = draw(st.sampled_from(static_inputs))
+    if draw(st.integers(0, 3)) == 0:
+        label = draw(st.sampled_from(sorted(KNOWN_REFUSED) + list(HARMLESS)))
+        target = draw(st.sampled_from([dynamic_input, static_input]))
+        return [(target, ('known', 0, 0, label))], dynamic_input, static_input
     edits = draw(st.lists(st.tuples(st.sampled_from(files), mutations()), min_size=1, max_size=3))
-    return edits, dynamic_input, draw(st.sampled_from(static_inputs))
+    return edits, dynamic_input, static_input
+
+
+def expected_outcome(kind, input_name, edits):
+    """(exit status, names the message must contain) that a classified case promises for this run, or None.
+
+    A refused mutation of the input file the script reads: status 2 and a message naming the input file,
+    the line and the option or file (KNOWN_REFUSED).  A harmless mutation, or an input file left
+    unmutated in a classified case: status 0.  Unclassified cases promise only what check_run checks.
+    """
+    if len(edits) != 1 or edits[0][1][0] != 'known':
+        return None
+    target, (_, _, _, label) = edits[0]
+    if target != input_name or label in HARMLESS:
+        return 0, ()
+    scope, name = KNOWN_REFUSED[label]
+    if scope == 'dynamic' and kind != 'dynamic':
+        return None  # e.g. a negative dt in a static problem, which does not read dt
+    return 2, (os.path.basename(input_name), 'line', name)
 
 
 # ---------------------------------------------------------------------- the earlier run
@@ -238,8 +314,9 @@ def traceback_signature(kind, error):
     return '%s: %s in %s' % (kind, type(error).__name__, where)
 
 
-def check_run(kind, folder, input_name):
-    """Run one script on the case; raises Finding when a promise of the module docstring is broken."""
+def check_run(kind, folder, input_name, expected=None):
+    """Run one script on the case; raises Finding when a promise of the module docstring is broken, or
+    when ``expected`` (exit status, names the ``error:`` message must contain) is not met."""
     before = snapshot_files(folder / 'data')
     try:
         status, out, err = run_in_process(kind, folder, input_name)
@@ -262,6 +339,14 @@ def check_run(kind, folder, input_name):
             kinds = sorted({name.rsplit('.', 1)[-1] for name in changed})
             raise Finding('%s: earlier outputs changed by a failed validation (%s)' % (kind, ', '.join(kinds)),
                           '%s\nchanged: %s' % (message[-1], changed))
+    if expected is not None:
+        status_expected, names = expected
+        last = ([line for line in err.splitlines() if line.startswith('error: ')] or [''])[-1]
+        if status != status_expected or not all(name in last for name in names):
+            raise Finding('%s: classified mutation gave exit %s, expected %s naming %s'
+                          % (kind, status, status_expected, ', '.join(names) or 'nothing'), err[-3000:])
+        OUTCOMES['classified %s, exit %d as expected' % ('refused' if status_expected == 2 else 'harmless',
+                                                          status)] += 1
     return status
 
 
@@ -276,7 +361,7 @@ COLLECT = os.environ.get('RMB_FUZZ_COLLECT', '') not in ('', '0')
 def run_both(folder, dynamic_input, static_input, edits):
     for kind, input_name in (('dynamic', dynamic_input), ('static', static_input)):
         try:
-            check_run(kind, folder, input_name)
+            check_run(kind, folder, input_name, expected_outcome(kind, input_name, edits))
         except Finding as finding:
             FINDINGS[finding.signature].append('%s on %s after %r\n%s' % (kind, input_name, edits, finding))
             if not (COLLECT or finding.signature.startswith(KNOWN_FOREIGN)):
@@ -320,6 +405,9 @@ def test_report_fuzz_outcomes():
         for text, count in MESSAGES.most_common():
             print('%5d  %s' % (count, text))
     assert OUTCOMES['cases'] > 0
+    if OUTCOMES['cases'] >= 100:  # about one case in four is classified: both kinds were checked
+        assert OUTCOMES['classified refused, exit 2 as expected'] > 0
+        assert OUTCOMES['classified harmless, exit 0 as expected'] > 0
 
 
 # ---------------------------------------------------------------------- earlier findings in the static script, now fixed

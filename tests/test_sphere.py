@@ -218,7 +218,8 @@ def test_sphere_equilibrium_height_rfd_matches_gibbs_boltzmann_em_does_not():
     spread over the independent spheres.  Pass: |mean| < 3 SE; EM (no kT
     div N drift) must fail with mean < -3 SE (it gives about -6.6 SE here).
     The time-averaged height is also compared with the quadrature mean of the
-    exact density (3 SE).
+    exact density (3 SE), and the one-step displacements with the mobility
+    (the spheres must move at the equilibrium rate).
     """
     rng = np.random.default_rng(3)
     model = sph.SphereModel('best', weight=2.0, repulsion_strength=0.2, debye_length=0.1)
@@ -232,16 +233,31 @@ def test_sphere_equilibrium_height_rfd_matches_gibbs_boltzmann_em_does_not():
                                           np.random.default_rng(4))
         loc, orient = locations, orientations
         total = np.zeros(h0.size)
-        for _ in range(100):
+        squared, predicted = np.zeros(h0.size), np.zeros(h0.size)
+        for step in range(100):
+            if step % 10 == 0:  # one-step displacement against 2 kT dt tr N_tt at the step's start
+                predicted += 2.0 * sph.KT * 0.02 * np.trace(model.mobility(loc, orient)[:, :3, :3], axis1=1, axis2=2)
+                before = loc
             loc, orient = integrator.step(loc, orient, 0.02)
+            if step % 10 == 0:
+                squared += np.sum((loc - before) ** 2, axis=1)
             total += loc[:, 2]
         average = total / 100
         change = average - h0
+        ratio = squared / predicted
+        motion = (ratio.mean() - np.array([1.0, 1.25])) / (ratio.std(ddof=1) / np.sqrt(h0.size))
         results[scheme] = (change.mean() / (change.std(ddof=1) / np.sqrt(h0.size)),
-                           (average.mean() - exact_mean) / (average.std(ddof=1) / np.sqrt(h0.size)))
+                           (average.mean() - exact_mean) / (average.std(ddof=1) / np.sqrt(h0.size)),
+                           motion[0], motion[1])
     for scheme in ('RFD', 'FIXMAN'):
         assert abs(results[scheme][0]) < 3.0 and abs(results[scheme][1]) < 3.0, (scheme, results)
     assert results['EM'][0] < -3.0, results
+    # A frozen integrator keeps the exact start (change 0) and would pass the above: every scheme must also
+    # move at the rate of the fluctuation-dissipation law, E[|dr|^2 | state] = 2 kT dt tr N_tt(state) +
+    # O(dt^2), on every 10th step (ratio of the sums per sphere within 4 SE of 1, SE from the spread over the
+    # spheres), and the same statistic must reject a rate 25 % off (a wrong kT).
+    for scheme in ('RFD', 'FIXMAN', 'EM'):
+        assert abs(results[scheme][2]) < 4.0 and abs(results[scheme][3]) > 4.0, (scheme, results)
 
 
 def test_sphere_rotational_msd_script_writes_msd_and_heights(tmp_path, monkeypatch):

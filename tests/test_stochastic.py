@@ -10,9 +10,14 @@ Numbers asserted come from outside the code under test:
 Statistical tolerances are stated where they are used; they come from the
 spread of per-body means of many independent bodies started from an exact
 equilibrium sample (no burn-in).  Each statistical test has a negative
-control (the drift switched off, or the 2017 transposed factor) that must
-fail the same check.
+control (the drift switched off, the scheme run at a wrong kT, or the 2017
+transposed factor) that must fail the same check.  An exact start means
+that an integrator that never moves keeps the right heights: every
+Gibbs-Boltzmann test also checks that the bodies move at the equilibrium
+rate (in-plane diffusion 4 kT <mu_par> tau, or one-step displacements
+against 2 kT dt tr N).
 """
+import functools
 import os
 import pickle
 import warnings
@@ -78,6 +83,19 @@ EXACT_BINS = np.diff(np.interp(HIST_EDGES, GRID, CDF))
 CHI2_LIMIT = 24.0  # sum of squared bin z-scores: about chi^2 with 7 degrees of freedom, p = 0.001
 
 
+MSD_WINDOW = 10  # steps per window of the in-plane displacements recorded by run_heights
+
+
+@functools.lru_cache(maxsize=None)
+def mean_parallel_mobility():
+    """<mu_par> of one blob over the exact height density (quadrature; units mu0 = 1/(6 pi eta a))."""
+    M = mobility.blob_mobility_matrix('python')
+    z = np.linspace(1e-3, 20, 4000)
+    mu_par = np.array([M(np.array([[0, 0, h]]), ETA, A)[0, 0] for h in z])
+    density = height_density(z)
+    return np.trapezoid(mu_par * density, z) / np.trapezoid(density, z)
+
+
 def equilibrium_blobs(n_bodies, seed, spacing=25.0):
     """Single-blob bodies on a square lattice (far apart), heights drawn from the exact density."""
     rng = np.random.default_rng(seed)
@@ -94,15 +112,18 @@ def equilibrium_blobs(n_bodies, seed, spacing=25.0):
     return bodies
 
 
-def run_heights(scheme_name, n_bodies, n_steps, dt, seed, disable_drift=False, vector_product=CPP):
-    """Per-body time averages of z and of the histogram bins, and the in-plane displacements."""
+def run_heights(scheme_name, n_bodies, n_steps, dt, seed, disable_drift=False, vector_product=CPP, kT=KT):
+    """Per-body time averages of z and of the histogram bins, the in-plane displacements over the run, the
+    scheme, and the in-plane displacements over consecutive windows of MSD_WINDOW steps (windows, n_bodies, 2)."""
     bodies = equilibrium_blobs(n_bodies, seed)
     system = make_system(bodies, [n_bodies], vector_product=vector_product)
-    scheme = make_scheme(scheme_name, dt, Opts())
+    scheme = make_scheme(scheme_name, dt, Opts(kT=kT))
     if disable_drift:
         scheme.thermal_drift = False
     rng = np.random.default_rng(seed + 1)
     start = system.arrays.locations.copy()
+    window_start = start[:, :2].copy()
+    increments = []  # in-plane displacements over consecutive windows of MSD_WINDOW steps
     z_sum = np.zeros(n_bodies)
     bins = np.zeros((n_bodies, len(HIST_EDGES) - 1))
     for step in range(n_steps):
@@ -110,8 +131,11 @@ def run_heights(scheme_name, n_bodies, n_steps, dt, seed, disable_drift=False, v
         z = system.arrays.locations[:, 2]
         z_sum += z
         bins[np.arange(n_bodies), np.clip(np.searchsorted(HIST_EDGES, z) - 1, 0, len(HIST_EDGES) - 2)] += 1
+        if (step + 1) % MSD_WINDOW == 0:
+            increments.append(system.arrays.locations[:, :2] - window_start)
+            window_start = system.arrays.locations[:, :2].copy()
     displacement = system.arrays.locations[:, :2] - start[:, :2]
-    return z_sum / n_steps, bins / n_steps, displacement, scheme
+    return z_sum / n_steps, bins / n_steps, displacement, scheme, np.array(increments)
 
 
 def z_score(per_body, exact):
@@ -313,6 +337,30 @@ def assert_gibbs_boltzmann(z_means, bins, label):
     assert np.sum(bin_scores ** 2) < CHI2_LIMIT, '%s: histogram z-scores %s' % (label, np.round(bin_scores, 2))
 
 
+def in_plane_diffusion_score(increments, dt, kT=KT):
+    """z-score of the in-plane diffusion against VALIDATION T2: E|dx, dy|^2 = 4 kT <mu_par> tau.
+
+    At equilibrium x and y have no drift (a single blob's mobility depends on z only and mu_xz = 0), so
+    the law holds exactly for any window tau = MSD_WINDOW dt.  Per body: the mean over its windows of
+    |displacement|^2 / (4 tau); standard error from the spread of these over the independent bodies
+    (the windows of one body may be correlated through its height; the bodies are independent).
+    ``increments`` (windows, n_bodies, 2).  A frozen integrator gives -inf (zero spread is no evidence).
+    """
+    per_body = np.mean(np.sum(increments ** 2, axis=2), axis=0) / (4.0 * MSD_WINDOW * dt)
+    expected = kT * mean_parallel_mobility()
+    spread = per_body.std(ddof=1)
+    if not spread > 0:
+        return -np.inf
+    return (per_body.mean() - expected) / (spread / np.sqrt(per_body.size))
+
+
+def assert_in_plane_diffusion(increments, dt, label, kT=KT):
+    """The bodies move at the rate of Gibbs-Boltzmann equilibrium: |z-score| < 4 (see in_plane_diffusion_score)."""
+    score = in_plane_diffusion_score(increments, dt, kT)
+    assert abs(score) < 4.0, '%s: in-plane diffusion z-score %.2f against 4 kT <mu_par> tau (kT = %g)' % (
+        label, score, kT)
+
+
 GB_CASES = [(name, 150, 300, 0.01) for name in RIGID_ITERATIVE] + \
            [(name, 16, 1000, 0.01) for name in RIGID_DENSE] + [(name, 300, 400, 0.01) for name in ROLLERS]
 
@@ -322,20 +370,45 @@ GB_CASES = [(name, 150, 300, 0.01) for name in RIGID_ITERATIVE] + \
 def test_gibbs_boltzmann_heights(scheme_name, n_bodies, n_steps, dt):
     """VALIDATION T1 (own parameters): single-blob heights keep the exact equilibrium distribution."""
     vector_product = 'python' if scheme_name in RIGID_DENSE else CPP
-    z_means, bins, _, scheme = run_heights(scheme_name, n_bodies, n_steps, dt, seed=100,
+    z_means, bins, _, scheme, increments = run_heights(scheme_name, n_bodies, n_steps, dt, seed=100,
                                            vector_product=vector_product)
     assert_gibbs_boltzmann(z_means, bins, scheme_name)
+    # the heights alone would pass for an integrator that never moves (the start is an exact sample):
+    # the same run must also diffuse in the plane at the equilibrium rate (VALIDATION T2) ...
+    assert_in_plane_diffusion(increments, dt, scheme_name)
+    # ... and the check has the power to see a wrong kT (25 % off: at least 6 standard errors here)
+    assert abs(in_plane_diffusion_score(increments, dt, kT=1.25 * KT)) > 4.0, scheme_name
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize('scheme_name', ['stochastic_Slip_Trapz', 'stochastic_first_order_RFD',
-                                         'stochastic_adams_bashforth_rollers'])
+                                         'stochastic_adams_bashforth_rollers', 'Fixman'])
 def test_gibbs_boltzmann_fails_without_drift(scheme_name):
-    """Negative control: the same runs with the thermal drift (RFD terms) switched off leave the equilibrium."""
-    n_bodies = 150 if 'rollers' not in scheme_name else 300
-    z_means, bins, _, _ = run_heights(scheme_name, n_bodies, 300, 0.01, seed=100, disable_drift=True)
+    """Negative control: the same runs with the thermal drift (RFD terms; for Fixman the midpoint mobility
+    of the corrector) switched off leave the equilibrium."""
+    n_bodies = 16 if scheme_name in RIGID_DENSE else (150 if 'rollers' not in scheme_name else 300)
+    n_steps = 1000 if scheme_name in RIGID_DENSE else 300
+    vector_product = 'python' if scheme_name in RIGID_DENSE else CPP
+    z_means, bins, _, _, _ = run_heights(scheme_name, n_bodies, n_steps, 0.01, seed=100, disable_drift=True,
+                                         vector_product=vector_product)
     with pytest.raises(AssertionError):
         assert_gibbs_boltzmann(z_means, bins, scheme_name + ' without drift')
+
+
+WRONG_KT_CASES = [(name, 150, 50) for name in RIGID_ITERATIVE] + [(name, 16, 300) for name in RIGID_DENSE] + \
+                 [(name, 300, 50) for name in ROLLERS]
+
+
+@pytest.mark.parametrize('scheme_name, n_bodies, n_steps', WRONG_KT_CASES)
+def test_in_plane_diffusion_fails_at_a_wrong_kT(scheme_name, n_bodies, n_steps):
+    """Negative control of every scheme: run at 2 kT (short runs from the same equilibrium start), the
+    in-plane diffusion check against kT must fail (the noise variance is twice too large; the mean of the
+    per-body MSDs has a relative SE of about 5 %, 15 % for the dense cases: 6.5 to 19 SE off, measured)."""
+    vector_product = 'python' if scheme_name in RIGID_DENSE else CPP
+    _, _, _, _, increments = run_heights(scheme_name, n_bodies, n_steps, 0.01, seed=100,
+                                         vector_product=vector_product, kT=2.0 * KT)
+    with pytest.raises(AssertionError):
+        assert_in_plane_diffusion(increments, 0.01, scheme_name + " at 2 kT")
 
 
 def test_in_plane_diffusion_equals_kT_mean_parallel_mobility():
@@ -350,7 +423,7 @@ def test_in_plane_diffusion_equals_kT_mean_parallel_mobility():
     density = height_density(z)
     expected = KT * np.trapezoid(mu_par * density, z) / np.trapezoid(density, z)
     n_steps, dt = 300, 0.01
-    _, _, displacement, _ = run_heights('stochastic_adams_bashforth_rollers', 300, n_steps, dt, seed=200)
+    _, _, displacement, _, _ = run_heights('stochastic_adams_bashforth_rollers', 300, n_steps, dt, seed=200)
     per_body = np.sum(displacement ** 2, axis=1) / (4 * n_steps * dt)
     score = (per_body.mean() - expected) / (per_body.std(ddof=1) / np.sqrt(per_body.size))
     assert abs(score) < 4.0, (per_body.mean(), expected)
@@ -454,6 +527,7 @@ def test_every_manual_scheme_name_runs(tmp_path, monkeypatch):
 
 # ====================================================================== multi-blob equilibrium (preconditioned noise)
 BOOM_A, BOOM_G, BOOM_EPS, BOOM_B = 0.15, 1.0 / 15.0, 1.0, 0.2  # blob radius, weight per blob, wall eps and b
+BOOM_MOTION_EVERY = 10  # steps between the one-step displacement checks of the Brownian boomerangs
 
 
 def boomerang_blob_energy(z):
@@ -506,7 +580,9 @@ def boomerang_keywords():
 
 @pytest.fixture(scope='module')
 def boomerang_brownian():
-    """Per-body time averages of (h, cos theta, cos^2 theta) of 30 boomerangs, 250 steps of Slip_Trapz."""
+    """Per-body time averages of (h, cos theta, cos^2 theta) of 30 boomerangs, 250 steps of Slip_Trapz; the
+    exact values; per body, the squared one-step displacements of the tracking point summed over every
+    BOOM_MOTION_EVERY-th step, over their expectation 2 kT dt tr N_tt at the step's start (N dense, here)."""
     n_bodies, n_steps = 30, 250
     reference, locations, orientations, exact = boomerang_start(n_bodies, 401)
     bodies = []
@@ -520,11 +596,19 @@ def boomerang_brownian():
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
     rng = np.random.default_rng(402)
     sums = np.zeros((n_bodies, 3))
+    squared, predicted = np.zeros(n_bodies), np.zeros(n_bodies)
     for step in range(n_steps):
+        if step % BOOM_MOTION_EVERY == 0:  # E[|dr|^2 | state] = 2 kT dt tr N_tt(state) + O(dt^2), N from here
+            N = system.dense_matrices(*system.get_state())[3]
+            blocks = np.array([np.trace(N[6 * b:6 * b + 3, 6 * b:6 * b + 3]) for b in range(n_bodies)])
+            predicted += 2.0 * KT * scheme.dt * blocks
+            before = system.arrays.locations.copy()
         scheme.step(system, step, rng)
+        if step % BOOM_MOTION_EVERY == 0:
+            squared += np.sum((system.arrays.locations - before) ** 2, axis=1)
         c = rotation_matrices(system.arrays.orientations)[:, 2, 2]
         sums += np.column_stack((system.arrays.locations[:, 2], c, c ** 2))
-    return sums / n_steps, exact
+    return sums / n_steps, exact, squared / predicted
 
 
 @pytest.mark.slow
@@ -535,20 +619,35 @@ def test_boomerang_height_and_tilt_keep_gibbs_boltzmann(boomerang_brownian):
     density); per-body time averages of h, cos(theta) and cos^2(theta) are within 4 SE of the quadrature
     values.  This exercises the block-preconditioned Lanczos noise and the slip RFD on rigid bodies.
     """
-    per_body, exact = boomerang_brownian
+    per_body, exact, motion = boomerang_brownian
     scores = z_score(per_body, exact)
     assert np.max(np.abs(scores)) < 4.0, (per_body.mean(axis=0), exact, scores)
+    # An integrator that never moves would pass the above (exact start): the bodies must also move at the
+    # rate of the fluctuation-dissipation law, the ratio within 4 SE of 1 (SE from the spread over the
+    # bodies; the O(dt^2) drift term is below 0.2 %) ...
+    motion_score = z_score(motion, 1.0)
+    assert abs(motion_score) < 4.0, (motion.mean(), motion_score)
+    # ... and the check sees a wrong kT (25 % off)
+    assert abs(z_score(motion, 1.25)) > 4.0, (motion.mean(), z_score(motion, 1.25))
 
 
 @pytest.mark.slow
 def test_boomerang_equilibrium_of_monte_carlo_and_brownian_dynamics_agree(boomerang_brownian):
     """VALIDATION T4 (short version): the Metropolis sampler of many_bodyMCMC on the same scene (same
-    bodies, potentials and start) gives the same <h>, <cos theta>, <cos^2 theta> as the Brownian run:
-    the difference is within 4 combined standard errors (each from its per-body spread)."""
+    bodies and potentials) gives the same <h>, <cos theta>, <cos^2 theta> as the Brownian run.
+
+    The two start from independent exact equilibrium samples (seeds 404 and 401), so two chains that never
+    move do not agree by construction.  Correlation in time: each body's time average is one block, and
+    the bodies are independent (far apart), so the standard error of each run's grand mean is the spread
+    of its per-body time averages over sqrt(30), whatever the autocorrelation time; the difference must be
+    within 4 combined standard errors.  The Monte Carlo chains must also mix: their effective sample size,
+    var(instantaneous values) / SE^2, above 1.5 per body (a frozen chain gives (n - 1) / n per body), and
+    the Brownian bodies must move at the fluctuation-dissipation rate (shared run, see the test above).
+    """
     from many_bodyMCMC import mcmc_energy
     from many_bodyMCMC.sampler import MetropolisSampler
     n_bodies = 30
-    reference, locations, orientations, _ = boomerang_start(n_bodies, 401)
+    reference, locations, orientations, _ = boomerang_start(n_bodies, 404)
     bodies = []
     for location, orientation in zip(locations, orientations):
         body = Body(location, orientation, reference, BOOM_A)
@@ -563,14 +662,19 @@ def test_boomerang_equilibrium_of_monte_carlo_and_brownian_dynamics_agree(boomer
     sampler = MetropolisSampler(energy, locations, orientations, KT, max_translation=0.2, max_angle_shift=0.3,
                                 move='one_body')
     rng = np.random.default_rng(403)
-    sums = np.zeros((n_bodies, 3))
-    n_sweeps = 150
+    n_sweeps = 1000  # about 2 s; 150 sweeps left an effective sample of about 1.3 per body for h
+    series = np.empty((n_sweeps, n_bodies, 3))
     for sweep in range(n_sweeps):
         sampler.step(sweep, rng)
         c = rotation_matrices(sampler.orientations)[:, 2, 2]
-        sums += np.column_stack((sampler.locations[:, 2], c, c ** 2))
-    monte_carlo = sums / n_sweeps
-    brownian, _ = boomerang_brownian
+        series[sweep] = np.column_stack((sampler.locations[:, 2], c, c ** 2))
+    monte_carlo = series.mean(axis=0)
+    brownian, _, motion = boomerang_brownian
     difference = monte_carlo.mean(axis=0) - brownian.mean(axis=0)
-    error = np.sqrt(monte_carlo.var(axis=0, ddof=1) / n_bodies + brownian.var(axis=0, ddof=1) / n_bodies)
+    se_mc = monte_carlo.std(axis=0, ddof=1) / np.sqrt(n_bodies)
+    error = np.sqrt(se_mc ** 2 + brownian.var(axis=0, ddof=1) / n_bodies)
     assert np.all(np.abs(difference) < 4 * error), (monte_carlo.mean(axis=0), brownian.mean(axis=0), error)
+    effective = series.reshape(-1, 3).var(axis=0) / se_mc ** 2
+    assert np.all(effective > 1.5 * n_bodies), ('Monte Carlo chains do not mix', effective)
+    assert 0.15 < sampler.acceptance_ratio() < 0.95, sampler.acceptance_ratio()
+    assert abs(z_score(motion, 1.0)) < 4.0, ('Brownian bodies do not move at the equilibrium rate', motion.mean())
