@@ -599,7 +599,7 @@ def boomerang_brownian():
     squared, predicted = np.zeros(n_bodies), np.zeros(n_bodies)
     for step in range(n_steps):
         if step % BOOM_MOTION_EVERY == 0:  # E[|dr|^2 | state] = 2 kT dt tr N_tt(state) + O(dt^2), N from here
-            N = system.dense_matrices(*system.get_state())[3]
+            N = system.dense_matrices(system.configuration)[3]
             blocks = np.array([np.trace(N[6 * b:6 * b + 3, 6 * b:6 * b + 3]) for b in range(n_bodies)])
             predicted += 2.0 * KT * scheme.dt * blocks
             before = system.arrays.locations.copy()
