@@ -201,7 +201,8 @@ def run_dynamics_script(run_dir, monkeypatch):
     return load_script('multi_bodies').main(['--input-file', EXAMPLE_INPUT])
 
 
-@pytest.mark.parametrize('scheme', ['deterministic_forward_euler', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid'])
+@pytest.mark.parametrize('scheme', ['deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
+                                    'deterministic_adams_bashforth', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid'])
 def test_example_obstacle_stays_and_driven_body_follows_its_velocity(scheme, tmp_path, monkeypatch):
     run_dir = example_copy(tmp_path, [('scheme', 'scheme %s' % scheme), ('n_steps', 'n_steps 4'),
                                       ('n_save', 'n_save 1')])
@@ -232,6 +233,26 @@ def test_other_stochastic_scheme_refuses_obstacles(tmp_path):
     for word in ('stochastic_first_order_RFD', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid', 'obstacle'):
         assert word in message
     assert not (run_dir / 'data').exists()
+
+
+def test_structure_and_obstacle_lines_are_checked(tmp_path):
+    from multi_bodies.files.input_options import parse_input_text
+    from utils import UserInputError
+    options = parse_input_text('scheme deterministic_forward_euler\nstructure a.vertex b.clones None v.dat\n'
+                               'obstacle c.vertex d.clones\nstructure e.vertex f.clones g.slip\n', 'in.dat')
+    assert [(s.ID, s.slip_file, s.velocity_file, s.obstacle) for s in options.structures] == \
+        [('b', None, 'v.dat', False), ('f', 'g.slip', None, False)]
+    assert [(s.ID, s.obstacle, s.where) for s in options.obstacles] == [('d', True, 'in.dat, line 3')]
+    with pytest.raises(UserInputError, match=r"in.dat, line 2: 'obstacle' expects two or three file names"):
+        parse_input_text('scheme deterministic_forward_euler\nobstacle a.vertex b.clones c.slip d.dat\n', 'in.dat')
+    # a velocity file with the wrong number of lines is refused, naming it
+    run_dir = example_copy(tmp_path)
+    (run_dir / 'driven_sphere.velocity').write_text('0 0 0 0 0 0\n0 0 0 0 0 0\n')
+    env = dict(os.environ, PYTHONPATH=REPO_ROOT, OMP_NUM_THREADS='1')
+    done = subprocess.run([sys.executable, os.path.join(REPO_ROOT, 'multi_bodies', 'multi_bodies.py'),
+                           '--input-file', EXAMPLE_INPUT], cwd=run_dir, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 2 and 'driven_sphere.velocity' in done.stderr + done.stdout
 
 
 def test_static_mobility_with_obstacles_matches_dense_algebra(tmp_path, monkeypatch):
