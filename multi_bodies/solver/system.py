@@ -403,9 +403,9 @@ class System:
         """Velocities (Nb, 6) at ``configuration`` by dense algebra: ``N (F - K^T M^{-1} slip)``."""
         _, force_torque, slip = self.forces_and_slip(configuration)
         if self.has_fixed_bodies:
-            M, M_inv, K, _ = body_solver.dense_matrices(self.arrays, as_configuration(configuration),
-                                                        self.blob_mobility_matrix, self.eta, self.blob_radius,
-                                                        inverse=False)
+            M, _, K, _ = body_solver.dense_matrices(self.arrays, as_configuration(configuration),
+                                                    self.blob_mobility_matrix, self.eta, self.blob_radius,
+                                                    inverse=False)
             return obstacles.dense_mixed_solution(M, K, self.fixed_bodies, self.prescribed_velocities,
                                                   force_torque, slip)[0]
         return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
