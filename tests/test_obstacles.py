@@ -260,7 +260,7 @@ def test_static_mobility_with_obstacles_matches_dense_algebra(tmp_path, monkeypa
                        [0.0, 0.3, -0.5, 0.1, 0.0, 0.0]])
     static = load_script('multi_bodies_utilities')
     results = {}
-    for scheme in ('mobility', 'body_mobility'):
+    for scheme in ('mobility', 'body_mobility', 'resistance'):
         run_dir = example_copy(tmp_path / scheme, [('scheme', 'scheme %s' % scheme),
                                                    ('mobility_vector_prod_implementation',
                                                     'mobility_vector_prod_implementation python')])
@@ -291,6 +291,10 @@ def test_static_mobility_with_obstacles_matches_dense_algebra(tmp_path, monkeypa
     R_FF = K[:, :6].T @ np.linalg.solve(M, K[:, :6])
     assert relative(N[:6, :6], np.linalg.inv(R_FF)) < 1e-8
     assert np.all(N[6:] == 0.0) and np.all(N[:, 6:] == 0.0)
+    # resistance (no velocity_file: free bodies at rest) keeps the prescribed velocities of the others
+    U_rest = np.where(fixed[:, None], U_P, 0.0)
+    expected = (K.T @ np.linalg.solve(M, K @ U_rest.reshape(-1))).reshape(3, 6)
+    assert relative(np.loadtxt(results['resistance'] / 'obstacle_shells.force.dat'), expected) < 1e-10
 
 
 # ------------------------------------------------------------------ the published Pillars example
