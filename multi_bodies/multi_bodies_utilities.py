@@ -16,6 +16,16 @@ Schemes (option ``scheme``):
 * ``resistance``: forces and torques for given velocities (``velocity_file``,
   zero by default) and the active slip, by a dense solve -> ``output_name.force.dat``.
 
+Obstacles (``obstacle`` lines) and bodies of prescribed velocity (a fourth
+file on a ``structure`` line) keep their prescribed velocity (zero for an
+obstacle) in every problem (``multi_bodies.solver.obstacles``): ``mobility``
+solves the mixed problem (free bodies move, prescribed ones do not respond)
+and writes, in the rows of prescribed bodies, their prescribed velocity to
+``.velocities.dat`` and the force-torque that holds them to ``.force.dat``;
+``body_mobility`` gives the mobility of the free bodies with the prescribed
+ones held (zero rows and columns for the latter); ``resistance`` uses the
+prescribed velocities for those bodies whatever ``velocity_file`` says.
+
 The set-up (input checks, ``user_defined_functions.py`` overrides in either
 style, bodies and their slip from ``set_slip_by_ID``, backends including
 ``auto``, start check) is ``run_setup.prepare``, shared with
@@ -42,6 +52,7 @@ import numpy as np  # noqa: E402
 
 import mobility  # noqa: E402
 from multi_bodies.solver import body_solver  # noqa: E402
+from multi_bodies.solver import obstacles  # noqa: E402
 from multi_bodies.files.input_options import read_input_file  # noqa: E402
 from multi_bodies.run import run_output  # noqa: E402
 from multi_bodies.run.run_setup import STATIC_SCHEMES, prepare, write_bodies_info  # noqa: E402
@@ -56,8 +67,13 @@ def save_table(path, table):
 
 def run_body_mobility(options, system, configuration):
     with utils.Timer() as timer:
-        body_mobility, slip_mobility = body_solver.dense_body_mobility(
-            system.arrays, configuration, system.blob_mobility_matrix, system.eta, system.blob_radius)
+        if system.has_fixed_bodies:  # the free bodies' mobility with the prescribed ones held
+            M, _, K, _ = system.dense_matrices(configuration, inverse=False)
+            body_mobility, slip_mobility = obstacles.dense_mixed_body_mobility(np.linalg.inv(M), K,
+                                                                               system.fixed_bodies)
+        else:
+            body_mobility, slip_mobility = body_solver.dense_body_mobility(
+                system.arrays, configuration, system.blob_mobility_matrix, system.eta, system.blob_radius)
     print('Time to compute body mobility = %s' % timer.elapsed)
     save_table(options.output_name + '.body_mobility.dat', body_mobility)
     save_table(options.output_name + '.body_slip_mobility.dat', slip_mobility)
@@ -88,6 +104,8 @@ def run_mobility(options, system, configuration, force_table=None):
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))
     save_table(options.output_name + '.velocities.dat', result.velocities)
+    if result.constraint_force_torque is not None:  # prescribed bodies: the force-torque that holds them
+        force_torque = np.where(system.fixed_bodies[:, None], result.constraint_force_torque, force_torque)
     save_table(options.output_name + '.force.dat', force_torque)
     write_velocity_field(options, system, problem.r_vectors, result.lambda_blobs)
     if not result.converged:
@@ -107,6 +125,8 @@ def run_resistance(options, system, configuration, velocity_table=None):
                                      options.where('velocity_file'))
     else:
         velocities = np.zeros((system.num_bodies, 6))
+    if system.has_fixed_bodies:  # obstacles and bodies of prescribed velocity keep theirs
+        velocities = np.where(system.fixed_bodies[:, None], system.prescribed_velocities, velocities)
     slip = system.slip(configuration) if system.has_slip else np.zeros((system.num_blobs, 3))
     with utils.Timer() as timer:
         force_torque, lambda_blobs = body_solver.solve_resistance_problem(

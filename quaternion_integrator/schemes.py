@@ -110,6 +110,28 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
 
 
+# Schemes that solve the mixed problem of bodies of prescribed kinematics (obstacles, velocity files).
+SCHEMES_WITH_OBSTACLES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
+                          'deterministic_adams_bashforth', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid')
+
+
+def check_fixed_bodies_supported(name, options):
+    """Refuse (UserInputError) obstacles or prescribed velocities with a scheme that does not solve the mixed problem."""
+    if options is None or name in SCHEMES_WITH_OBSTACLES:
+        return
+    specs = list(getattr(options, 'structures', [])) + list(getattr(options, 'obstacles', []))
+    fixed = [spec for spec in specs if getattr(spec, 'obstacle', False)
+             or getattr(spec, 'velocity_file', None) is not None]
+    if not fixed or name not in _all_schemes():
+        return
+    where = getattr(options, 'where', lambda option: option)
+    raise UserInputError(
+        "%s: scheme %s does not support obstacles or bodies of prescribed velocity (%s: %s line); use "
+        "stochastic_Slip_Trapz or stochastic_Slip_Mid for a stochastic run (or a deterministic scheme: %s)"
+        % (where('scheme'), name, fixed[0].where, 'obstacle' if fixed[0].obstacle else 'structure',
+           ', '.join(SCHEMES_WITH_OBSTACLES[:3])))
+
+
 def make_scheme(name, dt, options=None):
     """The scheme object for the manual's name ``name`` with time step ``dt``.
 
@@ -118,6 +140,7 @@ def make_scheme(name, dt, options=None):
     name (the message lists the known ones).
     """
     schemes = _all_schemes()
+    check_fixed_bodies_supported(name, options)
     if name in SCHEMES:
         return SCHEMES[name](dt)
     if name in schemes:

@@ -138,7 +138,12 @@ class StochasticScheme(Scheme):
         """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
-        return system.solve(problem, rhs, preconditioner, kind='stochastic')
+        result = system.solve(problem, rhs, preconditioner, kind='stochastic')
+        split = getattr(problem, 'split_body_unknowns', None)
+        if split is not None:  # bodies of prescribed kinematics are not moved by noise or RFD solves
+            velocities, _ = split(result.velocities, prescribed_motion=False)
+            result = result._replace(velocities=velocities)
+        return result
 
     def rfd_drift(self, system, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).

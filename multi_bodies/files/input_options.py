@@ -199,34 +199,57 @@ OPTION_TABLE = {
 
 # Options of later versions of the published code that this package does not implement.
 UNSUPPORTED_LATER_OPTIONS = (
-    'tilt_angle', 'obstacle', 'articulated', 'repulsion_strength_firm', 'firm_delta',
+    'tilt_angle', 'articulated', 'repulsion_strength_firm', 'firm_delta',
     'hydro_interactions', 'call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
     'green_particles', 'cells', 'domType', 'Lub_Cut', 'zmin', 'zmax',
     'nonlinear_solver_tolerance', 'slip_length', 'plot_velocity_field_shell',
     'save_HydroGrid_cells', 'hydrodynamic_radius', 'mu', 'vacf', 'stiffness_wall',
 )
 
-StructureSpec = namedtuple('StructureSpec', ['vertex_file', 'clones_file', 'slip_file', 'ID', 'where'])
-StructureSpec.__doc__ = """One ``structure`` line: file names (relative to the working directory),
-the structure ID (clones file name without directory and ``.clones``) and
-``where`` ("file, line n") for error messages."""
+StructureSpec = namedtuple('StructureSpec', ['vertex_file', 'clones_file', 'slip_file', 'ID', 'where',
+                                             'velocity_file', 'obstacle'], defaults=(None, False))
+StructureSpec.__doc__ = """One ``structure`` or ``obstacle`` line: file names (relative to the working
+directory), the structure ID (clones file name without directory and ``.clones``), ``where``
+("file, line n") for error messages, ``velocity_file`` (the fourth file of a ``structure`` line: the
+prescribed lab-frame velocities ``vx vy vz wx wy wz`` of its bodies, one line per body; None for free
+bodies) and ``obstacle`` (True for an ``obstacle`` line: bodies held at zero velocity)."""
+
+
+def parse_structure_line(name, value, where):
+    """The StructureSpec of one ``structure`` (2 to 4 files) or ``obstacle`` (2 or 3 files) line."""
+    files = value.split()
+    if name == 'obstacle':
+        if len(files) not in (2, 3):
+            raise UserInputError("%s: 'obstacle' expects two or three file names (vertex clones [slip]), got "
+                                 "%d: '%s'" % (where, len(files), value))
+    elif len(files) not in (2, 3, 4):
+        raise UserInputError(
+            "%s: 'structure' expects two or three file names (vertex clones [slip]), or four for bodies of "
+            "prescribed velocity (vertex clones slip velocity; slip None for no slip), got %d: '%s'"
+            % (where, len(files), value))
+    slip = files[2] if len(files) >= 3 and files[2] != 'None' else None
+    velocity = files[3] if len(files) == 4 else None
+    return StructureSpec(files[0], files[1], slip, structure_id_from_clones(files[1]), where, velocity,
+                         name == 'obstacle')
 
 
 class Options:
     """Typed options of one input file.
 
     Every name of ``OPTION_TABLE`` is an attribute (defaults filled in);
-    ``structures`` is the list of ``StructureSpec`` in input order;
+    ``structures`` is the list of ``StructureSpec`` of the ``structure`` lines in input order,
+    ``obstacles`` that of the ``obstacle`` lines (their bodies come after all the structures');
     ``input_file`` the path read; ``where(name)`` says on which line an
     option was set ("<file>, line <n>", or "<file> (default)");
     ``warnings`` the messages about accepted but doubtful lines (printed by
     ``read_input_file``).
     """
 
-    def __init__(self, input_file, values, lines, structures):
+    def __init__(self, input_file, values, lines, structures, obstacles=()):
         self.input_file = input_file
         self._lines = dict(lines)
         self.structures = list(structures)
+        self.obstacles = list(obstacles)
         self.warnings = []
         for name, option in OPTION_TABLE.items():
             setattr(self, name, values.get(name, option.default))
@@ -331,6 +354,7 @@ def parse_input_text(text, input_file='<input>', program=None):
     static script, others: the dynamic one).
     """
     values, lines, structures, repeated = {}, {}, [], []
+    obstacles = []
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split('#', 1)[0].strip()
         if not line:
@@ -341,22 +365,15 @@ def parse_input_text(text, input_file='<input>', program=None):
         if len(parts) < 2:
             raise UserInputError("%s: option '%s' has no value; write '%s <value>'" % (where, name, name))
         value = parts[1].strip()
-        if name == 'structure':
-            files = value.split()
-            if len(files) not in (2, 3):
-                raise UserInputError(
-                    "%s: 'structure' expects two or three file names (vertex clones [slip]), got %d: '%s'"
-                    % (where, len(files), value))
-            slip = files[2] if len(files) == 3 else None
-            structures.append(StructureSpec(files[0], files[1], slip,
-                                            structure_id_from_clones(files[1]), where))
+        if name in ('structure', 'obstacle'):
+            (structures if name == 'structure' else obstacles).append(parse_structure_line(name, value, where))
             continue
         if name in UNSUPPORTED_LATER_OPTIONS:
             raise UserInputError(
                 "%s: option '%s' belongs to a later version of the published code and is unsupported "
                 "here; remove the line (see doc/static_problems.md for the options we support)" % (where, name))
         if name not in OPTION_TABLE:
-            close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure'], n=1)
+            close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure', 'obstacle'], n=1)
             hint = " (did you mean '%s'?)" % close[0] if close else ''
             raise UserInputError("%s: unknown option '%s'%s" % (where, name, hint))
         values[name] = _convert(OPTION_TABLE[name].kind, name, value, where)
@@ -364,7 +381,7 @@ def parse_input_text(text, input_file='<input>', program=None):
             repeated.append("%s: option '%s' repeats line %d; the later value is used (remove one of the lines)"
                             % (where, name, lines[name]))
         lines[name] = number
-    options = Options(input_file, values, lines, structures)
+    options = Options(input_file, values, lines, structures, obstacles)
     check_options(options, program)
     check_periodic_box(options)
     options.warnings = repeated + unused_option_warnings(options, program)

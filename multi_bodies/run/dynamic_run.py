@@ -147,6 +147,10 @@ class DynamicRun:
         if self.options.save_blobs_mobility:
             np.savetxt(stem % 'blobs_mobility', M, delimiter='  ')
         if self.options.save_body_mobility:
+            if system.has_fixed_bodies:  # obstacles: the free bodies' mobility with the prescribed ones held
+                from multi_bodies.solver.obstacles import dense_mixed_body_mobility
+                N = dense_mixed_body_mobility(M_inv, system.dense_matrices(system.configuration, inverse=False)[2],
+                                              system.fixed_bodies)[0]
             np.savetxt(stem % 'body_mobility', N, delimiter='  ')
 
     def log_error(self, text):

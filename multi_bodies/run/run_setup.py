@@ -39,7 +39,7 @@ from multi_bodies.files.input_options import STATIC_SCHEMES, check_options  # no
 from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
 from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
-from multi_bodies.files.structure_files import read_slip_file, read_vertex_file
+from multi_bodies.files.structure_files import read_body_table, read_slip_file, read_vertex_file
 from multi_bodies.solver.system import make_system
 
 
@@ -60,13 +60,16 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         ``output_name.restart`` at that step: it says where the snapshot
         starts in each ``.config`` file.
 
-    Returns (list of Body, list of (ID, number of bodies) per structure type).
+    Returns (list of Body, list of (ID, number of bodies) per structure type).  The bodies of the
+    ``obstacle`` lines come after those of every ``structure`` line; each body has
+    ``prescribed_velocity``: None for a free body, (6,) lab-frame ``[v, w]`` for a body of
+    prescribed kinematics (zeros for an obstacle, the row of the ``structure`` line's velocity file).
     """
     if not options.structures:
         raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
                                    % options.input_file)
     bodies, types = [], []
-    for spec in options.structures:
+    for spec in all_structure_specs(options):
         clones = spec.clones_file
         snapshot = None
         restart_step = getattr(options, 'initial_step', 0)
@@ -101,9 +104,10 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         if single_blob_bodies and reference.shape[0] != 1:
             raise utils.UserInputError('%s: roller schemes need single-blob bodies, but %s has %d blobs'
                                        % (spec.where, spec.vertex_file, reference.shape[0]))
-        print('Creating structures = %s' % clones)
+        print('Creating %s = %s' % ('obstacles' if getattr(spec, 'obstacle', False) else 'structures', clones))
+        prescribed = prescribed_velocities(spec, locations.shape[0])
         body_length = None
-        for location, orientation in zip(locations, orientations):
+        for index, (location, orientation) in enumerate(zip(locations, orientations)):
             body = Body(location, orientation, reference, options.blob_radius)
             body.ID = spec.ID
             set_slip_by_ID(body, slip)
@@ -111,9 +115,28 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             if body_length is None:
                 body_length = body.calc_body_length()
             body.body_length = body_length
+            body.prescribed_velocity = None if prescribed is None else prescribed[index].copy()
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
     return bodies, types
+
+
+def all_structure_specs(options):
+    """The StructureSpec of every ``structure`` line, then of every ``obstacle`` line (the body order)."""
+    return list(options.structures) + list(getattr(options, 'obstacles', []))
+
+
+def prescribed_velocities(spec, num_bodies):
+    """Prescribed lab-frame velocities (num_bodies, 6) of one structure line, or None for free bodies.
+
+    Obstacles: zeros.  A ``structure`` line with a fourth file: that velocity file, one line
+    ``vx vy vz wx wy wz`` per body of the line (angular velocity about the body's location).
+    """
+    if getattr(spec, 'obstacle', False):
+        return np.zeros((num_bodies, 6))
+    if getattr(spec, 'velocity_file', None) is None:
+        return None
+    return read_body_table(spec.velocity_file, num_bodies, 'velocity', spec.where)
 
 
 def _is_default_helper(function, name):
@@ -180,7 +203,7 @@ def check_start(options, system, types):
     if invalid.size:
         first = int(invalid[0])
         start = 0
-        for (structure_id, count), spec in zip(types, options.structures):
+        for (structure_id, count), spec in zip(types, all_structure_specs(options)):
             if first < start + count:
                 raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
                                            '%d bodies are affected. Move the bodies up in the clones file.'
@@ -226,6 +249,11 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
     body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    fixed = [spec for spec in all_structure_specs(options) if spec.obstacle or spec.velocity_file is not None]
+    if fixed and script == 'mcmc':
+        raise utils.UserInputError('%s: the Monte Carlo program has no obstacles or bodies of prescribed '
+                                   'velocity; remove the line (or run the dynamics, multi_bodies.py)'
+                                   % fixed[0].where)
     if script == 'mcmc':
         return RunSetup(hooks, bodies, types, body_arrays, None)
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]

@@ -44,7 +44,7 @@ GMRES_MAXITER = 1000
 PINV_RCOND = 1e-14  # singular values below this fraction of the largest are dropped (rank-deficient bodies)
 
 SolveResult = namedtuple('SolveResult', ['lambda_blobs', 'velocities', 'iterations', 'converged', 'residual',
-                                         'normalised_solution'])
+                                         'normalised_solution', 'constraint_force_torque'], defaults=(None,))
 SolveResult.__doc__ = """Result of :func:`solve`.
 
 lambda_blobs : ndarray (N, 3), blob constraint forces (force units).
@@ -55,6 +55,9 @@ residual : float, ``|b - A x| / |b|`` of the returned solution (the true residua
 normalised_solution : ndarray (3N + 6Nb,), the solution of the normalised system ``A y = b / |b|``:
     the first guess for the next solve of a similar right-hand side (SPEC 4.2); None for a zero
     right-hand side (nothing was solved: keep the guess you had).
+constraint_force_torque : ndarray (Nb, 6) or None, with bodies of prescribed kinematics
+    (``multi_bodies.solver.obstacles``): the force-torque that holds each such body on its prescribed
+    motion (zero rows for free bodies); None for the free problem.
 """
 
 GmresResult = namedtuple('GmresResult', ['x', 'iterations', 'converged', 'residual'])
@@ -355,9 +358,11 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
     if problem.num_bodies:
         rhs[n3:] = problem.project_forces(rhs[n3:]).reshape(-1)
     norm = float(np.linalg.norm(rhs))
+    split = getattr(problem, 'split_body_unknowns', None)  # bodies of prescribed kinematics (obstacles.py)
     if norm == 0.0:
-        return SolveResult(np.zeros((problem.num_blobs, 3)), np.zeros((problem.num_bodies, 6)), 0, True, 0.0,
-                           None)
+        zeros = np.zeros((problem.num_bodies, 6))
+        return SolveResult(np.zeros((problem.num_blobs, 3)), zeros, 0, True, 0.0, None,
+                           None if split is None else zeros.copy())
     if isinstance(preconditioner, BlockDiagonalPreconditioner):
         preconditioner = preconditioner.operator
     if x0 is not None and np.shape(x0) != rhs.shape:
@@ -365,8 +370,11 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
     result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
                          restart=restart, maxiter=maxiter, print_residual=print_residual)
     x = result.x * norm
-    return SolveResult(x[:n3].reshape(-1, 3), x[n3:].reshape(-1, 6), result.iterations, result.converged,
-                       result.residual, result.x)
+    velocities, constraint = x[n3:].reshape(-1, 6), None
+    if split is not None:
+        velocities, constraint = split(velocities)
+    return SolveResult(x[:n3].reshape(-1, 3), velocities, result.iterations, result.converged,
+                       result.residual, result.x, constraint)
 
 
 # ---------------------------------------------------------------------------------------------- dense algebra

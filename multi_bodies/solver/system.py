@@ -35,6 +35,7 @@ import scipy.sparse.linalg as spla
 import mobility
 from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
 from multi_bodies.solver import body_solver
+from multi_bodies.solver import obstacles
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import user_hooks
 from quaternion_integrator.quaternion import Quaternion
@@ -160,6 +161,8 @@ class System:
         self.lanczos_max_iterations = 1000
         self.solves = {'deterministic': 0, 'stochastic': 0}
         self.last_iterations = 0
+        # Bodies of prescribed kinematics (obstacles, velocity files): (Nb,) bool and (Nb, 6) lab-frame [v, w].
+        self.fixed_bodies, self.prescribed_velocities = obstacles.fixed_bodies_of(bodies)
 
     # -------------------------------------------------------------- counters for .info
     def counters(self, scheme=None):
@@ -300,14 +303,28 @@ class System:
         return r_vectors, force_torque, slip
 
     # -------------------------------------------------------------- mobility problem
+    @property
+    def has_fixed_bodies(self):
+        """True when some bodies have prescribed kinematics (obstacles or a velocity file)."""
+        return bool(np.any(self.fixed_bodies))
+
     def mobility_problem(self, configuration):
-        """The saddle-point problem at ``configuration`` (a value; body_solver.MobilityProblem)."""
+        """The saddle-point problem at ``configuration`` (a value; body_solver.MobilityProblem, or
+        obstacles.MixedMobilityProblem when some bodies have prescribed kinematics)."""
+        if self.has_fixed_bodies:
+            return obstacles.MixedMobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
+                                                  self.blob_radius, self.periodic_length, self.fixed_bodies,
+                                                  self.prescribed_velocities)
         return body_solver.MobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
                                            self.blob_radius, self.periodic_length)
 
     def build_preconditioner(self, configuration):
         """Block-diagonal preconditioner (and Lanczos factors) at ``configuration`` (or a problem's)."""
         configuration = getattr(configuration, 'configuration', configuration)
+        if self.has_fixed_bodies:
+            return obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
+                                                 self.blob_radius, stacked_mobility=self.stacked_mobility,
+                                                 fixed=self.fixed_bodies)
         return body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
                                                        self.eta, self.blob_radius,
                                                        stacked_mobility=self.stacked_mobility)
@@ -385,6 +402,12 @@ class System:
     def dense_velocities(self, configuration):
         """Velocities (Nb, 6) at ``configuration`` by dense algebra: ``N (F - K^T M^{-1} slip)``."""
         _, force_torque, slip = self.forces_and_slip(configuration)
+        if self.has_fixed_bodies:
+            M, _, K, _ = body_solver.dense_matrices(self.arrays, as_configuration(configuration),
+                                                    self.blob_mobility_matrix, self.eta, self.blob_radius,
+                                                    inverse=False)
+            return obstacles.dense_mixed_solution(M, K, self.fixed_bodies, self.prescribed_velocities,
+                                                  force_torque, slip)[0]
         return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
                                                      self.blob_mobility_matrix, self.eta, self.blob_radius)
 
