@@ -483,7 +483,7 @@ DYNAMICS_OPTIONS = ('scheme', 'dt', 'eta', 'g', 'kT', 'blob_radius', 'repulsion_
                     'mobility_blobs_implementation', 'mobility_vector_prod_implementation',
                     'blob_blob_force_implementation', 'body_body_force_torque_implementation',
                     'mcmc_move', 'mcmc_energy_implementation', 'max_translation', 'max_angle_shift', 'n_burn_in',
-                    'target_acceptance', 'n_save')
+                    'target_acceptance')
 FORCE_OPTION = 'restart_inexact'
 FORCE_HINT = ('set "%s True" in the input file to continue anyway (the continuation then differs from an '
               'uninterrupted run)' % FORCE_OPTION)
@@ -796,17 +796,23 @@ class SnapshotWriter:
 
 def _append_or_take_back(path, data):
     """Append ``data`` to ``path``; when that fails (full disk, file-size limit), cut off what was appended."""
-    with open(path, 'ab') as f:
-        start = f.tell()
+    descriptor = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    try:
+        start = os.fstat(descriptor).st_size
+        view = memoryview(data)
         try:
-            f.write(data)
-            f.flush()
-        except OSError:
+            while view:  # unbuffered: nothing is left in a buffer to be written later
+                view = view[os.write(descriptor, view):]
+        except OSError as err:
             try:
-                f.truncate(start)
+                os.ftruncate(descriptor, start)
             except OSError:
                 pass
+            if err.filename is None:
+                err.filename = path
             raise
+    finally:
+        os.close(descriptor)
 
 
 def config_snapshot_end(path, offset):
