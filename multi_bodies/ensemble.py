@@ -130,6 +130,12 @@ def _run_locked(args, plan, distributed):
     try:
         if distributed is None:
             results = runner.run_serially(plan)
+            stopped = [result for result in results if result['status'] == 'stopped']
+            if stopped:  # a signal stopped the replica in progress (it saved the step reached)
+                print('ensemble stopped (%s); rerun the same command to resume it (finished replicas are skipped, '
+                      'the others continue from their last saved step)' % stopped[0].get('message', ''),
+                      file=sys.stderr)
+                return stopped[0].get('exit_status') or 130
         else:
             if args.jobqueue:
                 cluster = _jobqueue_cluster(args)

@@ -352,6 +352,10 @@ def ensemble_lock(output_dir):
             if holder.get('host') == host and isinstance(holder.get('pid'), int) and not _alive(holder['pid']):
                 os.remove(path)  # stale: its process has gone
                 continue
+            if not holder and _age(path) > LOCK_WRITE_SECONDS:
+                # empty or unreadable: a driver killed between creating the lock and writing its name in it
+                os.remove(path)
+                continue
             raise UserInputError('%s: another ensemble.py (pid %s on %s, started %s) is running in this folder; '
                                  'wait for it or stop it (if it no longer runs, remove %s)'
                                  % (output_dir, holder.get('pid', '?'), holder.get('host', '?'),
@@ -366,6 +370,16 @@ def ensemble_lock(output_dir):
             os.remove(path)
         except FileNotFoundError:
             pass
+
+
+LOCK_WRITE_SECONDS = 5.0  # a live driver writes its name into the lock at once; an empty older one is stale
+
+
+def _age(path):
+    try:
+        return time.time() - os.path.getmtime(path)
+    except OSError:
+        return 0.0
 
 
 def _alive(pid):

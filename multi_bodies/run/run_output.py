@@ -231,7 +231,11 @@ def read_random_state(path, where='random_state'):
     the restricted ``_PublishedStateUnpickler`` and returned as that 5-tuple.
     Raises UserInputError (naming ``where``) for a missing file or anything else.
     """
+    import stat
     try:
+        if os.path.exists(path) and not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path):
+            raise UserInputError('%s: %s is not a regular file (a pipe or device would be read forever); give a '
+                                 '.random_state file' % (where, path))
         with open(path, 'rb') as f:
             data = f.read()
     except FileNotFoundError:
