@@ -368,3 +368,124 @@ def test_restart_consistency_changes_are_refused(tmp_path, change, words):
     (folder / 'input.dat').write_text(text)
     status, _, err = run(DYNAMIC, folder)
     assert status == 2 and words in err and 'restart_inexact' in err and 'Traceback' not in err, err
+
+
+# ------------------------------------------------------------------ readers take the current run's steps only
+@pytest.mark.parametrize('save_clones', ['one_file_per_step', 'one_file'])
+def test_readers_leave_out_snapshots_without_a_record(tmp_path, save_clones, capsys):
+    """A kill between snapshot 8 and its record, and (per step) a file of another run at step 40: the reader
+    of render.py / clones_to_vtk.py and the ensemble statistics take steps 0 and 4 only."""
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.vtk_output import saved_snapshots
+    folder = dynamic_scene(tmp_path / 'run', n_steps=40, n_save=4, save_clones=save_clones)
+    assert run(DYNAMIC, folder, {run_output.KILL_HOOK: '8'})[0] == -signal.SIGKILL
+    if save_clones == 'one_file_per_step':
+        for name in ('a', 'b'):
+            shutil.copy(folder / 'data' / ('run.%s.00000004.clones' % name),
+                        folder / 'data' / ('run.%s.00000040.clones' % name))
+    previous = os.getcwd()
+    os.chdir(str(folder))
+    try:
+        options = read_input_file('input.dat')
+        steps, locations, _ = saved_snapshots(options, [('a', 1), ('b', 1)])
+    finally:
+        os.chdir(previous)
+    assert steps.tolist() == [0, 4] and locations.shape == (2, 2, 3)
+    assert 'without a restart record' in capsys.readouterr().out
+    from multi_bodies.ensembles import ensemble_statistics
+    output_name = str(folder / 'data' / 'run')
+    recorded = run_output.recorded_snapshots(output_name, save_clones, 'a')
+    assert recorded == ({0, 4} if save_clones == 'one_file_per_step' else 2)
+    assert ensemble_statistics is not None
+
+
+# ------------------------------------------------------------------ resources and one-line refusals
+def test_reference_body_length_is_the_all_pairs_value_in_o_n_memory():
+    """Law: the body length is the largest pairwise blob distance + 2a, computed here by all pairs; the hull
+    path gives the same double on every shipped structure, and 1e6 blobs need far less than 1 GB."""
+    import tracemalloc
+    from body.body import reference_body_length
+    from multi_bodies.files.structure_files import read_vertex_file
+    checked = 0
+    for path in sorted((REPO_ROOT / 'multi_bodies' / 'Structures').glob('*.vertex')):
+        blobs = read_vertex_file(str(path))
+        if len(blobs) > 3000:
+            continue
+        diff = blobs[:, None, :] - blobs[None, :, :]
+        expected = float(np.sqrt(np.max(np.einsum('ijk,ijk->ij', diff, diff)))) + 2 * 0.3 if len(blobs) > 1 else 0.6
+        assert reference_body_length(blobs, 0.3) == expected, path.name
+        checked += 1
+    assert checked >= 3
+    many = np.random.default_rng(2).standard_normal((1000000, 3))
+    tracemalloc.start()
+    length = reference_body_length(many, 0.1)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 300e6 and 8.0 < length < 14.0
+
+
+@pytest.mark.parametrize('box', ['-5 -5 0', '1e-10 1e-10 0'])
+def test_bad_periodic_length_is_one_line(tmp_path, box):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2, periodic_length=box)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'periodic_length' in err and 'Traceback' not in err, err
+
+
+def test_random_state_fifo_is_refused_not_read_forever(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    os.mkfifo(str(folder / 'pipe.random_state'))
+    edit(folder, random_state='pipe.random_state', seed=None)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'not a regular file' in err, err
+
+
+def test_restart_file_that_is_a_folder_is_one_line(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2)
+    assert run(DYNAMIC, folder)[0] == 0
+    (folder / 'data' / 'run.restart').rename(folder / 'data' / 'kept')
+    (folder / 'data' / 'run.restart').mkdir()
+    edit(folder, initial_step=2)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'is a folder' in err and 'Traceback' not in err, err
+
+
+def test_an_empty_stale_ensemble_lock_is_taken_over(tmp_path):
+    folder = tmp_path / 'ens'
+    folder.mkdir()
+    lock = folder / runner.LOCK_NAME
+    lock.write_text('')  # a driver killed between creating the lock and writing its name
+    old = time.time() - 60
+    os.utime(str(lock), (old, old))
+    with runner.ensemble_lock(str(folder)):
+        assert lock.read_text()
+    assert not lock.exists()
+
+
+@pytest.mark.parametrize('arguments, words', [(['--fps', '0'], '--fps'), (['--movie', 'x.mp4'], '.gif')])
+def test_render_refuses_bad_movie_options_in_one_line(tmp_path, arguments, words):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    process = subprocess.run([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'render.py'), '--input-file',
+                              'input.dat'] + arguments, cwd=str(folder), env=child_environment(),
+                             capture_output=True, text=True, timeout=120)
+    assert process.returncode == 2 and words in process.stderr and 'Traceback' not in process.stderr, \
+        process.stderr
+
+
+def test_ensemble_workers_0_interrupted_exits_with_the_signal_status(tmp_path):
+    """Before: exit 1 and '1 failed'; now 143 for SIGTERM, and a rerun resumes from the step reached."""
+    scene = dynamic_scene(tmp_path / 'scene', n_steps=3000, n_save=1000)
+    output = tmp_path / 'ens'
+    process = subprocess.Popen([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'ensemble.py'), '--input-file',
+                                str(scene / 'input.dat'), '--replicas', '1', '--workers', '0', '--output-dir',
+                                str(output), '--seed', '3'], cwd=str(scene), env=child_environment(),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(output.rglob('run.restart')) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.01)
+    time.sleep(0.3)
+    process.send_signal(signal.SIGTERM)
+    out, err = process.communicate(timeout=120)
+    assert process.returncode == 143, (out, err)
+    assert '1 failed' not in out and 'did not finish' not in out and 'Traceback' not in err, (out, err)
+    status = runner.read_status(str(list(output.rglob('run.restart'))[0].parent))
+    assert status['status'] == 'stopped'

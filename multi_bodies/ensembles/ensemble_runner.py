@@ -620,7 +620,7 @@ def run_serially(plan, stream=None):
         result = run_replica(spec)
         results.append(result)
         done += result['status'] == 'done'
-        failed += result['status'] != 'done'
+        failed += result['status'] == 'failed'  # a stopped replica is not a failure: a rerun resumes it
         _report(progress, result, plan['output_dir'])
         if result['status'] == 'stopped':
             break

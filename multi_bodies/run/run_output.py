@@ -952,6 +952,31 @@ def check_restart(options, record, types, fingerprint, report=warn_user):
     return use_record
 
 
+def recorded_snapshots(output_name, save_clones, structure_id):
+    """What of a series has restart records, for readers that take the current run's steps only.
+
+    ``one_file_per_step``: the set of steps with a record; ``one_file``: the number of ``.config`` frames of
+    ``structure_id`` that have one (frames after them were written without their record).  None when the run
+    has no readable ``.restart`` (a run of the published code): then every snapshot is taken.
+    """
+    path = output_name + RESTART_SUFFIX
+    if not os.path.isfile(path):
+        return None
+    quiet = lambda text: None  # noqa: E731
+    try:
+        entries = restart_index(path, quiet)
+    except (UserInputError, OSError):
+        return None
+    if save_clones != 'one_file':
+        return {step for step, _, _ in entries}
+    offsets = set()
+    for entry in entries:
+        record = read_restart_entry(path, entry)
+        if record is not None and structure_id in (record.get('config_offsets') or {}):
+            offsets.add(int(record['config_offsets'][structure_id]))
+    return len(offsets)
+
+
 def find_restart_record(output_name, step):
     """(record, end byte) of the last record of ``step`` in ``output_name.restart``; (None, None) when none.
 
