@@ -108,6 +108,8 @@ class MCMCRun:
         log('Monte Carlo: %d bodies, %d blobs, mcmc_move %s, blob-blob energy %s, max_translation %g, '
             'max_angle_shift %g' % (arrays.num_bodies, arrays.num_blobs, options.mcmc_move, pair_sums.name,
                                     self.sampler.max_translation, self.sampler.max_angle_shift))
+        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
+                                        log)
         start_output(options)
 
     def check_periodic_bodies(self, bodies):

@@ -489,3 +489,39 @@ def test_ensemble_workers_0_interrupted_exits_with_the_signal_status(tmp_path):
     assert '1 failed' not in out and 'did not finish' not in out and 'Traceback' not in err, (out, err)
     status = runner.read_status(str(list(output.rglob('run.restart'))[0].parent))
     assert status['status'] == 'stopped'
+
+
+def test_a_dense_scheme_too_big_is_refused_before_any_file(tmp_path, monkeypatch):
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.dynamic_run import DynamicRun
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2, scheme='deterministic_forward_euler_dense_algebra', kT=0)
+    monkeypatch.chdir(folder)
+    monkeypatch.setattr(run_output, 'available_memory', lambda: 1000)  # a machine with 1000 bytes
+    options = read_input_file('input.dat')
+    with pytest.raises(run_output.UserInputError, match='needs about .* of memory, but 1000 B are available'):
+        DynamicRun(options, log=lambda text: None)
+    assert not (folder / 'data').exists()
+
+
+def test_a_velocity_grid_too_big_is_refused_with_its_memory():
+    from multi_bodies.run import velocity_field
+    grid = ((0.0, 1.0, 100000), (0.0, 1.0, 100000), (0.0, 1.0, 1000))
+    with pytest.raises(run_output.UserInputError, match='velocity field on 10000000000000 cells .* needs about'):
+        velocity_field.check_grid(grid, 10)
+    velocity_field.check_grid(((0.0, 1.0, 4),) * 3, 10)  # a small grid passes
+
+
+def test_a_run_writing_more_than_10000_files_is_warned_about(tmp_path, monkeypatch):
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.dynamic_run import DynamicRun
+    folder = dynamic_scene(tmp_path / 'run', n_steps=6000, n_save=1)
+    monkeypatch.chdir(folder)
+    lines = []
+    DynamicRun(read_input_file('input.dat'), log=lines.append)
+    warned = [line for line in lines if 'will write about' in line]
+    assert warned and '(6001 saves)' in warned[0], lines
+    assert int(warned[0].split('will write about')[1].split()[0]) >= 2 * 6001  # a snapshot per structure and save
+    lines.clear()
+    edit(folder, save_clones='one_file')
+    DynamicRun(read_input_file('input.dat'), log=lines.append)
+    assert not any('will write' in line for line in lines), lines

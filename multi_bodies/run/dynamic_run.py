@@ -47,6 +47,15 @@ class DynamicRun:
         # Shared with the static and Monte Carlo scripts: checks, hooks, bodies, arrays, backends, System, start check.
         setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
         self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
+        arrays = setup.body_arrays
+        if 'dense' in options.scheme or options.save_blobs_mobility or options.save_body_mobility:
+            run_output.refuse_if_too_big(
+                run_output.dense_memory(arrays.num_blobs, arrays.num_bodies),
+                'the dense mobility of %d blobs (%s%s)' % (arrays.num_blobs, options.scheme,
+                                                          ', save_*_mobility' if options.save_blobs_mobility or
+                                                          options.save_body_mobility else ''),
+                options.where('scheme'), 'choose an iterative scheme (without _dense_algebra) and leave '
+                'save_blobs_mobility and save_body_mobility False, or fewer blobs')
         self.fingerprint = run_output.run_fingerprint(options, self.types, self.bodies)
         use_record = True
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
@@ -72,6 +81,8 @@ class DynamicRun:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
                 % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
+        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
+                                        self.log)
         start_output(options)
 
     # -------------------------------------------------------------- output helpers

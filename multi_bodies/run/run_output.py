@@ -305,6 +305,67 @@ def save_random_state(path, rng):
     atomic_write(path, json.dumps(document, indent=1) + '\n')
 
 
+# ------------------------------------------------------------------ resources
+def format_bytes(n):
+    """'1.5 GiB' style text of a byte count."""
+    n = float(n)
+    for unit in ('B', 'KiB', 'MiB', 'GiB', 'TiB', 'PiB'):
+        if n < 1024 or unit == 'PiB':
+            return ('%d %s' % (n, unit)) if unit == 'B' else ('%.3g %s' % (n, unit))
+        n /= 1024.0
+
+
+def available_memory():
+    """Bytes of memory this process can still get (MemAvailable of /proc/meminfo, else the physical memory);
+    None when unknown."""
+    try:
+        with open('/proc/meminfo') as f:
+            for line in f:
+                if line.startswith('MemAvailable:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def refuse_if_too_big(need, what, where, fix):
+    """Raise UserInputError before anything is written when ``need`` bytes exceed the memory available."""
+    have = available_memory()
+    if have is not None and need > have:
+        raise UserInputError('%s: %s needs about %s of memory, but %s are available; %s'
+                             % (where, what, format_bytes(need), format_bytes(have), fix))
+
+
+def dense_memory(num_blobs, num_bodies):
+    """Bytes of the dense matrices of one dense solve: the blob mobility (3N)^2 three times (the matrix, its
+    inverse or factor, a work copy) and the body blocks (6 Nb)^2 twice, doubles."""
+    return 8 * (3 * (3 * num_blobs) ** 2 + 2 * (6 * num_bodies) ** 2 + 6 * (3 * num_blobs) * (6 * num_bodies))
+
+
+FILES_WARNING, BYTES_WARNING = 10000, 10 ** 9
+
+
+def output_estimate(n_saves, types, save_clones, record_bytes):
+    """(files, bytes) a run with ``n_saves`` saves will write (snapshots and restart records)."""
+    bodies = sum(count for _, count in types)
+    files = n_saves * len(types) if save_clones == 'one_file_per_step' else len(types)
+    return files + 8, n_saves * (bodies * 140 + record_bytes + 60)
+
+
+def warn_if_large_output(options, types, record_bytes, log):
+    """A line when the run will write more than 10,000 files or 1 GB (``n_save`` and ``save_clones`` say how many)."""
+    first = options.initial_step
+    saves = max(0, options.n_steps // options.n_save - (first - 1) // options.n_save) if options.n_steps > first \
+        else 0
+    files, size = output_estimate(saves, types, options.save_clones, record_bytes)
+    if files > FILES_WARNING or size > BYTES_WARNING:
+        log('warning: %s: this run will write about %d files and %s (%d saves); raise n_save or use save_clones '
+            'one_file to write fewer' % (options.where('n_save'), files, format_bytes(size), saves))
+
+
 # ------------------------------------------------------------------ files
 def atomic_write(path, data, binary=False):
     """Write ``data`` to ``path`` through a temporary file, so a stop never leaves a truncated file."""
