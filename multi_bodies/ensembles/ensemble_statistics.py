@@ -85,15 +85,10 @@ def replica_trajectories(output_dir, replica):
     output_name = os.path.join(folder, replica.get('output_basename') or os.path.basename(options.output_name))
     trajectories = {}
     for structure_id in dict.fromkeys(spec.ID for spec in options.structures):
-        recorded = run_output.recorded_snapshots(output_name, options.save_clones, structure_id)
         if options.save_clones == 'one_file':
             frames = snapshots.read_config_frames(snapshots.config_name(output_name, structure_id))
-            if recorded is not None:  # frames written without their restart record are not the run's
-                frames = frames[:recorded]
         else:
-            steps, frames = snapshots.read_clones_frames(output_name, structure_id)
-            if recorded is not None and len(steps):
-                frames = frames[np.isin(steps, sorted(recorded))]
+            frames = snapshots.read_clones_frames(output_name, structure_id)[1]
         trajectories[structure_id] = frames
     return options, output_name, trajectories
 

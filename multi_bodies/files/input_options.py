@@ -133,19 +133,6 @@ def _option(kind, default, used_by, rule=None, **program_rules):
     return Option(kind, default, rule, tuple(used_by), program_rules)
 
 
-class _PeriodicBox:
-    """Rule of periodic_length: three finite lengths, each 0 (not periodic) or at least 1e-6 (a box)."""
-    SMALLEST = 1e-6
-
-    def allows(self, value):
-        return all(math.isfinite(v) and (v == 0 or v >= self.SMALLEST) for v in value)
-
-    def message(self, where, name, value, known=False):
-        return ('%s: periodic_length %s: each length must be 0 (that axis is not periodic) or a positive box '
-                'length of at least %g, in the units of the blob radius' % (where, ' '.join('%g' % v for v in value),
-                                                                           self.SMALLEST))
-
-
 SDM = ('static', 'dynamic', 'mcmc')
 SD = ('static', 'dynamic')
 DM = ('dynamic', 'mcmc')
@@ -188,7 +175,7 @@ OPTION_TABLE = {
     'solver_tolerance': _option('float', 1e-8, SD, Range(0, 1, True, True, fix='a relative tolerance, e.g. 1e-8')),
     'rf_delta': _option('float', 1e-3, ('stochastic',), Range(0, low_open=True, fix='1e-3 is the default')),
     'save_clones': _option('str', 'one_file_per_step', DM, _SAVE_CLONES),
-    'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM, _PeriodicBox()),
+    'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM),
     'omega_one_roller': _option('floats3', (0.0, 0.0, 0.0), ('rollers',)),
     'free_kinematics': _option('bool', True, ('rollers',)),
     'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall'))),

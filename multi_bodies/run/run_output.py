@@ -305,6 +305,21 @@ def save_random_state(path, rng):
     atomic_write(path, json.dumps(document, indent=1) + '\n')
 
 
+# ------------------------------------------------------------------ checks before a run
+SMALLEST_BOX = 1e-6
+
+
+def check_periodic_length(options):
+    """Refuse a negative, infinite or vanishing periodic_length (each entry 0 or at least SMALLEST_BOX)."""
+    box = getattr(options, 'periodic_length', None)
+    if box is None:
+        return
+    if not all(np.isfinite(v) and (v == 0 or v >= SMALLEST_BOX) for v in box):
+        raise UserInputError('%s: periodic_length %s: each length must be 0 (that axis is not periodic) or a box '
+                             'length of at least %g, in the units of the blob radius'
+                             % (options.where('periodic_length'), ' '.join('%g' % v for v in box), SMALLEST_BOX))
+
+
 # ------------------------------------------------------------------ resources
 def format_bytes(n):
     """'1.5 GiB' style text of a byte count."""
@@ -852,8 +867,7 @@ class SnapshotWriter:
                 present = f.read()
             if present == text:
                 return old
-            with open(path, 'r+b') as f:
-                f.truncate(old)
+            _save_tail(path, old, aside_folder(self.output_name, 'replaced_step_%d' % step))
             offset = old
         _append_or_take_back(path, text)
         return offset

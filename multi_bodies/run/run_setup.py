@@ -220,6 +220,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     import and a ``set_slip_by_ID`` that fails.
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
+    run_output.check_periodic_length(options)
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
