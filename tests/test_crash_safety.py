@@ -39,7 +39,7 @@ from run_scenes import REPO_ROOT, child_environment, set_options  # noqa: E402
 
 DYNAMIC = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
 MCMC = str(REPO_ROOT / 'many_bodyMCMC' / 'many_body_MCMC.py')
-CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '8'))
+CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '9'))
 
 
 # ------------------------------------------------------------------ scenes
@@ -109,9 +109,9 @@ def last_pair_step(folder, save_clones, ids):
     return None if record is None else record['step']
 
 
-def wait_for_record(process, folder, step, timeout=60.0):
+def wait_for_record(process, folder, step, timeout=60.0, path=None):
     """Wait until ``.restart`` holds the record of ``step`` (False when the child ended first)."""
-    path = Path(folder) / 'data' / 'run.restart'
+    path = Path(folder) / 'data' / 'run.restart' if path is None else Path(path)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if process.poll() is not None:
@@ -129,9 +129,11 @@ def wait_for_record(process, folder, step, timeout=60.0):
 # ------------------------------------------------------------------ the crash test
 def one_chain(tmp_path, rng, index, counts):
     """One chain: a run killed at a drawn moment, continued, compared with the uninterrupted run."""
-    program = ['dynamic', 'mcmc'][index % 2]
-    save_clones = ['one_file_per_step', 'one_file'][(index // 2) % 2]
     how = ['SIGKILL', 'SIGTERM', 'SIGINT', 'between'][int(rng.integers(4))]
+    if index % 3 == 2:
+        return replica_chain(tmp_path, rng, index, counts, how)
+    program = ['dynamic', 'mcmc'][index % 3]
+    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
     scene, script, ids = ((dynamic_scene, DYNAMIC, ('a', 'b')) if program == 'dynamic'
                           else (mcmc_scene, MCMC, ('a',)))
     n_steps, n_save = (40, 4) if program == 'dynamic' else (4000, 40)
@@ -182,6 +184,42 @@ def one_chain(tmp_path, rng, index, counts):
                                                                          moment, restart, different))
 
 
+def replica_outputs(spec):
+    folder = Path(spec['path'])
+    found = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in ('.clones', '.config')}
+    found['info'] = b'\n'.join((folder / 'run.info').read_bytes().splitlines()[:3])
+    return found
+
+
+def replica_chain(tmp_path, rng, index, counts, how):
+    """A replica killed (child process) at a drawn moment; the runner resumes it by itself."""
+    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
+    reference = replica_scene(tmp_path / ('reference_%d' % index), save_clones, n_steps=40, n_save=4)
+    assert runner.run_replica(reference)['status'] == 'done'
+    killed = replica_scene(tmp_path / ('chain_%d' % index), save_clones, n_steps=40, n_save=4)
+    moment = 4 * int(rng.integers(1, 9))
+    code = ('import sys; sys.path.insert(0, %r); from multi_bodies.ensembles import ensemble_runner as r; '
+            'r.run_replica(%r)' % (str(REPO_ROOT), killed))
+    environment = child_environment()
+    if how == 'between':
+        environment[run_output.KILL_HOOK] = str(moment)
+    process = subprocess.Popen([sys.executable, '-c', code], env=environment, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    if how != 'between' and wait_for_record(process, None, moment, path=Path(killed['path']) / 'run.restart'):
+        process.send_signal(getattr(signal, how))
+    out, err = process.communicate(timeout=120)
+    assert 'Traceback' not in err, err
+    counts['chains'] += 1
+    counts['signals'] += 1
+    result = runner.run_replica(killed)
+    assert result['status'] == 'done', result
+    if replica_outputs(killed) == replica_outputs(reference):
+        counts['exact'] += 1
+    else:
+        counts['lost'] += 1
+        pytest.fail('replica chain %d (%s, %s at %d) differs' % (index, save_clones, how, moment))
+
+
 def test_crash_chains(tmp_path):
     """CHAINS chains (fixed seed): each continuation equals the uninterrupted run bit for bit or was refused."""
     rng = np.random.default_rng(17)
@@ -192,9 +230,9 @@ def test_crash_chains(tmp_path):
     assert counts['lost'] == 0 and counts['exact'] == counts['chains']
 
 
-def replica_scene(tmp_path, save_clones):
+def replica_scene(tmp_path, save_clones, n_steps=12, n_save=2):
     folder = tmp_path / 'scene'
-    dynamic_scene(folder, n_steps=12, n_save=2, save_clones=save_clones, output_name='data/run')
+    dynamic_scene(folder, n_steps=n_steps, n_save=n_save, save_clones=save_clones, output_name='data/run')
     plan = runner.build_plan(str(folder / 'input.dat'), 1, (), str(tmp_path / 'ensemble'), 7)
     runner.write_plan(plan)
     return runner.replica_specs(plan)[0]
