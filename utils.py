@@ -27,8 +27,16 @@ class SimulationStopped(RuntimeError):
     """
 
 
+def _interrupted_while_starting(signal_number, frame):
+    print('interrupted (SIGINT) while starting; nothing was written', file=sys.stderr, flush=True)
+    os._exit(130)
+
+
 def fail_cleanly(main, *args, **kwargs):
     """Run ``main``; a UserInputError becomes its message and exit status 2, Ctrl-C one line and 130."""
+    import signal
+    if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return main(*args, **kwargs)
     except UserInputError as err:
@@ -196,7 +204,14 @@ def prepare_script_path(script_file):
     and forgets a module that such a script left under the package's name.
     """
     import os
+    import signal
     import sys
+    main_file = getattr(sys.modules.get('__main__'), '__file__', None)
+    if main_file and os.path.abspath(main_file) == os.path.abspath(script_file) \
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        # Ctrl-C while the script still imports (numpy, scipy, the backends): one line, no traceback;
+        # fail_cleanly puts Python's own handler back when main starts.
+        signal.signal(signal.SIGINT, _interrupted_while_starting)
     folder = os.path.dirname(os.path.abspath(script_file))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != folder]
     package = os.path.basename(folder)

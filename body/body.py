@@ -131,13 +131,36 @@ def reference_slip_in_lab_frame(body):
     return np.asarray(body.slip_reference, dtype=float).reshape(-1, 3) @ body.rotation_matrix().T
 
 
+def _max_squared_distance(points, block_bytes=1 << 25):
+    """Largest squared distance between two rows of ``points`` (m, 3), in blocks of rows: O(m) memory."""
+    m = points.shape[0]
+    rows = max(1, block_bytes // (24 * m))
+    best = 0.0
+    for start in range(0, m, rows):
+        diff = points[start:start + rows, None, :] - points[None, :, :]
+        best = max(best, float(np.max(np.einsum('ijk,ijk->ij', diff, diff))))
+    return best
+
+
 def reference_body_length(reference_configuration, blob_radius):
-    """Largest pairwise distance of the reference blobs (shape (n, 3)) plus ``2 a``."""
+    """Largest pairwise distance of the reference blobs (shape (n, 3)) plus ``2 a`` (length units).
+
+    The farthest pair lies on the convex hull, so for many blobs only the hull
+    vertices are compared (scipy's ConvexHull, O(n log n)); each distance is
+    computed as in the all-pairs formula, so the result is the same double.
+    Flat or tiny sets fall back to all pairs, in blocks (O(n) memory).
+    """
     ref = np.asarray(reference_configuration, dtype=float).reshape(-1, 3)
     if ref.shape[0] < 2:
         return 2.0 * blob_radius
-    diff = ref[:, None, :] - ref[None, :, :]
-    return float(np.sqrt(np.max(np.einsum('ijk,ijk->ij', diff, diff)))) + 2.0 * blob_radius
+    points = ref
+    if ref.shape[0] > 64:
+        try:
+            from scipy.spatial import ConvexHull
+            points = ref[np.unique(ConvexHull(ref).vertices)]
+        except Exception:  # coplanar or collinear blobs (QhullError): every pair
+            points = ref
+    return float(np.sqrt(_max_squared_distance(points))) + 2.0 * blob_radius
 
 
 class Configuration:

@@ -55,9 +55,10 @@ class MCMCRun:
         if unused:
             log('warning: %s: the Monte Carlo sampler does not use %s (ignored)'
                 % (options.input_file, ', '.join(unused)))
-        self.restart = None
+        self.restart, self.restart_end = None, None
         if options.initial_step > 0:
-            self.restart = run_output.restart_record(options.output_name, options.initial_step)
+            self.restart, self.restart_end = run_output.find_restart_record(options.output_name,
+                                                                            options.initial_step)
         # Shared with the dynamic and static scripts: checks, hooks (here the potentials), bodies, arrays.
         setup = prepare(options, 'mcmc', log=log, directory=directory, restart_record=self.restart,
                         hook_loader=load_potentials, set_slip_by_ID=_no_slip)
@@ -81,8 +82,13 @@ class MCMCRun:
         self.sampler = MetropolisSampler(self.energy, arrays.locations, arrays.orientations, options.kT,
                                          max_translation, max_angle_shift, options.mcmc_move, options.n_burn_in,
                                          options.target_acceptance)
+        self.fingerprint = run_output.run_fingerprint(options, self.types, bodies)
+        use_record = True
+        if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
+            use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,
+                                                  report=lambda text: print('warning: ' + text, file=sys.stderr))
         self.rng = run_output.make_generator(options)
-        if self.restart is not None and (self.restart.get('state') or {}).get('sampler') is not None:
+        if use_record and self.restart is not None and (self.restart.get('state') or {}).get('sampler') is not None:
             state = self.restart['state']
             saved = state['sampler']
             same = (np.allclose(saved['locations'], arrays.locations, rtol=0, atol=1e-10)
@@ -102,6 +108,8 @@ class MCMCRun:
         log('Monte Carlo: %d bodies, %d blobs, mcmc_move %s, blob-blob energy %s, max_translation %g, '
             'max_angle_shift %g' % (arrays.num_bodies, arrays.num_blobs, options.mcmc_move, pair_sums.name,
                                     self.sampler.max_translation, self.sampler.max_angle_shift))
+        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
+                                        log)
         start_output(options)
 
     def check_periodic_bodies(self, bodies):
@@ -145,7 +153,9 @@ class MCMCRun:
         restart = options.initial_step > 0
         write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
-                                           options.where('save_clones'), restart=restart)
+                                           options.where('save_clones'), restart=restart,
+                                           restart_from=(self.restart, self.restart_end),
+                                           fingerprint=self.fingerprint, log=self.log)
         first, last = options.initial_step, options.n_steps
         name = 'MCMC_' + options.mcmc_move
         progress = run_output.Progress(name, first, last)
@@ -157,8 +167,17 @@ class MCMCRun:
             self.write_info()
             progress.at_save(index, sampler.invalid, extra=', acceptance ratio = %.4g' % sampler.acceptance_ratio())
 
-        # a restart does not write its first snapshot again (the run before wrote it)
-        loop = run_output.TimeLoop(first, last, options.n_save, save_first=not restart)
+        def save_stop(index):  # a signal stopped the run: keep the step just finished, beside the series
+            writer.save(index, sampler.locations, sampler.orientations, self.restart_state(), stop=True)
+            self.write_info()
+            self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
+                     '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
+                                                         options.output_name, run_output.RESTART_SUFFIX, index))
+
+        # a restart does not write its first snapshot again (the run before wrote it), unless that step was
+        # saved beside the series when a signal stopped the run
+        from_stop = bool((self.restart or {}).get('stop'))
+        loop = run_output.TimeLoop(first, last, options.n_save, save_first=not restart or from_stop)
 
         def advance(step):
             sampler.step(step, self.rng)
@@ -167,22 +186,32 @@ class MCMCRun:
         stop = run_output.StopRequest()
         try:
             with stop:
-                loop.run(save, advance, stop)
+                loop.run(save, advance, stop, save_stop)
             if stop.signal_number is not None:
                 stopped_line = stop.stopped_line(loop.step)
                 status = stop.exit_status
             if last <= first:
                 self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
+        except OSError as err:  # a full disk or a file-size limit: one line, what was appended taken back
+            line = run_output.write_error_line(err, 'the outputs', loop.step, loop.saved)
+            print('error: run stopped: %s' % line, file=sys.stderr, flush=True)
+            stopped_line, status = 'run stopped at step %d: %s' % (loop.step, line), 1
         except KeyboardInterrupt:
             stopped_line = 'run interrupted at step %d' % loop.step
             status = 130
         finally:
             progress.close()
-            run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
-                                  stopped_line)
-        if stopped_line:
-            print('%s; outputs are complete up to the last saved step; restart with initial_step set to that step'
-                  % stopped_line, file=sys.stderr, flush=True)
+            if not run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
+                                         stopped_line) and status == 0:
+                status = 1
+        if stopped_line and status != 1:
+            if loop.stop_saved is not None:
+                print('%s; the step reached is saved too (%s%s/): restart with initial_step %d'
+                      % (stopped_line, options.output_name, run_output.STOP_SUFFIX, loop.stop_saved),
+                      file=sys.stderr, flush=True)
+            else:
+                print('%s; outputs are complete up to the last saved step; restart with initial_step set to that '
+                      'step' % stopped_line, file=sys.stderr, flush=True)
         return status
 
 

@@ -130,6 +130,12 @@ def _run_locked(args, plan, distributed):
     try:
         if distributed is None:
             results = runner.run_serially(plan)
+            stopped = [result for result in results if result['status'] == 'stopped']
+            if stopped:  # a signal stopped the replica in progress (it saved the step reached)
+                print('ensemble stopped (%s); rerun the same command to resume it (finished replicas are skipped, '
+                      'the others continue from their last saved step)' % stopped[0].get('message', ''),
+                      file=sys.stderr)
+                return stopped[0].get('exit_status') or 130
         else:
             if args.jobqueue:
                 cluster = _jobqueue_cluster(args)
@@ -149,6 +155,9 @@ def _run_locked(args, plan, distributed):
                     print('Dask dashboard: not served (it needs bokeh: pip install bokeh)', flush=True)
             results = runner.run_on_client(plan, client, retries=args.retries)
     except KeyboardInterrupt:
+        import logging
+        for name in ('distributed', 'tornado', 'asyncio', 'dask_jobqueue'):  # no shutdown noise after Ctrl-C
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
         print('\nensemble stopped; rerun the same command to resume it (finished replicas are skipped, the others '
               'continue from their last saved step)', file=sys.stderr)
         return 130

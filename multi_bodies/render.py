@@ -250,6 +250,11 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.every < 1:
         raise utils.UserInputError('--every: give a positive number of saved steps between frames')
+    if not (args.fps > 0 and np.isfinite(args.fps)):
+        raise utils.UserInputError('--fps %g: give a positive number of frames per second (default 5)' % args.fps)
+    if args.movie is not None and os.path.splitext(args.movie)[1].lower() != '.gif':
+        raise utils.UserInputError('--movie %s: render.py writes GIF movies only; give a name ending in .gif (an '
+                                   'mp4 can be made from the GIF or from the PNGs, e.g. with ffmpeg)' % args.movie)
     if min(args.size) < 16:
         raise utils.UserInputError('--size: give a width and height of at least 16 pixels')
 

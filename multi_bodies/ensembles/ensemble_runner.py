@@ -352,6 +352,10 @@ def ensemble_lock(output_dir):
             if holder.get('host') == host and isinstance(holder.get('pid'), int) and not _alive(holder['pid']):
                 os.remove(path)  # stale: its process has gone
                 continue
+            if not holder and _age(path) > LOCK_WRITE_SECONDS:
+                # empty or unreadable: a driver killed between creating the lock and writing its name in it
+                os.remove(path)
+                continue
             raise UserInputError('%s: another ensemble.py (pid %s on %s, started %s) is running in this folder; '
                                  'wait for it or stop it (if it no longer runs, remove %s)'
                                  % (output_dir, holder.get('pid', '?'), holder.get('host', '?'),
@@ -366,6 +370,16 @@ def ensemble_lock(output_dir):
             os.remove(path)
         except FileNotFoundError:
             pass
+
+
+LOCK_WRITE_SECONDS = 5.0  # a live driver writes its name into the lock at once; an empty older one is stale
+
+
+def _age(path):
+    try:
+        return time.time() - os.path.getmtime(path)
+    except OSError:
+        return 0.0
 
 
 def _alive(pid):
@@ -403,29 +417,27 @@ def is_finished(spec):
 
 
 # ------------------------------------------------------------------ one replica (the task)
-def prepare_resume(options):
-    """Step to resume a killed replica from (0: start afresh), after trimming what the kill left half-written.
+def prepare_resume(options, log=print):
+    """Step to resume a killed replica from (0: start afresh); changes no file.
 
-    The last complete record of ``output_name.restart`` gives the step k.
-    The file is cut after that record (a record cut by the kill would hide
-    the records appended after it), and with ``save_clones one_file`` each
-    ``.config`` is cut where snapshot k starts (the resumed run writes it
-    again), so the resumed outputs equal those of an undisturbed run.
+    The step is that of the last record of ``output_name.restart`` whose
+    snapshot is complete and unchanged (its checksum): a record cut by the
+    kill, or a snapshot written without its record, is passed over, with a
+    line saying so.  The resumed run (through ``initial_step``) moves what
+    the kill left after that pair aside at its first save, once the
+    replacement is being written, so the resumed outputs equal those of an
+    undisturbed run and a resume that fails loses nothing.
     """
-    from multi_bodies.files import snapshots
     from multi_bodies.run import run_output
     path = options.output_name + run_output.RESTART_SUFFIX
     if not os.path.isfile(path):
         return 0
-    last, end = run_output.last_valid_restart_record(path)  # damaged or cut records: reported and dropped
+    types = [(spec.ID, 0) for spec in options.structures]
+    last, _ = run_output.last_complete_pair(options.output_name, options.save_clones, types, report=log)
     if last is None or not isinstance(last.get('step'), int) or last['step'] <= 0:
         return 0
-    if os.path.getsize(path) != end:
-        with open(path, 'r+b') as f:
-            f.truncate(end)
-    if options.save_clones == 'one_file':
-        for structure_id, offset in (last.get('config_offsets') or {}).items():
-            snapshots.truncate_config(snapshots.config_name(options.output_name, structure_id), offset)
+    log('# ensemble: the last complete snapshot and record is step %d%s' % (
+        last['step'], ' (saved when a signal stopped the run)' if last.get('stop') else ''))
     return int(last['step'])
 
 
@@ -608,7 +620,7 @@ def run_serially(plan, stream=None):
         result = run_replica(spec)
         results.append(result)
         done += result['status'] == 'done'
-        failed += result['status'] != 'done'
+        failed += result['status'] == 'failed'  # a stopped replica is not a failure: a rerun resumes it
         _report(progress, result, plan['output_dir'])
         if result['status'] == 'stopped':
             break

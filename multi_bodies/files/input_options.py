@@ -151,6 +151,7 @@ OPTION_TABLE = {
     'n_steps': _option('int', 0, DM, Range(0, fix='the index of the last step')),
     'initial_step': _option('int', 0, DM, Range(0, fix='0 starts a new run, k > 0 restarts from saved step k')),
     'n_save': _option('int', 1, DM, Range(1, fix='save every n_save steps')),
+    'restart_inexact': _option('bool', False, DM),
     'n_relaxation': _option('int', 0, ()),
     'dt': _option('float', 0.0, ('dynamic',), Range(0, fix='the time step'),
                   dynamic=Range(0, low_open=True, fix='the time step of a dynamic run')),

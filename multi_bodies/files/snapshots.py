@@ -80,9 +80,16 @@ def write_clones_file(path, locations, orientations, comment=None):
     """
     path = os.fspath(path)
     part = path + '.part'
-    with open(part, 'w') as f:
-        f.write(format_clones(locations, orientations, comment))
-    os.replace(part, path)
+    try:
+        with open(part, 'w') as f:
+            f.write(format_clones(locations, orientations, comment))
+        os.replace(part, path)
+    except BaseException:  # a full disk or a file-size limit: no empty or half-written .part is left
+        try:
+            os.remove(part)
+        except OSError:
+            pass
+        raise
 
 
 def append_config_snapshot(path, locations, orientations, new_file=False):

@@ -40,15 +40,30 @@ class DynamicRun:
             if str(err).startswith(options.input_file):
                 raise
             raise utils.UserInputError('%s: %s' % (options.where('scheme'), err))
-        self.restart = None
+        self.restart, self.restart_end = None, None
         if options.initial_step > 0:
-            self.restart = run_output.restart_record(options.output_name, options.initial_step)
+            self.restart, self.restart_end = run_output.find_restart_record(options.output_name,
+                                                                            options.initial_step)
         # Shared with the static and Monte Carlo scripts: checks, hooks, bodies, arrays, backends, System, start check.
         setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
         self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
+        arrays = setup.body_arrays
+        if 'dense' in options.scheme or options.save_blobs_mobility or options.save_body_mobility:
+            run_output.refuse_if_too_big(
+                run_output.dense_memory(arrays.num_blobs, arrays.num_bodies),
+                'the dense mobility of %d blobs (%s%s)' % (arrays.num_blobs, options.scheme,
+                                                          ', save_*_mobility' if options.save_blobs_mobility or
+                                                          options.save_body_mobility else ''),
+                options.where('scheme'), 'choose an iterative scheme (without _dense_algebra) and leave '
+                'save_blobs_mobility and save_body_mobility False, or fewer blobs')
+        self.fingerprint = run_output.run_fingerprint(options, self.types, self.bodies)
+        use_record = True
+        if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
+            use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,
+                                                  report=self.log_error)
         self.rng = run_output.make_generator(options)
         self.rng_from_restart = False
-        if self.restart is not None and self.restart.get('state'):
+        if self.restart is not None and self.restart.get('state') and use_record:
             state = self.restart['state']
             if state.get('rng') is not None:
                 self.rng.bit_generator.state = state['rng']
@@ -66,6 +81,8 @@ class DynamicRun:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
                 % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
+        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
+                                        self.log)
         start_output(options)
 
     # -------------------------------------------------------------- output helpers
@@ -85,7 +102,9 @@ class DynamicRun:
         write_run_start(options, self.types, system.num_blobs, self.rng, restart=restart)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
-                                           restart_from=self.restart)
+                                           restart_from=(self.restart, self.restart_end),
+                                           fingerprint=self.fingerprint, log=self.log)
+        self.writer = writer
         if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
             from multi_bodies.run.vtk_output import AlsoWriteVtk
             writer = AlsoWriteVtk(writer, options, self.types, system)
@@ -102,6 +121,14 @@ class DynamicRun:
             self.write_info()
             progress.at_save(index, scheme.invalid_configurations)
 
+        def save_stop(index):  # a signal stopped the run off the n_save grid: keep the step just finished
+            self.writer.save(index, system.configuration.locations, system.configuration.orientations,
+                             self.restart_state(), stop=True)
+            self.write_info()
+            self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
+                     '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
+                                                         options.output_name, run_output.RESTART_SUFFIX, index))
+
         loop = run_output.TimeLoop(first, last, options.n_save)
 
         def advance(step):
@@ -110,7 +137,7 @@ class DynamicRun:
 
         with run_output.StopRequest() as stop:
             try:
-                loop.run(save, advance, stop)
+                loop.run(save, advance, stop, save_stop)
                 if stop.signal_number is not None:
                     stopped_line = stop.stopped_line(loop.step, loop.last_saved)
                     status = stop.exit_status
@@ -127,16 +154,27 @@ class DynamicRun:
                                'and .time are written.' % str(err).rstrip('.'))
                 stopped_line = 'run stopped at step %d: %s' % (loop.step, str(err).rstrip('.'))
                 status = 1
+            except OSError as err:  # a full disk or a file-size limit: one line, what was appended taken back
+                progress.close()
+                line = run_output.write_error_line(err, 'the outputs', loop.step, loop.saved)
+                self.log_error('error: run stopped: %s' % line)
+                stopped_line = 'run stopped at step %d: %s' % (loop.step, line)
+                status = 1
             except KeyboardInterrupt:
                 stopped_line = 'run interrupted at step %d' % loop.step
                 status = 130
             finally:
                 progress.close()
-                run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
-                                      stopped_line)
+                if not run_output.finish_run(options.output_name, start, first, loop.step, restart,
+                                             self.write_info, stopped_line) and status == 0:
+                    status = 1
         if stopped_line and status != 1:
-            self.log_error('%s; outputs are complete up to the last saved step; restart with initial_step '
-                           'set to that step' % stopped_line)
+            if loop.stop_saved is not None:
+                self.log_error('%s; the step reached is saved too (%s%s/): restart with initial_step %d'
+                               % (stopped_line, options.output_name, run_output.STOP_SUFFIX, loop.stop_saved))
+            else:
+                self.log_error('%s; outputs are complete up to step %d; restart with initial_step %d'
+                               % (stopped_line, loop.last_saved, loop.last_saved))
         return status
 
     def save_mobilities(self, step):

@@ -44,6 +44,8 @@ import struct
 import sys
 import threading
 import time
+import re
+import uuid
 
 import numpy as np
 
@@ -53,6 +55,9 @@ from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, c
                                           write_clones_file)
 
 RESTART_SUFFIX = '.restart'
+RUN_SUFFIX = '.run'
+STOP_SUFFIX = '.stopped'
+ASIDE_SUFFIX = '.set_aside'
 
 
 # ------------------------------------------------------------------ set-up of the output folder
@@ -226,7 +231,11 @@ def read_random_state(path, where='random_state'):
     the restricted ``_PublishedStateUnpickler`` and returned as that 5-tuple.
     Raises UserInputError (naming ``where``) for a missing file or anything else.
     """
+    import stat
     try:
+        if os.path.exists(path) and not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path):
+            raise UserInputError('%s: %s is not a regular file (a pipe or device would be read forever); give a '
+                                 '.random_state file' % (where, path))
         with open(path, 'rb') as f:
             data = f.read()
     except FileNotFoundError:
@@ -296,13 +305,100 @@ def save_random_state(path, rng):
     atomic_write(path, json.dumps(document, indent=1) + '\n')
 
 
+# ------------------------------------------------------------------ checks before a run
+SMALLEST_BOX = 1e-6
+
+
+def check_periodic_length(options):
+    """Refuse a negative, infinite or vanishing periodic_length (each entry 0 or at least SMALLEST_BOX)."""
+    box = getattr(options, 'periodic_length', None)
+    if box is None:
+        return
+    if not all(np.isfinite(v) and (v == 0 or v >= SMALLEST_BOX) for v in box):
+        raise UserInputError('%s: periodic_length %s: each length must be 0 (that axis is not periodic) or a box '
+                             'length of at least %g, in the units of the blob radius'
+                             % (options.where('periodic_length'), ' '.join('%g' % v for v in box), SMALLEST_BOX))
+
+
+# ------------------------------------------------------------------ resources
+def format_bytes(n):
+    """'1.5 GiB' style text of a byte count."""
+    n = float(n)
+    for unit in ('B', 'KiB', 'MiB', 'GiB', 'TiB', 'PiB'):
+        if n < 1024 or unit == 'PiB':
+            return ('%d %s' % (n, unit)) if unit == 'B' else ('%.3g %s' % (n, unit))
+        n /= 1024.0
+
+
+def available_memory():
+    """Bytes of memory this process can still get (MemAvailable of /proc/meminfo, else the physical memory);
+    None when unknown."""
+    try:
+        with open('/proc/meminfo') as f:
+            for line in f:
+                if line.startswith('MemAvailable:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def refuse_if_too_big(need, what, where, fix):
+    """Raise UserInputError before anything is written when ``need`` bytes exceed the memory available."""
+    have = available_memory()
+    if have is not None and need > have:
+        raise UserInputError('%s: %s needs about %s of memory, but %s are available; %s'
+                             % (where, what, format_bytes(need), format_bytes(have), fix))
+
+
+def dense_memory(num_blobs, num_bodies):
+    """Bytes of the dense matrices of one dense solve: the blob mobility (3N)^2 three times (the matrix, its
+    inverse or factor, a work copy) and the body blocks (6 Nb)^2 twice, doubles."""
+    return 8 * (3 * (3 * num_blobs) ** 2 + 2 * (6 * num_bodies) ** 2 + 6 * (3 * num_blobs) * (6 * num_bodies))
+
+
+FILES_WARNING, BYTES_WARNING = 10000, 10 ** 9
+
+
+def output_estimate(n_saves, types, save_clones, record_bytes):
+    """(files, bytes) a run with ``n_saves`` saves will write (snapshots and restart records)."""
+    bodies = sum(count for _, count in types)
+    files = n_saves * len(types) if save_clones == 'one_file_per_step' else len(types)
+    return files + 8, n_saves * (bodies * 140 + record_bytes + 60)
+
+
+def warn_if_large_output(options, types, record_bytes, log):
+    """A line when the run will write more than 10,000 files or 1 GB (``n_save`` and ``save_clones`` say how many)."""
+    first = options.initial_step
+    saves = max(0, options.n_steps // options.n_save - (first - 1) // options.n_save) if options.n_steps > first \
+        else 0
+    files, size = output_estimate(saves, types, options.save_clones, record_bytes)
+    if files > FILES_WARNING or size > BYTES_WARNING:
+        log('warning: %s: this run will write about %d files and %s (%d saves); raise n_save or use save_clones '
+            'one_file to write fewer' % (options.where('n_save'), files, format_bytes(size), saves))
+
+
 # ------------------------------------------------------------------ files
 def atomic_write(path, data, binary=False):
     """Write ``data`` to ``path`` through a temporary file, so a stop never leaves a truncated file."""
     part = path + '.part'
-    with open(part, 'wb' if binary else 'w') as f:
-        f.write(data)
-    os.replace(part, path)
+    try:
+        with open(part, 'wb' if binary else 'w') as f:
+            f.write(data)
+        os.replace(part, path)
+    except BaseException:
+        _remove_quietly(part)
+        raise
+
+
+def _remove_quietly(path):
+    try:
+        os.remove(path)
+    except OSError:
+        pass
 
 
 def write_bodies_info(path, types, num_blobs):
@@ -457,6 +553,149 @@ def last_valid_restart_record(path, report=warn_user):
     return None, len(RESTART_MAGIC)
 
 
+# ------------------------------------------------------------------ what a record depends on
+# Options whose change makes a continuation differ from the uninterrupted run
+# (the record's fingerprint holds their values; a restart with another value
+# is refused unless restart_inexact is set).
+DYNAMICS_OPTIONS = ('scheme', 'dt', 'eta', 'g', 'kT', 'blob_radius', 'repulsion_strength_wall', 'debye_length_wall',
+                    'repulsion_strength', 'debye_length', 'periodic_length', 'domain', 'omega_one_roller',
+                    'free_kinematics', 'update_PC', 'rf_delta', 'solver_tolerance',
+                    'mobility_blobs_implementation', 'mobility_vector_prod_implementation',
+                    'blob_blob_force_implementation', 'body_body_force_torque_implementation',
+                    'mcmc_move', 'mcmc_energy_implementation', 'max_translation', 'max_angle_shift', 'n_burn_in',
+                    'target_acceptance')
+FORCE_OPTION = 'restart_inexact'
+FORCE_HINT = ('set "%s True" in the input file to continue anyway (the continuation then differs from an '
+              'uninterrupted run)' % FORCE_OPTION)
+KILL_HOOK = 'RMB_TEST_KILL_BETWEEN_SNAPSHOT_AND_RECORD'  # test hook: SIGKILL after snapshot k, before its record
+
+
+def _digest(data):
+    return hashlib.sha256(data).hexdigest()
+
+
+def run_fingerprint(options, types, bodies):
+    """What a restart record depends on, as {name: text}: structures in order, their blobs, radii, slips, options.
+
+    types: list of (structure ID, number of bodies) in body order; bodies: the Body list (``reference_configuration``
+    (n, 3), ``blob_radius``, ``slip_reference`` (n, 3) or None).  Two runs with equal fingerprints compute the same
+    trajectory from the same snapshot, generator and scheme history.
+    """
+    found = {'structures': ', '.join('%s x %d' % (name, count) for name, count in types)}
+    start = 0
+    for name, count in types:
+        if count:
+            body = bodies[start]
+            blobs = np.ascontiguousarray(body.reference_configuration, dtype=float)
+            found['blobs of %s' % name] = '%d blobs, sha256 %s' % (blobs.shape[0], _digest(blobs.tobytes())[:16])
+            radii = np.ascontiguousarray(getattr(body, 'blob_radii', body.blob_radius), dtype=float)
+            found['blob radius of %s' % name] = ('%r' % float(radii) if radii.ndim == 0 else
+                                                 'sha256 %s' % _digest(radii.tobytes())[:16])
+            slip = getattr(body, 'slip_reference', None)
+            if slip is not None:
+                found['slip of %s' % name] = 'sha256 %s' % _digest(np.ascontiguousarray(slip, float).tobytes())[:16]
+        start += count
+    for name in DYNAMICS_OPTIONS:
+        if hasattr(options, name):
+            value = getattr(options, name)
+            found[name] = repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
+    return found
+
+
+def fingerprint_changes(recorded, current):
+    """'what changed' lines between a record's fingerprint and this run's (empty when they agree)."""
+    changes = []
+    for name in list(recorded) + [n for n in current if n not in recorded]:
+        if recorded.get(name) != current.get(name):
+            changes.append('%s: was %s, now %s' % (name, recorded.get(name, '(absent)'), current.get(name, '(absent)')))
+    return changes
+
+
+def new_run_id():
+    """A fresh run identifier (16 hex digits): carried by every restart record and ``output_name.run``."""
+    return uuid.uuid4().hex[:16]
+
+
+def write_run_file(output_name, run_id, first_step):
+    """``output_name.run``: the run identifier and its segments (JSON; a side file, the snapshot formats stay the
+    published ones)."""
+    path = output_name + RUN_SUFFIX
+    segments = []
+    try:
+        with open(path) as f:
+            document = json.load(f)
+        if document.get('run_id') == run_id:
+            segments = list(document.get('segments', []))
+    except (OSError, ValueError, AttributeError):
+        pass
+    segments.append({'first_step': int(first_step), 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
+                     'pid': os.getpid()})
+    atomic_write(path, json.dumps({'format': STATE_FORMAT, 'kind': 'run', 'run_id': run_id,
+                                   'segments': segments}, indent=1) + '\n')
+
+
+def read_run_id(output_name):
+    """The run identifier of ``output_name.run`` (None when absent or unreadable)."""
+    try:
+        with open(output_name + RUN_SUFFIX) as f:
+            return json.load(f).get('run_id')
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+# ------------------------------------------------------------------ moving earlier outputs aside
+_SNAPSHOT_SUFFIX = re.compile(r'^\.(?P<id>.+?)\.(?:(?P<step>\d{8,})(?:\.stop)?\.clones|config)$')
+
+
+def run_snapshot_files(output_name):
+    """Snapshot files of ``output_name`` (any structure): list of (path, ID, step or None for a ``.config``)."""
+    folder, base = os.path.split(output_name)
+    try:
+        names = sorted(os.listdir(folder or os.curdir))
+    except OSError:
+        return []
+    found = []
+    for name in names:
+        if not name.startswith(base + '.'):
+            continue
+        match = _SNAPSHOT_SUFFIX.match(name[len(base):])
+        path = os.path.join(folder, name)
+        if match and os.path.isfile(path):
+            found.append((path, match.group('id'), int(match.group('step')) if match.group('step') else None))
+    return found
+
+
+def aside_folder(output_name, why):
+    """A new folder ``output_name.set_aside/<time>_<why>/`` for outputs that a new run or restart replaces."""
+    stamp = time.strftime('%Y%m%dT%H%M%S', time.gmtime())
+    base = os.path.join(output_name + ASIDE_SUFFIX, '%s_%s' % (stamp, why))
+    folder, n = base, 1
+    while os.path.exists(folder):
+        n += 1
+        folder = '%s_%d' % (base, n)
+    os.makedirs(folder)
+    return folder
+
+
+def _save_tail(path, keep, folder):
+    """Copy the bytes of ``path`` after ``keep`` into ``folder`` (synced), then cut ``path`` at ``keep``.
+
+    The cut happens only once the copy is on disk, so nothing is lost.
+    """
+    with open(path, 'rb') as source:
+        source.seek(keep)
+        tail = source.read()
+    target = os.path.join(folder, os.path.basename(path) + '.after_byte_%d' % keep)
+    with open(target, 'wb') as f:
+        f.write(tail)
+        f.flush()
+        os.fsync(f.fileno())
+    with open(path, 'r+b') as f:
+        f.truncate(keep)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 class SnapshotWriter:
     """Writes the configuration of every structure type at the saved steps, and the restart records.
 
@@ -467,51 +706,371 @@ class SnapshotWriter:
     types : list of (structure ID, number of bodies), in body order
     where : str, location of the save_clones option for messages
     restart : bool, this run continues an earlier one (``one_file`` series are appended to)
-    restart_from : dict or None, the restart record of the step the run continues from; ``one_file``
-        series are cut where that step's snapshot starts (it is written again, and later snapshots belong
-        to the abandoned continuation), so the files equal those of an uninterrupted run
+    restart_from : (record, end) or record or None: the restart record of the step the run continues from and
+        the byte where it ends in ``.restart``
+    run_id : str, the run identifier written in every record (a restart passes the record's)
+    fingerprint : dict, ``run_fingerprint`` of the run, written in every record
+    log : callable(str) for the lines saying what was moved aside
+
+    Nothing is changed before the first save (a restart refused or with nothing to do leaves every file as it
+    was).  At the first save, a new run moves the snapshots and ``.restart`` of an earlier run with the same
+    ``output_name`` into ``output_name.set_aside/``; a restart from step k moves there what belongs to the
+    abandoned continuation after k (later ``.clones`` files, the ``.config`` bytes after snapshot k, the
+    ``.restart`` bytes after record k, including a record cut by a hard stop), each copied and synced before
+    the original is cut.  A snapshot is written before its record; a record holds the SHA-256 of every
+    snapshot it belongs to, so a restart can tell a complete pair from a lone snapshot or an edited one.
     """
 
-    def __init__(self, output_name, save_clones, types, where='save_clones', restart=False, restart_from=None):
+    def __init__(self, output_name, save_clones, types, where='save_clones', restart=False, restart_from=None,
+                 run_id=None, fingerprint=None, log=None):
         if save_clones not in ('one_file_per_step', 'one_file'):
             raise UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
                                  % (where, save_clones))
         self.output_name, self.save_clones, self.types = output_name, save_clones, list(types)
         self.restart_path = output_name + RESTART_SUFFIX
-        self._started = restart
-        if not restart and os.path.exists(self.restart_path):
-            os.remove(self.restart_path)
-        if restart and restart_from and save_clones == 'one_file':
-            for structure_id, offset in (restart_from.get('config_offsets') or {}).items():
-                truncate_config(config_name(output_name, structure_id), offset)
+        self.restart = restart
+        if isinstance(restart_from, tuple):
+            self.record, self.record_end = restart_from
+        else:
+            self.record, self.record_end = restart_from, None
+        self.run_id = run_id or (self.record or {}).get('run_id') or new_run_id()
+        self.fingerprint = fingerprint
+        self.log = log or (lambda text: print(text, flush=True))
+        self._begun = False
+        self.last_saved = None
 
-    def save(self, step, locations, orientations, restart_state=None):
+    # -------------------------------------------------------------- the first save
+    def _begin(self, step):
+        self._begun = True
+        if not self.restart:
+            self._set_aside_earlier_run()
+        else:
+            self._set_aside_abandoned(step)
+        write_run_file(self.output_name, self.run_id, step)
+
+    def _set_aside_earlier_run(self):
+        files = [path for path, _, _ in run_snapshot_files(self.output_name)]
+        for suffix in (RESTART_SUFFIX, RUN_SUFFIX):
+            if os.path.isfile(self.output_name + suffix):
+                files.append(self.output_name + suffix)
+        if not files:
+            return
+        folder = aside_folder(self.output_name, 'earlier_run_%s' % (read_run_id(self.output_name) or 'unknown'))
+        for path in files:
+            os.replace(path, os.path.join(folder, os.path.basename(path)))
+        self.log('new run %s: %d files of an earlier run with output_name %s (snapshots, .restart) moved to %s'
+                 % (self.run_id, len(files), self.output_name, folder))
+
+    def _set_aside_abandoned(self, step):
+        record = self.record or {}
+        k = record.get('step', step)
+        moves, cuts = [], []
+        ids = {name for name, _ in self.types}
+        if self.save_clones == 'one_file_per_step':
+            moves = [path for path, name, s in run_snapshot_files(self.output_name)
+                     if s is not None and s > k and name in ids]
+        else:
+            for name, _ in self.types:
+                path = config_name(self.output_name, name)
+                if not os.path.isfile(path):
+                    continue
+                keep = self._config_keep(name, path)
+                if keep is not None and os.path.getsize(path) > keep:
+                    cuts.append((path, keep))
+        if self.record_end is not None and os.path.isfile(self.restart_path) \
+                and os.path.getsize(self.restart_path) > self.record_end:
+            cuts.append((self.restart_path, self.record_end))
+        if not moves and not cuts:
+            return
+        folder = aside_folder(self.output_name, 'after_step_%d' % k)
+        for path in moves:
+            os.replace(path, os.path.join(folder, os.path.basename(path)))
+        for path, keep in cuts:
+            _save_tail(path, keep, folder)
+        self.log('restart from step %d: %d snapshot files and %d file ends of the continuation after step %d '
+                 '(or cut by a hard stop) moved to %s' % (k, len(moves), len(cuts), k, folder))
+
+    def _config_keep(self, name, path):
+        """Bytes of the ``.config`` of ``name`` that the continuation keeps: up to the end of snapshot k."""
+        record = self.record or {}
+        ends = record.get('config_ends') or {}
+        if name in ends:
+            return int(ends[name])
+        offsets = record.get('config_offsets') or {}
+        if name not in offsets:
+            return None
+        offset = int(offsets[name])
+        snapshot = (record.get('snapshots') or {}).get(name)
+        if snapshot:
+            return offset + int(snapshot[1])
+        return config_snapshot_end(path, offset)
+
+    # -------------------------------------------------------------- one save
+    def save(self, step, locations, orientations, restart_state=None, stop=False):
         """Write snapshot ``step`` of all structures; then append its restart record.
 
         locations (Nb, 3), orientations (Nb, 4); ``restart_state``: what the
         run needs to continue exactly from this step (generator state, scheme
         history), nested dicts/lists/tuples of numbers, strings and arrays
-        (``encode_state``).
+        (``encode_state``).  ``stop``: a save outside the ``n_save`` grid (a
+        signal stopped the run): the snapshot goes to ``.clones`` files in ``output_name.stopped/`` (the
+        series keep the grid steps only), named in the record.
+        Raises OSError when a file cannot be written (what this save appended is taken back first).
         """
-        offsets = {}
+        if not self._begun:
+            self._begin(step)
+        offsets, digests, stop_files = {}, {}, {}
         start = 0
         for structure_id, count in self.types:
             block = slice(start, start + count)
             start += count
-            if self.save_clones == 'one_file_per_step':
+            text = format_clones(locations[block], orientations[block]).encode()
+            digests[structure_id] = [_digest(text), len(text)]
+            if stop:  # off the grid: beside the series, so that the series keep the n_save steps only
+                folder = self.output_name + STOP_SUFFIX
+                os.makedirs(folder, exist_ok=True)
+                path = os.path.join(folder, os.path.basename(clones_name(self.output_name, structure_id, step)))
+                write_clones_file(path, locations[block], orientations[block])
+                stop_files[structure_id] = os.path.relpath(path, os.path.dirname(self.output_name) or os.curdir)
+            elif self.save_clones == 'one_file_per_step':
                 write_clones_file(clones_name(self.output_name, structure_id, step), locations[block],
                                   orientations[block])
             else:
-                offsets[structure_id] = append_config_snapshot(config_name(self.output_name, structure_id),
-                                                               locations[block], orientations[block],
-                                                               new_file=not self._started)
-        self._started = True
-        payload = state_to_bytes({'step': int(step), 'config_offsets': offsets, 'state': restart_state})
+                offsets[structure_id] = self._append_config(structure_id, step, text)
+        if os.environ.get(KILL_HOOK) == str(step):
+            os.kill(os.getpid(), signal.SIGKILL)
+        record = {'step': int(step), 'run_id': self.run_id, 'config_offsets': offsets, 'snapshots': digests,
+                  'fingerprint': self.fingerprint, 'state': restart_state}
+        if self.save_clones == 'one_file':
+            record['config_ends'] = {name: os.path.getsize(config_name(self.output_name, name))
+                                     for name, _ in self.types if os.path.isfile(config_name(self.output_name, name))}
+        if stop:
+            record['stop'] = True
+            if stop_files:
+                record['stop_files'] = stop_files
+        payload = state_to_bytes(record)
         header = RECORD_HEADER.pack(RECORD_TAG, int(step), len(payload), hashlib.sha256(payload).digest())
         new = not os.path.isfile(self.restart_path) or os.path.getsize(self.restart_path) == 0
-        with open(self.restart_path, 'ab') as f:
-            f.write((RESTART_MAGIC if new else b'') + header + payload)
-            f.flush()
+        _append_or_take_back(self.restart_path, (RESTART_MAGIC if new else b'') + header + payload)
+        self.last_saved = step
+
+    def _append_config(self, structure_id, step, text):
+        path = config_name(self.output_name, structure_id)
+        offset = os.path.getsize(path) if os.path.isfile(path) else 0  # an earlier run's was set aside
+        if self.restart and self.record and step == self.record.get('step') and \
+                structure_id in (self.record.get('config_offsets') or {}):
+            # the continuation saves step k again: the series already ends with that snapshot (kept at the
+            # first save); keep it when it is the same text, else cut it (it was edited: an inexact restart)
+            old = int(self.record['config_offsets'][structure_id])
+            with open(path, 'rb') as f:
+                f.seek(old)
+                present = f.read()
+            if present == text:
+                return old
+            _save_tail(path, old, aside_folder(self.output_name, 'replaced_step_%d' % step))
+            offset = old
+        _append_or_take_back(path, text)
+        return offset
+
+
+def _append_or_take_back(path, data):
+    """Append ``data`` to ``path``; when that fails (full disk, file-size limit), cut off what was appended."""
+    descriptor = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    try:
+        start = os.fstat(descriptor).st_size
+        view = memoryview(data)
+        try:
+            while view:  # unbuffered: nothing is left in a buffer to be written later
+                view = view[os.write(descriptor, view):]
+        except OSError as err:
+            try:
+                os.ftruncate(descriptor, start)
+            except OSError:
+                pass
+            if err.filename is None:
+                err.filename = path
+            raise
+    finally:
+        os.close(descriptor)
+
+
+def config_snapshot_end(path, offset):
+    """Byte where the ``.config`` snapshot starting at ``offset`` ends (None when it is incomplete)."""
+    with open(path, 'rb') as f:
+        f.seek(offset)
+        line = f.readline()
+        try:
+            count = int(line.split()[0])
+        except (ValueError, IndexError):
+            return None
+        for _ in range(count):
+            if not f.readline().endswith(b'\n'):
+                return None
+        return f.tell()
+
+
+def stop_snapshot_path(output_name, record, structure_id):
+    """Path of the ``.clones`` file a stop record (``record['stop_files']``) names for ``structure_id``."""
+    name = (record.get('stop_files') or {})[structure_id]
+    if os.path.isabs(name) or '..' in name.replace('\\', '/').split('/'):
+        raise UserInputError('%s%s: the record of step %d names %r, not a file of the run folder'
+                             % (output_name, RESTART_SUFFIX, record['step'], name))
+    return os.path.join(os.path.dirname(output_name), name)
+
+
+def snapshot_bytes(output_name, save_clones, structure_id, record):
+    """The bytes of the snapshot of ``structure_id`` that ``record`` belongs to (None when absent)."""
+    step = record['step']
+    stop_files = record.get('stop_files') or {}
+    if structure_id in stop_files:
+        path = stop_snapshot_path(output_name, record, structure_id)
+    elif save_clones == 'one_file' and not record.get('stop'):
+        offsets = record.get('config_offsets') or {}
+        if structure_id not in offsets:
+            return None
+        path = config_name(output_name, structure_id)
+        length = ((record.get('snapshots') or {}).get(structure_id) or [None, None])[1]
+        try:
+            with open(path, 'rb') as f:
+                f.seek(int(offsets[structure_id]))
+                return f.read(length) if length is not None else None
+        except OSError:
+            return None
+    else:
+        path = clones_name(output_name, structure_id, step)
+    try:
+        with open(path, 'rb') as f:
+            return f.read()
+    except OSError:
+        return None
+
+
+def snapshot_mismatches(output_name, save_clones, types, record):
+    """IDs of ``types`` whose snapshot is missing or differs from the checksum ``record`` holds for it.
+
+    A record of an earlier version (no checksums) gives no mismatch.
+    """
+    digests = record.get('snapshots')
+    if not digests:
+        return []
+    bad = []
+    for structure_id, _ in types:
+        data = snapshot_bytes(output_name, save_clones, structure_id, record)
+        if structure_id not in digests or data is None or _digest(data) != digests[structure_id][0]:
+            bad.append(structure_id)
+    return bad
+
+
+def last_complete_pair(output_name, save_clones, types, report=warn_user):
+    """(record, end) of the last record of ``output_name.restart`` whose snapshot is complete and unchanged.
+
+    (None, None) when there is none.  Records passed over are reported.
+    """
+    path = output_name + RESTART_SUFFIX
+    if not os.path.isfile(path):
+        return None, None
+    for entry in reversed(restart_index(path, report)):
+        record = read_restart_entry(path, entry)
+        if record is None:
+            report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+            continue
+        bad = snapshot_mismatches(output_name, save_clones, types, record)
+        if bad:
+            report('%s: the snapshot of step %d of %s is missing or differs from its record; step %d is skipped'
+                   % (path, entry[0], ', '.join(bad), entry[0]))
+            continue
+        return record, entry[2]
+    return None, None
+
+
+def check_restart(options, record, types, fingerprint, report=warn_user):
+    """Decide whether a restart from ``initial_step`` is exact; returns True to use ``record``'s state.
+
+    Refuses (UserInputError saying why and how to force) a restart without a record of that step, one whose
+    snapshot differs from its record (edited, or a lone snapshot of a stop between snapshot and record), and one
+    whose fingerprint (structures, blobs, radii, options) differs from this run's.  With ``restart_inexact True``
+    each of these is a warning instead; the record's generator and history are then used only when the
+    snapshot is the record's.
+    """
+    k = options.initial_step
+    force = bool(getattr(options, FORCE_OPTION, False))
+    where = options.where('initial_step')
+    path = options.output_name + RESTART_SUFFIX
+    problems, use_record = [], record is not None
+    if record is None:
+        pair, _ = last_complete_pair(options.output_name, options.save_clones, types, report=lambda text: None)
+        last = ' (the last step with a complete snapshot and record is %d)' % pair['step'] if pair else ''
+        problems.append('%s has no restart record of step %d (none complete)%s, so the generator state and the scheme history '
+                        'of that step are unknown (a run stopped between writing the snapshot and its record, or a '
+                        'snapshot of another program)' % (path, k, last))
+    else:
+        bad = snapshot_mismatches(options.output_name, options.save_clones, types, record)
+        if bad:
+            problems.append('the snapshot of step %d of %s differs from the one its record in %s was written with '
+                            '(the file was edited or replaced)' % (k, ', '.join(bad), path))
+            use_record = False
+        recorded = record.get('fingerprint')
+        if recorded:
+            changes = fingerprint_changes(recorded, fingerprint)
+            if changes:
+                problems.append('the run differs from the one that wrote the record of step %d: %s'
+                                % (k, '; '.join(changes)))
+    if not problems:
+        return use_record
+    if not force:
+        raise UserInputError('%s: initial_step %d cannot restart exactly: %s. Restart from another step, or %s'
+                             % (where, k, ' and '.join(problems), FORCE_HINT))
+    report('%s: inexact restart from step %d (%s True): %s; %s' % (
+        where, k, FORCE_OPTION, ' and '.join(problems),
+        'the record\'s generator and scheme history are used' if use_record else
+        'the generator starts from seed/random_state and multistep schemes restart with one first-order step'))
+    return use_record
+
+
+def recorded_snapshots(output_name, save_clones, structure_id):
+    """What of a series has restart records, for readers that take the current run's steps only.
+
+    ``one_file_per_step``: the set of steps with a record; ``one_file``: the number of ``.config`` frames of
+    ``structure_id`` that have one (frames after them were written without their record).  None when the run
+    has no readable ``.restart`` (a run of the published code): then every snapshot is taken.
+    """
+    path = output_name + RESTART_SUFFIX
+    if not os.path.isfile(path):
+        return None
+    quiet = lambda text: None  # noqa: E731
+    try:
+        entries = restart_index(path, quiet)
+    except (UserInputError, OSError):
+        return None
+    if save_clones != 'one_file':
+        return {step for step, _, _ in entries}
+    offsets = set()
+    for entry in entries:
+        record = read_restart_entry(path, entry)
+        if record is not None and structure_id in (record.get('config_offsets') or {}):
+            offsets.add(int(record['config_offsets'][structure_id]))
+    return len(offsets)
+
+
+def find_restart_record(output_name, step):
+    """(record, end byte) of the last record of ``step`` in ``output_name.restart``; (None, None) when none.
+
+    Raises UserInputError as ``restart_record`` does.
+    """
+    path = output_name + RESTART_SUFFIX
+    if os.path.isdir(path):
+        raise UserInputError('%s is a folder, not a restart file; rename or remove it' % path)
+    if not os.path.isfile(path):
+        return None, None
+    entries = [entry for entry in restart_index(path) if entry[0] == step]
+    if not entries:
+        return None, None
+    record = read_restart_entry(path, entries[-1])
+    if record is None:
+        raise UserInputError('%s: the record of step %d fails its checksum (the file is damaged); restart from '
+                             'another saved step, or remove the file to restart from the snapshot alone'
+                             % (path, step))
+    return record, entries[-1][2]
 
 
 def read_restart_records(output_name):
@@ -539,18 +1098,7 @@ def restart_record(output_name, step):
     when the record of ``step`` fails its checksum (flipped bits) or the
     file is not a restart file of this package: a damaged record is never used.
     """
-    path = output_name + RESTART_SUFFIX
-    if not os.path.isfile(path):
-        return None
-    entries = [entry for entry in restart_index(path) if entry[0] == step]
-    if not entries:
-        return None
-    record = read_restart_entry(path, entries[-1])
-    if record is None:
-        raise UserInputError('%s: the record of step %d fails its checksum (the file is damaged); restart from '
-                             'another saved step, or remove the file to restart from the snapshot alone'
-                             % (path, step))
-    return record
+    return find_restart_record(output_name, step)[0]
 
 
 # ------------------------------------------------------------------ ending a run
@@ -597,11 +1145,14 @@ class StopRequest:
 class TimeLoop:
     """The loop over steps ``first .. last - 1`` of a dynamic or Monte Carlo run.
 
-    ``run(save, advance, stop)`` calls ``save(k)`` before step k when k is a
+    ``run(save, advance, stop, save_stop)`` calls ``save(k)`` before step k when k is a
     multiple of ``n_save`` (and after the last step when ``last`` is one),
     ``advance(k)`` for every step, and stops after the step in progress once
-    ``stop.signal_number`` is set.  ``step`` is always the index of the step
-    being (or next to be) run, so an error handler can name it.
+    ``stop.signal_number`` is set; it then saves the step just reached with ``save_stop(k)`` (when given),
+    so a stop loses no work.
+    ``step`` is always the index of the step being (or next to be) run, so an error handler can name it;
+    ``saved`` the last step saved on the grid (None before the first save), ``stop_saved`` the step saved by
+    ``save_stop``.
     ``save_first=False`` skips the save at ``first`` (a restart whose
     snapshot the earlier run wrote).
     """
@@ -609,23 +1160,43 @@ class TimeLoop:
     def __init__(self, first, last, n_save, save_first=True):
         self.first, self.last, self.n_save, self.save_first = first, last, n_save, save_first
         self.step = first
+        self.saved = None  # the last step saved on the n_save grid
+        self.stop_saved = None  # the step saved off the grid when a signal stopped the run
 
-    def run(self, save, advance, stop):
+    def _save(self, save, step):
+        save(step)
+        self.saved = step
+
+    def run(self, save, advance, stop, save_stop=None):
         for self.step in range(self.first, self.last):
             if self.step % self.n_save == 0 and (self.save_first or self.step != self.first):
-                save(self.step)
+                self._save(save, self.step)
             advance(self.step)
             if stop.signal_number is not None:
                 self.step += 1
+                if save_stop is not None:  # beside the series, also on the grid (a restart writes it there)
+                    save_stop(self.step)
+                    self.stop_saved = self.step
                 return
         self.step = self.last
         if self.last > self.first and self.last % self.n_save == 0:
-            save(self.last)
+            self._save(save, self.last)
 
     @property
     def last_saved(self):
         """The last step saved before ``step`` (for the stop message)."""
+        if self.saved is not None:
+            return self.saved
         return ((self.step - 1) // self.n_save) * self.n_save if self.step > self.first else self.first
+
+
+def write_error_line(err, what, step, last_saved):
+    """One line for an OSError while writing outputs (full disk, file-size limit, ...)."""
+    name = getattr(err, 'filename', None)
+    return ('cannot write %s at step %d (%s); %s. Free space (or raise the file-size limit) and restart with '
+            'initial_step %s' % (name or what, step, err.strerror or err,
+                                 'outputs are complete up to step %s' % last_saved if last_saved is not None
+                                 else 'no step was saved', last_saved if last_saved is not None else 0))
 
 
 def finish_run(output_name, start, first, step, restart, write_info_lines, stopped_line=None):
@@ -635,9 +1206,17 @@ def finish_run(output_name, start, first, step, restart, write_info_lines, stopp
     ``.MCMC_info``) with the given extra lines.
     """
     elapsed = time.perf_counter() - start
-    append_time(output_name + '.time', elapsed, restart=restart,
-                note=('restart segment, steps %d to %d' % (first, step)) if restart else None)
-    write_info_lines([stopped_line] if stopped_line else [])
+    failed = []
+    for write in (lambda: append_time(output_name + '.time', elapsed, restart=restart,
+                                      note=('restart segment, steps %d to %d' % (first, step)) if restart else None),
+                  lambda: write_info_lines([stopped_line] if stopped_line else [])):
+        try:  # each on its own: a full disk that refuses one still lets the other be tried
+            write()
+        except OSError as err:
+            failed.append('%s (%s)' % (getattr(err, 'filename', None) or 'a file', err.strerror or err))
+    if failed:
+        print('error: cannot write %s' % ', '.join(failed), file=sys.stderr, flush=True)
+    return not failed
 
 
 # ------------------------------------------------------------------ progress

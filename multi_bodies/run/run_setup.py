@@ -73,7 +73,10 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         clones = spec.clones_file
         snapshot = None
         restart_step = getattr(options, 'initial_step', 0)
-        if restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
+        stop_files = (restart_record or {}).get('stop_files') or {}
+        if restart_step > 0 and spec.ID in stop_files:  # a step saved when a signal stopped the run
+            clones = run_output.stop_snapshot_path(options.output_name, restart_record, spec.ID)
+        elif restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
             clones = config_name(options.output_name, spec.ID)
             offsets = (restart_record or {}).get('config_offsets') or {}
             if spec.ID not in offsets or not os.path.isfile(clones):
@@ -240,6 +243,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     import and a ``set_slip_by_ID`` that fails.
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
+    run_output.check_periodic_length(options)
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:

@@ -26,6 +26,25 @@ def cell_centres(grid):
     return np.column_stack((xx.ravel(), yy.ravel(), zz.ravel()))
 
 
+def grid_memory(grid, num_blobs):
+    """Bytes the velocity on ``grid`` needs: the cell centres and velocities (6 doubles a cell) and, for the
+    pair-by-pair products, a block of cells x blobs x 3 doubles."""
+    cells = 1
+    for _, _, n in grid:
+        cells *= int(n)
+    return 8 * cells * (9 + 3 * int(num_blobs))
+
+
+def check_grid(grid, num_blobs, where='plot_velocity_field'):
+    """Refuse (UserInputError with the memory it would need) a grid too big for this machine."""
+    from multi_bodies.run.run_output import refuse_if_too_big
+    cells = 1
+    for _, _, n in grid:
+        cells *= int(n)
+    refuse_if_too_big(grid_memory(grid, num_blobs), 'the velocity field on %d cells with %d blobs' % (cells, num_blobs),
+                      where, 'give fewer cells Nx Ny Nz')
+
+
 def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, eta, source_target_product,
                    periodic_length=(0.0, 0.0, 0.0)):
     """Fluid velocity at the cell centres, shape (Nx Ny Nz, 3), x fastest.
@@ -40,6 +59,7 @@ def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, et
         ``f(source_r, target_r, force, radius_source, radius_target, eta, periodic_length) -> (3 Nt,)``
         (``mobility.source_target_product(name)``).
     """
+    check_grid(grid, np.asarray(r_vectors).size // 3)
     targets = cell_centres(grid)
     velocity = source_target_product(np.asarray(r_vectors, dtype=float).reshape(-1, 3), targets,
                                      np.asarray(lambda_blobs, dtype=float).reshape(-1), blob_radius,

@@ -45,6 +45,7 @@ import utils
 from body.body import K_dot, bodies_to_arrays
 from multi_bodies.solver import user_hooks
 from multi_bodies.run.run_setup import read_bodies
+from multi_bodies.run import run_output
 from multi_bodies.files import snapshots as snapshot_files
 from multi_bodies.files.structure_files import read_body_table
 from quaternion_integrator.quaternion import rotation_matrices
@@ -389,11 +390,25 @@ def saved_snapshots(options, types):
             path = snapshot_files.config_name(options.output_name, structure_id)
             series.append(snapshot_files.read_config_series(path))
         snapshots = min(s[0].shape[0] for s in series)
+        recorded = [run_output.recorded_snapshots(options.output_name, 'one_file', structure_id)
+                    for structure_id, _ in types]
+        recorded = [n for n in recorded if n is not None]
+        if recorded and min(recorded) < snapshots:  # frames written without their record: not the run's
+            print('skipping %d snapshot(s) without a restart record (a run stopped between a snapshot and its '
+                  'record)' % (snapshots - min(recorded)))
+            snapshots = min(recorded)
         steps = np.arange(snapshots) * options.n_save
         series = [(loc[:snapshots], ori[:snapshots]) for loc, ori in series]
     elif options.save_clones == 'one_file_per_step':
         saved = [set(snapshot_files.clones_series_steps(options.output_name, structure_id)[0])
                  for structure_id, _ in types]
+        recorded = run_output.recorded_snapshots(options.output_name, 'one_file_per_step', None)
+        if recorded is not None:  # the current run's steps: those with a restart record
+            lone = set.union(*saved) - recorded
+            if lone:
+                print('skipping %d step(s) without a restart record (%s; a run stopped between a snapshot and its '
+                      'record, or files of another run)' % (len(lone), utils.describe_steps(sorted(lone))))
+            saved = [steps & recorded for steps in saved]
         common = sorted(set.intersection(*saved))
         if not common:
             raise utils.UserInputError(

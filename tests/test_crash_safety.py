@@ -1,0 +1,576 @@
+"""No lost or mixed frames; restarts exact or refused (issue 17).
+
+The crash test kills small runs (dynamic, Monte Carlo, an ensemble replica; both
+``save_clones`` modes) with SIGKILL, SIGTERM and SIGINT at moments drawn from a
+fixed seed, including between a snapshot and its record (the test hook
+``RMB_TEST_KILL_BETWEEN_SNAPSHOT_AND_RECORD=<step>`` makes the writer SIGKILL
+itself there).  Each chain is continued as a user would (``initial_step`` =
+the step the stop message names, or the last complete snapshot and record
+after SIGKILL; the ensemble runner resumes by itself) and compared with the
+uninterrupted run: every continuation equals it bit for bit (snapshots and
+counters) or was refused with a message.  Law: a deterministic program with
+the same state gives the same bytes.
+
+The CI version runs ``CHAINS`` chains (under a minute).  The longer run::
+
+    RMB_CRASH_CHAINS=200 PYTHONPATH=. OMP_NUM_THREADS=1 python3 -m pytest -q -p no:cacheprovider \
+        tests/test_crash_safety.py -k crash_chains -s
+
+prints the counts (chains, signals, exact, refused, lost) at the end.
+"""
+import os
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
+from multi_bodies.files.snapshots import read_config_frames  # noqa: E402
+from multi_bodies.run import run_output  # noqa: E402
+from run_scenes import REPO_ROOT, child_environment, set_options  # noqa: E402
+
+DYNAMIC = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
+MCMC = str(REPO_ROOT / 'many_bodyMCMC' / 'many_body_MCMC.py')
+CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '9'))
+
+
+# ------------------------------------------------------------------ scenes
+def dynamic_scene(folder, n_steps=40, n_save=4, save_clones='one_file_per_step', **extra):
+    """Two single-blob structures a and b (one body each), Brownian Adams-Bashforth: noise and history matter."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / 'blob.vertex').write_text('1\n0 0 0\n')
+    (folder / 'a.clones').write_text('1\n0 0 2.0 1 0 0 0\n')
+    (folder / 'b.clones').write_text('1\n2.5 0 2.5 1 0 0 0\n')
+    options = dict(scheme='stochastic_adams_bashforth', dt=0.01, n_steps=n_steps, n_save=n_save, eta=1.0, g=0.5,
+                   blob_radius=0.5, kT=1.0, seed=3, repulsion_strength_wall=1.0, debye_length_wall=0.2,
+                   mobility_blobs_implementation='python', mobility_vector_prod_implementation='python',
+                   blob_blob_force_implementation='python', solver_tolerance=1e-10, output_name='data/run',
+                   save_clones=save_clones)
+    options.update(extra)
+    text = set_options('structure blob.vertex a.clones\nstructure blob.vertex b.clones', **options)
+    (folder / 'input.dat').write_text(text)
+    return folder
+
+
+def mcmc_scene(folder, n_steps=400, n_save=40, save_clones='one_file_per_step', **extra):
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / 'blob.vertex').write_text('1\n0 0 0\n')
+    (folder / 'a.clones').write_text('2\n0 0 2.0 1 0 0 0\n1.5 0 2.0 1 0 0 0\n')
+    options = dict(n_steps=n_steps, n_save=n_save, kT=1.0, g=1.0, blob_radius=0.5, repulsion_strength_wall=1.0,
+                   debye_length_wall=0.5, max_translation=0.1, seed=5, output_name='data/run',
+                   save_clones=save_clones, mcmc_energy_implementation='python')
+    options.update(extra)
+    (folder / 'input.dat').write_text(set_options('structure blob.vertex a.clones', **options))
+    return folder
+
+
+def edit(folder, **values):
+    path = Path(folder) / 'input.dat'
+    path.write_text(set_options(path.read_text(), **values))
+
+
+def start(script, folder, env=None):
+    environment = child_environment()
+    environment.update(env or {})
+    return subprocess.Popen([sys.executable, script, '--input-file', 'input.dat'] if script == DYNAMIC
+                            else [sys.executable, script, 'input.dat'], cwd=str(folder), env=environment,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def run(script, folder, env=None):
+    process = start(script, folder, env)
+    out, err = process.communicate(timeout=120)
+    return process.returncode, out, err
+
+
+def outputs(folder, mcmc=False):
+    """{name: bytes} of the snapshots and counters of ``folder/data`` (the series only, nothing set aside)."""
+    data = Path(folder) / 'data'
+    found = {p.name: p.read_bytes() for p in data.iterdir()
+             if p.is_file() and (p.name.endswith('.clones') or p.name.endswith('.config'))}
+    info = data / ('run.MCMC_info' if mcmc else 'run.info')
+    found['info'] = b'\n'.join(info.read_bytes().splitlines()[:3])
+    return found
+
+
+def last_pair_step(folder, save_clones, ids):
+    record, _ = run_output.last_complete_pair(str(Path(folder) / 'data' / 'run'), save_clones,
+                                              [(i, 0) for i in ids], report=lambda text: None)
+    return None if record is None else record['step']
+
+
+def wait_for_record(process, folder, step, timeout=60.0, path=None):
+    """Wait until ``.restart`` holds the record of ``step`` (False when the child ended first)."""
+    path = Path(folder) / 'data' / 'run.restart' if path is None else Path(path)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            return False
+        if path.exists():
+            try:
+                if any(s >= step for s, _, _ in run_output.restart_index(str(path), report=lambda text: None)):
+                    return True
+            except run_output.RestartFileError:
+                pass
+        time.sleep(0.005)
+    return False
+
+
+# ------------------------------------------------------------------ the crash test
+def one_chain(tmp_path, rng, index, counts):
+    """One chain: a run killed at a drawn moment, continued, compared with the uninterrupted run."""
+    how = ['SIGKILL', 'SIGTERM', 'SIGINT', 'between'][int(rng.integers(4))]
+    if index % 3 == 2:
+        return replica_chain(tmp_path, rng, index, counts, how)
+    program = ['dynamic', 'mcmc'][index % 3]
+    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
+    scene, script, ids = ((dynamic_scene, DYNAMIC, ('a', 'b')) if program == 'dynamic'
+                          else (mcmc_scene, MCMC, ('a',)))
+    n_steps, n_save = (40, 4) if program == 'dynamic' else (4000, 40)
+    reference = scene(tmp_path / ('reference_%d' % index), n_steps=n_steps, n_save=n_save, save_clones=save_clones)
+    assert run(script, reference)[0] == 0
+    folder = scene(tmp_path / ('chain_%d' % index), n_steps=n_steps, n_save=n_save, save_clones=save_clones)
+    moment = n_save * int(rng.integers(1, n_steps // n_save - 1))
+    counts['chains'] += 1
+    if how == 'between':
+        status, _, _ = run(script, folder, {run_output.KILL_HOOK: str(moment)})
+        assert status == -signal.SIGKILL
+        # the lone snapshot of `moment` must be refused, the last complete pair taken
+        edit(folder, initial_step=moment)
+        status, _, err = run(script, folder)
+        assert status == 2 and 'record of step %d' % moment in err and 'Traceback' not in err, err
+        counts['refused'] += 1
+        restart = last_pair_step(folder, save_clones, ids)
+    else:
+        process = start(script, folder)
+        interrupted = wait_for_record(process, folder, moment)
+        if interrupted:
+            process.send_signal(getattr(signal, how))
+        out, err = process.communicate(timeout=120)
+        if process.returncode == 0:  # it finished before the signal came
+            restart = None
+            counts['finished first'] += 1
+        elif how == 'SIGKILL':
+            restart = last_pair_step(folder, save_clones, ids)
+        else:
+            assert process.returncode == {'SIGTERM': 143, 'SIGINT': 130}[how], err
+            assert 'Traceback' not in err, err
+            restart = int(err.rsplit('restart with initial_step', 1)[1].split()[0])
+    counts['signals'] += 1
+    if restart is not None:
+        edit(folder, initial_step=restart)
+        status, out, err = run(script, folder)
+        if status == 2:
+            counts['refused'] += 1
+            return
+        assert status == 0, err
+    ours, theirs = outputs(folder, program == 'mcmc'), outputs(reference, program == 'mcmc')
+    if ours == theirs:
+        counts['exact'] += 1
+    else:
+        counts['lost'] += 1
+        different = sorted(k for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
+        pytest.fail('chain %d (%s, %s, %s at %d, restart %s): %s differ' % (index, program, save_clones, how,
+                                                                         moment, restart, different))
+
+
+def replica_outputs(spec):
+    folder = Path(spec['path'])
+    found = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in ('.clones', '.config')}
+    found['info'] = b'\n'.join((folder / 'run.info').read_bytes().splitlines()[:3])
+    return found
+
+
+def replica_chain(tmp_path, rng, index, counts, how):
+    """A replica killed (child process) at a drawn moment; the runner resumes it by itself."""
+    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
+    reference = replica_scene(tmp_path / ('reference_%d' % index), save_clones, n_steps=40, n_save=4)
+    assert runner.run_replica(reference)['status'] == 'done'
+    killed = replica_scene(tmp_path / ('chain_%d' % index), save_clones, n_steps=40, n_save=4)
+    moment = 4 * int(rng.integers(1, 9))
+    code = ('import sys; sys.path.insert(0, %r); from multi_bodies.ensembles import ensemble_runner as r; '
+            'r.run_replica(%r)' % (str(REPO_ROOT), killed))
+    environment = child_environment()
+    if how == 'between':
+        environment[run_output.KILL_HOOK] = str(moment)
+    process = subprocess.Popen([sys.executable, '-c', code], env=environment, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    if how != 'between' and wait_for_record(process, None, moment, path=Path(killed['path']) / 'run.restart'):
+        process.send_signal(getattr(signal, how))
+    out, err = process.communicate(timeout=120)
+    assert 'Traceback' not in err, err
+    counts['chains'] += 1
+    counts['signals'] += 1
+    result = runner.run_replica(killed)
+    assert result['status'] == 'done', result
+    if replica_outputs(killed) == replica_outputs(reference):
+        counts['exact'] += 1
+    else:
+        counts['lost'] += 1
+        pytest.fail('replica chain %d (%s, %s at %d) differs' % (index, save_clones, how, moment))
+
+
+def test_crash_chains(tmp_path):
+    """CHAINS chains (fixed seed): each continuation equals the uninterrupted run bit for bit or was refused."""
+    rng = np.random.default_rng(17)
+    counts = {'chains': 0, 'signals': 0, 'exact': 0, 'refused': 0, 'lost': 0, 'finished first': 0}
+    for index in range(CHAINS):
+        one_chain(tmp_path, rng, index, counts)
+    print('crash test:', counts)
+    assert counts['lost'] == 0 and counts['exact'] == counts['chains']
+
+
+def replica_scene(tmp_path, save_clones, n_steps=12, n_save=2):
+    folder = tmp_path / 'scene'
+    dynamic_scene(folder, n_steps=n_steps, n_save=n_save, save_clones=save_clones, output_name='data/run')
+    plan = runner.build_plan(str(folder / 'input.dat'), 1, (), str(tmp_path / 'ensemble'), 7)
+    runner.write_plan(plan)
+    return runner.replica_specs(plan)[0]
+
+
+@pytest.mark.parametrize('save_clones', ['one_file_per_step', 'one_file'])
+def test_ensemble_replica_killed_between_snapshot_and_record_resumes_exactly(tmp_path, save_clones):
+    """L1 and W1 for a replica: killed after snapshot 6 and before its record; the resume uses step 4 and
+    ends as the undisturbed replica (before: IndexError with one_file, a frame cut per attempt)."""
+    spec = replica_scene(tmp_path / 'ref', save_clones)
+    assert runner.run_replica(spec)['status'] == 'done'
+    killed = replica_scene(tmp_path / 'killed', save_clones)
+    code = ('import sys; sys.path.insert(0, %r); from multi_bodies.ensembles import ensemble_runner as r; '
+            'r.run_replica(%r)' % (str(REPO_ROOT), killed))
+    environment = child_environment()
+    environment[run_output.KILL_HOOK] = '6'
+    process = subprocess.run([sys.executable, '-c', code], env=environment, capture_output=True, text=True,
+                             timeout=120)
+    assert process.returncode == -signal.SIGKILL, process.stderr
+    for attempt in range(2):  # a second attempt after a success changes nothing
+        result = runner.run_replica(killed)
+        assert result['status'] == 'done', result
+    assert result['skipped']
+    log = Path(killed['path'], runner.LOG_NAME).read_text()
+    assert 'last complete snapshot and record is step 4' in log
+    mine = {p.name: p.read_bytes() for p in Path(killed['path']).iterdir() if p.suffix in ('.clones', '.config')}
+    ref = {p.name: p.read_bytes() for p in Path(spec['path']).iterdir() if p.suffix in ('.clones', '.config')}
+    assert mine == ref
+
+
+# ------------------------------------------------------------------ one test per finding
+def test_L2_nothing_to_do_keeps_every_frame(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=10, n_save=1, save_clones='one_file')
+    assert run(DYNAMIC, folder)[0] == 0
+    before = outputs(folder)
+    assert read_config_frames(str(folder / 'data' / 'run.a.config')).shape[0] == 11
+    edit(folder, initial_step=10)
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0 and 'nothing to do' in out, err
+    assert read_config_frames(str(folder / 'data' / 'run.a.config')).shape[0] == 11
+    assert outputs(folder) == before
+
+
+def test_L3_a_cut_record_is_set_aside_before_later_appends(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=12, n_save=4)
+    assert run(DYNAMIC, folder)[0] == 0
+    path = folder / 'data' / 'run.restart'
+    _, start_, end = run_output.restart_index(str(path))[-1]
+    path.write_bytes(path.read_bytes()[:(start_ + end) // 2])  # the record of step 12 cut by a hard stop
+    edit(folder, initial_step=8, n_steps=16)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 0, err
+    messages = []
+    steps = [s for s, _, _ in run_output.restart_index(str(path), report=messages.append)]
+    assert messages == [] and steps == [0, 4, 8, 8, 12, 16]  # before: the appended records hid behind the cut one
+    aside = list((folder / 'data' / ('run' + run_output.ASIDE_SUFFIX)).rglob('run.restart.after_byte_*'))
+    assert len(aside) == 1 and aside[0].stat().st_size > 0
+
+
+@pytest.mark.parametrize('program', ['dynamic', 'mcmc'])
+def test_L4_file_size_limit_ends_in_one_line_without_part_files(tmp_path, program):
+    scene, script = (dynamic_scene, DYNAMIC) if program == 'dynamic' else (mcmc_scene, MCMC)
+    folder = scene(tmp_path / 'run', n_steps=4000 if program == 'mcmc' else 400, n_save=1 if program == 'dynamic'
+                   else 10, save_clones='one_file')
+    limit = 20000
+
+    def limited():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    arguments = [sys.executable, script] + (['--input-file', 'input.dat'] if program == 'dynamic' else ['input.dat'])
+    process = subprocess.run(arguments, cwd=str(folder), env=child_environment(), capture_output=True, text=True,
+                             preexec_fn=limited, timeout=120)
+    err = process.stderr
+    assert process.returncode == 1, err
+    assert 'Traceback' not in err and 'cannot write' in err and 'restart with initial_step' in err, err
+    data = folder / 'data'
+    assert not list(data.rglob('*.part'))
+    assert (data / 'run.time').exists() and (data / ('run.MCMC_info' if program == 'mcmc' else 'run.info')).exists()
+    messages = []
+    run_output.restart_index(str(data / 'run.restart'), report=messages.append)
+    assert messages == []  # no partial record
+    saved = int(err.rsplit('restart with initial_step', 1)[1].split()[0])
+    assert last_pair_step(folder, 'one_file', ['a']) == saved
+
+
+def test_W1_lone_snapshot_is_refused_and_forcing_says_so(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=40, n_save=4)
+    status, _, _ = run(DYNAMIC, folder, {run_output.KILL_HOOK: '8'})
+    assert status == -signal.SIGKILL and (folder / 'data' / 'run.a.00000008.clones').exists()
+    edit(folder, initial_step=8)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'no restart record of step 8' in err and 'restart_inexact True' in err, err
+    assert 'last step with a complete snapshot and record is 4' in err
+    edit(folder, restart_inexact='True')
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0 and 'inexact restart from step 8' in err, err
+
+
+def test_W2_mcmc_one_file_restart_cuts_the_abandoned_frames(tmp_path):
+    whole = mcmc_scene(tmp_path / 'whole', n_steps=400, n_save=40, save_clones='one_file')
+    assert run(MCMC, whole)[0] == 0
+    split = tmp_path / 'split'
+    shutil.copytree(whole, split)
+    edit(split, initial_step=200)
+    status, _, err = run(MCMC, split)
+    assert status == 0, err
+    assert outputs(split, mcmc=True) == outputs(whole, mcmc=True)  # before: frame 200 twice, later ones shifted
+
+
+def test_a_new_run_sets_the_earlier_run_aside(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=20, n_save=2)
+    assert run(DYNAMIC, folder)[0] == 0
+    edit(folder, n_steps=10, seed=4)
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0 and 'earlier run' in out, err
+    steps = sorted(int(p.name.split('.')[-2]) for p in (folder / 'data').glob('run.a.*.clones'))
+    assert steps == list(range(0, 11, 2))
+    aside = list((folder / 'data' / 'run.set_aside').glob('*/run.a.00000020.clones'))
+    assert len(aside) == 1
+    edit(folder, initial_step=10, n_steps=20)  # continues the new run, not the old one
+    assert run(DYNAMIC, folder)[0] == 0
+    record = run_output.restart_record(str(folder / 'data' / 'run'), 20)
+    assert record['run_id'] == run_output.read_run_id(str(folder / 'data' / 'run'))
+
+
+@pytest.mark.parametrize('signal_name', ['SIGTERM', 'SIGINT'])
+def test_a_signal_saves_the_step_reached(tmp_path, signal_name):
+    """n_save 100000: before, a stop kept only step 0; now the step reached is saved and continues exactly."""
+    reference = dynamic_scene(tmp_path / 'reference', n_steps=3000, n_save=100000)
+    folder = dynamic_scene(tmp_path / 'run', n_steps=3000, n_save=100000)
+    process = start(DYNAMIC, folder)
+    assert wait_for_record(process, folder, 0)
+    time.sleep(0.3)
+    process.send_signal(getattr(signal, signal_name))
+    out, err = process.communicate(timeout=120)
+    assert process.returncode in (130, 143), err
+    step = int(err.rsplit('restart with initial_step', 1)[1].split()[0])
+    assert step > 0 and (folder / 'data' / 'run.stopped' / ('run.a.%08d.clones' % step)).exists()
+    edit(folder, initial_step=step, n_steps=step + 6, n_save=step + 6)
+    edit(reference, n_steps=step + 6, n_save=step + 6)
+    assert run(DYNAMIC, folder)[0] == 0 and run(DYNAMIC, reference)[0] == 0
+    assert outputs(folder) == outputs(reference)
+
+
+@pytest.mark.parametrize('change, words', [
+    ('order', 'structures: was a x 1, b x 1, now b x 1, a x 1'),
+    ('radius', 'blob_radius'),
+    ('vertex', 'blobs of a'),
+    ('removed', 'structures'),
+    ('snapshot', 'differs from the one its record'),
+])
+def test_restart_consistency_changes_are_refused(tmp_path, change, words):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=8, n_save=4)
+    assert run(DYNAMIC, folder)[0] == 0
+    edit(folder, initial_step=4, n_steps=8)
+    text = (folder / 'input.dat').read_text()
+    if change == 'order':
+        text = text.replace('structure blob.vertex a.clones\nstructure blob.vertex b.clones',
+                            'structure blob.vertex b.clones\nstructure blob.vertex a.clones')
+    elif change == 'radius':
+        text = set_options(text, blob_radius=0.51)
+    elif change == 'vertex':
+        (folder / 'blob2.vertex').write_text('2\n0 0 0\n0 0 0.5\n')
+        text = text.replace('structure blob.vertex a.clones', 'structure blob2.vertex a.clones')
+    elif change == 'removed':
+        text = text.replace('structure blob.vertex b.clones\n', '')
+    else:
+        path = folder / 'data' / 'run.a.00000004.clones'
+        path.write_text(path.read_text().replace('1.0 0.0 0.0 0.0', '1.0 0.0 0.0 0.0 ').replace('\n', ' \n', 1))
+    (folder / 'input.dat').write_text(text)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and words in err and 'restart_inexact' in err and 'Traceback' not in err, err
+
+
+# ------------------------------------------------------------------ readers take the current run's steps only
+@pytest.mark.parametrize('save_clones', ['one_file_per_step', 'one_file'])
+def test_readers_leave_out_snapshots_without_a_record(tmp_path, save_clones, capsys):
+    """A kill between snapshot 8 and its record, and (per step) a file of another run at step 40: the reader
+    of render.py / clones_to_vtk.py and the ensemble statistics take steps 0 and 4 only."""
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.vtk_output import saved_snapshots
+    folder = dynamic_scene(tmp_path / 'run', n_steps=40, n_save=4, save_clones=save_clones)
+    assert run(DYNAMIC, folder, {run_output.KILL_HOOK: '8'})[0] == -signal.SIGKILL
+    if save_clones == 'one_file_per_step':
+        for name in ('a', 'b'):
+            shutil.copy(folder / 'data' / ('run.%s.00000004.clones' % name),
+                        folder / 'data' / ('run.%s.00000040.clones' % name))
+    previous = os.getcwd()
+    os.chdir(str(folder))
+    try:
+        options = read_input_file('input.dat')
+        steps, locations, _ = saved_snapshots(options, [('a', 1), ('b', 1)])
+    finally:
+        os.chdir(previous)
+    assert steps.tolist() == [0, 4] and locations.shape == (2, 2, 3)
+    assert 'without a restart record' in capsys.readouterr().out
+    from multi_bodies.ensembles import ensemble_statistics
+    output_name = str(folder / 'data' / 'run')
+    recorded = run_output.recorded_snapshots(output_name, save_clones, 'a')
+    assert recorded == ({0, 4} if save_clones == 'one_file_per_step' else 2)
+    assert ensemble_statistics is not None
+
+
+# ------------------------------------------------------------------ resources and one-line refusals
+def test_reference_body_length_is_the_all_pairs_value_in_o_n_memory():
+    """Law: the body length is the largest pairwise blob distance + 2a, computed here by all pairs; the hull
+    path gives the same double on every shipped structure, and 1e6 blobs need far less than 1 GB."""
+    import tracemalloc
+    from body.body import reference_body_length
+    from multi_bodies.files.structure_files import read_vertex_file
+    checked = 0
+    for path in sorted((REPO_ROOT / 'multi_bodies' / 'Structures').glob('*.vertex')):
+        blobs = read_vertex_file(str(path))
+        if len(blobs) > 3000:
+            continue
+        diff = blobs[:, None, :] - blobs[None, :, :]
+        expected = float(np.sqrt(np.max(np.einsum('ijk,ijk->ij', diff, diff)))) + 2 * 0.3 if len(blobs) > 1 else 0.6
+        assert reference_body_length(blobs, 0.3) == expected, path.name
+        checked += 1
+    assert checked >= 3
+    many = np.random.default_rng(2).standard_normal((1000000, 3))
+    tracemalloc.start()
+    length = reference_body_length(many, 0.1)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 300e6 and 8.0 < length < 14.0
+
+
+@pytest.mark.parametrize('box', ['-5 -5 0', '1e-10 1e-10 0'])
+def test_bad_periodic_length_is_one_line(tmp_path, box):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2, periodic_length=box)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'periodic_length' in err and 'Traceback' not in err, err
+
+
+def test_random_state_fifo_is_refused_not_read_forever(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    os.mkfifo(str(folder / 'pipe.random_state'))
+    edit(folder, random_state='pipe.random_state', seed=None)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'not a regular file' in err, err
+
+
+def test_restart_file_that_is_a_folder_is_one_line(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2)
+    assert run(DYNAMIC, folder)[0] == 0
+    (folder / 'data' / 'run.restart').rename(folder / 'data' / 'kept')
+    (folder / 'data' / 'run.restart').mkdir()
+    edit(folder, initial_step=2)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'is a folder' in err and 'Traceback' not in err, err
+
+
+def test_an_empty_stale_ensemble_lock_is_taken_over(tmp_path):
+    folder = tmp_path / 'ens'
+    folder.mkdir()
+    lock = folder / runner.LOCK_NAME
+    lock.write_text('')  # a driver killed between creating the lock and writing its name
+    old = time.time() - 60
+    os.utime(str(lock), (old, old))
+    with runner.ensemble_lock(str(folder)):
+        assert lock.read_text()
+    assert not lock.exists()
+
+
+@pytest.mark.parametrize('arguments, words', [(['--fps', '0'], '--fps'), (['--movie', 'x.mp4'], '.gif')])
+def test_render_refuses_bad_movie_options_in_one_line(tmp_path, arguments, words):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    process = subprocess.run([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'render.py'), '--input-file',
+                              'input.dat'] + arguments, cwd=str(folder), env=child_environment(),
+                             capture_output=True, text=True, timeout=120)
+    assert process.returncode == 2 and words in process.stderr and 'Traceback' not in process.stderr, \
+        process.stderr
+
+
+def test_ensemble_workers_0_interrupted_exits_with_the_signal_status(tmp_path):
+    """Before: exit 1 and '1 failed'; now 143 for SIGTERM, and a rerun resumes from the step reached."""
+    scene = dynamic_scene(tmp_path / 'scene', n_steps=3000, n_save=1000)
+    output = tmp_path / 'ens'
+    process = subprocess.Popen([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'ensemble.py'), '--input-file',
+                                str(scene / 'input.dat'), '--replicas', '1', '--workers', '0', '--output-dir',
+                                str(output), '--seed', '3'], cwd=str(scene), env=child_environment(),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(output.rglob('run.restart')) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.01)
+    time.sleep(0.3)
+    process.send_signal(signal.SIGTERM)
+    out, err = process.communicate(timeout=120)
+    assert process.returncode == 143, (out, err)
+    assert '1 failed' not in out and 'did not finish' not in out and 'Traceback' not in err, (out, err)
+    status = runner.read_status(str(list(output.rglob('run.restart'))[0].parent))
+    assert status['status'] == 'stopped'
+
+
+def test_a_dense_scheme_too_big_is_refused_before_any_file(tmp_path, monkeypatch):
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.dynamic_run import DynamicRun
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2, scheme='deterministic_forward_euler_dense_algebra', kT=0)
+    monkeypatch.chdir(folder)
+    monkeypatch.setattr(run_output, 'available_memory', lambda: 1000)  # a machine with 1000 bytes
+    options = read_input_file('input.dat')
+    with pytest.raises(run_output.UserInputError, match='needs about .* of memory, but 1000 B are available'):
+        DynamicRun(options, log=lambda text: None)
+    assert not (folder / 'data').exists()
+
+
+def test_a_velocity_grid_too_big_is_refused_with_its_memory():
+    from multi_bodies.run import velocity_field
+    grid = ((0.0, 1.0, 100000), (0.0, 1.0, 100000), (0.0, 1.0, 1000))
+    with pytest.raises(run_output.UserInputError, match='velocity field on 10000000000000 cells .* needs about'):
+        velocity_field.check_grid(grid, 10)
+    velocity_field.check_grid(((0.0, 1.0, 4),) * 3, 10)  # a small grid passes
+
+
+def test_a_run_writing_more_than_10000_files_is_warned_about(tmp_path, monkeypatch):
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.dynamic_run import DynamicRun
+    folder = dynamic_scene(tmp_path / 'run', n_steps=6000, n_save=1)
+    monkeypatch.chdir(folder)
+    lines = []
+    DynamicRun(read_input_file('input.dat'), log=lines.append)
+    warned = [line for line in lines if 'will write about' in line]
+    assert warned and '(6001 saves)' in warned[0], lines
+    assert int(warned[0].split('will write about')[1].split()[0]) >= 2 * 6001  # a snapshot per structure and save
+    lines.clear()
+    edit(folder, save_clones='one_file')
+    DynamicRun(read_input_file('input.dat'), log=lines.append)
+    assert not any('will write' in line for line in lines), lines
+
+
+def test_ctrl_c_while_the_script_imports_is_one_line(tmp_path):
+    """SIGINT before main starts (while numpy, scipy and the backends import): one line and 130."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=2)
+    process = start(DYNAMIC, folder)
+    time.sleep(0.15)  # the script has started its imports
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=60)
+    assert 'Traceback' not in err, err
+    assert process.returncode in (130, 0, 2), err  # 0: it finished first on a fast machine
