@@ -318,22 +318,17 @@ RMB_HD void rot_times_torque_pair(double rx, double ry, double rz, double zt, do
   }
 }
 
-// Velocity of a target of radius b from a force on a source of radius as, in
-// physical units (result in units of 1/(8 pi eta)); heights already raised to
-// max(z, radius).  Free part: RPY for unequal spheres (Zuk et al., J. Fluid
-// Mech. 741, R5, 2014) with overlap and containment branches.  Wall part: the
-// image system with Faxen corrections for both radii, block -W P with
-// P = diag(1, 1, -1); see mobility/pair_formulas.py for W term by term.
-template <bool Wall>
-RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, double zs, double b, double as,
-                               double fx, double fy, double fz, double &ux, double &uy, double &uz) {
-  const double r2 = rx * rx + ry * ry + rz * rz;
+// Free part of the RPY tensor for unequal spheres (Zuk, Wajnryb, Mizerski and
+// Szymczak, J. Fluid Mech. 741, R5, 2014), physical units, result in units of
+// 1/(8 pi eta): M = c_iso I + c_rr r r^T for a target of radius b and a
+// source of radius as at distance^2 r2, with its overlap and containment
+// branches (equal radii: the standard RPY tensor, self term 4/(3a) I).
+RMB_HD void unequal_rpy_coefficients(double r2, double b, double as, double &c_iso, double &c_rr) {
   const double rinv = r2 > 0.0 ? RMB_RSQRT(r2) : 0.0;
   const double rinv2 = rinv * rinv;
   const double r = r2 * rinv;
   const double s = b * b + as * as;
   const double diff = b - as;
-  double c_iso, c_rr;
   if (r >= b + as) {
     c_iso = rinv * (1.0 + s * rinv2 / 3.0);
     c_rr = rinv * rinv2 * (1.0 - s * rinv2);
@@ -348,6 +343,19 @@ RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, doubl
     c_iso = (4.0 / 3.0) / (b > as ? b : as);
     c_rr = 0.0;
   }
+}
+
+// Velocity of a target of radius b from a force on a source of radius as, in
+// physical units (result in units of 1/(8 pi eta)); heights already raised to
+// max(z, radius).  Free part: unequal_rpy_coefficients.  Wall part: the
+// image system with Faxen corrections for both radii, block -W P with
+// P = diag(1, 1, -1); see mobility/pair_formulas.py for W term by term.
+template <bool Wall>
+RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, double zs, double b, double as,
+                               double fx, double fy, double fz, double &ux, double &uy, double &uz) {
+  const double s = b * b + as * as;
+  double c_iso, c_rr;
+  unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, b, as, c_iso, c_rr);
   const double rf = c_rr * (rx * fx + ry * fy + rz * fz);
   ux += c_iso * fx + rf * rx;
   uy += c_iso * fy + rf * ry;
@@ -372,6 +380,46 @@ RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, doubl
     uy -= w_I * fy + (w_RR * Rg + w_Rz * gz) * ry;
     uz -= w_I * gz + (w_RR * Rg + w_Rz * gz) * Rz + w_J * gz + w_zR * Rg;
   }
+}
+
+// Free-slip (free) surface at z = 0, blobs in z > 0: the RPY tensor of the
+// pair plus that of the target with the mirror image of the source, applied
+// to the mirrored force (fx, fy, -fz).  The image vector is
+// R = (rx, ry, zt + zs).  No height regularisation: the sum is a congruence
+// of the RPY tensor of blobs and images, positive definite at any height.
+// Equal radii (units of a, result 1/(8 pi eta a)):
+RMB_HD void free_surface_pair(double rx, double ry, double rz, double zt, double zs, double fx, double fy,
+                              double fz, double &ux, double &uy, double &uz) {
+  double c_iso, c_rr;
+  rpy_trans_trans(rx, ry, rz, c_iso, c_rr);
+  double rf = c_rr * (rx * fx + ry * fy + rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += c_iso * fz + rf * rz;
+  const double Rz = zt + zs;
+  rpy_trans_trans(rx, ry, Rz, c_iso, c_rr);
+  rf = c_rr * (rx * fx + ry * fy - Rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += -c_iso * fz + rf * Rz;
+}
+
+// Unequal radii (physical units, result 1/(8 pi eta)): target radius b, source radius as.
+RMB_HD void source_target_free_surface_pair(double rx, double ry, double rz, double zt, double zs, double b,
+                                            double as, double fx, double fy, double fz, double &ux, double &uy,
+                                            double &uz) {
+  double c_iso, c_rr;
+  unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, b, as, c_iso, c_rr);
+  double rf = c_rr * (rx * fx + ry * fy + rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += c_iso * fz + rf * rz;
+  const double Rz = zt + zs;
+  unequal_rpy_coefficients(rx * rx + ry * ry + Rz * Rz, b, as, c_iso, c_rr);
+  rf = c_rr * (rx * fx + ry * fy - Rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += -c_iso * fz + rf * Rz;
 }
 
 }  // namespace rmb
