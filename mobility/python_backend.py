@@ -290,7 +290,7 @@ def _dense_radii(r_vectors, eta, radius, periodic_length, domain):
     r = np.asarray(r_vectors, dtype=np.float64)
     if r.ndim == 3 and r.shape[2] == 3:
         radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), r.shape[:2])
-        return np.stack([_dense_radii(body, eta, rad, periodic_length, domain) for body, rad in zip(r, radii)])
+        return np.stack([_dense_or_radii(body, eta, rad, periodic_length, domain) for body, rad in zip(r, radii)])
     r = as_positions(r)
     n = r.shape[0]
     a = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,)).copy()
