@@ -138,9 +138,14 @@ class System:
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
         self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
         self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
+        radii_given = bool(getattr(body_arrays, 'radii_given', False))
         self.blob_blob_forces = mbf.blob_blob_force_calculator(
             blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda,
-            python_forces=hooks.blob_blob_forces_python)
+            python_forces=hooks.blob_blob_forces_python, radii_given=radii_given)
+        # Per-blob radii reach the default blob-blob laws (contact a_i + a_j); a user's law gets blob_radius.
+        self.blob_blob_physics = self.physics
+        if radii_given and hooks.blob_blob_forces_python is None:
+            self.blob_blob_physics = dict(self.physics, blob_radii=body_arrays.blob_radii)
         self.body_body_forces = mbf.body_body_force_calculator(
             body_body_name, pair_force_torque=hooks.body_body_force_torque,
             python_forces_torques=hooks.body_body_forces_python)
@@ -249,7 +254,7 @@ class System:
         """One-blob plus blob-blob forces at blob positions (N, 3), shape (N, 3)."""
         forces = np.asarray(self.hooks.blob_external_forces(r_vectors, **self.physics), dtype=float).reshape(-1, 3)
         if self.blob_blob_forces is not None:
-            forces = forces + np.asarray(self.blob_blob_forces(r_vectors, **self.physics)).reshape(-1, 3)
+            forces = forces + np.asarray(self.blob_blob_forces(r_vectors, **self.blob_blob_physics)).reshape(-1, 3)
         return forces
 
     def forces_torques(self, configuration, r_vectors=None):
@@ -534,7 +539,7 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     checked('mobility_vector_prod_implementation', lambda: mobility.mobility_vector_product(product))
     checked('mobility_blobs_implementation', lambda: mobility.blob_mobility_matrix(blobs))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
-        forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda))
+        forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
     return System(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
                   vector_product_name=product, blobs_name=blobs, blob_blob_name=forces,
