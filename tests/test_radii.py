@@ -234,7 +234,7 @@ def test_vertex_file_fourth_column(tmp_path):
         read_vertex_file(str(path))
     path.write_text('2\n0 0 1\n0 0 -1\n')
     assert read_vertex_file(str(path), return_radii=True)[1] is None
-    for text, fragment in (('2\n0 0 1 0.2\n0 0 -1\n', 'line 3: a blob without a radius'),
+    for text, fragment in (('2\n0 0 1 0.2\n0 0 -1\n', 'line 2: a blob radius in a fourth column, but line 3 has none'),
                            ('2\n0 0 1 0.2\n0 0 -1 -0.1\n', 'line 3: blob radius -0.1'),
                            ('2\n0 0 1 0.2 5\n0 0 -1 0.1\n', 'line 2: 5 values')):
         path.write_text(text)

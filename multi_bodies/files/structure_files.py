@@ -136,8 +136,8 @@ def read_vertex_file(path, referenced_from=None, return_radii=False):
     if with_radii and not all(four[:max(1, len(four))]):
         first = next(n for (n, t), has in zip(rows[1:], four) if not has)
         some = next(n for (n, t), has in zip(rows[1:], four) if has)
-        raise UserInputError("%s, line %d: a blob without a radius, but line %d gives one in a fourth column; give "
-                             "every blob its radius or none (then all get blob_radius)" % (path, first, some))
+        raise UserInputError("%s, line %d: a blob radius in a fourth column, but line %d has none; give every blob "
+                             "its radius or none (then all get blob_radius)" % (path, some, first))
     columns = 4 if with_radii else 3
     table = _read_counted_table(path, 'vertex', columns, 'blob position x y z' + (' and radius' if with_radii
                                                                                  else ''),
