@@ -344,19 +344,26 @@ void source_target_sum(const Blobs &t, const Blobs &s, const std::vector<double>
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
   ux.assign(t.n, 0.0), uy.assign(t.n, 0.0), uz.assign(t.n, 0.0);
+  const double *x = s.x.data(), *y = s.y.data(), *z = s.z.data(), *rad = s.radius.data();
+  const double *vx = s.vx.data(), *vy = s.vy.data(), *vz = s.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
 #pragma omp parallel for schedule(static) if (worth_threads(t.n, s.n * n_shifts))
   for (std::size_t i = 0; i < t.n; ++i) {
+    const double xi = t.x[i], yi = t.y[i], zi = t.z[i], bi = t.radius[i];
     double a = 0.0, b = 0.0, c = 0.0;
-    for (std::size_t k = 0; k < n_shifts; ++k)
+    for (std::size_t k = 0; k < n_shifts; ++k) {
+      const double sx = shifts[3 * k], sy = shifts[3 * k + 1], sz = shifts[3 * k + 2];
+#pragma omp simd reduction(+ : a, b, c)
       for (std::size_t j = 0; j < s.n; ++j) {
-        double rx = t.x[i] - s.x[j], ry = t.y[i] - s.y[j], rz = t.z[i] - s.z[j];
+        double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
         if (Periodic) {
-          rx = rmb::minimum_image(rx, L[0]) + shifts[3 * k];
-          ry = rmb::minimum_image(ry, L[1]) + shifts[3 * k + 1];
-          rz = rmb::minimum_image(rz, L[2]) + shifts[3 * k + 2];
+          rx = rmb::minimum_image(rx, Lx) + sx;
+          ry = rmb::minimum_image(ry, Ly) + sy;
+          rz = rmb::minimum_image(rz, Lz) + sz;
         }
-        radii_pair<D>(rx, ry, rz, t.z[i], s.z[j], t.radius[i], s.radius[j], s.vx[j], s.vy[j], s.vz[j], a, b, c);
+        radii_pair<D>(rx, ry, rz, zi, z[j], bi, rad[j], vx[j], vy[j], vz[j], a, b, c);
       }
+    }
     ux[i] = a, uy[i] = b, uz[i] = c;
   }
 }
