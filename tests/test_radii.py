@@ -302,3 +302,15 @@ def test_radii_file_with_an_implementation_that_cannot_use_them_is_refused(schem
     with pytest.raises(UserInputError, match='in.dat, line 8: .*' + fragment):
         SCRIPT.main(['--input-file', 'in.dat'])
     assert not (tmp_path / 'out.info').exists()
+
+
+def test_worked_example_of_the_docs_runs():
+    """The Python example of doc/mobility.md, section 'Blobs of different radii' (its asserts: the dense
+    matrix is the operator of M f, and a lone sphere has the Stokes mobility 1/(6 pi eta a))."""
+    from conftest import REPO_ROOT
+    if not backends.is_usable('C++'):
+        pytest.skip('C++ backend not built')
+    text = (REPO_ROOT / 'doc' / 'mobility.md').read_text(encoding='utf-8')
+    section = text[text.index('## Blobs of different radii'):text.index('## Python API')]
+    code = section[section.index('```python\n') + len('```python\n'):]
+    exec(compile(code[:code.index('```')], 'doc/mobility.md', 'exec'), {})
