@@ -314,3 +314,23 @@ def test_worked_example_of_the_docs_runs():
     section = text[text.index('## Blobs of different radii'):text.index('## Python API')]
     code = section[section.index('```python\n') + len('```python\n'):]
     exec(compile(code[:code.index('```')], 'doc/mobility.md', 'exec'), {})
+
+
+def test_vtk_blobs_carry_the_radius_of_each_blob(published, tmp_path, monkeypatch):
+    """save_vtk: the blobs' 'radius' point array is blob_radius for the shell without radii and the
+    fourth column of the other shell's vertex file."""
+    try:
+        import pyvista
+    except ImportError:
+        pytest.skip('pyvista is not installed: the VTK files cannot be read back')
+    if not backends.is_usable('C++'):
+        pytest.skip('C++ backend not built (radii_numba is its alias)')
+    folder = copy_radii_example(published, tmp_path)
+    text = (folder / 'inputfile.dat').read_text() + '\nsave_vtk True\n'
+    (folder / 'inputfile_vtk.dat').write_text(text)
+    monkeypatch.chdir(folder)
+    assert SCRIPT.main(['--input-file', 'inputfile_vtk.dat']) == 0
+    blobs = pyvista.read(str(folder / 'run.blobs.00000000.vtp'))
+    _, radii = read_vertex_file(str(folder / '../../Structures/shell_N_12_Rg_0.3960_Rh_0.5.vertex'),
+                                return_radii=True)
+    np.testing.assert_array_equal(blobs.point_data['radius'], np.concatenate((np.full(12, 0.416420683), radii)))

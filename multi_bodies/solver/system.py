@@ -396,6 +396,9 @@ class System:
     # -------------------------------------------------------------- rollers
     def roller_product(self, kind):
         """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``."""
+        if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
+            raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
+                                 'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
         base = self.vector_product_name[:-len(NO_WALL)] if self.vector_product_name.endswith(NO_WALL) \
             else self.vector_product_name
         name = base + (NO_WALL if self.domain == 'no_wall' else '')
@@ -518,6 +521,10 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log,
                                    num_blobs=max(body_arrays.type_blobs or [1]))
     forces = resolve_blob_blob_implementation(options.blob_blob_force_implementation, hooks, log)
+    if forces == 'pycuda' and options.blob_blob_force_implementation == 'auto' and body_arrays.radii_given:
+        forces = 'C++'  # the GPU kernel has one contact distance
+        if log is not None:
+            log('blob_blob_force_implementation: auto chose C++ instead of pycuda (per-blob radii)')
     body_body = options.body_body_force_torque_implementation
     if not hooks.is_default('body_body_force_torque') and body_body != 'python' and log is not None:
         log('  body_body_force_torque from %s cannot take effect: body_body_force_torque_implementation is %s; '
