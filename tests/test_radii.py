@@ -334,3 +334,52 @@ def test_vtk_blobs_carry_the_radius_of_each_blob(published, tmp_path, monkeypatc
     _, radii = read_vertex_file(str(folder / '../../Structures/shell_N_12_Rg_0.3960_Rh_0.5.vertex'),
                                 return_radii=True)
     np.testing.assert_array_equal(blobs.point_data['radius'], np.concatenate((np.full(12, 0.416420683), radii)))
+
+
+@pytest.mark.parametrize('domain', ['', '_no_wall', '_free_surface'])
+def test_pseudo_periodic_radii_product_is_the_sum_over_neighbour_boxes(domain, backend):
+    """With every pair closer than half a box, the pseudo-periodic product (minimum image, then the boxes
+    -L, 0, +L along x and y) is the plain product from the sources copied into the nine boxes."""
+    rng = np.random.default_rng(21)
+    L = np.array([8.0, 9.0, 0.0])
+    r = np.column_stack((rng.uniform(0, 3.5, 30), rng.uniform(0, 4.0, 30), rng.uniform(0.05, 3.0, 30)))
+    radii = rng.uniform(0.1, 0.45, 30)
+    f = rng.standard_normal(r.size)
+    periodic = mobility.mobility_vector_product(backend + domain)(r, f, 0.9, radii, L)
+    shifts = [(i * L[0], j * L[1], 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)]
+    sources = np.concatenate([r + s for s in shifts])
+    images = mobility.source_target_product(backend + domain)(sources, r, np.tile(f, 9), np.tile(radii, 9), radii,
+                                                               0.9)
+    assert relative_error(periodic, images) < 1e-13
+
+
+def test_monte_carlo_and_free_surface_rollers_refuse(tmp_path, monkeypatch):
+    """The Monte Carlo energies have one radius; the rollers have no free-surface couplings."""
+    from multi_bodies.files.input_options import read_input_file
+    from multi_bodies.run.run_setup import prepare
+    write_radii_run(tmp_path, 'deterministic_forward_euler')
+    (tmp_path / 'mc.dat').write_text('n_steps 1\nblob_radius 0.25\noutput_name mc\nstructure a.vertex a.clones\n')
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(UserInputError, match='Monte Carlo energies use the one blob_radius'):
+        prepare(read_input_file('mc.dat', 'mcmc'), 'mcmc', log=lambda text: None)
+    (tmp_path / 'a.vertex').write_text('1\n0 0 0\n')
+    (tmp_path / 'in.dat').write_text('scheme deterministic_forward_euler_rollers\ndt 0.1\nn_steps 1\nn_save 1\n'
+                                     'blob_radius 0.25\noutput_name out\n'
+                                     'mobility_vector_prod_implementation python_free_surface\n'
+                                     'structure a.vertex a.clones\n')
+    with pytest.raises(UserInputError, match='no free-surface couplings'):
+        SCRIPT.main(['--input-file', 'in.dat'])
+
+
+def test_published_function_names(published):
+    """mobility_radii_trans_times_force (the published entry point of the radii products) and
+    free_surface_mobility_trans_times_force reproduce the published numbers."""
+    d = load_case(published, 'radii_dense')
+    u = mobility.mobility_radii_trans_times_force(d['r'], d['force'], float(d['eta']), 0.3, d['radius'],
+                                                  mobility.single_wall_mobility_source_target)
+    assert relative_error(u, d['u_single_wall']) < TOLERANCE
+    d = load_case(published, 'free_surface_dense')
+    u = mobility.free_surface_mobility_trans_times_force(d['r'], d['force'], float(d['eta']), float(d['radius']))
+    assert relative_error(u, d['u_free_surface']) < TOLERANCE
+    M = mobility.free_surface_fluid_mobility(d['r'], float(d['eta']), float(d['radius']))
+    assert relative_error(M @ d['force'], d['u_free_surface']) < TOLERANCE
