@@ -399,8 +399,9 @@ class System:
         if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
             raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
                                  'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
-        base = self.vector_product_name[:-len(NO_WALL)] if self.vector_product_name.endswith(NO_WALL) \
-            else self.vector_product_name
+        name = self.vector_product_name
+        name = name[len('radii_'):] if name.startswith('radii_') else name  # published aliases (one radius here)
+        base = name[:-len(NO_WALL)] if name.endswith(NO_WALL) else name
         name = base + (NO_WALL if self.domain == 'no_wall' else '')
         return mobility.blob_product(name, kind)
 
