@@ -19,9 +19,8 @@ def _L(periodic_length):
 def _make_product(kind, wall):
     def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
         radius = blob_radii(a, r_vectors, kind)
-        if radius.ndim:  # different radii: the source-target formulas with sources = targets
-            return _ext.source_target_domain(r_vectors, r_vectors, np.ravel(vector), radius, radius, float(eta),
-                                             _L(periodic_length), 'single_wall' if wall else 'no_wall')
+        if radius.ndim:  # different radii: the source-target formulas, each pair once
+            return _ext.radii_product(r_vectors, np.ravel(vector), radius, float(eta), _L(periodic_length), wall)
         return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(radius), _L(periodic_length), wall,
                             precision)
     return product

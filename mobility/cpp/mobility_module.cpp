@@ -377,6 +377,84 @@ void source_target_any_box(bool periodic, const Blobs &t, const Blobs &s, const 
     source_target_sum<D, false>(t, s, L, ux, uy, uz);
 }
 
+// M f with per-blob radii, sources = targets (wall or free space): each unordered pair once,
+// adding M_ij f_j to i and M_ij^T f_i = M_ji f_i to j (the mobility is symmetric), into
+// per-thread accumulators; the blob with itself and its own images as in the one-sided sum.
+template <bool Wall, bool Periodic>
+void radii_symmetric_sum(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
+                         std::vector<double> &uy, std::vector<double> &uz) {
+  const std::size_t n = b.n;
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3;
+  const int threads = max_threads();
+  std::vector<double> acc(static_cast<std::size_t>(threads) * 3 * n, 0.0);
+  const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data(), *rad = b.radius.data();
+  const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
+#pragma omp parallel if (worth_threads(n, n / 2 * n_shifts))
+  {
+    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
+    double *ay = ax + n, *az = ay + n;
+#pragma omp for schedule(dynamic, 16)
+    for (std::size_t i = 0; i < n; ++i) {
+      const double xi = x[i], yi = y[i], zi = z[i], bi = rad[i], fxi = fx[i], fyi = fy[i], fzi = fz[i];
+      double uxi = 0.0, uyi = 0.0, uzi = 0.0;
+      for (std::size_t s = 0; s < n_shifts; ++s)
+        rmb::source_target_pair<Wall>(shifts[3 * s], shifts[3 * s + 1], shifts[3 * s + 2], zi, zi, bi, bi, fxi, fyi,
+                                      fzi, uxi, uyi, uzi);
+      for (std::size_t s = 0; s < n_shifts; ++s) {
+        const double sx = shifts[3 * s], sy = shifts[3 * s + 1], sz = shifts[3 * s + 2];
+#pragma omp simd reduction(+ : uxi, uyi, uzi)
+        for (std::size_t j = i + 1; j < n; ++j) {
+          double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+          if (Periodic) {
+            rx = rmb::minimum_image(rx, Lx) + sx;
+            ry = rmb::minimum_image(ry, Ly) + sy;
+            rz = rmb::minimum_image(rz, Lz) + sz;
+          }
+          double utx = 0.0, uty = 0.0, utz = 0.0, usx = 0.0, usy = 0.0, usz = 0.0;
+          rmb::source_target_pair_both<Wall>(rx, ry, rz, zi, z[j], bi, rad[j], fx[j], fy[j], fz[j], fxi, fyi, fzi,
+                                             utx, uty, utz, usx, usy, usz);
+          uxi += utx;
+          uyi += uty;
+          uzi += utz;
+          ax[j] += usx;
+          ay[j] += usy;
+          az[j] += usz;
+        }
+      }
+      ax[i] += uxi;
+      ay[i] += uyi;
+      az[i] += uzi;
+    }
+  }
+  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
+  for (int t = 0; t < threads; ++t) {
+    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
+    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
+  }
+}
+
+// M f (3N,) with per-blob radii (N,), wall or free space (the published radii_numba products).
+Array radii_product(const Array &r, const Array &vector, const Array &radius, double eta, const Array &periodic_length,
+                    bool wall) {
+  if (!(eta > 0.0)) throw std::invalid_argument("viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, &vector, radii_vector(radius, n, "radius"), 1.0, wall, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, 1.0, wall);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
+  std::vector<double> ux, uy, uz;
+  {
+    py::gil_scoped_release release;
+    if (wall)
+      periodic ? radii_symmetric_sum<true, true>(b, L, ux, uy, uz) : radii_symmetric_sum<true, false>(b, L, ux, uy, uz);
+    else
+      periodic ? radii_symmetric_sum<false, true>(b, L, ux, uy, uz)
+               : radii_symmetric_sum<false, false>(b, L, ux, uy, uz);
+  }
+  return flat_result(ux, uy, uz, b.damping, 1.0 / (8.0 * M_PI * eta));
+}
+
 // domain: "single_wall", "no_wall" or "free_surface".
 int domain_code(const std::string &domain) {
   if (domain == "no_wall") return kNoWall;
@@ -561,6 +639,9 @@ PYBIND11_MODULE(_mobility_cpp, m) {
         py::arg("radius_source"), py::arg("radius_target"), py::arg("eta"), py::arg("periodic_length"),
         py::arg("domain"), "Velocity (3Nt,) at targets from forces on sources of given radii; domain single_wall, "
         "no_wall or free_surface.");
+  m.def("radii_product", &radii_product, py::arg("r_vectors"), py::arg("vector"), py::arg("radius"), py::arg("eta"),
+        py::arg("periodic_length"), py::arg("wall"),
+        "M f (3N,) of blobs of radii (N,), each pair once (symmetric mobility); wall or free space.");
   m.def("free_surface_product", &free_surface_product, py::arg("r_vectors"), py::arg("vector"), py::arg("eta"),
         py::arg("a"), py::arg("periodic_length"), "M f (3N,) of blobs of radius a above a free-slip surface z = 0.");
   m.def("dense_radii", &dense_radii, py::arg("r_vectors"), py::arg("radius"), py::arg("eta"),
