@@ -383,3 +383,27 @@ def test_published_function_names(published):
     assert relative_error(u, d['u_free_surface']) < TOLERANCE
     M = mobility.free_surface_fluid_mobility(d['r'], float(d['eta']), float(d['radius']))
     assert relative_error(M @ d['force'], d['u_free_surface']) < TOLERANCE
+
+
+def test_body_mobility_of_the_half_size_shell_scales_as_stokes_flow(published, tmp_path, monkeypatch):
+    """multi_bodies_utilities.py body_mobility: the small shell is the large one scaled by 1/2 (blob positions
+    and radii), so in free space its translational mobility is exactly twice, its rotational mobility eight
+    times the large one's (Stokes scaling), and the large one's is 1/(6 pi eta Rh) with Rh = 1 to the
+    accuracy of its 12-blob discretisation (the shells' file names give Rh; 1e-3).  The two vertex files
+    agree with the factor 1/2 to the 13-16 digits they are printed with; through the inverse of the blob
+    mobility that leaves about 3e-10 in the body mobility, so 1e-8."""
+    folder = copy_radii_example(published, tmp_path)
+    (folder / 'bm.dat').write_text(
+        'scheme body_mobility\nmobility_blobs_implementation python_no_wall\n'
+        'mobility_vector_prod_implementation radii_python_no_wall\neta 0.0530516476972984\n'
+        'blob_radius 0.416420683\noutput_name bm\n'
+        'structure ../../Structures/shell_N_12_Rg_0_7921_Rh_1.vertex shell_1.clones\n'
+        'structure ../../Structures/shell_N_12_Rg_0.3960_Rh_0.5.vertex shell_2.clones\n')
+    monkeypatch.chdir(folder)
+    static = importlib.import_module('multi_bodies.multi_bodies_utilities')
+    assert static.main(['--input-file', 'bm.dat']) == 0
+    N = np.loadtxt(folder / 'bm.body_mobility.dat')
+    large, small = N[:6, :6], N[6:, 6:]
+    np.testing.assert_allclose(small[:3, :3], 2.0 * large[:3, :3], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(small[3:, 3:], 8.0 * large[3:, 3:], rtol=1e-8, atol=1e-10)
+    assert large[0, 0] == pytest.approx(1.0 / (6.0 * np.pi * 0.0530516476972984), rel=1e-3)
