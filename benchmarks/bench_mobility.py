@@ -10,6 +10,12 @@ printed beside ours.
     python benchmarks/bench_mobility.py                      # N = 1000, 4000, 16000
     python benchmarks/bench_mobility.py --sizes 1000 4000 --repeats 5
     python benchmarks/bench_mobility.py --gpu-sizes 100000 300000   # adds GPU-only sizes
+    python benchmarks/bench_mobility.py --radii-sizes 1000 4000      # radii product only (default sizes)
+
+After the equal-radius table, the product with per-blob radii (radii uniform
+in [0.15, 0.35], the formulas for different radii) is timed at the
+``--radii-sizes`` (default 1000 and 4000) on the CPU backends, and its
+ratio to the equal-radius product of the same backend and domain printed.
 
 Blob positions: uniform in [0, L]^2 x [a, 5] with L = sqrt(N / 0.5), a = 0.25,
 eta = 1 (the set-up of the published timings).
@@ -78,6 +84,9 @@ def main():
     parser.add_argument('--backends', nargs='+', default=['python', 'C++', 'pycuda'])
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--python-max', type=int, default=16000, help='largest N for the python backend')
+    parser.add_argument('--radii-sizes', type=int, nargs='*', default=[1000, 4000],
+                        help='sizes of the per-blob radii comparison (empty: skip it)')
+    parser.add_argument('--radii-only', action='store_true', help='time only the radii comparison')
     args = parser.parse_args()
 
     usable = [b for b in args.backends if backends.is_usable(b)]
@@ -89,7 +98,7 @@ def main():
         print('# C++ backend: %d OpenMP threads' % cpp_backend.max_threads())
 
     rows = []
-    for n in sorted(set(args.sizes) | set(args.gpu_sizes)):
+    for n in ([] if args.radii_only else sorted(set(args.sizes) | set(args.gpu_sizes))):
         r, f, a = configuration(n)
         for wall_name, suffix in (('wall', ''), ('no wall', '_no_wall')):
             timings = {}
@@ -115,8 +124,27 @@ def main():
                     n, wall_name, b, 1e3 * t, n * n / t, ratio,
                     '' if published is None else 'published %.3f ms (ours %.2fx faster)' % (1e3 * published,
                                                                                            published / t)))
-    print('# peak resident-memory growth of the python backend runs: %.0f MB' % max(
-        [row[4] for row in rows if row[2] == 'python'] or [0.0]))
+    if rows:
+        print('# peak resident-memory growth of the python backend runs: %.0f MB' % max(
+            [row[4] for row in rows if row[2] == 'python'] or [0.0]))
+    radii_comparison(args.radii_sizes, [b for b in usable if b != 'pycuda'], args.repeats)
+
+
+def radii_comparison(sizes, cpu_backends, repeats):
+    """Time M f with per-blob radii against the equal-radius product (same backend, domain, positions)."""
+    if not sizes:
+        return
+    print('# per-blob radii (uniform in [0.15, 0.35]) vs one radius a = 0.25')
+    for n in sizes:
+        r, f, a = configuration(n)
+        radii = np.random.default_rng(1).uniform(0.15, 0.35, n)
+        for wall_name, suffix in (('wall', ''), ('no wall', '_no_wall')):
+            for b in cpu_backends:
+                product = mobility.mobility_vector_product(b + suffix)
+                equal = time_product(product, r, f, a, repeats if n <= 4000 or b != 'python' else 1)
+                different = time_product(product, r, f, radii, repeats if n <= 4000 or b != 'python' else 1)
+                print('%8d  %-8s %-8s radii %10.3f ms  one radius %10.3f ms  ratio %.2f' % (
+                    n, wall_name, b, 1e3 * different, 1e3 * equal, different / equal))
 
 
 if __name__ == '__main__':

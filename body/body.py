@@ -43,7 +43,10 @@ class Body:
     reference_configuration : array_like, shape (n, 3)
         Blob positions in the body frame (location 0, quaternion (1,0,0,0)).
     blob_radius : float
-        Hydrodynamic radius ``a`` of every blob of the body.
+        Hydrodynamic radius ``a`` of the blobs (the input file's default).
+    blobs_radius : array_like, shape (n,), or None
+        Radius of each blob (the fourth column of a ``.vertex`` file; the
+        published attribute name); None gives every blob ``blob_radius``.
 
     Attributes
     ----------
@@ -58,7 +61,10 @@ class Body:
         another function.
     body_length : float
         Largest distance between two reference blobs plus ``2a``; the length
-        scale of random finite differences.
+        scale of random finite differences.  ``a`` is ``blob_radius`` even
+        when the blobs have their own radii (the published definition).
+    blobs_radius : ndarray, shape (n,)
+        Radius of each blob; ``radii_given`` says whether a file gave them.
 
     The attributes that published override files read exist with the
     published meaning: ``location``, ``orientation`` (a Quaternion with
@@ -67,7 +73,7 @@ class Body:
     ``calc_rot_matrix()``, ``calc_K_matrix()``, ``calc_slip()``.
     """
 
-    def __init__(self, location, orientation, reference_configuration, blob_radius):
+    def __init__(self, location, orientation, reference_configuration, blob_radius, blobs_radius=None):
         self.location = np.array(location, dtype=float).reshape(3)
         if not isinstance(orientation, Quaternion):
             orientation = Quaternion(orientation)
@@ -75,6 +81,9 @@ class Body:
         self.reference_configuration = np.array(reference_configuration, dtype=float).reshape(-1, 3)
         self.Nblobs = self.reference_configuration.shape[0]
         self.blob_radius = float(blob_radius)
+        self.radii_given = blobs_radius is not None
+        self.blobs_radius = (np.full(self.Nblobs, self.blob_radius) if blobs_radius is None
+                             else np.array(blobs_radius, dtype=float).reshape(self.Nblobs))
         self.ID = None
         self.slip_reference = None
         self.function_slip = reference_slip_in_lab_frame
@@ -245,10 +254,15 @@ class BodyArrays:
     reference_slip : ndarray, shape (N, 3)
         Body-frame slip of every blob (zeros where no slip file was given).
     blob_radius : float
+        The input file's blob radius (the default of every blob).
+    blob_radii : ndarray, shape (N,)
+        Radius of every blob (``blob_radius`` where no vertex file gave radii).
+    radii_given : bool
+        True when some vertex file gave per-blob radii (then the products use ``blob_radii``).
     """
 
     def __init__(self, locations, orientations, reference_per_type, bodies_per_type,
-                 blob_radius, reference_slip_per_type=None):
+                 blob_radius, reference_slip_per_type=None, radii_per_type=None):
         self.configuration = Configuration(locations, orientations)
         self.blob_radius = float(blob_radius)
         reference_per_type = [np.asarray(r, dtype=float).reshape(-1, 3) for r in reference_per_type]
@@ -269,6 +283,13 @@ class BodyArrays:
             slip = np.zeros_like(ref) if slip is None else np.asarray(slip, dtype=float).reshape(-1, 3)
             slips.append(np.tile(slip, (n, 1)))
         self.reference_slip = np.concatenate(slips) if slips else np.zeros((0, 3))
+        if radii_per_type is None:
+            radii_per_type = [None] * len(reference_per_type)
+        self.radii_given = any(radii is not None for radii in radii_per_type)
+        radii = [np.tile(np.full(ref.shape[0], self.blob_radius) if rad is None
+                         else np.asarray(rad, dtype=float).reshape(ref.shape[0]), n)
+                 for ref, rad, n in zip(reference_per_type, radii_per_type, bodies_per_type)]
+        self.blob_radii = np.concatenate(radii) if radii else np.zeros(0)
         self.type_slices = []
         body_start = 0
         for n_blobs, n_bodies in zip(self.type_blobs, bodies_per_type):
@@ -463,5 +484,6 @@ def bodies_to_arrays(bodies, types_of_bodies=None):
     starts = np.concatenate(([0], np.cumsum(types_of_bodies)))[:-1].astype(int)
     references = [bodies[s].reference_configuration for s in starts]
     slips = [bodies[s].slip_reference for s in starts]
+    radii = [bodies[s].blobs_radius if getattr(bodies[s], 'radii_given', False) else None for s in starts]
     return BodyArrays([b.location for b in bodies], [b.orientation.entries for b in bodies],
-                      references, types_of_bodies, bodies[0].blob_radius if bodies else 1.0, slips)
+                      references, types_of_bodies, bodies[0].blob_radius if bodies else 1.0, slips, radii)

@@ -11,6 +11,12 @@ Public functions (names kept from the published code, so user scripts work):
 * ``{single_wall,no_wall}_mobility_source_target(source, target, force,
   radius_source, radius_target, eta, periodic_length=(0, 0, 0),
   implementation='python')``: velocity (3Nt,) at target points.
+* ``free_surface_mobility_trans_times_force(r_vectors, vector, eta, a, periodic_length, implementation)``,
+  ``free_surface_mobility_source_target(...)`` and the dense
+  ``free_surface_fluid_mobility(r_vectors, eta, a)``: a free-slip surface at z = 0.
+* ``mobility_radii_trans_times_force(r_vectors, force, eta, a, radius_blobs, function)``
+  (published name): ``M f`` with per-blob radii through a source-target ``function``.
+  Every product above also takes ``a`` as per-blob radii (N,).
 * The registry: ``mobility_vector_product(name)``, ``blob_mobility_matrix(name)``,
   ``source_target_product(name)``, ``blob_product(name, kind)``,
   ``available_implementations()``; names as in the manual (python, C++,
@@ -26,7 +32,9 @@ from .product_names import PRODUCT_KINDS
 from .backends import (available_implementations, blob_mobility_matrix, blob_product,
                        mobility_vector_product, source_target_product, split_implementation_name, usable_names)
 
-__all__ = ['rotne_prager_tensor', 'single_wall_fluid_mobility', 'available_implementations',
+__all__ = ['rotne_prager_tensor', 'single_wall_fluid_mobility', 'free_surface_fluid_mobility',
+           'free_surface_mobility_trans_times_force', 'free_surface_mobility_source_target',
+           'mobility_radii_trans_times_force', 'available_implementations',
            'blob_mobility_matrix', 'blob_product', 'mobility_vector_product', 'source_target_product',
            'usable_names']
 
@@ -39,6 +47,37 @@ def rotne_prager_tensor(r_vectors, eta, a, periodic_length=(0, 0, 0)):
 def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
     """Dense Rotne-Prager-Blake blob mobility (3N, 3N) with the wall regularisation; r_vectors (N, 3)."""
     return _python.single_wall_fluid_mobility(r_vectors, eta, a, periodic_length)
+
+
+def free_surface_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
+    """Dense blob mobility above a free-slip surface at z = 0 (3N, 3N); ``a`` a number or radii (N,)."""
+    return _python.free_surface_fluid_mobility(r_vectors, eta, a, periodic_length)
+
+
+def free_surface_mobility_trans_times_force(r_vectors, vector, eta, a, periodic_length=(0, 0, 0),
+                                            implementation='python'):
+    """``M f`` (3N,) above a free-slip surface at z = 0; implementation python, C++ (numba) or pycuda."""
+    backend, _ = split_implementation_name(implementation)
+    return mobility_vector_product(backend + '_free_surface')(r_vectors, vector, eta, a, periodic_length)
+
+
+def free_surface_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                        periodic_length=(0, 0, 0), implementation='python'):
+    """Velocity (3Nt,) at targets from forces (3Ns,) on sources above a free-slip surface at z = 0."""
+    backend, _ = split_implementation_name(implementation)
+    return source_target_product(backend + '_free_surface')(source, target, force, radius_source, radius_target,
+                                                            eta, periodic_length)
+
+
+def mobility_radii_trans_times_force(r_vectors, force, eta, a, radius_blobs, function, *args, **kwargs):
+    """``M f`` (3N,) of blobs of radii ``radius_blobs`` (N,) through a source-target ``function`` (published name).
+
+    ``function(source, target, force, radius_source, radius_target, eta, periodic_length)``, e.g.
+    ``single_wall_mobility_source_target``; ``a`` is not used (the radii are); keyword
+    ``periodic_length`` (3,) as the published code passes it.
+    """
+    periodic_length = kwargs.get('periodic_length', (0, 0, 0))
+    return function(r_vectors, r_vectors, force, radius_blobs, radius_blobs, eta, periodic_length)
 
 
 def _public_product(domain, kind):

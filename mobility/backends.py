@@ -2,10 +2,19 @@
 
 ``python``, ``C++`` and ``pycuda`` select the NumPy, C++ (OpenMP) and CUDA
 (CuPy) backends; the suffix ``_no_wall`` selects the free-space RPY tensor
-instead of the Rotne-Prager-Blake tensor.  ``numba`` and ``numba_no_wall``
+instead of the Rotne-Prager-Blake tensor, the suffix ``_free_surface`` the
+mobility above a flat free-slip surface at z = 0 (the RPY tensor of the
+blobs and of their mirror images).  ``numba`` and ``numba_no_wall``
 (names of the later published code) are aliases of the C++ backend
 (SPEC.md decision 9).  ``pycuda`` is the manual's name for the GPU backend;
 ours runs through CuPy, not PyCUDA.
+
+Blobs of different radii: every product takes the blob radius ``a`` as a
+number or as one radius per blob (N,), and uses the formulas for unequal
+spheres when the radii differ.  The published names ``radii_python``,
+``radii_python_no_wall``, ``radii_numba``, ``radii_numba_no_wall``,
+``radii_pycuda`` and ``radii_numba_free_surface`` are therefore aliases of
+the plain names (``radii_numba`` = ``C++``, ...).
 
 Backends are imported on first use.  An unknown name, or a backend that
 cannot run here (extension not built, no CuPy, no GPU), raises
@@ -21,27 +30,47 @@ _BACKEND_MODULES = {'python': 'mobility.python_backend',
                     'C++': 'mobility.cpp_backend',
                     'pycuda': 'mobility.cuda_backend'}
 _ALIASES = {'numba': 'C++'}
+# domain suffix -> domain
+DOMAIN_SUFFIXES = (('_no_wall', 'no_wall'), ('_free_surface', 'free_surface'), ('', 'single_wall'))
+RADII_PREFIX = 'radii_'
+# The published names with the word radii (manual section 6.1; README of examples/radii), all aliases.
+RADII_NAMES = ('radii_python', 'radii_python_no_wall', 'radii_numba', 'radii_numba_no_wall', 'radii_pycuda',
+               'radii_numba_free_surface')
 _loaded = {}
 _failures = {}
 
 
-def split_implementation_name(name):
-    """Return ``(backend, wall)`` for an implementation name such as ``C++_no_wall``."""
+def split_domain(name):
+    """Return ``(backend, domain)`` for an implementation name: domain 'single_wall', 'no_wall' or 'free_surface'.
+
+    ``radii_`` names are the published aliases (``RADII_NAMES``).
+    """
     if not isinstance(name, str):
         raise UserInputError('mobility implementation must be a name such as python or C++_no_wall, got %r' % (name,))
-    base, wall = (name[:-len('_no_wall')], False) if name.endswith('_no_wall') else (name, True)
+    known = name in all_names()
+    stem = name[len(RADII_PREFIX):] if name.startswith(RADII_PREFIX) else name
+    for suffix, domain in DOMAIN_SUFFIXES:
+        if stem.endswith(suffix):
+            base = stem[:len(stem) - len(suffix)]
+            break
     base = _ALIASES.get(base, base)
-    if base not in _BACKEND_MODULES:
+    if not known or base not in _BACKEND_MODULES:
         raise UserInputError('unknown mobility implementation %r; known names: %s' % (name, ', '.join(all_names())))
-    return base, wall
+    return base, domain
+
+
+def split_implementation_name(name):
+    """Return ``(backend, wall)`` for an implementation name such as ``C++_no_wall`` (wall: not free space)."""
+    backend, domain = split_domain(name)
+    return backend, domain != 'no_wall'
 
 
 def all_names():
     """Every implementation name the registry accepts (aliases included)."""
     names = []
     for base in list(_BACKEND_MODULES) + list(_ALIASES):
-        names += [base, base + '_no_wall']
-    return names
+        names += [base + suffix for suffix in ('', '_no_wall', '_free_surface')]
+    return names + list(RADII_NAMES)
 
 
 def load_backend(backend):
@@ -79,21 +108,30 @@ def usable_names():
     return names
 
 
+def is_radii_name(name):
+    """True for the published ``radii_*`` names (aliases that say the vertex files may give radii)."""
+    return isinstance(name, str) and name.startswith(RADII_PREFIX)
+
+
 def available_implementations():
     """Dict backend -> 'usable' or the reason it cannot run here."""
     return {b: ('usable' if is_usable(b) else _failures.get(b, 'unknown failure')) for b in _BACKEND_MODULES}
 
 
 def _product(name, kind):
-    backend, wall = split_implementation_name(name)
+    backend, domain = split_domain(name)
     module = load_backend(backend)
-    return getattr(module, '%s_mobility_%s' % ('single_wall' if wall else 'no_wall', kind))
+    if domain == 'free_surface' and kind != 'trans_times_force':
+        raise UserInputError('implementation %r: the free surface has the product M f only (no roller couplings '
+                             '%s); use a wall or _no_wall implementation' % (name, kind))
+    return getattr(module, '%s_mobility_%s' % (domain, kind))
 
 
 def mobility_vector_product(name, precision='double'):
     """Return ``f(r_vectors (N,3), force (3N,), eta, a, periodic_length=(0,0,0)) -> (3N,)`` for ``name``.
 
-    ``precision='single'`` (C++ and pycuda only) evaluates the pair formulas in
+    ``a`` may be one radius or one radius per blob (N,) (blobs of different radii).
+    ``precision='single'`` (C++ and pycuda only, one radius) evaluates the pair formulas in
     single precision, with positions subtracted and sums kept in double:
     faster, with relative errors near 1e-6 instead of 1e-15.
     """
@@ -131,17 +169,18 @@ def blob_mobility_matrix(name):
     Dense matrices are built by the CPU backends only (manual option
     ``mobility_blobs_implementation``: python, C++, and their _no_wall forms).
     """
-    backend, wall = split_implementation_name(name)
+    backend, domain = split_domain(name)
     if backend == 'pycuda':
         raise UserInputError('mobility_blobs_implementation %r: dense blob matrices are built on the CPU; '
-                             'use python, C++, python_no_wall or C++_no_wall' % name)
+                             'use python, C++, python_no_wall or C++_no_wall (or their _free_surface forms)' % name)
     module = load_backend(backend)
-    return module.single_wall_fluid_mobility if wall else module.rotne_prager_tensor
+    return {'single_wall': module.single_wall_fluid_mobility, 'no_wall': module.rotne_prager_tensor,
+            'free_surface': module.free_surface_fluid_mobility}[domain]
 
 
 def source_target_product(name):
     """Return ``f(source (Ns,3), target (Nt,3), force (3Ns,), radius_source, radius_target, eta,
     periodic_length=(0,0,0)) -> (3Nt,)`` (velocity at targets) for ``name``."""
-    backend, wall = split_implementation_name(name)
+    backend, domain = split_domain(name)
     module = load_backend(backend)
-    return module.single_wall_mobility_source_target if wall else module.no_wall_mobility_source_target
+    return getattr(module, '%s_mobility_source_target' % domain)

@@ -7,6 +7,7 @@ import numpy as np
 
 from . import _mobility_cpp as _ext
 from .product_names import product_functions, source_target_functions
+from .python_backend import blob_radii
 
 max_threads = _ext.max_threads
 
@@ -17,7 +18,10 @@ def _L(periodic_length):
 
 def _make_product(kind, wall):
     def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
-        return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(a), _L(periodic_length), wall,
+        radius = blob_radii(a, r_vectors, kind)
+        if radius.ndim:  # different radii: the source-target formulas, each pair once
+            return _ext.radii_product(r_vectors, np.ravel(vector), radius, float(eta), _L(periodic_length), wall)
+        return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(radius), _L(periodic_length), wall,
                             precision)
     return product
 
@@ -32,10 +36,19 @@ globals().update(source_target_functions(_source_target, 'C++'))
 
 
 def _dense(r_vectors, eta, a, periodic_length, wall):
+    """Dense matrix; ``wall`` True/False or the domain name; ``a`` one radius or per-blob radii."""
+    domain = wall if isinstance(wall, str) else ('single_wall' if wall else 'no_wall')
     r = np.asarray(r_vectors, dtype=np.float64)
+    radius = np.asarray(a, dtype=np.float64)
     if r.ndim == 3 and r.shape[2] == 3:  # a stack of bodies: one block each
-        return np.stack([_ext.dense_trans_trans(body, float(eta), float(a), _L(periodic_length), wall) for body in r])
-    return _ext.dense_trans_trans(r, float(eta), float(a), _L(periodic_length), wall)
+        radii = np.broadcast_to(radius, r.shape[:2]) if radius.size > 1 else [radius] * r.shape[0]
+        return np.stack([_dense(body, eta, rad, periodic_length, domain) for body, rad in zip(r, radii)])
+    if radius.size > 1 and not np.all(radius == radius.reshape(-1)[0]):
+        return _ext.dense_radii(r, radius.reshape(-1), float(eta), _L(periodic_length), domain)
+    a = float(radius.reshape(-1)[0])
+    if domain == 'free_surface':
+        return _ext.dense_free_surface(r, float(eta), a, _L(periodic_length))
+    return _ext.dense_trans_trans(r, float(eta), a, _L(periodic_length), domain == 'single_wall')
 
 
 def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
@@ -47,3 +60,24 @@ def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
 def rotne_prager_tensor(r_vectors, eta, a, periodic_length=(0, 0, 0)):
     """Dense free-space RPY mobility: (N, 3) -> (3N, 3N), or (nb, n, 3) -> (nb, 3n, 3n)."""
     return _dense(r_vectors, eta, a, periodic_length, False)
+
+
+def free_surface_mobility_trans_times_force(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+    """``M f`` (3N,) above a free-slip surface at z = 0; ``a`` a number or per-blob radii (N,)."""
+    radius = blob_radii(a, r_vectors)
+    if radius.ndim:
+        return _ext.source_target_domain(r_vectors, r_vectors, np.ravel(vector), radius, radius, float(eta),
+                                         _L(periodic_length), 'free_surface')
+    return _ext.free_surface_product(r_vectors, np.ravel(vector), float(eta), float(radius), _L(periodic_length))
+
+
+def free_surface_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                        periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets from forces on sources above a free-slip surface, per-blob radii."""
+    return _ext.source_target_domain(source, target, np.ravel(force), np.ravel(radius_source),
+                                     np.ravel(radius_target), float(eta), _L(periodic_length), 'free_surface')
+
+
+def free_surface_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
+    """Dense free-surface blob mobility (3N, 3N) (or a stack of bodies)."""
+    return _dense(r_vectors, eta, a, periodic_length, 'free_surface')

@@ -20,11 +20,12 @@ import cupy as cp
 
 from .periodic import wall_regularisation
 from .product_names import product_functions, source_target_functions
+from .python_backend import blob_radii
 
 _KERNEL_SOURCE = os.path.join(os.path.dirname(__file__), 'cuda', 'mobility_kernels.cu')
 _HEADER_DIR = os.path.join(os.path.dirname(__file__), 'cpp')
 _KINDS = {'trans_times_force': 0, 'trans_times_torque': 1, 'rot_times_force': 2, 'rot_times_torque': 3,
-          'source_target': 4}
+          'source_target': 4, 'free_surface': 5, 'free_surface_source_target': 6}
 _POWERS = {'trans_times_force': 1, 'trans_times_torque': 2, 'rot_times_force': 2, 'rot_times_torque': 3}
 THREADS_PER_BLOCK = 128
 _module = None
@@ -111,6 +112,10 @@ def _to_caller(result, like):
 
 def _make_product(kind, wall):
     def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
+        radius = blob_radii(cp.asnumpy(a) if isinstance(a, cp.ndarray) else a, r_vectors, kind)
+        if radius.ndim:  # different radii: the source-target kernel with sources = targets
+            return _source_target(r_vectors, r_vectors, vector, radius, radius, eta, periodic_length, wall)
+        a = float(radius)
         positions, damping = _packed(r_vectors, a, wall, a)
         v = cp.zeros((positions.shape[0], 4), dtype=cp.float64)
         v[:, :3] = cp.asarray(vector, dtype=cp.float64).reshape(-1, 3) * damping[:, None]
@@ -121,15 +126,45 @@ def _make_product(kind, wall):
 
 
 def _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, wall):
+    """``wall``: True, False or 'free_surface' (no regularisation, kernel kind 6)."""
+    free_surface = wall == 'free_surface'
+    wall = wall is True
     sources, damping_s = _packed(source, radius_source, wall, 1.0)
     targets, damping_t = _packed(target, radius_target, wall, 1.0)
     v = cp.empty((sources.shape[0], 4), dtype=cp.float64)
     v[:, :3] = cp.asarray(force, dtype=cp.float64).reshape(-1, 3) * damping_s[:, None]
     v[:, 3] = sources[:, 3]
-    u = _launch('source_target', wall, targets, sources, v, _periodic(periodic_length))
+    kind = 'free_surface_source_target' if free_surface else 'source_target'
+    L = _periodic(periodic_length)
+    if free_surface and L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a free surface at z = 0')
+    u = _launch(kind, wall, targets, sources, v, L)
     u *= damping_t[:, None] / (8.0 * np.pi * eta)
     return _to_caller(u.reshape(-1), target)
 
 
 globals().update(product_functions(_make_product, 'CUDA'))
 globals().update(source_target_functions(_source_target, 'CUDA'))
+
+
+def free_surface_mobility_trans_times_force(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+    """``M f`` (3N,) above a free-slip surface at z = 0 on the GPU; ``a`` a number or per-blob radii (N,)."""
+    radius = blob_radii(cp.asnumpy(a) if isinstance(a, cp.ndarray) else a, r_vectors)
+    if radius.ndim:
+        return _source_target(r_vectors, r_vectors, vector, radius, radius, eta, periodic_length, 'free_surface')
+    a = float(radius)
+    positions, _ = _packed(r_vectors, a, False, a)
+    v = cp.zeros((positions.shape[0], 4), dtype=cp.float64)
+    v[:, :3] = cp.asarray(vector, dtype=cp.float64).reshape(-1, 3)
+    L = _periodic(periodic_length)
+    if L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a free surface at z = 0')
+    u = _launch('free_surface', False, positions, positions, v, L / a)
+    u /= 8.0 * np.pi * eta * a
+    return _to_caller(u.reshape(-1), r_vectors)
+
+
+def free_surface_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                        periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets above a free-slip surface, per-blob radii (GPU)."""
+    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, 'free_surface')

@@ -204,19 +204,17 @@ def rot_times_torque_pairs(rx, ry, rz, zt, zs, tx, ty, tz, wall):
     return wx.sum(axis=-1), wy.sum(axis=-1), wz.sum(axis=-1)
 
 
-def trans_times_force_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz, wall):
-    """Velocity of targets of radius ``bt`` from forces on sources of radius ``as_``.
+def unequal_rpy_coefficients(r2, bt, as_):
+    """Free RPY tensor of a target of radius ``bt`` and a source of radius ``as_`` at squared distance ``r2``.
 
-    Physical units (no scaling by a): positions, radii and heights as they
-    are, heights already raised to ``max(z, radius)``.  Result in units of
-    1/(8 pi eta).  Free part: the RPY tensor for unequal spheres of Zuk,
-    Wajnryb, Mizerski and Szymczak, J. Fluid Mech. 741, R5 (2014), with its
-    overlap and containment branches.  Wall part: the Rotne-Prager-Blake
-    image system with Faxen corrections for the two radii (Swan and Brady
-    2007, generalised to unequal radii as in the published code).
+    Zuk, Wajnryb, Mizerski and Szymczak, J. Fluid Mech. 741, R5 (2014):
+    ``M = c_iso I + c_rr r r^T`` in units of 1/(8 pi eta) (physical lengths),
+    with the far (``r >= bt + as_``), overlap and containment
+    (``r <= |bt - as_|``) branches.  Equal radii give the standard RPY tensor.
+    Arrays broadcast; returns ``(c_iso, c_rr)``.
     """
-    r2 = rx * rx + ry * ry + rz * rz
-    rinv = _safe_reciprocal_distance(r2)
+    r2 = np.asarray(r2, dtype=float)
+    rinv = _safe_reciprocal_distance(np.array(r2, copy=True))
     r = r2 * rinv
     rinv2 = rinv * rinv
     sum_sq = bt * bt + as_ * as_
@@ -236,6 +234,21 @@ def trans_times_force_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, f
         in_iso = (4.0 / 3.0) / np.maximum(bt, as_)
     c_iso = np.where(far, far_iso, np.where(contained, in_iso, lap_iso))
     c_rr = np.where(far | contained, np.where(far, far_rr, 0.0), lap_rr)
+    return c_iso, c_rr
+
+
+def trans_times_force_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz, wall):
+    """Velocity of targets of radius ``bt`` from forces on sources of radius ``as_``.
+
+    Physical units (no scaling by a): positions, radii and heights as they
+    are, heights already raised to ``max(z, radius)``.  Result in units of
+    1/(8 pi eta).  Free part: the RPY tensor for unequal spheres of Zuk,
+    Wajnryb, Mizerski and Szymczak, J. Fluid Mech. 741, R5 (2014), with its
+    overlap and containment branches.  Wall part: the Rotne-Prager-Blake
+    image system with Faxen corrections for the two radii (Swan and Brady
+    2007, generalised to unequal radii as in the published code).
+    """
+    c_iso, c_rr = unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, bt, as_)
     rf = c_rr * (rx * fx + ry * fy + rz * fz)
     ux = c_iso * fx + rf * rx
     uy = c_iso * fy + rf * ry
@@ -290,3 +303,35 @@ def _wall_unequal_radii_apply(rx, ry, zt, zs, bt, as_, fx, fy, fz):
     uy = -(w_I * fy + w_RR * Rg * ry + w_Rz * gz * ry)
     uz = -(w_I * gz + w_RR * Rg * Rz + w_J * gz + w_Rz * gz * Rz + w_zR * Rg)
     return ux, uy, uz
+
+
+def free_surface_trans_times_force_pairs(rx, ry, rz, zt, zs, fx, fy, fz):
+    """Velocity (units 1/(8 pi eta a)) above a free-slip surface at z = 0, one radius (units of a).
+
+    The RPY tensor of the pair plus that of the target and the mirror image
+    of the source (``R = (rx, ry, zt + zs)``) applied to the mirrored force
+    ``(fx, fy, -fz)``; heights not regularised.  Arrays (targets, sources).
+    """
+    ux, uy, uz = _rpy_apply(*rpy_trans_trans(rx, ry, rz), rx, ry, rz, fx, fy, fz)
+    Rz = zt + zs
+    wx, wy, wz = _rpy_apply(*rpy_trans_trans(rx, ry, Rz), rx, ry, Rz, fx, fy, -fz)
+    return (ux + wx).sum(axis=-1), (uy + wy).sum(axis=-1), (uz + wz).sum(axis=-1)
+
+
+def free_surface_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz):
+    """As :func:`free_surface_trans_times_force_pairs` with radii ``bt`` (targets) and ``as_`` (sources).
+
+    Physical units, result in units of 1/(8 pi eta); the free RPY tensor of
+    :func:`unequal_rpy_coefficients` for the pair and for the mirror image.
+    """
+    ux, uy, uz = _rpy_apply(*unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, bt, as_), rx, ry, rz, fx, fy, fz)
+    Rz = zt + zs
+    wx, wy, wz = _rpy_apply(*unequal_rpy_coefficients(rx * rx + ry * ry + Rz * Rz, bt, as_), rx, ry, Rz,
+                            fx, fy, -fz)
+    return (ux + wx).sum(axis=-1), (uy + wy).sum(axis=-1), (uz + wz).sum(axis=-1)
+
+
+def _rpy_apply(c_iso, c_rr, rx, ry, rz, fx, fy, fz):
+    """``(c_iso I + c_rr r r^T) f`` per pair (no sum)."""
+    rf = c_rr * (rx * fx + ry * fy + rz * fz)
+    return c_iso * fx + rf * rx, c_iso * fy + rf * ry, c_iso * fz + rf * rz

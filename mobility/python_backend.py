@@ -135,22 +135,58 @@ def _make_product(kind, wall):
     pair_function, radius_power = _PAIR_FUNCTIONS[kind]
 
     def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
-        return _blob_product(pair_function, r_vectors, vector, eta, a, periodic_length, wall, radius_power)
+        radius = blob_radii(a, r_vectors, kind)
+        if radius.ndim:
+            return _source_target(r_vectors, r_vectors, vector, radius, radius, eta, periodic_length,
+                                  'single_wall' if wall else 'no_wall')
+        return _blob_product(pair_function, r_vectors, vector, eta, float(radius), periodic_length, wall,
+                             radius_power)
     return product
+
+
+def blob_radii(a, r_vectors, kind='trans_times_force'):
+    """The blob radius argument ``a`` of a product: a number, or one radius per blob (N,).
+
+    Returns a 0-d array (one radius: the equal-radius formulas) or an (N,)
+    array of radii that are not all equal (the formulas for different radii).
+    Per-blob radii that are all equal collapse to one number, so equal radii
+    give exactly the single-radius numbers.  Only ``trans_times_force`` has
+    a form for different radii; the roller couplings refuse them
+    (``utils.UserInputError``).
+    """
+    radius = np.asarray(a, dtype=np.float64)
+    if radius.ndim == 0 or radius.size == 1:
+        return radius.reshape(())
+    n = np.size(r_vectors) // 3
+    radius = radius.reshape(-1)
+    if radius.size != n:
+        raise ValueError('blob radii: %d values for %d blobs' % (radius.size, n))
+    if np.all(radius == radius[0]):
+        return radius[0].reshape(())
+    if not np.all(np.isfinite(radius)) or np.any(radius <= 0):
+        raise ValueError('blob radii must be positive and finite')
+    if kind != 'trans_times_force':
+        from utils import UserInputError
+        raise UserInputError('the %s product has no form for blobs of different radii (only M f does); give every '
+                             'blob the same radius (remove the 4th column of the vertex files)' % kind)
+    return radius
 
 
 globals().update(product_functions(_make_product, 'NumPy'))
 
 
 def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):
+    """Velocity (3Nt,) at targets; ``wall`` True/False or a domain name (single_wall, no_wall, free_surface)."""
+    domain = wall if isinstance(wall, str) else ('single_wall' if wall else 'no_wall')
+    wall = domain == 'single_wall'
     source = as_positions(source_r, 'source positions')
     target = as_positions(target_r, 'target positions')
     f = as_blob_vectors(force, source.shape[0], 'force')
     a_s = np.broadcast_to(np.asarray(radius_source, dtype=np.float64), (source.shape[0],)).copy()
     b_t = np.broadcast_to(np.asarray(radius_target, dtype=np.float64), (target.shape[0],)).copy()
     L = as_periodic_length(periodic_length)
-    if wall and L[2] > 0:
-        raise ValueError('periodic_length along z must be 0 with a wall at z = 0')
+    if domain != 'no_wall' and L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a wall or free surface at z = 0')
     damping_t = None
     if wall:
         source, damping_s = _regularise(source, a_s)
@@ -158,6 +194,8 @@ def _source_target(source_r, target_r, force, radius_source, radius_target, eta,
         f = f * damping_s[:, None]
 
     def pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz):
+        if domain == 'free_surface':
+            return pf.free_surface_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz)
         return pf.trans_times_force_unequal_radii_pairs(rx, ry, rz, zt, zs, bt, as_, fx, fy, fz, wall)
 
     u = pair_sum(target, source, f, L, pairs, extra_target=b_t, extra_source=a_s)
@@ -221,11 +259,116 @@ def _dense_trans_trans(r_vectors, eta, a, wall, periodic_length):
 
 
 def rotne_prager_tensor(r_vectors, eta, a, periodic_length=(0, 0, 0)):
-    """Dense free-space RPY blob mobility: (N, 3) -> (3N, 3N), or (nb, n, 3) -> (nb, 3n, 3n)."""
-    return _dense_trans_trans(r_vectors, eta, a, False, periodic_length)
+    """Dense free-space RPY blob mobility: (N, 3) -> (3N, 3N), or (nb, n, 3) -> (nb, 3n, 3n).
+
+    ``a``: one radius, or per-blob radii (N,) (for a stack (nb, n) or (n,)): Zuk et al. (2014)."""
+    return _dense_or_radii(r_vectors, eta, a, periodic_length, 'no_wall')
 
 
 def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
     """Dense Rotne-Prager-Blake blob mobility with the wall regularisation:
-    (N, 3) -> (3N, 3N), or a stack of bodies (nb, n, 3) -> (nb, 3n, 3n)."""
-    return _dense_trans_trans(r_vectors, eta, a, True, periodic_length)
+    (N, 3) -> (3N, 3N), or a stack of bodies (nb, n, 3) -> (nb, 3n, 3n).
+
+    ``a``: one radius, or per-blob radii (N,) (for a stack (nb, n) or (n,))."""
+    return _dense_or_radii(r_vectors, eta, a, periodic_length, 'single_wall')
+
+
+def rotne_prager_tensor_radii(r_vectors, eta, radius, periodic_length=(0, 0, 0)):
+    """Dense free-space mobility of blobs of radii ``radius`` (N,): (N, 3) -> (3N, 3N) (Zuk et al. 2014)."""
+    return _dense_radii(r_vectors, eta, radius, periodic_length, 'no_wall')
+
+
+def single_wall_fluid_mobility_radii(r_vectors, eta, radius, periodic_length=(0, 0, 0)):
+    """Dense wall mobility of blobs of radii ``radius`` (N,), regularised below each blob's radius."""
+    return _dense_radii(r_vectors, eta, radius, periodic_length, 'single_wall')
+
+
+def _dense_radii(r_vectors, eta, radius, periodic_length, domain):
+    """Dense (3N, 3N) matrix of the per-blob-radius product: the pair formulas of
+    ``_source_target`` applied to unit vectors (one formula for product and matrix);
+    a stack (nb, n, 3) with radii (nb, n) or (n,) gives (nb, 3n, 3n)."""
+    r = np.asarray(r_vectors, dtype=np.float64)
+    if r.ndim == 3 and r.shape[2] == 3:
+        radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), r.shape[:2])
+        return np.stack([_dense_or_radii(body, eta, rad, periodic_length, domain) for body, rad in zip(r, radii)])
+    r = as_positions(r)
+    n = r.shape[0]
+    a = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,)).copy()
+    L = as_periodic_length(periodic_length)
+    if domain != 'no_wall' and L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a wall or free surface at z = 0')
+    damping = np.ones(n)
+    if domain == 'single_wall':
+        r, damping = _regularise(r, a)
+    shifts = image_shifts(L)
+    dx = wrap_axis(r[:, None, 0] - r[None, :, 0], L[0])[..., None]
+    dy = wrap_axis(r[:, None, 1] - r[None, :, 1], L[1])[..., None]
+    dz = wrap_axis(r[:, None, 2] - r[None, :, 2], L[2])[..., None]
+    zt, zs = r[:, None, 2, None], r[None, :, 2, None]
+    bt, as_ = a[:, None, None], a[None, :, None]
+    M = np.zeros((n, 3, n, 3))
+    for q in range(3):
+        e = [np.zeros((1, 1, 1)) for _ in range(3)]
+        e[q] = np.ones((1, 1, 1))
+        for shift in shifts:
+            if domain == 'free_surface':
+                u = pf.free_surface_unequal_radii_pairs(dx + shift[0], dy + shift[1], dz + shift[2], zt, zs, bt, as_,
+                                                        *e)
+            else:
+                u = pf.trans_times_force_unequal_radii_pairs(dx + shift[0], dy + shift[1], dz + shift[2], zt, zs,
+                                                             bt, as_, *e, domain == 'single_wall')
+            for p in range(3):
+                M[:, p, :, q] += u[p]
+    M *= damping[:, None, None, None] * damping[None, None, :, None] / (8.0 * np.pi * eta)
+    return M.reshape(3 * n, 3 * n)
+
+
+def _dense_or_radii(r_vectors, eta, a, periodic_length, domain):
+    """Dense matrix with one radius (the equal-radius formulas) or per-blob radii (N,) or (nb, n)."""
+    radius = np.asarray(a, dtype=np.float64)
+    if radius.size > 1 and not np.all(radius == radius.reshape(-1)[0]):
+        return _dense_radii(r_vectors, eta, radius, periodic_length, domain)
+    a = float(radius.reshape(-1)[0])
+    if domain == 'free_surface':
+        return _dense_free_surface(r_vectors, eta, a, periodic_length)
+    return _dense_trans_trans(r_vectors, eta, a, domain == 'single_wall', periodic_length)
+
+
+# ---------------------------------------------------------------------------
+# Free-slip surface at z = 0 (blobs in z > 0): the RPY tensor of the blobs plus
+# that of their mirror images (pair_formulas.free_surface_trans_times_force_pairs).
+
+def free_surface_mobility_trans_times_force(r_vectors, vector, eta, a, periodic_length=(0, 0, 0)):
+    """``M f`` (3N,) above a free-slip surface at z = 0; ``a`` a number or per-blob radii (N,)."""
+    radius = blob_radii(a, r_vectors)
+    if radius.ndim:
+        return _source_target(r_vectors, r_vectors, vector, radius, radius, eta, periodic_length, 'free_surface')
+    a = float(radius)
+    r = as_positions(r_vectors)
+    v = as_blob_vectors(vector, r.shape[0])
+    L = as_periodic_length(periodic_length)
+    if L[2] > 0:
+        raise ValueError('periodic_length along z must be 0 with a free surface at z = 0')
+    scaled = r / a
+    u = pair_sum(scaled, scaled, v, L / a, lambda rx, ry, rz, zt, zs, fx, fy, fz:
+                 pf.free_surface_trans_times_force_pairs(rx, ry, rz, zt, zs, fx, fy, fz))
+    return (u / (8.0 * np.pi * eta * a)).reshape(-1)
+
+
+def free_surface_mobility_source_target(source, target, force, radius_source, radius_target, eta,
+                                        periodic_length=(0, 0, 0)):
+    """Velocity (3Nt,) at targets from forces on sources, above a free-slip surface, per-blob radii."""
+    return _source_target(source, target, force, radius_source, radius_target, eta, periodic_length, 'free_surface')
+
+
+def _dense_free_surface(r_vectors, eta, a, periodic_length):
+    r = np.asarray(r_vectors, dtype=np.float64)
+    if r.ndim == 3 and r.shape[2] == 3:
+        return np.stack([_dense_free_surface(body, eta, a, periodic_length) for body in r])
+    n = as_positions(r).shape[0]
+    return _dense_radii(r, eta, np.full(n, float(a)), periodic_length, 'free_surface')
+
+
+def free_surface_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
+    """Dense free-surface blob mobility (3N, 3N) (or a stack); ``a`` a number or per-blob radii."""
+    return _dense_or_radii(r_vectors, eta, a, periodic_length, 'free_surface')

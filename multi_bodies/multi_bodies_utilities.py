@@ -148,8 +148,9 @@ def write_velocity_field(options, system, r_vectors, lambda_blobs):
     except utils.UserInputError as err:
         raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
                                    % (options.where('mobility_vector_prod_implementation'), err))
+    radius = body_solver.blob_radius_argument(system.arrays, options.blob_radius)  # per-blob radii if given
     velocity = velocity_field.velocity_field(options.plot_velocity_field, r_vectors, lambda_blobs,
-                                             options.blob_radius, options.tracer_radius, options.eta, product,
+                                             radius, options.tracer_radius, options.eta, product,
                                              options.periodic_length)
     path = velocity_field.write_velocity_field_vtk(options.output_name + '.velocity_field.vtk',
                                                    options.plot_velocity_field, velocity)

@@ -318,22 +318,17 @@ RMB_HD void rot_times_torque_pair(double rx, double ry, double rz, double zt, do
   }
 }
 
-// Velocity of a target of radius b from a force on a source of radius as, in
-// physical units (result in units of 1/(8 pi eta)); heights already raised to
-// max(z, radius).  Free part: RPY for unequal spheres (Zuk et al., J. Fluid
-// Mech. 741, R5, 2014) with overlap and containment branches.  Wall part: the
-// image system with Faxen corrections for both radii, block -W P with
-// P = diag(1, 1, -1); see mobility/pair_formulas.py for W term by term.
-template <bool Wall>
-RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, double zs, double b, double as,
-                               double fx, double fy, double fz, double &ux, double &uy, double &uz) {
-  const double r2 = rx * rx + ry * ry + rz * rz;
+// Free part of the RPY tensor for unequal spheres (Zuk, Wajnryb, Mizerski and
+// Szymczak, J. Fluid Mech. 741, R5, 2014), physical units, result in units of
+// 1/(8 pi eta): M = c_iso I + c_rr r r^T for a target of radius b and a
+// source of radius as at distance^2 r2, with its overlap and containment
+// branches (equal radii: the standard RPY tensor, self term 4/(3a) I).
+RMB_HD void unequal_rpy_coefficients(double r2, double b, double as, double &c_iso, double &c_rr) {
   const double rinv = r2 > 0.0 ? RMB_RSQRT(r2) : 0.0;
   const double rinv2 = rinv * rinv;
   const double r = r2 * rinv;
   const double s = b * b + as * as;
   const double diff = b - as;
-  double c_iso, c_rr;
   if (r >= b + as) {
     c_iso = rinv * (1.0 + s * rinv2 / 3.0);
     c_rr = rinv * rinv2 * (1.0 - s * rinv2);
@@ -348,30 +343,139 @@ RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, doubl
     c_iso = (4.0 / 3.0) / (b > as ? b : as);
     c_rr = 0.0;
   }
+}
+
+// Velocity of a target of radius b from a force on a source of radius as, in
+// physical units (result in units of 1/(8 pi eta)); heights already raised to
+// max(z, radius).  Free part: unequal_rpy_coefficients.  Wall part: the
+// image system with Faxen corrections for both radii, block -W P with
+// P = diag(1, 1, -1); see mobility/pair_formulas.py for W term by term.
+// Image-system coefficients of the unequal-radii wall correction:
+//   W = w_I I + w_RR R R^T + w_J z z^T + w_Rz R z^T + w_zR z R^T,  block -W P,
+// R = (rx, ry, zt + zs), target radius b, source radius as.
+struct RadiiWall {
+  double Rz, w_I, w_RR, w_J, w_Rz, w_zR;
+};
+
+RMB_HD RadiiWall radii_wall_coefficients(double rx, double ry, double zt, double zs, double b, double as) {
+  RadiiWall c;
+  const double s = b * b + as * as;
+  const double Rz = zt + zs;
+  c.Rz = Rz;
+  const double Rinv = RMB_RSQRT(rx * rx + ry * ry + Rz * Rz);
+  const double Rinv2 = Rinv * Rinv, Rinv3 = Rinv2 * Rinv, Rinv5 = Rinv3 * Rinv2;
+  const double Rinv7 = Rinv5 * Rinv2, Rinv9 = Rinv7 * Rinv2;
+  const double b2 = b * b, a2 = as * as, ab = a2 * b2;
+  const double cb = 2.0 * b2 / 3.0, ca = 2.0 * a2 / 3.0, cab = 2.0 * ab / 3.0;
+  c.w_I = Rinv * (1.0 + s * Rinv2 / 3.0) + 2.0 * zt * zs * Rinv3 - cb * zs * 3.0 * Rz * Rinv5 -
+          ca * zt * 3.0 * Rz * Rinv5 + cab * (-Rinv5 + 5.0 * Rz * Rz * Rinv7);
+  c.w_RR = Rinv3 * (1.0 - s * Rinv2) - 6.0 * zt * zs * Rinv5 + cb * zs * 15.0 * Rz * Rinv7 +
+           ca * zt * 15.0 * Rz * Rinv7 + cab * (5.0 * Rinv7 - 35.0 * Rz * Rz * Rinv9);
+  c.w_J = -2.0 * Rinv - cb * Rinv3 - ca * Rinv3 - 2.0 * cab * Rinv5;
+  c.w_Rz = -2.0 * zt * Rinv3 + cb * 3.0 * (Rz - zs) * Rinv5 - ca * zt * 3.0 * Rinv5 + cab * 10.0 * Rz * Rinv7;
+  c.w_zR = -2.0 * zs * Rinv3 - cb * zs * 3.0 * Rinv5 + ca * 3.0 * (Rz - zt) * Rinv5 + cab * 10.0 * Rz * Rinv7;
+  return c;
+}
+
+// u += -W P f (Transposed = false) or u += (-W P)^T f = -P W^T f (Transposed = true).
+template <bool Transposed>
+RMB_HD void apply_radii_wall(const RadiiWall &c, double rx, double ry, double fx, double fy, double fz, double &ux,
+                             double &uy, double &uz) {
+  if (!Transposed) {
+    const double gz = -fz;
+    const double Rg = rx * fx + ry * fy + c.Rz * gz;
+    const double along = c.w_RR * Rg + c.w_Rz * gz;
+    ux -= c.w_I * fx + along * rx;
+    uy -= c.w_I * fy + along * ry;
+    uz -= c.w_I * gz + along * c.Rz + c.w_J * gz + c.w_zR * Rg;
+  } else {
+    const double Rf = rx * fx + ry * fy + c.Rz * fz;
+    const double along = c.w_RR * Rf + c.w_zR * fz;
+    ux -= c.w_I * fx + along * rx;
+    uy -= c.w_I * fy + along * ry;
+    uz += c.w_I * fz + along * c.Rz + c.w_J * fz + c.w_Rz * Rf;
+  }
+}
+
+// Velocity of a target of radius b from a force on a source of radius as, in
+// physical units (result in units of 1/(8 pi eta)); heights already raised to
+// max(z, radius).  Free part: unequal_rpy_coefficients.  Wall part: the
+// image system with Faxen corrections for both radii, block -W P with
+// P = diag(1, 1, -1) (radii_wall_coefficients; see mobility/pair_formulas.py
+// for W term by term).
+template <bool Wall>
+RMB_HD void source_target_pair(double rx, double ry, double rz, double zt, double zs, double b, double as,
+                               double fx, double fy, double fz, double &ux, double &uy, double &uz) {
+  double c_iso, c_rr;
+  unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, b, as, c_iso, c_rr);
   const double rf = c_rr * (rx * fx + ry * fy + rz * fz);
   ux += c_iso * fx + rf * rx;
   uy += c_iso * fy + rf * ry;
   uz += c_iso * fz + rf * rz;
+  if (Wall) apply_radii_wall<false>(radii_wall_coefficients(rx, ry, zt, zs, b, as), rx, ry, fx, fy, fz, ux, uy, uz);
+}
+
+// Both halves of a pair of blobs of radii b (target t) and as (source s), using the
+// symmetry of the mobility: u_t += M_ts f_s and u_s += M_ts^T f_t (= M_st f_t).
+template <bool Wall>
+RMB_HD void source_target_pair_both(double rx, double ry, double rz, double zt, double zs, double b, double as,
+                                    double fsx, double fsy, double fsz, double ftx, double fty, double ftz,
+                                    double &utx, double &uty, double &utz, double &usx, double &usy, double &usz) {
+  double c_iso, c_rr;
+  unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, b, as, c_iso, c_rr);
+  const double rfs = c_rr * (rx * fsx + ry * fsy + rz * fsz);
+  const double rft = c_rr * (rx * ftx + ry * fty + rz * ftz);
+  utx += c_iso * fsx + rfs * rx;
+  uty += c_iso * fsy + rfs * ry;
+  utz += c_iso * fsz + rfs * rz;
+  usx += c_iso * ftx + rft * rx;
+  usy += c_iso * fty + rft * ry;
+  usz += c_iso * ftz + rft * rz;
   if (Wall) {
-    const double Rz = zt + zs;
-    const double Rinv = RMB_RSQRT(rx * rx + ry * ry + Rz * Rz);
-    const double Rinv2 = Rinv * Rinv, Rinv3 = Rinv2 * Rinv, Rinv5 = Rinv3 * Rinv2;
-    const double Rinv7 = Rinv5 * Rinv2, Rinv9 = Rinv7 * Rinv2;
-    const double b2 = b * b, a2 = as * as, ab = a2 * b2;
-    const double cb = 2.0 * b2 / 3.0, ca = 2.0 * a2 / 3.0, cab = 2.0 * ab / 3.0;
-    const double w_I = Rinv * (1.0 + s * Rinv2 / 3.0) + 2.0 * zt * zs * Rinv3 - cb * zs * 3.0 * Rz * Rinv5 -
-                       ca * zt * 3.0 * Rz * Rinv5 + cab * (-Rinv5 + 5.0 * Rz * Rz * Rinv7);
-    const double w_RR = Rinv3 * (1.0 - s * Rinv2) - 6.0 * zt * zs * Rinv5 + cb * zs * 15.0 * Rz * Rinv7 +
-                        ca * zt * 15.0 * Rz * Rinv7 + cab * (5.0 * Rinv7 - 35.0 * Rz * Rz * Rinv9);
-    const double w_J = -2.0 * Rinv - cb * Rinv3 - ca * Rinv3 - 2.0 * cab * Rinv5;
-    const double w_Rz = -2.0 * zt * Rinv3 + cb * 3.0 * (Rz - zs) * Rinv5 - ca * zt * 3.0 * Rinv5 + cab * 10.0 * Rz * Rinv7;
-    const double w_zR = -2.0 * zs * Rinv3 - cb * zs * 3.0 * Rinv5 + ca * 3.0 * (Rz - zt) * Rinv5 + cab * 10.0 * Rz * Rinv7;
-    const double gz = -fz;
-    const double Rg = rx * fx + ry * fy + Rz * gz;
-    ux -= w_I * fx + (w_RR * Rg + w_Rz * gz) * rx;
-    uy -= w_I * fy + (w_RR * Rg + w_Rz * gz) * ry;
-    uz -= w_I * gz + (w_RR * Rg + w_Rz * gz) * Rz + w_J * gz + w_zR * Rg;
+    const RadiiWall c = radii_wall_coefficients(rx, ry, zt, zs, b, as);
+    apply_radii_wall<false>(c, rx, ry, fsx, fsy, fsz, utx, uty, utz);
+    apply_radii_wall<true>(c, rx, ry, ftx, fty, ftz, usx, usy, usz);
   }
+}
+
+// Free-slip (free) surface at z = 0, blobs in z > 0: the RPY tensor of the
+// pair plus that of the target with the mirror image of the source, applied
+// to the mirrored force (fx, fy, -fz).  The image vector is
+// R = (rx, ry, zt + zs).  No height regularisation: the sum is a congruence
+// of the RPY tensor of blobs and images, positive definite at any height.
+// Equal radii (units of a, result 1/(8 pi eta a)):
+RMB_HD void free_surface_pair(double rx, double ry, double rz, double zt, double zs, double fx, double fy,
+                              double fz, double &ux, double &uy, double &uz) {
+  double c_iso, c_rr;
+  rpy_trans_trans(rx, ry, rz, c_iso, c_rr);
+  double rf = c_rr * (rx * fx + ry * fy + rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += c_iso * fz + rf * rz;
+  const double Rz = zt + zs;
+  rpy_trans_trans(rx, ry, Rz, c_iso, c_rr);
+  rf = c_rr * (rx * fx + ry * fy - Rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += -c_iso * fz + rf * Rz;
+}
+
+// Unequal radii (physical units, result 1/(8 pi eta)): target radius b, source radius as.
+RMB_HD void source_target_free_surface_pair(double rx, double ry, double rz, double zt, double zs, double b,
+                                            double as, double fx, double fy, double fz, double &ux, double &uy,
+                                            double &uz) {
+  double c_iso, c_rr;
+  unequal_rpy_coefficients(rx * rx + ry * ry + rz * rz, b, as, c_iso, c_rr);
+  double rf = c_rr * (rx * fx + ry * fy + rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += c_iso * fz + rf * rz;
+  const double Rz = zt + zs;
+  unequal_rpy_coefficients(rx * rx + ry * ry + Rz * Rz, b, as, c_iso, c_rr);
+  rf = c_rr * (rx * fx + ry * fy - Rz * fz);
+  ux += c_iso * fx + rf * rx;
+  uy += c_iso * fy + rf * ry;
+  uz += -c_iso * fz + rf * Rz;
 }
 
 }  // namespace rmb

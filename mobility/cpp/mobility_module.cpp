@@ -326,48 +326,186 @@ std::vector<double> radii_vector(const Array &radius, std::size_t n, const char 
   return std::vector<double>(radius.data(), radius.data() + n);
 }
 
-template <bool Wall, bool Periodic>
+// Domains of the source-target (per-blob radii) products.
+enum Domain { kNoWall = 0, kWall = 1, kFreeSurface = 2 };
+
+template <int D>
+inline void radii_pair(double rx, double ry, double rz, double zt, double zs, double b, double as, double fx,
+                       double fy, double fz, double &ux, double &uy, double &uz) {
+  if (D == kFreeSurface)
+    rmb::source_target_free_surface_pair(rx, ry, rz, zt, zs, b, as, fx, fy, fz, ux, uy, uz);
+  else
+    rmb::source_target_pair<D == kWall>(rx, ry, rz, zt, zs, b, as, fx, fy, fz, ux, uy, uz);
+}
+
+template <int D, bool Periodic>
 void source_target_sum(const Blobs &t, const Blobs &s, const std::vector<double> &L, std::vector<double> &ux,
                        std::vector<double> &uy, std::vector<double> &uz) {
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
   ux.assign(t.n, 0.0), uy.assign(t.n, 0.0), uz.assign(t.n, 0.0);
+  const double *x = s.x.data(), *y = s.y.data(), *z = s.z.data(), *rad = s.radius.data();
+  const double *vx = s.vx.data(), *vy = s.vy.data(), *vz = s.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
 #pragma omp parallel for schedule(static) if (worth_threads(t.n, s.n * n_shifts))
   for (std::size_t i = 0; i < t.n; ++i) {
+    const double xi = t.x[i], yi = t.y[i], zi = t.z[i], bi = t.radius[i];
     double a = 0.0, b = 0.0, c = 0.0;
-    for (std::size_t k = 0; k < n_shifts; ++k)
+    for (std::size_t k = 0; k < n_shifts; ++k) {
+      const double sx = shifts[3 * k], sy = shifts[3 * k + 1], sz = shifts[3 * k + 2];
+#pragma omp simd reduction(+ : a, b, c)
       for (std::size_t j = 0; j < s.n; ++j) {
-        double rx = t.x[i] - s.x[j], ry = t.y[i] - s.y[j], rz = t.z[i] - s.z[j];
+        double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
         if (Periodic) {
-          rx = rmb::minimum_image(rx, L[0]) + shifts[3 * k];
-          ry = rmb::minimum_image(ry, L[1]) + shifts[3 * k + 1];
-          rz = rmb::minimum_image(rz, L[2]) + shifts[3 * k + 2];
+          rx = rmb::minimum_image(rx, Lx) + sx;
+          ry = rmb::minimum_image(ry, Ly) + sy;
+          rz = rmb::minimum_image(rz, Lz) + sz;
         }
-        rmb::source_target_pair<Wall>(rx, ry, rz, t.z[i], s.z[j], t.radius[i], s.radius[j], s.vx[j], s.vy[j], s.vz[j],
-                                      a, b, c);
+        radii_pair<D>(rx, ry, rz, zi, z[j], bi, rad[j], vx[j], vy[j], vz[j], a, b, c);
       }
+    }
     ux[i] = a, uy[i] = b, uz[i] = c;
   }
 }
 
-Array source_target(const Array &source, const Array &target, const Array &force, const Array &radius_source,
-                    const Array &radius_target, double eta, const Array &periodic_length, bool wall) {
+template <int D>
+void source_target_any_box(bool periodic, const Blobs &t, const Blobs &s, const std::vector<double> &L,
+                           std::vector<double> &ux, std::vector<double> &uy, std::vector<double> &uz) {
+  if (periodic)
+    source_target_sum<D, true>(t, s, L, ux, uy, uz);
+  else
+    source_target_sum<D, false>(t, s, L, ux, uy, uz);
+}
+
+// M f with per-blob radii, sources = targets (wall or free space): each unordered pair once,
+// adding M_ij f_j to i and M_ij^T f_i = M_ji f_i to j (the mobility is symmetric), into
+// per-thread accumulators; the blob with itself and its own images as in the one-sided sum.
+template <bool Wall, bool Periodic>
+void radii_symmetric_sum(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
+                         std::vector<double> &uy, std::vector<double> &uz) {
+  const std::size_t n = b.n;
+  const std::vector<double> shifts = image_shifts(L);
+  const std::size_t n_shifts = shifts.size() / 3;
+  const int threads = max_threads();
+  std::vector<double> acc(static_cast<std::size_t>(threads) * 3 * n, 0.0);
+  const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data(), *rad = b.radius.data();
+  const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
+  const double Lx = L[0], Ly = L[1], Lz = L[2];
+#pragma omp parallel if (worth_threads(n, n / 2 * n_shifts))
+  {
+    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
+    double *ay = ax + n, *az = ay + n;
+#pragma omp for schedule(dynamic, 16)
+    for (std::size_t i = 0; i < n; ++i) {
+      const double xi = x[i], yi = y[i], zi = z[i], bi = rad[i], fxi = fx[i], fyi = fy[i], fzi = fz[i];
+      double uxi = 0.0, uyi = 0.0, uzi = 0.0;
+      for (std::size_t s = 0; s < n_shifts; ++s)
+        rmb::source_target_pair<Wall>(shifts[3 * s], shifts[3 * s + 1], shifts[3 * s + 2], zi, zi, bi, bi, fxi, fyi,
+                                      fzi, uxi, uyi, uzi);
+      for (std::size_t s = 0; s < n_shifts; ++s) {
+        const double sx = shifts[3 * s], sy = shifts[3 * s + 1], sz = shifts[3 * s + 2];
+#pragma omp simd reduction(+ : uxi, uyi, uzi)
+        for (std::size_t j = i + 1; j < n; ++j) {
+          double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+          if (Periodic) {
+            rx = rmb::minimum_image(rx, Lx) + sx;
+            ry = rmb::minimum_image(ry, Ly) + sy;
+            rz = rmb::minimum_image(rz, Lz) + sz;
+          }
+          double utx = 0.0, uty = 0.0, utz = 0.0, usx = 0.0, usy = 0.0, usz = 0.0;
+          rmb::source_target_pair_both<Wall>(rx, ry, rz, zi, z[j], bi, rad[j], fx[j], fy[j], fz[j], fxi, fyi, fzi,
+                                             utx, uty, utz, usx, usy, usz);
+          uxi += utx;
+          uyi += uty;
+          uzi += utz;
+          ax[j] += usx;
+          ay[j] += usy;
+          az[j] += usz;
+        }
+      }
+      ax[i] += uxi;
+      ay[i] += uyi;
+      az[i] += uzi;
+    }
+  }
+  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
+  for (int t = 0; t < threads; ++t) {
+    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
+    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
+  }
+}
+
+// M f (3N,) with per-blob radii (N,), wall or free space (the published radii_numba products).
+Array radii_product(const Array &r, const Array &vector, const Array &radius, double eta, const Array &periodic_length,
+                    bool wall) {
   if (!(eta > 0.0)) throw std::invalid_argument("viscosity must be positive");
-  const std::size_t ns = count_rows(source, "source positions"), nt = count_rows(target, "target positions");
-  const Blobs s = make_blobs(source, &force, radii_vector(radius_source, ns, "radius_source"), 1.0, wall, "source");
-  const Blobs t = make_blobs(target, nullptr, radii_vector(radius_target, nt, "radius_target"), 1.0, wall, "target");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, &vector, radii_vector(radius, n, "radius"), 1.0, wall, "r_vectors");
   const std::vector<double> L = periodic_lengths(periodic_length, 1.0, wall);
   const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
   std::vector<double> ux, uy, uz;
   {
     py::gil_scoped_release release;
     if (wall)
-      periodic ? source_target_sum<true, true>(t, s, L, ux, uy, uz) : source_target_sum<true, false>(t, s, L, ux, uy, uz);
+      periodic ? radii_symmetric_sum<true, true>(b, L, ux, uy, uz) : radii_symmetric_sum<true, false>(b, L, ux, uy, uz);
     else
-      periodic ? source_target_sum<false, true>(t, s, L, ux, uy, uz)
-               : source_target_sum<false, false>(t, s, L, ux, uy, uz);
+      periodic ? radii_symmetric_sum<false, true>(b, L, ux, uy, uz)
+               : radii_symmetric_sum<false, false>(b, L, ux, uy, uz);
+  }
+  return flat_result(ux, uy, uz, b.damping, 1.0 / (8.0 * M_PI * eta));
+}
+
+// domain: "single_wall", "no_wall" or "free_surface".
+int domain_code(const std::string &domain) {
+  if (domain == "no_wall") return kNoWall;
+  if (domain == "single_wall") return kWall;
+  if (domain == "free_surface") return kFreeSurface;
+  throw std::invalid_argument("domain must be single_wall, no_wall or free_surface, got '" + domain + "'");
+}
+
+Array source_target_domain(const Array &source, const Array &target, const Array &force, const Array &radius_source,
+                           const Array &radius_target, double eta, const Array &periodic_length,
+                           const std::string &domain) {
+  if (!(eta > 0.0)) throw std::invalid_argument("viscosity must be positive");
+  const int d = domain_code(domain);
+  const bool wall = d == kWall;  // the wall regularisation of blobs below their radius
+  const std::size_t ns = count_rows(source, "source positions"), nt = count_rows(target, "target positions");
+  const Blobs s = make_blobs(source, &force, radii_vector(radius_source, ns, "radius_source"), 1.0, wall, "source");
+  const Blobs t = make_blobs(target, nullptr, radii_vector(radius_target, nt, "radius_target"), 1.0, wall, "target");
+  const std::vector<double> L = periodic_lengths(periodic_length, 1.0, d != kNoWall);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
+  std::vector<double> ux, uy, uz;
+  {
+    py::gil_scoped_release release;
+    if (d == kWall)
+      source_target_any_box<kWall>(periodic, t, s, L, ux, uy, uz);
+    else if (d == kNoWall)
+      source_target_any_box<kNoWall>(periodic, t, s, L, ux, uy, uz);
+    else
+      source_target_any_box<kFreeSurface>(periodic, t, s, L, ux, uy, uz);
   }
   return flat_result(ux, uy, uz, t.damping, 1.0 / (8.0 * M_PI * eta));
+}
+
+Array source_target(const Array &source, const Array &target, const Array &force, const Array &radius_source,
+                    const Array &radius_target, double eta, const Array &periodic_length, bool wall) {
+  return source_target_domain(source, target, force, radius_source, radius_target, eta, periodic_length,
+                              wall ? "single_wall" : "no_wall");
+}
+
+// M f of blobs of radius a above a free-slip surface at z = 0 (free_surface_pair).
+Array free_surface_product(const Array &r, const Array &vector, double eta, double a, const Array &periodic_length) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, &vector, std::vector<double>(n, a), a, false, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, a, true);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0;
+  std::vector<double> ux, uy, uz;
+  {
+    py::gil_scoped_release release;
+    one_sided_sum_any_box<rmb::free_surface_pair>(periodic, b, L, ux, uy, uz);
+  }
+  return flat_result(ux, uy, uz, b.damping, 1.0 / (8.0 * M_PI * eta * a));
 }
 
 template <bool Wall>
@@ -409,6 +547,80 @@ Array dense_trans_trans(const Array &r, double eta, double a, const Array &perio
   return M;
 }
 
+// Dense (3N, 3N) matrix of a product whose pair formula is `pair(i, j, shift, e, u)` (u += B_ij e): each
+// 3x3 block from the pair formula applied to the three unit vectors, so that the matrix and the product
+// share one formula.  Periodic images are summed as in the products.
+template <class Pair>
+void fill_dense_from_pairs(std::size_t n, const std::vector<double> &shifts, const Pair &pair,
+                           const std::vector<double> &factor, double *M) {
+  const std::size_t cols = 3 * n, n_shifts = shifts.size() / 3;
+#pragma omp parallel for schedule(static) if (worth_threads(n, n * n_shifts))
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = 0; j < n; ++j)
+      for (int q = 0; q < 3; ++q) {
+        const double e[3] = {q == 0 ? 1.0 : 0.0, q == 1 ? 1.0 : 0.0, q == 2 ? 1.0 : 0.0};
+        double u[3] = {0.0, 0.0, 0.0};
+        for (std::size_t k = 0; k < n_shifts; ++k) pair(i, j, &shifts[3 * k], e, u);
+        const double f = factor[i] * factor[j];
+        for (int p = 0; p < 3; ++p) M[(3 * i + p) * cols + 3 * j + q] = u[p] * f;
+      }
+}
+
+// Dense blob mobility with one radius per blob (wall, free space or free surface), physical units.
+Array dense_radii(const Array &r, const Array &radius, double eta, const Array &periodic_length,
+                  const std::string &domain) {
+  if (!(eta > 0.0)) throw std::invalid_argument("viscosity must be positive");
+  const int d = domain_code(domain);
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, nullptr, radii_vector(radius, n, "radius"), 1.0, d == kWall, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, 1.0, d != kNoWall);
+  const std::vector<double> shifts = image_shifts(L);
+  Array M({static_cast<py::ssize_t>(3 * n), static_cast<py::ssize_t>(3 * n)});
+  std::vector<double> factor(b.damping);
+  for (double &f : factor) f *= std::sqrt(1.0 / (8.0 * M_PI * eta));
+  double *m = M.mutable_data();
+  {
+    py::gil_scoped_release release;
+    auto pair = [&](std::size_t i, std::size_t j, const double *shift, const double *e, double *u) {
+      const double rx = rmb::minimum_image(b.x[i] - b.x[j], L[0]) + shift[0];
+      const double ry = rmb::minimum_image(b.y[i] - b.y[j], L[1]) + shift[1];
+      const double rz = rmb::minimum_image(b.z[i] - b.z[j], L[2]) + shift[2];
+      if (d == kWall)
+        radii_pair<kWall>(rx, ry, rz, b.z[i], b.z[j], b.radius[i], b.radius[j], e[0], e[1], e[2], u[0], u[1], u[2]);
+      else if (d == kNoWall)
+        radii_pair<kNoWall>(rx, ry, rz, b.z[i], b.z[j], b.radius[i], b.radius[j], e[0], e[1], e[2], u[0], u[1],
+                            u[2]);
+      else
+        radii_pair<kFreeSurface>(rx, ry, rz, b.z[i], b.z[j], b.radius[i], b.radius[j], e[0], e[1], e[2], u[0],
+                                 u[1], u[2]);
+    };
+    fill_dense_from_pairs(n, shifts, pair, factor, m);
+  }
+  return M;
+}
+
+// Dense free-surface blob mobility, one radius a (free_surface_pair).
+Array dense_free_surface(const Array &r, double eta, double a, const Array &periodic_length) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs b = make_blobs(r, nullptr, std::vector<double>(n, a), a, false, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, a, true);
+  const std::vector<double> shifts = image_shifts(L);
+  Array M({static_cast<py::ssize_t>(3 * n), static_cast<py::ssize_t>(3 * n)});
+  const std::vector<double> factor(n, std::sqrt(1.0 / (8.0 * M_PI * eta * a)));
+  double *m = M.mutable_data();
+  {
+    py::gil_scoped_release release;
+    auto pair = [&](std::size_t i, std::size_t j, const double *shift, const double *e, double *u) {
+      const double rx = rmb::minimum_image(b.x[i] - b.x[j], L[0]) + shift[0];
+      const double ry = rmb::minimum_image(b.y[i] - b.y[j], L[1]) + shift[1];
+      rmb::free_surface_pair(rx, ry, b.z[i] - b.z[j], b.z[i], b.z[j], e[0], e[1], e[2], u[0], u[1], u[2]);
+    };
+    fill_dense_from_pairs(n, shifts, pair, factor, m);
+  }
+  return M;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_mobility_cpp, m) {
@@ -423,5 +635,18 @@ PYBIND11_MODULE(_mobility_cpp, m) {
         py::arg("wall"), "Velocity (3Nt,) at targets from forces on sources of given radii.");
   m.def("dense_trans_trans", &dense_trans_trans, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
         py::arg("periodic_length"), py::arg("wall"), "Dense (3N, 3N) blob mobility.");
+  m.def("source_target_domain", &source_target_domain, py::arg("source"), py::arg("target"), py::arg("force"),
+        py::arg("radius_source"), py::arg("radius_target"), py::arg("eta"), py::arg("periodic_length"),
+        py::arg("domain"), "Velocity (3Nt,) at targets from forces on sources of given radii; domain single_wall, "
+        "no_wall or free_surface.");
+  m.def("radii_product", &radii_product, py::arg("r_vectors"), py::arg("vector"), py::arg("radius"), py::arg("eta"),
+        py::arg("periodic_length"), py::arg("wall"),
+        "M f (3N,) of blobs of radii (N,), each pair once (symmetric mobility); wall or free space.");
+  m.def("free_surface_product", &free_surface_product, py::arg("r_vectors"), py::arg("vector"), py::arg("eta"),
+        py::arg("a"), py::arg("periodic_length"), "M f (3N,) of blobs of radius a above a free-slip surface z = 0.");
+  m.def("dense_radii", &dense_radii, py::arg("r_vectors"), py::arg("radius"), py::arg("eta"),
+        py::arg("periodic_length"), py::arg("domain"), "Dense (3N, 3N) blob mobility with per-blob radii (N,).");
+  m.def("dense_free_surface", &dense_free_surface, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
+        py::arg("periodic_length"), "Dense (3N, 3N) free-surface blob mobility, one radius a.");
   m.def("max_threads", &max_threads, "Number of OpenMP threads the kernels use.");
 }

@@ -36,11 +36,14 @@ __device__ __forceinline__ void pair_dispatch(double rx, double ry, double rz, d
   if (Kind == 2) rmb::rot_times_force_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
   if (Kind == 3) rmb::rot_times_torque_pair<Wall>(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
   if (Kind == 4) rmb::source_target_pair<Wall>(rx, ry, rz, zt, zs, bt, v.w, v.x, v.y, v.z, ux, uy, uz);
+  if (Kind == 5) rmb::free_surface_pair(rx, ry, rz, zt, zs, v.x, v.y, v.z, ux, uy, uz);
+  if (Kind == 6) rmb::source_target_free_surface_pair(rx, ry, rz, zt, zs, bt, v.w, v.x, v.y, v.z, ux, uy, uz);
 }
 
 // Kind: 0 trans_times_force, 1 trans_times_torque, 2 rot_times_force,
 // 3 rot_times_torque, 4 source_target (unequal radii; target radius in
-// targets[i].w, source radius in vectors[j].w).  Real: the precision of the
+// targets[i].w, source radius in vectors[j].w), 5 free surface (one radius),
+// 6 free surface with unequal radii (as 4; Wall unused for 5 and 6).  Real: the precision of the
 // pair formula of kind 0 (double, or float); the others are double only.
 template <int Kind, bool Wall, bool Periodic, class Real>
 __global__ void blob_product_kernel(const Packed4 *__restrict__ targets, int n_targets,

@@ -140,7 +140,7 @@ _SCALE = Range(SCALE_RANGE[0], SCALE_RANGE[1], text='positive, between %g and %g
                fix='beyond that eta a^3 over- or underflows in double precision; rescale the units')
 _SAVE_CLONES = Choice(('one_file_per_step', 'one_file'))
 # 'numba' (a name of later published versions) is an alias of the compiled all-pairs kernel 'C++'.
-_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'pycuda', 'auto')
+_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'radii_numba', 'pycuda', 'auto')
 
 OPTION_TABLE = {
     'scheme': _option('str', 'deterministic_forward_euler', SD, Choice(STATIC_SCHEMES + DYNAMIC_SCHEMES),

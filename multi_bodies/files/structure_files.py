@@ -4,8 +4,10 @@ Formats (SPEC section 1.3); in every file ``#`` starts a comment and blank
 lines are skipped.
 
 * ``.vertex``: first line the number of blobs ``n`` (more numbers may follow
-  on that line and are ignored); then ``n`` lines ``x y z``, the blob
-  positions in the body frame.
+  on that line and are ignored); then ``n`` lines ``x y z`` or ``x y z a``:
+  the blob positions in the body frame and, optionally, the radius of each
+  blob (manual section 2; either every line has the fourth column or none).
+  Without it every blob gets ``blob_radius`` of the input file.
 * ``.clones``: first line the number of bodies; then one line per body
   ``x y z s p1 p2 p3`` (location and scalar-first quaternion, normalised
   when read).  Its reader and writer are in ``snapshots.py`` (with the
@@ -21,9 +23,8 @@ malformed.  Numbers must be finite and at most ``LARGEST_VALUE`` in
 magnitude (squares of distances must not overflow): ``nan``, ``inf`` and
 ``1e400`` are refused when the file is read, not deep in a solver.  Extra
 values on a ``.clones`` or ``.slip`` line are ignored with a warning; a
-fourth column in a ``.vertex`` file is an error, because later versions of
-the published code read it as the radius of that blob, while this package
-gives every blob the one ``blob_radius`` of the input file.
+``.vertex`` line with more than four values, a fourth column on some lines
+only, or a radius that is not positive is an error.
 """
 import os
 
@@ -108,10 +109,8 @@ def _read_counted_table(path, kind, columns, expected, referenced_from, exact_co
         for n, t in data:
             if len(t) > columns:
                 raise UserInputError(
-                    "%s, line %d: %d values, but a vertex line holds the 3 numbers x y z. Later versions of the "
-                    "published code read a 4th column as the radius of that blob; this package gives every blob "
-                    "the radius blob_radius of the input file, so the file would mean something else here. "
-                    "Remove the extra column(s) (and set blob_radius)" % (path, n, len(t)))
+                    "%s, line %d: %d values, but a vertex line holds x y z or x y z radius; remove the extra "
+                    "value(s)" % (path, n, len(t)))
     else:
         _check_extra_columns(path, data, columns, expected, kind)
     table = [_parse_row(path, n, t, columns, expected) for n, t in data[:count]]
@@ -121,22 +120,45 @@ def _read_counted_table(path, kind, columns, expected, referenced_from, exact_co
     return np.array(table, dtype=float).reshape(count, columns)
 
 
-def read_vertex_file(path, referenced_from=None):
+def read_vertex_file(path, referenced_from=None, return_radii=False):
     """Blob positions of the reference configuration, shape (n, 3).
 
-    Two blobs at the same position are refused: they make the body's blob
+    ``return_radii``: return ``(positions (n, 3), radii (n,) or None)``, the
+    radii of the optional fourth column (None when the file has three
+    columns).  Without it, a file that gives radii is refused unless the
+    caller asked for them (so a radius is never dropped silently).  Two
+    blobs at the same position are refused: they make the body's blob
     mobility singular.
     """
-    blobs = _read_counted_table(path, 'vertex', 3, 'blob position x y z', referenced_from, exact_count=True)
+    rows = _meaningful_lines(path, 'vertex', referenced_from)
+    four = [len(t) >= 4 for _, t in rows[1:]]
+    with_radii = bool(four) and any(four)
+    if with_radii and not all(four[:max(1, len(four))]):
+        first = next(n for (n, t), has in zip(rows[1:], four) if not has)
+        some = next(n for (n, t), has in zip(rows[1:], four) if has)
+        raise UserInputError("%s, line %d: a blob radius in a fourth column, but line %d has none; give every blob "
+                             "its radius or none (then all get blob_radius)" % (path, some, first))
+    columns = 4 if with_radii else 3
+    table = _read_counted_table(path, 'vertex', columns, 'blob position x y z' + (' and radius' if with_radii
+                                                                                 else ''),
+                                referenced_from, exact_count=True)
+    blobs, radii = table[:, :3].copy(), (table[:, 3].copy() if with_radii else None)
+    if radii is not None and np.any(radii <= 0):
+        bad = int(np.argmax(radii <= 0))
+        raise UserInputError("%s, line %d: blob radius %r in the fourth column; a radius must be positive"
+                             % (path, rows[1 + bad][0], float(radii[bad])))
+    if radii is not None and not return_radii:
+        raise UserInputError("%s: the vertex file gives a radius per blob (fourth column), which this program "
+                             "does not use; remove the fourth column" % path)
     _, first, counts = np.unique(blobs, axis=0, return_index=True, return_counts=True)
     if np.any(counts > 1):
         repeated = blobs[first[np.argmax(counts > 1)]]
         same = np.flatnonzero(np.all(blobs == repeated, axis=1))
-        rows = [n for n, t in _meaningful_lines(path, 'vertex', referenced_from)[1:]]
+        lines = [n for n, t in rows[1:]]
         raise UserInputError("%s, lines %d and %d: two blobs at the same position %s make the mobility of the "
                              "body singular; remove one of the lines and fix the count"
-                             % (path, rows[same[0]], rows[same[1]], ' '.join(repr(float(v)) for v in repeated)))
-    return blobs
+                             % (path, lines[same[0]], lines[same[1]], ' '.join(repr(float(v)) for v in repeated)))
+    return (blobs, radii) if return_radii else blobs
 
 
 def read_slip_file(path, referenced_from=None):
@@ -163,13 +185,18 @@ def read_body_table(path, num_bodies, kind, referenced_from=None):
     return np.array(table, dtype=float).reshape(num_bodies, 6)
 
 
-def write_vertex_file(path, reference_configuration, comment=None):
-    """Write blob positions (shape (n, 3)) as a ``.vertex`` file with full precision."""
+def write_vertex_file(path, reference_configuration, comment=None, radii=None):
+    """Write blob positions (shape (n, 3)) as a ``.vertex`` file with full precision.
+
+    ``radii`` (n,): written as the fourth column (the radius of each blob).
+    """
     blobs = np.asarray(reference_configuration, dtype=float).reshape(-1, 3)
+    radii = None if radii is None else np.broadcast_to(np.asarray(radii, dtype=float), (blobs.shape[0],))
     with open(path, 'w') as f:
         if comment:
             for line in comment.splitlines():
                 f.write('# %s\n' % line)
         f.write('%d\n' % blobs.shape[0])
-        for x, y, z in blobs:
-            f.write('%s %s %s\n' % (repr(float(x)), repr(float(y)), repr(float(z))))
+        for k, (x, y, z) in enumerate(blobs):
+            extra = '' if radii is None else ' %s' % repr(float(radii[k]))
+            f.write('%s %s %s%s\n' % (repr(float(x)), repr(float(y)), repr(float(z)), extra))

@@ -92,7 +92,11 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
                     '%s: initial_step %d restarts from %s, which does not exist; restart from a saved step '
                     '(save_clones one_file_per_step writes one file per saved step)'
                     % (options.where('initial_step'), options.initial_step, clones))
-        reference = read_vertex_file(spec.vertex_file, spec.where)
+        reference, radii = read_vertex_file(spec.vertex_file, spec.where, return_radii=True)
+        if radii is not None and single_blob_bodies:
+            raise utils.UserInputError('%s: %s gives blob radii (fourth column), but the roller schemes use the one '
+                                       'blob_radius of the input file; remove the fourth column'
+                                       % (spec.where, spec.vertex_file))
         if snapshot is None:
             locations, orientations = read_clones_file(clones, spec.where)
         else:
@@ -111,7 +115,7 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         prescribed = prescribed_velocities(spec, locations.shape[0])
         body_length = None
         for index, (location, orientation) in enumerate(zip(locations, orientations)):
-            body = Body(location, orientation, reference, options.blob_radius)
+            body = Body(location, orientation, reference, options.blob_radius, blobs_radius=radii)
             body.ID = spec.ID
             set_slip_by_ID(body, slip)
             simplify_slip_function(body)
@@ -258,6 +262,10 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         raise utils.UserInputError('%s: the Monte Carlo program has no obstacles or bodies of prescribed '
                                    'velocity; remove the line (or run the dynamics, multi_bodies.py)'
                                    % fixed[0].where)
+    if script == 'mcmc' and body_arrays.radii_given:
+        raise utils.UserInputError('%s: a vertex file gives blob radii (fourth column), but the Monte Carlo energies '
+                                   'use the one blob_radius of the input file; remove the fourth column'
+                                   % options.input_file)
     if script == 'mcmc':
         return RunSetup(hooks, bodies, types, body_arrays, None)
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]

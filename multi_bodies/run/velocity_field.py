@@ -4,6 +4,7 @@ The grid option ``x0 x1 Nx y0 y1 Ny z0 z1 Nz`` splits the box into
 ``Nx Ny Nz`` cells; the velocity is computed at the cell centres (x fastest,
 then y, then z) as the flow of the blob constraint forces ``lambda``:
 ``u(x) = M_source_target(x, r_blobs) lambda`` with sources of radius ``a``
+(one number, or the radius of each blob when the vertex files give radii)
 and targets of radius ``tracer_radius`` (0 gives the point velocity).
 
 pyvista is imported only when a file is written.
@@ -54,7 +55,8 @@ def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, et
     grid : ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz))
     r_vectors : ndarray (N, 3), blob positions (sources).
     lambda_blobs : ndarray (N, 3), blob constraint forces.
-    blob_radius, tracer_radius, eta : float
+    blob_radius : float, or ndarray (N,) (the radius of each source blob)
+    tracer_radius, eta : float
     source_target_product : callable
         ``f(source_r, target_r, force, radius_source, radius_target, eta, periodic_length) -> (3 Nt,)``
         (``mobility.source_target_product(name)``).

@@ -6,8 +6,9 @@ convert the ``.clones`` series of a finished or stopped run) and by
 prefixed by ``output_name`` (see doc/visualisation.md):
 
 * ``output_name.blobs.<step, 8 digits>.vtp``: PolyData with one vertex per
-  blob at its lab-frame position, and point arrays ``radius`` (the blob
-  radius ``a``, for true-size sphere glyphs), ``body_index`` (0-based, over
+  blob at its lab-frame position, and point arrays ``radius`` (the radius
+  of each blob: the fourth column of its vertex file, else ``blob_radius``;
+  for true-size sphere glyphs), ``body_index`` (0-based, over
   all structures in input order), ``structure_index`` (0-based structure
   line), ``structure`` (the structure ID, a string), ``velocity``
   (``v + w x (r - location)``, only when body velocities are given) and
@@ -319,7 +320,8 @@ class VtkSeries:
         if self._blob_structure is None or self._blob_structure[0].shape[0] != blob_index.shape[0]:
             blob_structure_index = self.body_structure_index[blob_index]
             self._blob_structure = (blob_structure_index, StringArray(self.structure_names, blob_structure_index))
-        files = ((BLOBS, r_vectors, blob_point_arrays(body_arrays.blob_radius, blob_index, self._blob_structure,
+        radii = getattr(body_arrays, 'blob_radii', body_arrays.blob_radius)  # the radius of each blob
+        files = ((BLOBS, r_vectors, blob_point_arrays(radii, blob_index, self._blob_structure,
                                                       blob_velocities, blob_slip)),
                  (BODIES, locations, body_point_arrays(configuration.orientations, self._body_structure,
                                                        body_velocities)))

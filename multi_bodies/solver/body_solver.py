@@ -64,6 +64,17 @@ GmresResult = namedtuple('GmresResult', ['x', 'iterations', 'converged', 'residu
 GmresResult.__doc__ = """Result of :func:`gmres_solve`: solution ``x``, inner iterations, converged, true relative residual."""
 
 
+def blob_radius_argument(body_arrays, blob_radius, blobs=slice(None)):
+    """The radius argument of the mobility functions for ``blobs`` of ``body_arrays``.
+
+    ``blob_radius`` (a number) unless a vertex file gave per-blob radii
+    (``body_arrays.radii_given``); then the radii of those blobs, shape (n,).
+    """
+    if getattr(body_arrays, 'radii_given', False):
+        return body_arrays.blob_radii[blobs]
+    return blob_radius
+
+
 def body_mobility_from_resistance(resistance):
     """Body mobility ``N = pinv(R)`` of resistance matrices ``R = K^T M^{-1} K``, symmetrised.
 
@@ -106,6 +117,8 @@ class MobilityProblem:
                                         body_arrays.blob_body_index)
         self.mobility_product = mobility_product
         self.eta, self.blob_radius = float(eta), float(blob_radius)
+        # one number, or the per-blob radii (N,) when a vertex file gave them
+        self.blob_radii = blob_radius_argument(body_arrays, self.blob_radius)
         self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3).copy()
         self.num_blobs = self.r_vectors.shape[0]
         self.num_bodies = self.locations.shape[0]
@@ -156,7 +169,7 @@ class MobilityProblem:
     def M_dot(self, blob_forces):
         """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
         return np.asarray(self.mobility_product(self.r_vectors, np.asarray(blob_forces, dtype=float).reshape(-1),
-                                                self.eta, self.blob_radius, self.periodic_length)).reshape(-1)
+                                                self.eta, self.blob_radii, self.periodic_length)).reshape(-1)
 
     def K_dot(self, body_velocities):
         """``K U``: blob velocities (N, 3) of body velocities (Nb, 6) or (6Nb,)."""
@@ -236,10 +249,14 @@ class BlockDiagonalPreconditioner:
             nb = bodies.stop - bodies.start
             r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
             # Building the dense blocks calls the backend once per body (set-up only).
+            radius = blob_radius_argument(body_arrays, blob_radius, blobs)
+            if np.ndim(radius):
+                radius = np.reshape(radius, (nb, n_blobs))
             if stacked_mobility is not None:
-                M_blocks = stacked_mobility(r_type, eta, blob_radius)
+                M_blocks = stacked_mobility(r_type, eta, radius)
             else:
-                M_blocks = np.stack([blob_mobility_matrix(r_body, eta, blob_radius) for r_body in r_type])
+                M_blocks = np.stack([blob_mobility_matrix(r_body, eta, radius if np.ndim(radius) == 0 else radius[k])
+                                     for k, r_body in enumerate(r_type)])
             try:
                 L = np.linalg.cholesky(M_blocks)
                 L_inv = np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape))
@@ -379,7 +396,7 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
 
 # ---------------------------------------------------------------------------------------------- dense algebra
 def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
-    """Dense blob mobility of all blobs, shape (3N, 3N)."""
+    """Dense blob mobility of all blobs, shape (3N, 3N); ``blob_radius`` a number or per-blob radii (N,)."""
     return blob_mobility_matrix(np.asarray(r_vectors, dtype=float).reshape(-1, 3), eta, blob_radius)
 
 
@@ -390,7 +407,7 @@ def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_r
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
-    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
+    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius_argument(body_arrays, blob_radius))
     K = body_arrays.K_dense(configuration, r_vectors)
     if not inverse:
         return M, None, K, None
@@ -433,7 +450,7 @@ def solve_resistance_problem(body_arrays, configuration, body_velocities, slip, 
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
-    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius)
+    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius_argument(body_arrays, blob_radius))
     blob_velocities = np.asarray(slip, dtype=float).reshape(-1, 3) + body_arrays.K_dot(configuration,
                                                                                       body_velocities, r_vectors)
     lambda_blobs = np.linalg.solve(M, blob_velocities.reshape(-1)).reshape(-1, 3)

@@ -107,22 +107,29 @@ def blob_blob_potential(r, repulsion_strength=1.0, debye_length=1.0, blob_radius
     return eps * np.exp(-np.maximum(distance - d, 0.0) / b) + (eps / b) * np.maximum(d - distance, 0.0)
 
 
-def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), pair_force=None, **kwargs):
+def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), pair_force=None, blob_radii=None, **kwargs):
     """Forces of all blob pairs (the ``blob_blob_force`` hook), shape (N, 3).
 
     Pairs use the minimum image on periodic axes; every pair is counted once
     per blob, so blob i receives ``sum_{j != i} f(r_j - r_i)``.  ``pair_force``
     (default: this module's ``blob_blob_force``) is the law of one pair,
     vectorised over pairs: ``pair_force(r (..., 3), **kwargs) -> (..., 3)``.
+    ``blob_radii`` (N,), when the vertex files give radii: each pair gets
+    ``blob_radius = (a_i + a_j)/2`` (shape (..., ) of the pairs), so that the
+    default law's contact distance is ``a_i + a_j`` (the published rule of
+    the radii forces).
     """
     pair_force = blob_blob_force if pair_force is None else pair_force
     r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
     n = r_vectors.shape[0]
     forces = np.zeros_like(r_vectors)
     rows = max(1, PAIR_CHUNK_ELEMENTS // max(n, 1))
+    radii = None if blob_radii is None else np.asarray(blob_radii, dtype=float).reshape(n)
     for start in range(0, n, rows):
         stop = min(n, start + rows)
         r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)
+        if radii is not None:
+            kwargs['blob_radius'] = 0.5 * (radii[start:stop, None] + radii[None, :])
         pair = pair_force(r, periodic_length=periodic_length, **kwargs)
         pair[np.arange(stop - start), np.arange(start, stop)] = 0.0
         forces[start:stop] = np.einsum('ijk->ik', pair)
@@ -240,7 +247,8 @@ default_zero_blobs.published_helper = 'default_zero_blobs'
 active_body_slip.published_helper = 'active_body_slip'
 
 
-def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=None, python_forces=None):
+def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=None, python_forces=None,
+                               radii_given=False):
     """The all-pairs blob force function for ``blob_blob_force_implementation``.
 
     Returns None for 'None' (no blob-blob forces), else
@@ -255,9 +263,20 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
     * 'pycuda': ``pycuda_forces`` if given (the function of a
       ``forces_pycuda_user_defined.py``), else the CuPy kernel of
       ``multi_bodies.solver.forces_pycuda`` (imported only here).
+    * 'radii_numba' (the published name of the forces with per-blob radii):
+      the C++ kernel; python and C++ use the radii as well when the vertex
+      files give them (the function then takes ``blob_radii`` (N,)).
+
+    ``radii_given``: the vertex files give per-blob radii; pycuda, which has
+    one contact distance, is then refused.
     """
     if implementation == 'None':
         return None
+    if implementation == 'radii_numba':
+        implementation = 'C++'
+    if radii_given and implementation == 'pycuda':
+        raise UserInputError("blob_blob_force_implementation pycuda uses one blob_radius, but the vertex files give "
+                             "per-blob radii (fourth column); use python, C++ or radii_numba")
     if implementation == 'python':
         if python_forces is not None:
             return python_forces
@@ -270,7 +289,12 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
                                  "is not built (%s); run 'pip install -e .' or use python" % err)
 
         def cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0, debye_length=1.0,
-                       blob_radius=1.0, **kw):
+                       blob_radius=1.0, blob_radii=None, **kw):
+            if blob_radii is not None:
+                return _forces_cpp.blob_blob_forces_radii(np.asarray(r_vectors, dtype=float).reshape(-1, 3),
+                                                          np.asarray(periodic_length, dtype=float).reshape(3),
+                                                          float(repulsion_strength), float(debye_length),
+                                                          np.asarray(blob_radii, dtype=float).reshape(-1))
             return _forces_cpp.blob_blob_forces(np.asarray(r_vectors, dtype=float).reshape(-1, 3),
                                                 np.asarray(periodic_length, dtype=float).reshape(3),
                                                 float(repulsion_strength), float(debye_length), float(blob_radius))
@@ -285,7 +309,8 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
         if pycuda_forces is not None:
             return pycuda_forces
         return forces_pycuda.calc_blob_blob_forces_pycuda
-    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ (or numba) or pycuda"
+    raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ (or numba, "
+                         "radii_numba) or pycuda"
                          % implementation)
 
 

@@ -139,9 +139,14 @@ class System:
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
         self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
         self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
+        radii_given = bool(getattr(body_arrays, 'radii_given', False))
         self.blob_blob_forces = mbf.blob_blob_force_calculator(
             blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda,
-            python_forces=hooks.blob_blob_forces_python)
+            python_forces=hooks.blob_blob_forces_python, radii_given=radii_given)
+        # Per-blob radii reach the default blob-blob laws (contact a_i + a_j); a user's law gets blob_radius.
+        self.blob_blob_physics = self.physics
+        if radii_given and hooks.blob_blob_forces_python is None:
+            self.blob_blob_physics = dict(self.physics, blob_radii=body_arrays.blob_radii)
         self.body_body_forces = mbf.body_body_force_calculator(
             body_body_name, pair_force_torque=hooks.body_body_force_torque,
             python_forces_torques=hooks.body_body_forces_python)
@@ -252,7 +257,7 @@ class System:
         """One-blob plus blob-blob forces at blob positions (N, 3), shape (N, 3)."""
         forces = np.asarray(self.hooks.blob_external_forces(r_vectors, **self.physics), dtype=float).reshape(-1, 3)
         if self.blob_blob_forces is not None:
-            forces = forces + np.asarray(self.blob_blob_forces(r_vectors, **self.physics)).reshape(-1, 3)
+            forces = forces + np.asarray(self.blob_blob_forces(r_vectors, **self.blob_blob_physics)).reshape(-1, 3)
         return forces
 
     def forces_torques(self, configuration, r_vectors=None):
@@ -414,8 +419,12 @@ class System:
     # -------------------------------------------------------------- rollers
     def roller_product(self, kind):
         """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``."""
-        base = self.vector_product_name[:-len(NO_WALL)] if self.vector_product_name.endswith(NO_WALL) \
-            else self.vector_product_name
+        if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
+            raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
+                                 'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
+        name = self.vector_product_name
+        name = name[len('radii_'):] if name.startswith('radii_') else name  # published aliases (one radius here)
+        base = name[:-len(NO_WALL)] if name.endswith(NO_WALL) else name
         name = base + (NO_WALL if self.domain == 'no_wall' else '')
         return mobility.blob_product(name, kind)
 
@@ -536,6 +545,10 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     blobs = resolve_implementation(options.mobility_blobs_implementation, 'blobs', log,
                                    num_blobs=max(body_arrays.type_blobs or [1]))
     forces = resolve_blob_blob_implementation(options.blob_blob_force_implementation, hooks, log)
+    if forces == 'pycuda' and options.blob_blob_force_implementation == 'auto' and body_arrays.radii_given:
+        forces = 'C++'  # the GPU kernel has one contact distance
+        if log is not None:
+            log('blob_blob_force_implementation: auto chose C++ instead of pycuda (per-blob radii)')
     body_body = options.body_body_force_torque_implementation
     if not hooks.is_default('body_body_force_torque') and body_body != 'python' and log is not None:
         log('  body_body_force_torque from %s cannot take effect: body_body_force_torque_implementation is %s; '
@@ -557,7 +570,7 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     checked('mobility_vector_prod_implementation', lambda: mobility.mobility_vector_product(product))
     checked('mobility_blobs_implementation', lambda: mobility.blob_mobility_matrix(blobs))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
-        forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda))
+        forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
     return System(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
                   vector_product_name=product, blobs_name=blobs, blob_blob_name=forces,

@@ -5,7 +5,9 @@
 // r_j - r_i, so each pair is visited once) and d = 2a:
 //   f_i = -(eps/b) exp(-(|r| - d)/b) r/|r|   for |r| > d,
 //   f_i = -(eps/b) r/|r|                     otherwise,
-// |r| floored by machine epsilon.  The law and the minimum image are those of
+// |r| floored by machine epsilon.  With per-blob radii a_i (blob_blob_forces_radii)
+// the contact distance of a pair is d = a_i + a_j (twice the mean radius, the rule of
+// the published radii_numba forces).  The law and the minimum image are those of
 // mobility/cpp/pair_laws.h (the one source of the compiled backends); edit
 // rmb::blob_blob_force_factor there to change the law of the C++ and CUDA backends
 // (then rebuild with pip install -e .).  OpenMP splits the rows i of the pair
@@ -46,16 +48,20 @@ int this_thread() {
 #endif
 }
 
-Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
-                       double debye_length, double blob_radius) {
+template <bool Radii>
+Array blob_blob_forces_any(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
+                           double debye_length, double blob_radius, const Array *radii) {
   if (!(r_vectors.ndim() == 2 && r_vectors.shape(1) == 3) && !(r_vectors.ndim() == 1 && r_vectors.shape(0) % 3 == 0))
     throw std::invalid_argument("r_vectors must have shape (N, 3)");
   if (periodic_length.size() != 3) throw std::invalid_argument("periodic_length must hold 3 numbers");
   if (debye_length <= 0.0) throw std::invalid_argument("debye_length must be positive");
   const long n = static_cast<long>(r_vectors.size() / 3);
-  std::vector<double> x(n), y(n), z(n);
+  if (Radii && radii->size() != n) throw std::invalid_argument("blob_radii must hold one radius per blob");
+  std::vector<double> x(n), y(n), z(n), a(Radii ? n : 0);
   const double *rp = r_vectors.data();
   for (long i = 0; i < n; ++i) x[i] = rp[3 * i], y[i] = rp[3 * i + 1], z[i] = rp[3 * i + 2];
+  if (Radii)
+    for (long i = 0; i < n; ++i) a[i] = radii->data()[i];
   const double Lx = periodic_length.data()[0], Ly = periodic_length.data()[1], Lz = periodic_length.data()[2];
   const rmb::SoftRepulsion law = rmb::soft_repulsion(repulsion_strength, debye_length, 2.0 * blob_radius);
   Array result({static_cast<py::ssize_t>(n), static_cast<py::ssize_t>(3)});
@@ -76,7 +82,10 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
         const double rx = rmb::minimum_image(x[j] - xi, Lx);
         const double ry = rmb::minimum_image(y[j] - yi, Ly);
         const double rz = rmb::minimum_image(z[j] - zi, Lz);
-        const double m = rmb::blob_blob_force_factor(std::sqrt(rx * rx + ry * ry + rz * rz), law);
+        const double distance = std::sqrt(rx * rx + ry * ry + rz * rz);
+        const double m = Radii ? rmb::blob_blob_force_factor(
+                                     distance, rmb::soft_repulsion(repulsion_strength, debye_length, a[i] + a[j]))
+                               : rmb::blob_blob_force_factor(distance, law);
         fx -= m * rx, fy -= m * ry, fz -= m * rz;
         acc[3 * j] += m * rx, acc[3 * j + 1] += m * ry, acc[3 * j + 2] += m * rz;
       }
@@ -90,6 +99,17 @@ Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, dou
     }
   }
   return result;
+}
+
+Array blob_blob_forces(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
+                       double debye_length, double blob_radius) {
+  return blob_blob_forces_any<false>(r_vectors, periodic_length, repulsion_strength, debye_length, blob_radius,
+                                     nullptr);
+}
+
+Array blob_blob_forces_radii(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
+                             double debye_length, const Array &blob_radii) {
+  return blob_blob_forces_any<true>(r_vectors, periodic_length, repulsion_strength, debye_length, 0.0, &blob_radii);
 }
 
 // The laws of pair_laws.h at many points, for the tests: law "wall" (x = heights z,
@@ -145,6 +165,9 @@ PYBIND11_MODULE(_forces_cpp, m) {
   m.def("blob_blob_forces", &blob_blob_forces, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"),
         "Forces (N, 3) of the default soft repulsion between all blob pairs; r_vectors (N, 3).");
+  m.def("blob_blob_forces_radii", &blob_blob_forces_radii, py::arg("r_vectors"), py::arg("periodic_length"),
+        py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radii"),
+        "Forces (N, 3) of the soft repulsion with per-blob radii (N,): contact distance a_i + a_j.");
   m.def("pair_laws", &pair_laws, py::arg("law"), py::arg("x"), py::arg("repulsion_strength"),
         py::arg("debye_length"), py::arg("blob_radius"),
         "(energies, forces) of the header's law 'wall', 'blob_blob' or 'body_body' at the heights or distances x.");
