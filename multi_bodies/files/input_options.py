@@ -38,12 +38,13 @@ STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 # that both lists agree).
 DETERMINISTIC_SCHEMES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
                          'deterministic_adams_bashforth', 'deterministic_forward_euler_rollers',
-                         'deterministic_adams_bashforth_rollers')
+                         'deterministic_adams_bashforth_rollers', 'deterministic_midpoint')
 STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
                       'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
-                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
+                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
+                      'stochastic_GDC_RFD')
 DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES
 MCMC_MOVES = ('all_bodies', 'one_body')                        # many_bodyMCMC.sampler.MOVES
 MCMC_ENERGY_IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')  # many_bodyMCMC.mcmc_energy.IMPLEMENTATIONS
@@ -163,6 +164,7 @@ OPTION_TABLE = {
     'output_name': _option('str', 'run', SDM),
     'random_state': _option('optional_str', None, DM),
     'seed': _option('optional_int', None, DM, Range(0, text='a non-negative integer')),
+    'random_generator': _option('str', 'auto', DM, Choice(('auto', 'default', 'published'))),
     'repulsion_strength_wall': _option('float', 1.0, SDM),
     'debye_length_wall': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
     'repulsion_strength': _option('float', 1.0, SDM),
