@@ -140,8 +140,9 @@ DM = ('dynamic', 'mcmc')
 _SCALE = Range(SCALE_RANGE[0], SCALE_RANGE[1], text='positive, between %g and %g' % SCALE_RANGE,
                fix='beyond that eta a^3 over- or underflows in double precision; rescale the units')
 _SAVE_CLONES = Choice(('one_file_per_step', 'one_file'))
-# 'numba' (a name of later published versions) is an alias of the compiled all-pairs kernel 'C++'.
-_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'pycuda', 'auto')
+# 'numba' (a name of later published versions) is an alias of the compiled all-pairs kernel 'C++';
+# 'tree_numba' (ditto) is the compiled cell list (pairs beyond 2 blob_radius + 30 debye_length neglected).
+_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'tree_numba', 'pycuda', 'auto')
 
 OPTION_TABLE = {
     'scheme': _option('str', 'deterministic_forward_euler', SD, Choice(STATIC_SCHEMES + DYNAMIC_SCHEMES),
