@@ -300,7 +300,8 @@ def _convert(kind, name, value, where):
             fail('three numbers')
         return numbers
     if kind == 'grid9':
-        expected = 'nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...)'
+        expected = ('nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...; '
+                    'x0 = x1 with Nx = 1 gives one point on that axis, e.g. a plane z = z0)')
         if len(words) != 9:
             fail(expected)
         try:
@@ -308,7 +309,8 @@ def _convert(kind, name, value, where):
             for axis in range(3):
                 low, high = finite(words[3 * axis], expected), finite(words[3 * axis + 1], expected)
                 cells = int(words[3 * axis + 2])
-                if cells < 1 or not high > low:
+                # a degenerate axis (low = high) holds one point: a plane or a line of the published grids
+                if cells < 1 or not (high > low or (high == low and cells == 1)):
                     fail(expected)
                 grid.append((low, high, cells))
         except UserInputError:
