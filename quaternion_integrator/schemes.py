@@ -9,9 +9,10 @@ use its methods, each of which takes the configuration it is about
 (``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
 ``forces_and_slip``, ``mobility_problem``, ``solve``, ``preprocess``,
 ``postprocess``, ``invalid_bodies``, ``blob_positions``) and never import
-the scripts or any global.  The random generator ``rng``
-(``numpy.random.Generator``) is unused by the deterministic schemes here but
-is part of the signature.
+the scripts or any global.  The random generator ``rng`` (anything
+with ``standard_normal(n)``: numpy's ``Generator`` or
+``stochastic_forcing.generators.PublishedGenerator``) is unused by the
+deterministic schemes here but is part of the signature.
 
 Body velocities have shape (Nb, 6) ``[v, w]`` (length/time, radians/time);
 locations (Nb, 3); scalar-first quaternions (Nb, 4), updated by

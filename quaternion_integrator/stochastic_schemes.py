@@ -19,8 +19,11 @@ A scheme is made by ``make_scheme(name, dt, options)``;
 configuration (``scheme.step`` applies it to the system).  Predictors and
 midpoints are configurations of their own (``body.body.Configuration``
 values): forces, slip and solves are evaluated at them without touching the
-step's start.  The random numbers come only from ``rng``
-(``numpy.random.Generator``), drawn in a fixed order stated in each scheme,
+step's start.  The random numbers come only from ``rng``, through its
+``standard_normal(n)`` (the one draw of every scheme): numpy's
+``Generator`` or the published code's legacy ``RandomState``
+(:class:`stochastic_forcing.generators.PublishedGenerator`, which repeats
+a published run's numbers), drawn in a fixed order stated in each scheme,
 so a run is a function of its input and its generator state.  Random finite
 differences go through :func:`stochastic_forcing.rfd` with the rigid-body
 displacement :func:`quaternion_integrator.scheme_base.displace_bodies` (or

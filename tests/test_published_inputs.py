@@ -66,3 +66,21 @@ def test_published_boomerang_analysis_flags(tmp_path, monkeypatch, capsys):
         msd_script.main(['-dt', '0.01', '-N', '30', '--data-dir', str(tmp_path)])
     with pytest.raises(SystemExit):
         msd_script.main(files + ['--profile', 'maybe'])
+
+
+# ------------------------------------------------------------------ later published force names
+def roller_snapshot(folder, forces):
+    edit_input(folder / 'inputfile_rollers.dat', blob_blob_force_implementation=forces, n_steps=10, n_save=10,
+               periodic_length='20 20 0')
+    status, _, err = run_in_process('dynamic', folder, 'inputfile_rollers.dat')
+    assert status == 0, err
+    return np.loadtxt(folder / 'data' / 'rollers.four_rollers.00000010.clones', skiprows=1)
+
+
+def test_rollers_example_with_the_later_published_force_names(tmp_path):
+    """The rollers example (Rollers_Small_Example style) with ``numba`` and ``tree_numba`` runs and gives the
+    trajectory of the python all-pairs forces (the cell list neglects pairs whose force is below exp(-30) of
+    contact; the rest agrees to round-off), in a box periodic in x and y."""
+    python = roller_snapshot(copy_scene(tmp_path / 'python'), 'python')
+    for name in ('numba', 'tree_numba'):
+        np.testing.assert_allclose(roller_snapshot(copy_scene(tmp_path / name), name), python, rtol=0, atol=1e-10)
