@@ -226,3 +226,23 @@ def test_published_generator_state_round_trips_with_the_cached_gaussian(tmp_path
     assert isinstance(restored, PublishedGenerator)
     np.testing.assert_array_equal(restored.standard_normal(9), legacy.standard_normal(9))
     np.testing.assert_array_equal(restored.uniform(-1, 2, 5), legacy.uniform(-1, 2, 5))
+
+
+def test_restart_with_the_published_generator_continues_bit_for_bit(tmp_path, monkeypatch):
+    """``random_generator published``: 10 steps in one run equal 4 + 6 steps with initial_step 4 (the restart
+    record holds the legacy state), and the run differs from the default generator's with the same seed."""
+    from test_stochastic import run_in, snapshots, write_scene
+    whole, split, default = tmp_path / 'whole', tmp_path / 'split', tmp_path / 'default'
+    for folder in (whole, split, default):
+        folder.mkdir()
+    extra = {'seed': 9, 'random_generator': 'published'}
+    write_scene(whole, 'stochastic_GDC_RFD', 10, extra)
+    assert run_in(whole, monkeypatch) == 0
+    write_scene(split, 'stochastic_GDC_RFD', 4, extra)
+    assert run_in(split, monkeypatch) == 0
+    write_scene(split, 'stochastic_GDC_RFD', 10, extra, initial_step=4)
+    assert run_in(split, monkeypatch) == 0
+    assert snapshots(whole) == snapshots(split)
+    write_scene(default, 'stochastic_GDC_RFD', 10, {'seed': 9})
+    assert run_in(default, monkeypatch) == 0
+    assert snapshots(default) != snapshots(whole)
