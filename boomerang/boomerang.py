@@ -9,7 +9,8 @@ Options (the published ones, plus ``--data-dir``, ``--seed`` and ``--implementat
 * ``-dt`` time step (s), ``-N`` number of steps, ``-gfactor`` multiplies gravity
   (default 1), ``-scheme`` ``RFD`` (default), ``FIXMAN`` or ``EM``;
 * ``--data-name`` text appended to the trajectory file name;
-* ``--profile`` runs under cProfile and prints the 25 most expensive calls;
+* ``--profile`` (or ``--profile True`` / ``--profile 1``, the published form) runs under cProfile and
+  prints the 25 most expensive calls;
 * ``--data-dir`` folder for the data (default: ``DATA_DIR`` of a
   ``config_local.py`` in the current folder, this folder or the repository
   root, as the published code read it; else ``./data``);
@@ -63,6 +64,39 @@ def find_data_dir(data_dir=None):
                                            'or pass --data-dir' % path)
             return str(namespace['DATA_DIR'])
     return os.path.join(os.getcwd(), 'data')
+
+
+def profile_flag(text):
+    """The value of ``--profile``: the published scripts took ``--profile True`` (or ``1``).
+
+    ``True``/``1``/``yes``/``on`` profile, ``False``/``0``/``no``/``off`` do
+    not (case-insensitive); a bare ``--profile`` profiles.  (The published
+    ``type=bool`` turned any non-empty word, ``False`` included, into True;
+    here the word is read as written.)
+    """
+    word = str(text).strip().lower()
+    if word in ('true', '1', 'yes', 'on'):
+        return True
+    if word in ('false', '0', 'no', 'off'):
+        return False
+    raise argparse.ArgumentTypeError("--profile takes True or False (or 1 / 0), got '%s'" % text)
+
+
+def add_profile_option(parser):
+    """``--profile [True|False]``: run under cProfile and print the 25 most expensive calls."""
+    parser.add_argument('--profile', nargs='?', const=True, default=False, type=profile_flag, metavar='True|False',
+                        help='run under cProfile and print the 25 most expensive calls (--profile, --profile True '
+                             'or --profile 1 as in the published scripts)')
+
+
+def run_profiled(function, *args, **kwargs):
+    """``function(*args, **kwargs)`` under cProfile; prints the 25 most expensive calls (cumulative) and
+    returns the function's result."""
+    profiler = cProfile.Profile()
+    try:
+        return profiler.runcall(function, *args, **kwargs)
+    finally:
+        pstats.Stats(profiler, stream=sys.stdout).sort_stats('cumulative').print_stats(25)
 
 
 def trajectory_name(dt, n_steps, scheme, gfactor, data_name=''):
@@ -141,7 +175,7 @@ def main(argv=None):
                         help='RFD (default), FIXMAN or EM (no drift: wrong equilibrium near the wall)')
     parser.add_argument('--data-name', dest='data_name', default='',
                         help='text appended to the trajectory file name (e.g. run-1)')
-    parser.add_argument('--profile', action='store_true', help='run under cProfile and print the statistics')
+    add_profile_option(parser)
     parser.add_argument('--data-dir', dest='data_dir', default=None,
                         help='data folder (default: DATA_DIR of config_local.py, else ./data)')
     parser.add_argument('--seed', type=int, default=None, help='seed of the random generator')
@@ -161,9 +195,7 @@ def main(argv=None):
                       data_name=args.data_name, data_dir=args.data_dir, seed=args.seed,
                       implementation=args.implementation, logger=logger)
         if args.profile:
-            profiler = cProfile.Profile()
-            profiler.runcall(run, **kwargs)
-            pstats.Stats(profiler, stream=sys.stdout).sort_stats('cumulative').print_stats(25)
+            run_profiled(run, **kwargs)
         else:
             run(**kwargs)
     except utils.SimulationStopped as err:

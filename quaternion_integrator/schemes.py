@@ -9,9 +9,10 @@ use its methods, each of which takes the configuration it is about
 (``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
 ``forces_and_slip``, ``mobility_problem``, ``solve``, ``preprocess``,
 ``postprocess``, ``invalid_bodies``, ``blob_positions``) and never import
-the scripts or any global.  The random generator ``rng``
-(``numpy.random.Generator``) is unused by the deterministic schemes here but
-is part of the signature.
+the scripts or any global.  The random generator ``rng`` (anything
+with ``standard_normal(n)``: numpy's ``Generator`` or
+``stochastic_forcing.generators.PublishedGenerator``) is unused by the
+deterministic schemes here but is part of the signature.
 
 Body velocities have shape (Nb, 6) ``[v, w]`` (length/time, radians/time);
 locations (Nb, 3); scalar-first quaternions (Nb, 4), updated by
@@ -80,6 +81,29 @@ class DeterministicAdamsBashforth(AdamsBashforthMixin, DeterministicForwardEuler
     name = 'deterministic_adams_bashforth'
 
 
+class DeterministicMidpoint(DeterministicForwardEuler):
+    """Explicit midpoint (second order): ``U1 = U(q^n)``, ``q* = q^n + U1 dt/2``, ``q^{n+1} = q^n + U(q*) dt``.
+
+    Two iterative solves per step (each warm started from the last).  A
+    midpoint with a blob centre below the wall stops the run like an
+    invalid step (InvalidConfiguration naming the step and the bodies).
+    """
+    name = 'deterministic_midpoint'
+
+    def velocities(self, system, configuration):
+        U1 = self.rigid_velocities(system, configuration)
+        mid = self.move(configuration, U1, 0.5 * self.dt)
+        invalid = system.invalid_bodies(mid)
+        if invalid.size:
+            self.invalid_configurations += 1
+            raise InvalidConfiguration(getattr(self, '_step_index', -1), invalid, self.name)
+        return self.rigid_velocities(system, mid)
+
+    def advance(self, system, configuration, step_index, rng=None):
+        self._step_index = step_index
+        return super().advance(system, configuration, step_index, rng)
+
+
 class DeterministicForwardEulerRollers(Scheme):
     """Single-blob rollers: ``r += v dt`` with v of ``System.roller_velocities`` (orientation fixed)."""
     name = 'deterministic_forward_euler_rollers'
@@ -94,7 +118,7 @@ class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwa
 
 
 SCHEMES = {cls.name: cls for cls in (DeterministicForwardEuler, DeterministicForwardEulerDenseAlgebra,
-                                     DeterministicAdamsBashforth, DeterministicForwardEulerRollers,
+                                     DeterministicAdamsBashforth, DeterministicMidpoint, DeterministicForwardEulerRollers,
                                      DeterministicAdamsBashforthRollers)}
 
 def _all_schemes():
@@ -107,7 +131,8 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
-                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
+                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
+                      'stochastic_GDC_RFD')
 
 
 # Schemes that solve the mixed problem of bodies of prescribed kinematics (obstacles, velocity files).

@@ -19,8 +19,11 @@ A scheme is made by ``make_scheme(name, dt, options)``;
 configuration (``scheme.step`` applies it to the system).  Predictors and
 midpoints are configurations of their own (``body.body.Configuration``
 values): forces, slip and solves are evaluated at them without touching the
-step's start.  The random numbers come only from ``rng``
-(``numpy.random.Generator``), drawn in a fixed order stated in each scheme,
+step's start.  The random numbers come only from ``rng``, through its
+``standard_normal(n)`` (the one draw of every scheme): numpy's
+``Generator`` or the published code's legacy ``RandomState``
+(:class:`stochastic_forcing.generators.PublishedGenerator`, which repeats
+a published run's numbers), drawn in a fixed order stated in each scheme,
 so a run is a function of its input and its generator state.  Random finite
 differences go through :func:`stochastic_forcing.rfd` with the rigid-body
 displacement :func:`quaternion_integrator.scheme_base.displace_bodies` (or
@@ -415,6 +418,108 @@ class StochasticSlipMid(StochasticScheme):
         return self.move(old, U, self.dt), U
 
 
+class StochasticEM(StochasticScheme):
+    """Euler-Maruyama without a drift term: ``U = N F + sqrt(2 kT/dt) N K^T M^{-1} M^{1/2} W`` (as published).
+
+    One Lanczos call (``M^{1/2} W`` at q^n) and one constrained solve per
+    step.  It has no thermal drift, so it samples the Gibbs-Boltzmann
+    distribution only where ``div_q N = 0`` (bodies far from any wall, e.g.
+    ``mobility_vector_prod_implementation`` ``*_no_wall`` or periodic
+    boxes); above a wall use ``stochastic_Slip_Trapz`` or
+    ``stochastic_GDC_RFD``.  Draws: W (3N).
+    """
+    name = 'stochastic_EM'
+
+    def attempt(self, system, step_index, rng, old):
+        W = rng.standard_normal(3 * system.num_blobs)
+        problem = system.mobility_problem(old)
+        pc = self.preconditioner(system, step_index, problem)
+        noise = system.lanczos_noise(problem, W, self.noise_factor(), pc)
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
+        return self.move(old, U, self.dt), U
+
+
+def rigid_projection(system, configuration, blob_velocities):
+    """The unconstrained solve: ``(K^T K)^+ K^T v`` at ``configuration``, body velocities (Nb, 6).
+
+    blob_velocities v (3N,) or (N, 3).  It is the solve of the saddle-point
+    system ``[I -K; -K^T 0] [lambda; U] = [-v; 0]`` (the constrained one with
+    the blob mobility replaced by the identity): the least-squares rigid
+    motion of the blob velocities.  ``K^T K`` is block diagonal (one 6x6
+    block per body, built from six products), so the cost is O(N); the
+    pseudo-inverse handles single-blob bodies (no rotational block).
+    """
+    arrays = system.arrays
+    nb = system.num_bodies
+    r = arrays.blob_positions(configuration)
+    gram = np.empty((nb, 6, 6))
+    for k in range(6):
+        unit = np.zeros((nb, 6))
+        unit[:, k] = 1.0
+        gram[:, :, k] = np.asarray(arrays.KT_dot(configuration, arrays.K_dot(configuration, unit, r), r)).reshape(nb, 6)
+    scale = np.maximum(np.abs(gram).max(axis=(1, 2)), np.finfo(float).tiny)[:, None, None]
+    inverse = np.linalg.pinv(gram / scale, rcond=1e-12) / scale
+    rhs = np.asarray(arrays.KT_dot(configuration, np.asarray(blob_velocities, dtype=float).reshape(-1, 3), r))
+    return np.einsum('bij,bj->bi', inverse, rhs.reshape(nb, 6))
+
+
+class StochasticGDCRFD(StochasticScheme):
+    """Generalised drifter-corrector (Sprinkle, Balboa Usabiaga, Patankar and Donev 2017, and the group's
+    later roller work): one constrained solve, three Lanczos calls and two unconstrained solves per step.
+
+    With ``B(q) = sqrt(2kT/dt) N K^T M^{-1} M^{1/2}`` (the noise of the
+    constrained solve) and ``B~(q) = sqrt(2kT/dt) (K^T K)^+ K^T M^{1/2}``
+    (the same blob noise projected on rigid motions, no hydrodynamic solve),
+    one step with one W ~ N(0, I) (3N) is::
+
+        U~   = B~(q^n) W                       Lanczos 1 at q^n, unconstrained solve 1
+        div  = W_rfd . (B~(q^n + delta W_rfd) W - U~) / delta
+                                               Lanczos 2 and unconstrained solve 2 at the RFD configuration
+        q*   = q^n + U~ dt/2                   the drifter (predictor)
+        U*   = N F(q*) + B(q*) W               Lanczos 3 at q*, the one constrained solve (at q*)
+        q^{n+1} = q^n + U* dt (1 + div dt/2)
+
+    (translations of the RFD displacement are scaled by the body length and
+    the divergence divides them back).  Every Lanczos call uses the
+    preconditioner of the step (built at q^n), so the three factors are one
+    function ``M^{1/2}(q)``.  Why it is right: the noise covariance is
+    ``B B^T = (2kT/dt) N``; expanding ``B(q*)`` about q^n gives the mean
+    ``(dt/2) d_j B_ik B~_jk`` and the correction factor gives
+    ``(dt/2) B_ik d_j B~_jk``; together ``(dt/2) d_j (B B~^T)_ij`` and
+    ``B B~^T = (2kT/dt) N K^T M^{-1} M K (K^T K)^+ = (2kT/dt) N`` (``K^T K
+    (K^T K)^+`` is the identity on the range of N), so the drift is exactly
+    ``kT div N``: weakly first order with the right equilibrium.
+    ``thermal_drift = False`` drops the correction factor (div = 0), which
+    leaves the drift ``kT div N - kT B div B~`` (wrong; a negative control).
+    Draws: W (3N), then W_rfd (6 Nb).
+    """
+    name = 'stochastic_GDC_RFD'
+
+    def attempt(self, system, step_index, rng, old):
+        W = rng.standard_normal(3 * system.num_blobs)
+        W_rfd = rng.standard_normal(6 * system.num_bodies).reshape(-1, 6)
+        problem = system.mobility_problem(old)
+        pc = self.preconditioner(system, step_index, problem)
+        factor = self.noise_factor()
+        U_tilde = rigid_projection(system, old, system.lanczos_noise(problem, W, factor, pc))
+        divergence = 0.0
+        if self.thermal_drift and self.kT > 0:
+            lengths = self.body_lengths(system)
+            q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
+            noise_rfd = system.lanczos_noise(system.mobility_problem(q_rfd), W, factor, pc)
+            U_rfd = rigid_projection(system, q_rfd, noise_rfd)
+            W_tilde = W_rfd.copy()
+            W_tilde[:, :3] /= lengths[:, None]
+            divergence = float(np.sum((U_rfd - U_tilde) * W_tilde)) / self.delta
+        mid = self.move(old, U_tilde, 0.5 * self.dt)
+        self.check(system, mid)
+        problem_mid = system.mobility_problem(mid)
+        noise_mid = system.lanczos_noise(problem_mid, W, factor, pc)
+        U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid)
+        U = U * (1.0 + 0.5 * self.dt * divergence)
+        return self.move(old, U, self.dt), U
+
+
 # ====================================================================== rigid multiblob, dense algebra
 class DenseScheme(StochasticScheme):
     """Helpers of the dense-algebra schemes (cost O(N^3) per step; best for small systems)."""
@@ -607,4 +712,4 @@ STOCHASTIC_SCHEME_CLASSES = (StochasticFirstOrderRFD, StochasticAdamsBashforth, 
                              StochasticTractionEM, Fixman, StochasticSlipTrapz, StochasticTractionAB,
                              StochasticSlipMid, StochasticSlipMidDLA, StochasticFirstOrderRollers,
                              StochasticAdamsBashforthRollers, StochasticMidPointRollers,
-                             StochasticTrapezoidalRollers)
+                             StochasticTrapezoidalRollers, StochasticEM, StochasticGDCRFD)

@@ -39,6 +39,8 @@ utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
+from stochastic_forcing import compat  # noqa: E402
+
 from sphere import sphere as sph  # noqa: E402
 from sphere.rigid_msd import msd_statistics  # noqa: E402
 from sphere.single_body_integrators import SCHEMES, SingleBodyIntegrator  # noqa: E402
@@ -52,9 +54,9 @@ def equilibrium_averages(model, kT, h_max=None, points=20001):
     h_max = h_max or model.a + 60.0 * kT / model.weight
     h = np.linspace(model.a, h_max, points)[1:]
     density = model.equilibrium_height_density(h, kT)
-    density /= np.trapezoid(density, h)
+    density /= compat.trapezoid(density, h)
     N = model.mobility(np.column_stack((np.zeros_like(h), np.zeros_like(h), h)), None)
-    return np.trapezoid(N * density[:, None, None], h, axis=0), h, density
+    return compat.trapezoid(N * density[:, None, None], h, axis=0), h, density
 
 
 def run(dt, n_steps, end_time, runs=10, scheme='RFD', mobility_model='best', com_offset=sph.COM_OFFSET,

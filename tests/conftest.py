@@ -8,7 +8,12 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 os.environ.setdefault('MKL_NUM_THREADS', '1')
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+# numpy < 2.0 (the oldest supported numpy is 1.26) names numpy.trapezoid trapz; the tests use the new name.
+if not hasattr(np, 'trapezoid'):
+    np.trapezoid = np.trapz
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 REFERENCE_DIR = Path(os.environ.get('RMB_REFERENCE_DIR', REPO_ROOT.parent / 'shared' / 'reference'))

@@ -84,3 +84,64 @@ def test_wall_force_is_minus_gradient_of_wall_energy():
         return g * z + np.where(z < a, eps + eps * (a - z) / b, eps * np.exp(-(z - a) / b))
     h = 1e-7
     np.testing.assert_allclose(forces[:, 2], -(energy(z + h) - energy(z - h)) / (2 * h), rtol=1e-6)
+
+
+# ------------------------------------------------------------------ cell lists (tree_numba, a law with a cutoff)
+def pairs_within(r_vectors, periodic_length, cutoff, law):
+    """Forces (N, 3) summed over the pairs with |r| <= cutoff (minimum image), by the all-pairs python sum."""
+    def masked(r, **kw):
+        return law(r, **kw) * (np.linalg.norm(r, axis=-1) <= cutoff)[..., None]
+    return mbf.calc_blob_blob_forces(r_vectors, periodic_length=periodic_length, pair_force=masked, **PARAMS)
+
+
+def spread_blobs(seed, n=400, box=(30.0, 30.0, 12.0)):
+    """Blobs in a box much larger than the cutoff 2a + 30b = 9.5, with overlaps and a coincident pair."""
+    rng = np.random.default_rng(seed)
+    r = rng.uniform(0, 1, size=(n, 3)) * np.array(box)
+    r[:5] = r[5:10] + rng.normal(scale=0.1, size=(5, 3))
+    r[10] = r[11]
+    return r
+
+
+@pytest.mark.parametrize('periodic_length', [(0.0, 0.0, 0.0), (30.0, 30.0, 0.0), (30.0, 13.0, 12.0), (8.0, 0.0, 0.0)])
+def test_cell_list_equals_the_pairs_within_the_cutoff(periodic_length):
+    """tree_numba = the all-pairs sum over pairs within 2a + 30b (round-off), also with (pseudo-)periodic
+    boxes (one box side shorter than the cutoff included); the neglected remainder is below exp(-30) of the
+    contact force eps/b per neglected pair."""
+    L = np.array(periodic_length)
+    r = spread_blobs(3)
+    cutoff = 2 * PARAMS['blob_radius'] + 30 * PARAMS['debye_length']
+    cell = calculator('tree_numba')(r, periodic_length=L, **PARAMS)
+    within = pairs_within(r, L, cutoff, mbf.blob_blob_force)
+    scale = np.max(np.abs(within))
+    np.testing.assert_allclose(cell, within, rtol=0, atol=1e-13 * scale)
+    everything = mbf.calc_blob_blob_forces(r, periodic_length=L, **PARAMS)
+    contact = PARAMS['repulsion_strength'] / PARAMS['debye_length']
+    assert np.max(np.abs(everything - cell)) <= len(r) * contact * np.exp(-30)
+
+
+def test_cell_list_single_and_no_blobs():
+    f = calculator('tree_numba')
+    assert f(np.zeros((0, 3)), **PARAMS).shape == (0, 3)
+    np.testing.assert_array_equal(f(np.array([[1.0, 2.0, 3.0]]), **PARAMS), np.zeros((1, 3)))
+
+
+def test_python_law_with_a_cutoff_uses_only_the_pairs_within_it():
+    """A user law with an attribute ``cutoff`` gives the sum over the pairs within it (periodic in x, y)."""
+    def law(r, **kw):
+        return mbf.blob_blob_force(r, **kw)
+    law.cutoff = 3.0
+    L = np.array([30.0, 30.0, 0.0])
+    r = spread_blobs(5)
+    forces = mbf.blob_blob_force_calculator('python', pair_force=law)(r, periodic_length=L, **PARAMS)
+    np.testing.assert_allclose(forces, pairs_within(r, L, 3.0, mbf.blob_blob_force), rtol=0,
+                               atol=1e-13 * np.max(np.abs(forces)))
+    assert np.max(np.abs(forces.sum(axis=0))) < 1e-10 * np.max(np.abs(forces))  # Newton's third law
+
+
+def test_law_with_a_bad_cutoff_is_refused():
+    def law(r, **kw):
+        return mbf.blob_blob_force(r, **kw)
+    law.cutoff = -1.0
+    with pytest.raises(UserInputError, match='cutoff'):
+        mbf.blob_blob_force_calculator('python', pair_force=law)

@@ -34,6 +34,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+trapezoid = getattr(np, 'trapezoid', None) or np.trapz  # numpy < 2.0 names it trapz
+
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
@@ -71,7 +73,7 @@ def exact_cdf(b):
 def exact_mean(b):
     grid = np.linspace(0.0, 25.0, 200001)
     d = height_density(grid, b)
-    return np.trapezoid(grid * d, grid) / np.trapezoid(d, grid)
+    return trapezoid(grid * d, grid) / trapezoid(d, grid)
 
 
 def blob_system(n_bodies, b, seed, backend):
@@ -163,7 +165,7 @@ def weak_chart(curves, out, plt):
 def chart_heights(results, out, plt):
     grid = np.linspace(0.0, 5.0, 1000)
     density = height_density(grid, SOFT)
-    density /= np.trapezoid(density, grid)
+    density /= trapezoid(density, grid)
     names = list(results)
     cols = 4
     rows = int(np.ceil(len(names) / cols))
@@ -300,9 +302,9 @@ def boomerang_chart(args, plt):
     h = np.linspace(-0.5, 12.0, 2500)
     energy = sum(blob_energy(h[None, :] + dz[:, i:i + 1]) for i in range(reference.shape[0]))
     density = np.exp(-(energy - energy.min()))
-    weights = np.trapezoid(density, h, axis=1)
+    weights = trapezoid(density, h, axis=1)
     weights /= weights.sum()
-    h_marginal = (weights[:, None] * density / np.trapezoid(density, h, axis=1)[:, None]).sum(axis=0)
+    h_marginal = (weights[:, None] * density / trapezoid(density, h, axis=1)[:, None]).sum(axis=0)
     cdf = np.cumsum(density, axis=1)
     cdf /= cdf[:, -1:]
     n_bodies = 30 if args.quick else 60
@@ -331,7 +333,7 @@ def boomerang_chart(args, plt):
     exact_cos = np.histogram(R[:, 2, 2], bins=cos_edges, weights=weights, density=True)[0]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
     ax1.hist(heights, bins=50, range=(0, 4), density=True, alpha=0.6, label='Slip_Trapz')
-    ax1.plot(h, h_marginal / np.trapezoid(h_marginal, h), 'k-', label='exact')
+    ax1.plot(h, h_marginal / trapezoid(h_marginal, h), 'k-', label='exact')
     ax1.set_xlabel('height of the boomerang apex')
     ax1.set_xlim(0, 4)
     ax1.legend()
@@ -343,7 +345,7 @@ def boomerang_chart(args, plt):
     path = os.path.join(args.out, 'brownian_boomerang_equilibrium.png')
     fig.savefig(path, dpi=80)
     plt.close(fig)
-    exact_h = np.trapezoid(h * h_marginal, h) / np.trapezoid(h_marginal, h)
+    exact_h = trapezoid(h * h_marginal, h) / trapezoid(h_marginal, h)
     print('%d boomerangs x %d steps: <h> = %.4f (exact %.4f), <cos^2> = %.4f (exact %.4f)'
           % (n_bodies, n_steps, heights.mean(), exact_h, np.mean(tilts ** 2), np.sum(weights * R[:, 2, 2] ** 2)))
     print(path)

@@ -38,12 +38,13 @@ STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 # that both lists agree).
 DETERMINISTIC_SCHEMES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
                          'deterministic_adams_bashforth', 'deterministic_forward_euler_rollers',
-                         'deterministic_adams_bashforth_rollers')
+                         'deterministic_adams_bashforth_rollers', 'deterministic_midpoint')
 STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
                       'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
-                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers')
+                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
+                      'stochastic_GDC_RFD')
 DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES
 MCMC_MOVES = ('all_bodies', 'one_body')                        # many_bodyMCMC.sampler.MOVES
 MCMC_ENERGY_IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')  # many_bodyMCMC.mcmc_energy.IMPLEMENTATIONS
@@ -139,8 +140,10 @@ DM = ('dynamic', 'mcmc')
 _SCALE = Range(SCALE_RANGE[0], SCALE_RANGE[1], text='positive, between %g and %g' % SCALE_RANGE,
                fix='beyond that eta a^3 over- or underflows in double precision; rescale the units')
 _SAVE_CLONES = Choice(('one_file_per_step', 'one_file'))
-# 'numba' (a name of later published versions) is an alias of the compiled all-pairs kernel 'C++'.
-_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'radii_numba', 'pycuda', 'auto')
+# 'numba' (a name of later published versions) is an alias of the compiled all-pairs kernel 'C++', and so is
+# 'radii_numba' (the published name of the forces with per-blob radii, which C++ and python use when given);
+# 'tree_numba' (ditto) is the compiled cell list (pairs beyond 2 blob_radius + 30 debye_length neglected).
+_FORCE_IMPLEMENTATIONS = ('None', 'python', 'C++', 'numba', 'radii_numba', 'tree_numba', 'pycuda', 'auto')
 
 OPTION_TABLE = {
     'scheme': _option('str', 'deterministic_forward_euler', SD, Choice(STATIC_SCHEMES + DYNAMIC_SCHEMES),
@@ -164,6 +167,7 @@ OPTION_TABLE = {
     'output_name': _option('str', 'run', SDM),
     'random_state': _option('optional_str', None, DM),
     'seed': _option('optional_int', None, DM, Range(0, text='a non-negative integer')),
+    'random_generator': _option('str', 'auto', DM, Choice(('auto', 'default', 'published'))),
     'repulsion_strength_wall': _option('float', 1.0, SDM),
     'debye_length_wall': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
     'repulsion_strength': _option('float', 1.0, SDM),
@@ -321,7 +325,8 @@ def _convert(kind, name, value, where):
             fail('three numbers')
         return numbers
     if kind == 'grid9':
-        expected = 'nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...)'
+        expected = ('nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...; '
+                    'x0 = x1 with Nx = 1 gives one point on that axis, e.g. a plane z = z0)')
         if len(words) != 9:
             fail(expected)
         try:
@@ -329,7 +334,8 @@ def _convert(kind, name, value, where):
             for axis in range(3):
                 low, high = finite(words[3 * axis], expected), finite(words[3 * axis + 1], expected)
                 cells = int(words[3 * axis + 2])
-                if cells < 1 or not high > low:
+                # a degenerate axis (low = high) holds one point: a plane or a line of the published grids
+                if cells < 1 or not (high > low or (high == low and cells == 1)):
                     fail(expected)
                 grid.append((low, high, cells))
         except UserInputError:

@@ -49,6 +49,7 @@ import uuid
 
 import numpy as np
 
+from stochastic_forcing import generators
 from utils import UserInputError, warn_user
 from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, config_name,  # noqa: F401
                                           format_clones, read_config_snapshot, truncate_config,
@@ -257,28 +258,42 @@ def read_random_state(path, where='random_state'):
                              'instead' % (where, path, type(err).__name__, err))
 
 
-def load_random_state(path, where='random_state'):
-    """The ``numpy.random.Generator`` of the state in ``path`` (see ``read_random_state``).
+def load_random_state(path, where='random_state', generator='auto'):
+    """The generator continuing the state in ``path`` (see ``read_random_state``).
 
-    A published RandomState state (MT19937) gives a Generator on an MT19937
-    bit generator with the same keys and position; its normal and uniform
-    draws are not those RandomState made from it, so a notice says so.
-    Raises UserInputError (naming ``where``) for a file that holds no valid state.
+    ``generator`` (the ``random_generator`` option): 'auto' gives the
+    published generator (numpy's legacy ``RandomState`` on MT19937,
+    :class:`stochastic_forcing.generators.PublishedGenerator`) for a
+    published state or a saved state of that generator, so a published run
+    repeats its draws, and a ``numpy.random.Generator`` otherwise;
+    'published' and 'default' force one.  A published state loaded into the
+    default generator draws other numbers than the published code (a notice
+    says so).  Raises UserInputError (naming ``where``) for a file that holds
+    no valid state.
     """
     state = read_random_state(path, where)
     if isinstance(state, tuple):
-        warn_user('%s: %s holds a published numpy RandomState state (MT19937, position %d); the run uses an '
-                  'MT19937 generator started at that state, whose draws differ from those of the published code'
-                  % (where, path, state[2]))
+        if generator != 'default':
+            return generators.PublishedGenerator.from_legacy_state(state)
+        warn_user('%s: %s holds a published numpy RandomState state (MT19937, position %d); with random_generator '
+                  'default the run uses an MT19937 Generator started at that state, whose draws differ from those '
+                  'of the published code (random_generator published repeats them)' % (where, path, state[2]))
         state = {'bit_generator': 'MT19937', 'state': {'key': state[1], 'pos': state[2]}}
     name = state.get('bit_generator') if isinstance(state, dict) else None
     if not (isinstance(name, str) and isinstance(getattr(np.random, name, None), type)
             and issubclass(getattr(np.random, name), np.random.BitGenerator)):
         raise UserInputError('%s: %s does not hold a numpy random state; give a .random_state file, or use seed '
                              'instead' % (where, path))
+    legacy = generator == 'published' or (generator == 'auto' and generators.is_legacy_state(state))
     try:
+        if legacy:
+            if name != 'MT19937':
+                raise ValueError('the published generator runs on MT19937, the file holds a %s state' % name)
+            rng = generators.PublishedGenerator()
+            rng.bit_generator.state = state
+            return rng
         bit_generator = getattr(np.random, name)()
-        bit_generator.state = state
+        bit_generator.state = {'bit_generator': name, 'state': state['state']} if 'has_gauss' in state else state
     except Exception as err:
         raise UserInputError('%s: %s holds a damaged random state (%s)' % (where, path, err))
     return np.random.Generator(bit_generator)
@@ -287,15 +302,20 @@ def load_random_state(path, where='random_state'):
 def make_generator(options):
     """The run's generator (SPEC decision 7): from ``random_state`` if given, else seeded by ``seed``.
 
-    Without either, numpy seeds from the operating system (the state is
-    still saved in ``.random_state``, so the run can be repeated).
+    ``random_generator`` chooses numpy's ``Generator`` ('default', PCG64) or
+    the published code's legacy ``RandomState`` ('published'); 'auto' (the
+    default) is 'published' for a published ``random_state`` and 'default'
+    otherwise.  Without ``seed`` or ``random_state``, numpy seeds from the
+    operating system (the state is still saved in ``.random_state``, so the
+    run can be repeated).
     """
+    kind = getattr(options, 'random_generator', 'auto') or 'auto'
     if options.random_state is not None:
-        return load_random_state(options.random_state, options.where('random_state'))
+        return load_random_state(options.random_state, options.where('random_state'), kind)
     if options.seed is not None and options.seed < 0:
         raise UserInputError('%s: seed must be a non-negative integer, got %d'
                              % (options.where('seed'), options.seed))
-    return np.random.default_rng(options.seed)
+    return generators.make('published' if kind == 'published' else 'default', options.seed)
 
 
 def save_random_state(path, rng):

@@ -1,7 +1,8 @@
 """Fluid velocity on a rectilinear grid, written as a legacy VTK file.
 
 The grid option ``x0 x1 Nx y0 y1 Ny z0 z1 Nz`` splits the box into
-``Nx Ny Nz`` cells; the velocity is computed at the cell centres (x fastest,
+``Nx Ny Nz`` cells (an axis with ``x0 = x1`` and one cell is a single
+point: ``... z0 z0 1`` is the plane z = z0, as in the published examples); the velocity is computed at the cell centres (x fastest,
 then y, then z) as the flow of the blob constraint forces ``lambda``:
 ``u(x) = M_source_target(x, r_blobs) lambda`` with sources of radius ``a``
 (one number, or the radius of each blob when the vertex files give radii)
@@ -13,11 +14,14 @@ import numpy as np
 
 
 def grid_edges(grid):
-    """Cell edges along x, y, z: tuple of three arrays of length N_axis + 1.
+    """Cell edges along x, y, z: tuple of three arrays of length N_axis + 1 (1 on a degenerate axis).
 
-    ``grid`` is ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz)).
+    ``grid`` is ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz)).  An axis with
+    ``x0 = x1`` (then ``Nx = 1``) holds one point, so the grid is a plane
+    (or a line) of cells of zero thickness; its edge is the single
+    coordinate ``x0``, which VTK readers show as a two-dimensional grid.
     """
-    return tuple(np.linspace(low, high, cells + 1) for low, high, cells in grid)
+    return tuple(np.array([low]) if high == low else np.linspace(low, high, cells + 1) for low, high, cells in grid)
 
 
 def cell_centres(grid):

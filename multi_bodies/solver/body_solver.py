@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions
+from stochastic_forcing import compat
 
 GMRES_RESTART = 60
 GMRES_MAXITER = 1000
@@ -344,8 +345,8 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
         if print_residual:
             print('gmres = %d %s' % (iterations[0], residual_norm))
 
-    solution, info = spla.gmres(operator, rhs, x0=x0, rtol=tolerance, atol=0.0, restart=restart, maxiter=maxiter,
-                                M=preconditioner, callback=count, callback_type='legacy')
+    solution, info = compat.gmres(operator, rhs, tolerance, x0=x0, atol=0.0, restart=restart, maxiter=maxiter,
+                                  M=preconditioner, callback=count, callback_type='legacy')
     residual = float(np.linalg.norm(rhs - operator.matvec(solution)) / rhs_norm)
     return GmresResult(solution, iterations[0], info == 0, residual)
 

@@ -247,9 +247,60 @@ default_zero_blobs.published_helper = 'default_zero_blobs'
 active_body_slip.published_helper = 'active_body_slip'
 
 
+def default_blob_blob_cutoff(blob_radius=1.0, debye_length=1.0, **kwargs):
+    """``2 a + 30 b``: beyond it the default soft repulsion is below ``exp(-30)`` of its contact value
+    (the cutoff of the published ``tree_numba``)."""
+    return 2.0 * float(blob_radius) + 30.0 * float(debye_length)
+
+
+def calc_blob_blob_forces_cell_list(r_vectors, cutoff, pair_force, periodic_length=(0.0, 0.0, 0.0), **kwargs):
+    """Forces (N, 3) of the pairs closer than ``cutoff`` (minimum image on periodic axes), O(N) neighbours.
+
+    ``pair_force(r (P, 3), **kwargs) -> (P, 3)`` is the law of one pair (force on i, r from i to j),
+    vectorised over pairs (a law of one pair only, r (3,) -> (3,), is called pair by pair).  The pairs come
+    from ``scipy.spatial.cKDTree`` on a box that is periodic on the periodic axes and, on the others, wider
+    than the blobs' extent plus the cutoff (so no pair wraps there).
+    """
+    from scipy.spatial import cKDTree
+    r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+    n = r_vectors.shape[0]
+    forces = np.zeros_like(r_vectors)
+    if n < 2:
+        return forces
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    periodic = L > 0
+    shifted = r_vectors.copy()
+    box = np.empty(3)
+    for d in range(3):
+        if periodic[d]:
+            shifted[:, d] = np.mod(shifted[:, d], L[d])
+            shifted[:, d][shifted[:, d] >= L[d]] = 0.0
+            box[d] = L[d]
+        else:
+            low = shifted[:, d].min()
+            shifted[:, d] -= low
+            box[d] = shifted[:, d].max() + 2.0 * cutoff + 1.0
+    pairs = cKDTree(shifted, boxsize=box).query_pairs(float(cutoff), output_type='ndarray')
+    if pairs.size == 0:
+        return forces
+    i, j = pairs[:, 0], pairs[:, 1]
+    r = minimum_image(r_vectors[j] - r_vectors[i], L)
+    try:
+        on_i = np.asarray(pair_force(r, periodic_length=periodic_length, **kwargs), dtype=float)
+        vectorised = on_i.shape == r.shape
+    except Exception:
+        vectorised = False
+    if not vectorised:
+        on_i = np.array([pair_force(rk, periodic_length=periodic_length, **kwargs) for rk in r], dtype=float)
+    # the law is that of a pair: the force on j (r_i - r_j) is minus that on i
+    np.add.at(forces, i, on_i)
+    np.add.at(forces, j, -on_i)
+    return forces
+
+
 def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=None, python_forces=None,
                                radii_given=False):
-    """The all-pairs blob force function for ``blob_blob_force_implementation``.
+    """The blob force function for ``blob_blob_force_implementation``.
 
     Returns None for 'None' (no blob-blob forces), else
     ``f(r_vectors (N, 3), **physics_keywords) -> (N, 3)``:
@@ -257,9 +308,16 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
     * 'python': ``python_forces`` if given (the all-pairs function that
       :class:`PhysicsHooks` builds around a user's pair law), else
       ``calc_blob_blob_forces`` with the vectorised pair law ``pair_force``
-      (default this module's ``blob_blob_force``);
+      (default this module's ``blob_blob_force``).  A law with an attribute
+      ``cutoff`` (a length, or a function of the physics keywords returning
+      one) declares that it vanishes beyond it: then only the pairs within
+      the cutoff are visited (``calc_blob_blob_forces_cell_list``, O(N));
     * 'C++' (alias 'numba', the later published name): the OpenMP kernel of
-      ``multi_bodies.solver._forces_cpp`` (default law);
+      ``multi_bodies.solver._forces_cpp`` (default law, all pairs);
+    * 'tree_numba' (the later published name of the O(N) version): the C++
+      cell list of the default law, which neglects pairs farther than
+      ``2 blob_radius + 30 debye_length`` (their force is below ``exp(-30)``
+      of the contact force);
     * 'pycuda': ``pycuda_forces`` if given (the function of a
       ``forces_pycuda_user_defined.py``), else the CuPy kernel of
       ``multi_bodies.solver.forces_pycuda`` (imported only here).
@@ -267,26 +325,45 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
       the C++ kernel; python and C++ use the radii as well when the vertex
       files give them (the function then takes ``blob_radii`` (N,)).
 
-    ``radii_given``: the vertex files give per-blob radii; pycuda, which has
-    one contact distance, is then refused.
+    ``radii_given``: the vertex files give per-blob radii; pycuda and
+    tree_numba, which have one contact distance, are then refused.
     """
     if implementation == 'None':
         return None
     if implementation == 'radii_numba':
         implementation = 'C++'
-    if radii_given and implementation == 'pycuda':
-        raise UserInputError("blob_blob_force_implementation pycuda uses one blob_radius, but the vertex files give "
-                             "per-blob radii (fourth column); use python, C++ or radii_numba")
+    if radii_given and implementation in ('pycuda', 'tree_numba'):
+        raise UserInputError("blob_blob_force_implementation %s uses one blob_radius, but the vertex files give "
+                             "per-blob radii (fourth column); use python, C++ or radii_numba" % implementation)
     if implementation == 'python':
+        cutoff = getattr(pair_force, 'cutoff', None)
+        if cutoff is not None:
+            if not (callable(cutoff) or (isinstance(cutoff, (int, float)) and cutoff > 0 and np.isfinite(cutoff))):
+                raise UserInputError('blob_blob_force.cutoff must be a positive length (or a function of the '
+                                     'physics keywords returning one), got %r' % (cutoff,))
+
+            def cell_list_forces(r_vectors, **kw):
+                length = float(cutoff(**kw)) if callable(cutoff) else float(cutoff)
+                return calc_blob_blob_forces_cell_list(r_vectors, length, pair_force, **kw)
+            return cell_list_forces
         if python_forces is not None:
             return python_forces
         return lambda r_vectors, **kw: calc_blob_blob_forces(r_vectors, pair_force=pair_force, **kw)
-    if implementation in ('C++', 'numba'):
+    if implementation in ('C++', 'numba', 'tree_numba'):
         try:
             from multi_bodies.solver import _forces_cpp
         except ImportError as err:
-            raise UserInputError("blob_blob_force_implementation C++: the extension multi_bodies.solver._forces_cpp "
-                                 "is not built (%s); run 'pip install -e .' or use python" % err)
+            raise UserInputError("blob_blob_force_implementation %s: the extension multi_bodies.solver._forces_cpp "
+                                 "is not built (%s); run 'pip install -e .' or use python" % (implementation, err))
+
+        if implementation == 'tree_numba':
+            def cell_list_cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0,
+                                     debye_length=1.0, blob_radius=1.0, **kw):
+                return _forces_cpp.blob_blob_forces_cell_list(
+                    np.asarray(r_vectors, dtype=float).reshape(-1, 3), np.asarray(periodic_length, dtype=float).reshape(3),
+                    float(repulsion_strength), float(debye_length), float(blob_radius),
+                    default_blob_blob_cutoff(blob_radius, debye_length))
+            return cell_list_cpp_forces
 
         def cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0, debye_length=1.0,
                        blob_radius=1.0, blob_radii=None, **kw):
@@ -310,8 +387,7 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
             return pycuda_forces
         return forces_pycuda.calc_blob_blob_forces_pycuda
     raise UserInputError("blob_blob_force_implementation '%s' is unknown; use None, python, C++ (or numba, "
-                         "radii_numba) or pycuda"
-                         % implementation)
+                         "radii_numba), tree_numba or pycuda" % implementation)
 
 
 def body_body_force_calculator(implementation, pair_force_torque=None, python_forces_torques=None):

@@ -16,6 +16,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -112,6 +113,120 @@ Array blob_blob_forces_radii(const Array &r_vectors, const Array &periodic_lengt
   return blob_blob_forces_any<true>(r_vectors, periodic_length, repulsion_strength, debye_length, 0.0, &blob_radii);
 }
 
+// The same soft repulsion with a cell list: only pairs with |r| <= cutoff (minimum image) are summed, in
+// O(N) for a bounded density.  Periodic axes (L > 0) are cut into floor(L / cutoff) cells (at least one) and
+// positions are wrapped into [0, L) for the binning only; the other axes span the blobs' bounding box (the
+// pseudo-periodic boxes of the published code: periodic in x and y above a wall).  Cells are at least
+// `cutoff` wide (wider when the box would need more than ~2 cells per blob), so every pair within the
+// cutoff lies in neighbouring cells; the neighbour offsets of an axis with fewer than three cells are
+// deduplicated, so each pair is found once per blob.  Each blob sums its own neighbours (every pair twice,
+// no write conflicts), so OpenMP needs no accumulators.
+Array blob_blob_forces_cell_list(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
+                                 double debye_length, double blob_radius, double cutoff) {
+  if (!(r_vectors.ndim() == 2 && r_vectors.shape(1) == 3) && !(r_vectors.ndim() == 1 && r_vectors.shape(0) % 3 == 0))
+    throw std::invalid_argument("r_vectors must have shape (N, 3)");
+  if (periodic_length.size() != 3) throw std::invalid_argument("periodic_length must hold 3 numbers");
+  if (debye_length <= 0.0) throw std::invalid_argument("debye_length must be positive");
+  if (!(cutoff > 0.0) || !std::isfinite(cutoff)) throw std::invalid_argument("cutoff must be positive and finite");
+  const long n = static_cast<long>(r_vectors.size() / 3);
+  const double *rp = r_vectors.data();
+  const double *Lp = periodic_length.data();
+  for (long k = 0; k < 3 * n; ++k)
+    if (!std::isfinite(rp[k])) throw std::invalid_argument("r_vectors must be finite");
+  const rmb::SoftRepulsion law = rmb::soft_repulsion(repulsion_strength, debye_length, 2.0 * blob_radius);
+  Array result({static_cast<py::ssize_t>(n), static_cast<py::ssize_t>(3)});
+  double *out = result.mutable_data();
+  if (n == 0) return result;
+  py::gil_scoped_release release;
+  // cell geometry per axis
+  double low[3], width[3];
+  long cells[3];
+  bool periodic[3];
+  for (int d = 0; d < 3; ++d) {
+    periodic[d] = Lp[d] > 0.0;
+    if (periodic[d]) {
+      low[d] = 0.0;
+      cells[d] = std::max(1L, static_cast<long>(std::floor(Lp[d] / cutoff)));
+      width[d] = Lp[d] / cells[d];
+    } else {
+      double lo = rp[d], hi = rp[d];
+      for (long i = 1; i < n; ++i) lo = std::min(lo, rp[3 * i + d]), hi = std::max(hi, rp[3 * i + d]);
+      low[d] = lo;
+      cells[d] = std::max(1L, static_cast<long>(std::floor((hi - lo) / cutoff)));
+      width[d] = std::max((hi - lo) / cells[d], cutoff);
+    }
+  }
+  // at most ~2 cells per blob: merge cells (never narrower than the cutoff) on sparse boxes
+  while (static_cast<double>(cells[0]) * cells[1] * cells[2] > 2.0 * n + 27.0) {
+    int d = 0;
+    for (int e = 1; e < 3; ++e)
+      if (cells[e] > cells[d]) d = e;
+    const long merged = std::max(1L, cells[d] / 2);
+    width[d] *= static_cast<double>(cells[d]) / merged;
+    cells[d] = merged;
+  }
+  auto axis_cell = [&](double x, int d) {
+    if (periodic[d]) x -= Lp[d] * std::floor(x / Lp[d]);
+    long c = static_cast<long>(std::floor((x - low[d]) / width[d]));
+    return std::min(std::max(c, 0L), cells[d] - 1);
+  };
+  const long total = cells[0] * cells[1] * cells[2];
+  std::vector<long> cell_of(n), start(total + 1, 0), order(n);
+  for (long i = 0; i < n; ++i) {
+    const long c = (axis_cell(rp[3 * i], 0) * cells[1] + axis_cell(rp[3 * i + 1], 1)) * cells[2] +
+                   axis_cell(rp[3 * i + 2], 2);
+    cell_of[i] = c;
+    ++start[c + 1];
+  }
+  for (long c = 0; c < total; ++c) start[c + 1] += start[c];
+  {
+    std::vector<long> fill(start.begin(), start.end() - 1);
+    for (long i = 0; i < n; ++i) order[fill[cell_of[i]]++] = i;
+  }
+  // neighbour cells of an axis cell index: offsets -1, 0, 1 (wrapped on periodic axes), duplicates removed
+  auto neighbours = [&](long c, int d, long *list) {
+    int count = 0;
+    for (long o = -1; o <= 1; ++o) {
+      long m = c + o;
+      if (periodic[d]) m = ((m % cells[d]) + cells[d]) % cells[d];
+      else if (m < 0 || m >= cells[d]) continue;
+      bool seen = false;
+      for (int k = 0; k < count; ++k) seen = seen || list[k] == m;
+      if (!seen) list[count++] = m;
+    }
+    return count;
+  };
+  const double cutoff2 = cutoff * cutoff;
+  const bool use_threads = n > 2000;
+#pragma omp parallel for schedule(dynamic, 64) if (use_threads)
+  for (long i = 0; i < n; ++i) {
+    const double xi = rp[3 * i], yi = rp[3 * i + 1], zi = rp[3 * i + 2];
+    const long c = cell_of[i];
+    const long cz = c % cells[2], cy = (c / cells[2]) % cells[1], cx = c / (cells[1] * cells[2]);
+    long nx[3], ny[3], nz[3];
+    const int kx = neighbours(cx, 0, nx), ky = neighbours(cy, 1, ny), kz = neighbours(cz, 2, nz);
+    double fx = 0.0, fy = 0.0, fz = 0.0;
+    for (int a = 0; a < kx; ++a)
+      for (int b = 0; b < ky; ++b)
+        for (int e = 0; e < kz; ++e) {
+          const long cell = (nx[a] * cells[1] + ny[b]) * cells[2] + nz[e];
+          for (long p = start[cell]; p < start[cell + 1]; ++p) {
+            const long j = order[p];
+            if (j == i) continue;
+            const double rx = rmb::minimum_image(rp[3 * j] - xi, Lp[0]);
+            const double ry = rmb::minimum_image(rp[3 * j + 1] - yi, Lp[1]);
+            const double rz = rmb::minimum_image(rp[3 * j + 2] - zi, Lp[2]);
+            const double r2 = rx * rx + ry * ry + rz * rz;
+            if (r2 > cutoff2) continue;
+            const double m = rmb::blob_blob_force_factor(std::sqrt(r2), law);
+            fx -= m * rx, fy -= m * ry, fz -= m * rz;
+          }
+        }
+    out[3 * i] = fx, out[3 * i + 1] = fy, out[3 * i + 2] = fz;
+  }
+  return result;
+}
+
 // The laws of pair_laws.h at many points, for the tests: law "wall" (x = heights z,
 // contact a), "blob_blob" (x = distances, contact 2a) or "body_body" (x = distances).
 // Returns (energies, forces) of the shape of x: the wall force f_z, and for the pair laws
@@ -161,13 +276,16 @@ int max_threads() {
 }  // namespace
 
 PYBIND11_MODULE(_forces_cpp, m) {
-  m.doc() = "C++ (OpenMP) blob-blob soft repulsion of all pairs";
+  m.doc() = "C++ (OpenMP) blob-blob soft repulsion: all pairs, or the pairs within a cutoff (cell list)";
   m.def("blob_blob_forces", &blob_blob_forces, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"),
         "Forces (N, 3) of the default soft repulsion between all blob pairs; r_vectors (N, 3).");
   m.def("blob_blob_forces_radii", &blob_blob_forces_radii, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radii"),
         "Forces (N, 3) of the soft repulsion with per-blob radii (N,): contact distance a_i + a_j.");
+  m.def("blob_blob_forces_cell_list", &blob_blob_forces_cell_list, py::arg("r_vectors"), py::arg("periodic_length"),
+        py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"), py::arg("cutoff"),
+        "Forces (N, 3) of the default soft repulsion over the pairs closer than cutoff (cell list, O(N)).");
   m.def("pair_laws", &pair_laws, py::arg("law"), py::arg("x"), py::arg("repulsion_strength"),
         py::arg("debye_length"), py::arg("blob_radius"),
         "(energies, forces) of the header's law 'wall', 'blob_blob' or 'body_body' at the heights or distances x.");
