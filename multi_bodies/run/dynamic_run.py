@@ -21,7 +21,7 @@ import numpy as np
 import utils
 from multi_bodies.files.input_options import check_options
 from multi_bodies.run import run_output
-from multi_bodies.run.run_setup import prepare, start_output, write_run_start
+from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies, write_run_start
 from quaternion_integrator.schemes import make_scheme
 
 class DynamicRun:
@@ -76,13 +76,17 @@ class DynamicRun:
                 'counters': self.system.counters(self.scheme)}
 
     def write_info(self, extra_lines=()):
-        run_output.write_info(self.options.output_name + '.info', self.system.counters(self.scheme), extra_lines)
+        counters = self.system.counters(self.scheme)
+        if getattr(self.system, 'articulated', None) is not None:  # the published count of the nonlinear solver
+            counters['nonlinear_iterations_count'] = self.system.articulated.nonlinear_iterations
+        run_output.write_info(self.options.output_name + '.info', counters, extra_lines)
 
     def run(self):
         """The time loop; returns the exit status."""
         options, system, scheme = self.options, self.system, self.scheme
         restart = options.initial_step > 0
         write_run_start(options, self.types, system.num_blobs, self.rng, restart=restart)
+        write_articulated_copies(options)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=self.restart)

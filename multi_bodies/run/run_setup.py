@@ -62,7 +62,7 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
 
     Returns (list of Body, list of (ID, number of bodies) per structure type).
     """
-    if not options.structures:
+    if not options.structures and not getattr(options, 'articulated', None):
         raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
                                    % options.input_file)
     bodies, types = [], []
@@ -113,7 +113,84 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             body.body_length = body_length
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
+    read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies)
     return bodies, types
+
+
+def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies=False):
+    """Append the bodies of every ``articulated`` line to ``bodies`` and ``types``; returns the ArticulatedSet or None.
+
+    Body ``i`` of a line's clones file uses vertex file ``i % n`` of its ``.list_vertex`` file (``n`` bodies per
+    articulated body, the first number of the ``.const`` file).  The set is kept as ``options._articulated_set``.
+    """
+    from multi_bodies.solver import articulated as art
+    specs = getattr(options, 'articulated', None) or []
+    options._articulated_set = None
+    if not specs:
+        return None
+    if getattr(options, 'initial_step', 0) > 0:
+        raise utils.UserInputError('%s: restarts (initial_step > 0) of runs with articulated bodies are not '
+                                   'supported; start from a clones file of the saved step instead'
+                                   % options.where('initial_step'))
+    articulated = art.ArticulatedSet()
+    for spec in specs:
+        names = art.read_list_vertex_file(spec.list_vertex_file, spec.where)
+        const = art.read_const_file(spec.const_file, spec.where)
+        if const.num_bodies != len(names):
+            raise utils.UserInputError('%s: %s names %d vertex files but %s has %d bodies per articulated body'
+                                       % (spec.where, spec.list_vertex_file, len(names), spec.const_file,
+                                          const.num_bodies))
+        references = {}
+        for name in names:
+            if name not in references:
+                references[name] = read_vertex_file(name, spec.where)
+                if single_blob_bodies and references[name].shape[0] != 1:
+                    raise utils.UserInputError('%s: articulated_deterministic_forward_euler_rollers needs single-'
+                                               'blob bodies, but %s has %d blobs'
+                                               % (spec.where, name, references[name].shape[0]))
+        locations, orientations = read_clones_file(spec.clones_file, spec.where)
+        if locations.shape[0] % const.num_bodies:
+            raise utils.UserInputError('%s: %s has %d bodies, not a multiple of the %d bodies of one articulated '
+                                       'body (%s)' % (spec.where, spec.clones_file, locations.shape[0],
+                                                      const.num_bodies, spec.const_file))
+        print('Creating articulated bodies = %s' % spec.clones_file)
+        first = len(bodies)
+        lengths = {}
+        for i, (location, orientation) in enumerate(zip(locations, orientations)):
+            name = names[i % const.num_bodies]
+            body = Body(location, orientation, references[name], options.blob_radius)
+            body.ID = spec.ID
+            set_slip_by_ID(body, None)
+            simplify_slip_function(body)
+            if name not in lengths:
+                lengths[name] = body.calc_body_length()
+            body.body_length = lengths[name]
+            bodies.append(body)
+        articulated.add(const, first, locations.shape[0] // const.num_bodies)
+        types.append((spec.ID, locations.shape[0]))
+    options._articulated_set = articulated
+    return articulated
+
+
+def array_runs(bodies):
+    """Numbers of consecutive bodies sharing one reference configuration (the types of ``BodyArrays``)."""
+    runs, previous = [], None
+    for b in bodies:
+        r = b.reference_configuration
+        if runs and r.shape == previous.shape and np.array_equal(r, previous):
+            runs[-1] += 1
+        else:
+            runs.append(1)
+            previous = r
+    return runs
+
+
+def write_articulated_copies(options):
+    """Copies of the ``.list_vertex`` and ``.const`` files of every articulated line (``output_name.<file name>``)."""
+    import shutil
+    for spec in getattr(options, 'articulated', None) or []:
+        for path in (spec.list_vertex_file, spec.const_file):
+            shutil.copyfile(path, '%s.%s' % (options.output_name, os.path.basename(path)))
 
 
 def _is_default_helper(function, name):
@@ -180,7 +257,8 @@ def check_start(options, system, types):
     if invalid.size:
         first = int(invalid[0])
         start = 0
-        for (structure_id, count), spec in zip(types, options.structures):
+        for (structure_id, count), spec in zip(types, list(options.structures) +
+                                               list(getattr(options, 'articulated', None) or [])):
             if first < start + count:
                 raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
                                            '%d bodies are affected. Move the bodies up in the clones file.'
@@ -225,12 +303,16 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
                                     restart_record=restart_record)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
-    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    articulated = getattr(options, '_articulated_set', None)
+    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if articulated is not None
+                                   else [count for _, count in types])
     if script == 'mcmc':
         return RunSetup(hooks, bodies, types, body_arrays, None)
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
     system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=log)
+    system.articulated = articulated  # joints of the articulated bodies (None without 'articulated' lines)
+    system.nonlinear_tolerance = options.nonlinear_solver_tolerance
     log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))
