@@ -20,8 +20,6 @@ The system must carry ``system.articulated`` (an ``ArticulatedSet``, set by
 ``run_setup.prepare``) and ``system.nonlinear_tolerance``.  Velocities have
 shape (Nb, 6) ``[v, w]``.
 """
-import numpy as np
-
 from multi_bodies.solver import articulated as art
 from quaternion_integrator.scheme_base import InvalidConfiguration, Scheme, _check_finite, moved
 from utils import SimulationStopped, UserInputError
@@ -42,19 +40,10 @@ class ArticulatedScheme(Scheme):
     def constrained_velocities(self, system, configuration, t):
         """Velocities (Nb, 6) with the joints at ``configuration`` and time ``t`` (counted, warm started)."""
         articulated = self.articulated_set(system)
-        if self.single_blobs:
-            force_torque = system.forces_torques(configuration)
-            U, _, iterations, converged, residual, guess = art.roller_articulated_velocities(
-                system, articulated, configuration, t, force_torque, x0=self.first_guess)
-        else:
-            _, force_torque, slip = system.forces_and_slip(configuration)
-            problem = art.ArticulatedProblem(system.mobility_problem(configuration), articulated, configuration, t)
-            preconditioner = art.ArticulatedPreconditioner(problem, system.build_preconditioner(configuration))
-            result = art.solve_articulated(problem, problem.rhs(slip, force_torque), preconditioner,
-                                           system.tolerance, x0=self.first_guess,
-                                           print_residual=system.print_residual)
-            U, iterations, converged, residual, guess = result.velocities, result.iterations, result.converged, \
-                result.residual, result.normalised_solution
+        result = art.articulated_velocities(system, articulated, configuration, t, x0=self.first_guess,
+                                            single_blobs=self.single_blobs)
+        U, iterations, converged, residual, guess = result.velocities, result.iterations, result.converged, \
+            result.residual, result.normalised_solution
         system.gmres_iterations += iterations
         system.solves['deterministic'] += 1
         system.last_iterations = iterations

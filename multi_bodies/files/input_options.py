@@ -478,7 +478,8 @@ def check_articulated(options):
     lines = getattr(options, 'articulated', [])
     if lines and options.scheme not in ARTICULATED_SCHEMES + STATIC_SCHEMES:
         raise UserInputError("%s: scheme '%s' cannot move articulated bodies (the 'articulated' line %s); use %s"
-                             % (options.where('scheme'), options.scheme, lines[0].where, ', '.join(ARTICULATED_SCHEMES)))
+                             % (options.where('scheme'), options.scheme, lines[0].where,
+                                ', '.join(ARTICULATED_SCHEMES)))
     if options.scheme in ARTICULATED_SCHEMES and not lines:
         raise UserInputError("%s: scheme '%s' moves articulated bodies, but the file has no 'articulated "
                              "<file.list_vertex> <file.clones> <file.const>' line" % (options.where('scheme'),

@@ -163,7 +163,7 @@ def _cross(a, b):
 
 
 def quaternion_rotation(theta):
-    """Rotation matrices (n, 3, 3) of (not necessarily unit) scalar-first quaternions theta (n, 4), published formula."""
+    """Rotation matrices (n, 3, 3) of (not necessarily unit) scalar-first quaternions theta (n, 4)."""
     s, p = theta[:, 0], theta[:, 1:]
     R = 2.0 * (p[:, :, None] * p[:, None, :])
     diag = 2.0 * s ** 2 - 1.0
@@ -229,7 +229,7 @@ class ArticulatedSet:
         return self.bodies.shape[0]
 
     def add(self, const, first_body, num_copies):
-        """Add ``num_copies`` articulated bodies of the :data:`ConstFile` ``const`` starting at global body ``first_body``."""
+        """Add ``num_copies`` articulated bodies of the :data:`ConstFile` ``const`` from global body ``first_body``."""
         n = const.num_bodies
         for k in range(num_copies):
             start = first_body + k * n
@@ -558,3 +558,27 @@ def roller_articulated_velocities(system, articulated, configuration, t, force_t
             result.residual, result.x
     velocities = U_free + M6(articulated.CT_dot(a, phi, nb))
     return velocities, phi.reshape(-1, 3), iterations, converged, residual, guess
+
+
+def articulated_velocities(system, articulated, configuration, t, force_torque=None, slip=None, x0=None,
+                           single_blobs=False):
+    """Velocities of every body with the joints of ``articulated`` at ``configuration`` and time ``t``.
+
+    force_torque (Nb, 6) and slip (N, 3): None for those of the system's hooks.  ``single_blobs``: the roller
+    model (:func:`roller_articulated_velocities`), else the blob saddle-point problem (:class:`ArticulatedProblem`).
+    Returns :data:`ArticulatedSolution` (``lambda_blobs`` None for single blobs).  Nothing is counted here.
+    """
+    if single_blobs:
+        if force_torque is None:
+            force_torque = system.forces_torques(configuration)
+        U, phi, iterations, converged, residual, guess = roller_articulated_velocities(
+            system, articulated, configuration, t, force_torque, x0=x0)
+        return ArticulatedSolution(U, phi, None, iterations, converged, residual, guess)
+    if force_torque is None or slip is None:
+        _, hooks_force_torque, hooks_slip = system.forces_and_slip(configuration)
+        force_torque = hooks_force_torque if force_torque is None else force_torque
+        slip = hooks_slip if slip is None else slip
+    problem = ArticulatedProblem(system.mobility_problem(configuration), articulated, configuration, t)
+    preconditioner = ArticulatedPreconditioner(problem, system.build_preconditioner(configuration))
+    return solve_articulated(problem, problem.rhs(slip, force_torque), preconditioner, system.tolerance, x0=x0,
+                             print_residual=system.print_residual)
