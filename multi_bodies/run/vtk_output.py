@@ -371,7 +371,10 @@ def load_run(options):
     """Bodies of the input file: (BodyArrays with the slip of the slip files and hooks, types)."""
     hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
     bodies, types = read_bodies(options, hooks.set_slip_by_ID)
-    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    # articulated lines mix vertex files: the array types are the runs of bodies sharing one reference
+    from multi_bodies.run.run_setup import array_runs
+    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if getattr(options, 'articulated', None)
+                                   else [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
     return body_arrays, types

@@ -397,11 +397,23 @@ def _skew(v):
 
 
 # ---------------------------------------------------------------------------------------------- the solve
+# Singular values of an articulated body's C below this fraction of the largest are redundant joint directions:
+# two joints on one hinge axis give a sixth one of the size of the axes' misalignment (the joints hold to
+# nonlinear_solver_tolerance, not exactly), which would make the solve ill-conditioned.
+RANK_RCOND = 1e-6
 class ArticulatedProblem:
-    """The mobility problem with joints at one configuration (unknowns ``[lambda (3N), U (6Nb), phi (3Nc)]``).
+    """The mobility problem with joints at one configuration (unknowns ``[lambda (3N), U (6Nb), psi]``).
 
     Reuses the products of a ``body_solver.MobilityProblem`` (``M_dot``, ``K_dot``, ``KT_dot``) and adds the
-    rows of ``C U = B``.  Attributes: ``problem``, ``articulated``, ``a`` (Nc, 6) lab links, ``size``, ``operator``.
+    rows of ``C U = B``.  Redundant joints (three joints locking two bodies, two joints on one hinge axis) make
+    rows of ``C`` dependent and the saddle-point system singular; so, per articulated body, ``C`` is replaced by
+    ``Q^T C`` with ``Q`` (3 nc, r) an orthonormal basis of its range (SVD, ``r`` its rank to ``RANK_RCOND``), and
+    ``B`` by
+    ``Q^T B``: the same velocities, a nonsingular system, reduced multipliers ``psi`` (r per articulated body)
+    and joint forces ``phi = Q psi`` (the least-norm ones).
+
+    Attributes: ``problem``, ``articulated``, ``a`` (Nc, 6) lab links, ``rates``, ``reduced`` (per articulated
+    body: (Q (3nc, r), Q^T C (r, 6nb))), ``num_multipliers``, ``size``, ``operator``.
     """
 
     def __init__(self, problem, articulated, configuration, t):
@@ -409,62 +421,100 @@ class ArticulatedProblem:
         self.a, self.rates = articulated.lab_links(configuration, t)
         self.num_blobs, self.num_bodies = problem.num_blobs, problem.num_bodies
         self.num_constraints = articulated.num_constraints
-        self.size = 3 * self.num_blobs + 6 * self.num_bodies + 3 * self.num_constraints
+        self.reduced, self.offsets = [], [0]
+        for group in articulated.groups:
+            C = articulated.C_dense_group(group, self.a)
+            if C.size == 0:
+                Q = np.zeros((C.shape[0], 0))
+            else:
+                left, singular, _ = np.linalg.svd(C, full_matrices=False)
+                rank = int(np.sum(singular > RANK_RCOND * max(singular[0], 1e-300)))
+                Q = left[:, :rank]
+            self.reduced.append((Q, Q.T @ C))
+            self.offsets.append(self.offsets[-1] + Q.shape[1])
+        self.num_multipliers = self.offsets[-1]
+        self.size = 3 * self.num_blobs + 6 * self.num_bodies + self.num_multipliers
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def split(self, x):
         n3, n6 = 3 * self.num_blobs, 3 * self.num_blobs + 6 * self.num_bodies
         return x[:n3], x[n3:n6], x[n6:]
 
+    def C_dot(self, velocities):
+        """``Q^T C U`` (num_multipliers,) of body velocities (Nb, 6)."""
+        U = np.asarray(velocities, dtype=float).reshape(-1, 6)
+        out = np.empty(self.num_multipliers)
+        for group, (_, QC), start, stop in zip(self.articulated.groups, self.reduced, self.offsets[:-1],
+                                                 self.offsets[1:]):
+            out[start:stop] = QC @ U[group.body_indices].reshape(-1)
+        return out
+
+    def CT_dot(self, psi):
+        """``C^T Q psi``: force-torque (Nb, 6) of reduced multipliers psi (num_multipliers,)."""
+        out = np.zeros((self.num_bodies, 6))
+        for group, (_, QC), start, stop in zip(self.articulated.groups, self.reduced, self.offsets[:-1],
+                                                 self.offsets[1:]):
+            out[group.body_indices] += (QC.T @ psi[start:stop]).reshape(-1, 6)
+        return out
+
+    def joint_forces(self, psi):
+        """Joint multipliers ``phi = Q psi``, shape (Nc, 3)."""
+        phi = np.zeros((self.num_constraints, 3))
+        for group, (Q, _), start, stop in zip(self.articulated.groups, self.reduced, self.offsets[:-1],
+                                                self.offsets[1:]):
+            phi[group.constraint_indices] = (Q @ psi[start:stop]).reshape(-1, 3)
+        return phi
+
     def matvec(self, x):
-        lam, U, phi = self.split(np.asarray(x, dtype=float).reshape(-1))
+        lam, U, psi = self.split(np.asarray(x, dtype=float).reshape(-1))
         first = self.problem.matvec(np.concatenate((lam, U)))
         n3 = 3 * self.num_blobs
-        first[n3:] -= self.articulated.CT_dot(self.a, phi, self.num_bodies).reshape(-1)
-        return np.concatenate((first, -self.articulated.C_dot(self.a, U).reshape(-1)))
+        first[n3:] -= self.CT_dot(psi).reshape(-1)
+        return np.concatenate((first, -self.C_dot(U)))
 
     def rhs(self, slip, force_torque):
-        """``[slip; -F; -B]`` with ``B`` the prescribed joint velocities at this problem's time."""
-        return np.concatenate((self.problem.rhs(slip=slip, force_torque=force_torque),
-                               -self.articulated.B(self.rates).reshape(-1)))
+        """``[slip; -F; -Q^T B]`` with ``B`` the prescribed joint velocities at this problem's time."""
+        B = self.articulated.B(self.rates)
+        reduced_B = np.empty(self.num_multipliers)
+        for group, (Q, _), start, stop in zip(self.articulated.groups, self.reduced, self.offsets[:-1],
+                                                self.offsets[1:]):
+            reduced_B[start:stop] = Q.T @ B[group.constraint_indices].reshape(-1)
+        return np.concatenate((self.problem.rhs(slip=slip, force_torque=force_torque), -reduced_B))
 
 
 class ArticulatedPreconditioner:
     """Block-diagonal body preconditioner plus the exact constraint Schur complement of each articulated body.
 
     For ``[s; f; b]``: ``(lambda0, U0) = P_body [s; f]``; per articulated body
-    ``phi = pinv(C N C^T) (b + C U0)``; then ``(lambda, U) = (lambda0, U0) + P_body [0; C^T phi]``.  This is the
-    exact inverse when the bodies do not interact hydrodynamically.
+    ``psi = (C N C^T)^{-1} (b + C U0)`` (``C`` the reduced ``Q^T C``, ``N`` the bodies' block-diagonal
+    mobilities); then ``(lambda, U) = (lambda0, U0) + P_body [0; C^T psi]``.  This is the exact inverse when
+    the bodies do not interact hydrodynamically.
     """
 
     def __init__(self, problem, body_preconditioner):
         self.problem, self.body = problem, body_preconditioner
-        art, a = problem.articulated, problem.a
         mobilities = np.zeros((problem.num_bodies, 6, 6))
         for (bodies, _), N in zip(body_preconditioner.body_arrays.type_slices, body_preconditioner.body_mobilities):
             mobilities[bodies] = N
         self.schur = []
-        for group in art.groups:
-            C = art.C_dense_group(group, a)
-            N = np.zeros((C.shape[1], C.shape[1]))
+        for group, (_, QC) in zip(problem.articulated.groups, problem.reduced):
+            N = np.zeros((QC.shape[1], QC.shape[1]))
             for k, body in enumerate(group.body_indices):
                 N[6 * k:6 * k + 6, 6 * k:6 * k + 6] = mobilities[body]
-            self.schur.append(np.linalg.pinv(C @ N @ C.T, rcond=1e-12, hermitian=True))
+            self.schur.append(np.linalg.pinv(QC @ N @ QC.T, rcond=1e-12, hermitian=True))
         self.operator = spla.LinearOperator((problem.size, problem.size), matvec=self.apply, dtype=float)
 
     def apply(self, x):
-        problem, art = self.problem, self.problem.articulated
+        problem = self.problem
         lam, U, b = problem.split(np.asarray(x, dtype=float).reshape(-1))
         first = self.body.apply(np.concatenate((lam, U)))
         n3 = 3 * problem.num_blobs
-        U0 = first[n3:].reshape(-1, 6)
-        residual = b.reshape(-1, 3) + art.C_dot(problem.a, U0)
-        phi = np.zeros((problem.num_constraints, 3))
-        for group, S in zip(art.groups, self.schur):
-            phi[group.constraint_indices] = (S @ residual[group.constraint_indices].reshape(-1)).reshape(-1, 3)
-        correction = self.body.apply(np.concatenate((np.zeros(n3), art.CT_dot(problem.a, phi, problem.num_bodies)
-                                                     .reshape(-1))))
-        return np.concatenate((first + correction, phi.reshape(-1)))
+        residual = b + problem.C_dot(first[n3:])
+        psi = np.empty(problem.num_multipliers)
+        for S, start, stop in zip(self.schur, problem.offsets[:-1], problem.offsets[1:]):
+            psi[start:stop] = S @ residual[start:stop]
+        correction = self.body.apply(np.concatenate((np.zeros(n3), problem.CT_dot(psi).reshape(-1))))
+        return np.concatenate((first + correction, psi))
 
 
 ArticulatedSolution = namedtuple('ArticulatedSolution', ['velocities', 'multipliers', 'lambda_blobs', 'iterations',
@@ -488,8 +538,8 @@ def solve_articulated(problem, rhs, preconditioner, tolerance, x0=None, print_re
     pc = preconditioner.operator if hasattr(preconditioner, 'operator') else preconditioner
     result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=pc, x0=x0,
                          print_residual=print_residual)
-    lam, U, phi = problem.split(result.x * norm)
-    return ArticulatedSolution(U.reshape(-1, 6), phi.reshape(-1, 3), lam.reshape(-1, 3), result.iterations,
+    lam, U, psi = problem.split(result.x * norm)
+    return ArticulatedSolution(U.reshape(-1, 6), problem.joint_forces(psi), lam.reshape(-1, 3), result.iterations,
                                result.converged, result.residual, result.x)
 
 
