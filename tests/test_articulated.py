@@ -229,6 +229,32 @@ def test_locked_chain_far_from_the_wall_sediments_as_one_body(tmp_path, monkeypa
     assert np.max(np.abs(displacement - displacement[1])) < 1e-9 * np.linalg.norm(displacement[1])
 
 
+def test_chain_of_single_blobs_with_the_multiblob_schemes_is_the_pinv_answer(tmp_path, monkeypatch):
+    """Single-blob bodies in the blob saddle-point problem have a rank-deficient K: they resist no rotation, so
+    (as body_solver's pinv answer) they get no angular velocity and a torque on them is projected out.  Joined by
+    ball joints at the midpoints they then move as the rod of the same blobs fused into one rigid body: in free
+    space under gravity that rod only translates (its rotations about y and z change sign under the reflection
+    x -> -x, which leaves the problem unchanged; about its axis it has no resistance, so pinv gives 0).
+    GMRES at solver_tolerance 1e-12: agreement to 1e-9 of |V|."""
+    common = write_chain(tmp_path, 5, 2.5, 3.0, locked=False, shape=np.zeros((1, 3)))
+    common = [line.replace('python', 'python_no_wall') if 'mobility' in line else line for line in common]
+    _, fused = setup_system(tmp_path, '\n'.join(['scheme mobility', 'structure fused.vertex fused.clones']
+                                                + common), monkeypatch)
+    _, chain = setup_system(tmp_path, '\n'.join(['scheme mobility', 'articulated chain.list_vertex chain.clones '
+                                                 'chain.const'] + common), monkeypatch)
+    system = fused.system
+    problem = system.mobility_problem(system.configuration)
+    from multi_bodies.solver import body_solver
+    reference = body_solver.solve(problem, problem.rhs(force_torque=system.forces_torques(system.configuration)),
+                                  system.build_preconditioner(system.configuration), tolerance=1e-12).velocities[0]
+    result = art.articulated_velocities(chain.system, chain.system.articulated, chain.system.configuration, 0.0)
+    assert result.converged
+    V = reference[:3]
+    assert np.linalg.norm(reference[3:]) < 1e-9 * np.linalg.norm(V) and V[2] < 0
+    expected = np.concatenate((np.tile(V, (5, 1)), np.zeros((5, 3))), axis=1)
+    assert np.max(np.abs(result.velocities - expected)) < 1e-9 * np.linalg.norm(V)
+
+
 @needs_published
 def test_active_swimmer_exerts_no_net_force_or_torque_on_the_fluid(tmp_path, monkeypatch):
     """The bacterium of the published example with its active joint and no external force (g = 0, the blob-blob

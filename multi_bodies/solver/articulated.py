@@ -421,9 +421,22 @@ class ArticulatedProblem:
         self.a, self.rates = articulated.lab_links(configuration, t)
         self.num_blobs, self.num_bodies = problem.num_blobs, problem.num_bodies
         self.num_constraints = articulated.num_constraints
+        # Bodies whose blobs cannot resist every rigid motion (a single blob, blobs on a line) have no velocity
+        # along the null space of their K (the pinv answer of body_solver): C acts on the projected velocities.
+        self.projectors = None
+        ranges = problem._range_projectors()
+        if ranges:
+            self.projectors = np.broadcast_to(np.eye(6), (self.num_bodies, 6, 6)).copy()
+            for bodies, P in ranges:
+                self.projectors[bodies] = P
         self.reduced, self.offsets = [], [0]
         for group in articulated.groups:
             C = articulated.C_dense_group(group, self.a)
+            if self.projectors is not None:
+                P = np.zeros((C.shape[1], C.shape[1]))
+                for k, body in enumerate(group.body_indices):
+                    P[6 * k:6 * k + 6, 6 * k:6 * k + 6] = self.projectors[body]
+                C = C @ P
             if C.size == 0:
                 Q = np.zeros((C.shape[0], 0))
             else:
@@ -479,7 +492,15 @@ class ArticulatedProblem:
         for group, (Q, _), start, stop in zip(self.articulated.groups, self.reduced, self.offsets[:-1],
                                                 self.offsets[1:]):
             reduced_B[start:stop] = Q.T @ B[group.constraint_indices].reshape(-1)
+        force_torque = None if force_torque is None else self.problem.project_forces(force_torque)
         return np.concatenate((self.problem.rhs(slip=slip, force_torque=force_torque), -reduced_B))
+
+    def project_velocities(self, velocities):
+        """Velocities (Nb, 6) without their part along the null space of each body's K (unchanged if full rank)."""
+        U = np.asarray(velocities, dtype=float).reshape(-1, 6)
+        if self.projectors is None:
+            return U
+        return np.matmul(self.projectors, U[:, :, None])[:, :, 0]
 
 
 class ArticulatedPreconditioner:
@@ -539,7 +560,7 @@ def solve_articulated(problem, rhs, preconditioner, tolerance, x0=None, print_re
     result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=pc, x0=x0,
                          print_residual=print_residual)
     lam, U, psi = problem.split(result.x * norm)
-    return ArticulatedSolution(U.reshape(-1, 6), problem.joint_forces(psi), lam.reshape(-1, 3), result.iterations,
+    return ArticulatedSolution(problem.project_velocities(U), problem.joint_forces(psi), lam.reshape(-1, 3), result.iterations,
                                result.converged, result.residual, result.x)
 
 
