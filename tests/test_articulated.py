@@ -255,6 +255,49 @@ def test_chain_of_single_blobs_with_the_multiblob_schemes_is_the_pinv_answer(tmp
     assert np.max(np.abs(result.velocities - expected)) < 1e-9 * np.linalg.norm(V)
 
 
+def test_several_articulated_lines_and_structures_in_one_run(tmp_path, monkeypatch):
+    """A rigid body, one articulated line with two copies of a 3-body chain and a second articulated line, far
+    apart (1e5, free space): each moves as it does alone, to their hydrodynamic coupling (blob size over distance,
+    1e-5 relative; asserted 1e-3), which checks that bodies and joints of every line and copy are numbered right.
+    """
+    common = write_chain(tmp_path, 3, 2.5, 0.0, locked=False)
+    common = [line.replace('python', 'python_no_wall') if 'mobility' in line else line for line in common]
+    chain = np.loadtxt(tmp_path / 'chain.clones', skiprows=1)
+    copies = np.concatenate((chain + [1e5, 0, 0, 0, 0, 0, 0], chain + [2e5, 0, 0, 0, 0, 0, 0]))
+    copies[3:, 3:] = [0.9, 0.3, -0.2, np.sqrt(1 - 0.94)]  # the second copy turned: a different motion
+    (tmp_path / 'copies.clones').write_text('6\n' + '\n'.join(' '.join(repr(float(v)) for v in row) for row in copies))
+    (tmp_path / 'free.clones').write_text('1\n3e5 0 0 1 0 0 0\n')
+    lines = ['scheme mobility', 'structure shell.vertex free.clones',
+             'articulated chain.list_vertex copies.clones chain.const',
+             'articulated chain.list_vertex chain.clones chain.const']
+    _, together = setup_system(tmp_path, '\n'.join(lines + common), monkeypatch)
+    assert together.system.articulated.num_constraints == 6
+    both = art.articulated_velocities(together.system, together.system.articulated,
+                                      together.system.configuration, 0.0).velocities
+    alone = []
+    for clones in ('free', 'copies_0', 'copies_1', 'chain'):
+        if clones == 'free':
+            text = lines[:2]
+        else:
+            rows = {'copies_0': copies[:3], 'copies_1': copies[3:], 'chain': chain}[clones]
+            (tmp_path / (clones + '.clones')).write_text('3\n' + '\n'.join(' '.join(repr(float(v)) for v in row)
+                                                                           for row in rows))
+            text = ['scheme mobility', 'articulated chain.list_vertex %s.clones chain.const' % clones]
+        _, setup = setup_system(tmp_path, '\n'.join(text + common), monkeypatch)
+        if setup.system.articulated is None:
+            from multi_bodies.solver import body_solver
+            problem = setup.system.mobility_problem(setup.system.configuration)
+            alone.append(body_solver.solve(problem, problem.rhs(force_torque=setup.system.forces_torques(
+                setup.system.configuration)), setup.system.build_preconditioner(setup.system.configuration),
+                tolerance=1e-12).velocities)
+        else:
+            alone.append(art.articulated_velocities(setup.system, setup.system.articulated,
+                                                    setup.system.configuration, 0.0).velocities)
+    alone = np.concatenate(alone)
+    assert np.max(np.abs(both - alone)) < 1e-3 * np.max(np.abs(alone))
+    assert np.max(np.abs(alone[4:7] - alone[1:4])) > 1e-2 * np.max(np.abs(alone))  # the copies differ
+
+
 @needs_published
 def test_active_swimmer_exerts_no_net_force_or_torque_on_the_fluid(tmp_path, monkeypatch):
     """The bacterium of the published example with its active joint and no external force (g = 0, the blob-blob
