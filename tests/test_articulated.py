@@ -319,6 +319,28 @@ def test_active_swimmer_exerts_no_net_force_or_torque_on_the_fluid(tmp_path, mon
     assert np.linalg.norm(np.cross(r, lam).sum(axis=0)) < 1e-8 * scale
 
 
+@needs_published
+def test_articulated_restart_continues_the_uninterrupted_run(tmp_path, monkeypatch):
+    """initial_step 2 picks up the restart record of step 2 (configuration, warm start, counters) and the last
+    step equals that of the uninterrupted 4-step run bit for bit (the same operations in the same order)."""
+    folder = copy_example(tmp_path, 'bacteria')
+    (folder / 'user_defined_functions.py').unlink()  # not needed without the torque (it imports numexpr)
+    monkeypatch.chdir(folder)
+    options = read_input_file('inputfile_bacteria_constant_angular_velocity.dat', 'dynamic')
+    options.n_steps, options.output_name = 4, 'whole'
+    assert run_dynamics(options, log=lambda *a: None) == 0
+    options = read_input_file('inputfile_bacteria_constant_angular_velocity.dat', 'dynamic')
+    options.n_steps, options.output_name = 2, 'pieces'
+    assert run_dynamics(options, log=lambda *a: None) == 0
+    options = read_input_file('inputfile_bacteria_constant_angular_velocity.dat', 'dynamic')
+    options.n_steps, options.output_name, options.initial_step = 4, 'pieces', 2
+    assert run_dynamics(options, log=lambda *a: None) == 0
+    whole, pieces = read_frames('whole.bacteria.config'), read_frames('pieces.bacteria.config')
+    assert whole.shape == pieces.shape == (5, 2, 7)
+    assert np.array_equal(whole[-1], pieces[-1])
+    assert open('whole.info').read().split('nonlinear')[1] == open('pieces.info').read().split('nonlinear')[1]
+
+
 # ------------------------------------------------------------------------------------------ input
 def test_const_file_expressions_and_errors(tmp_path):
     """The 12 extra fields of a .const line are expressions of t (link and its rate); bad input names file/line."""

@@ -55,6 +55,9 @@ class DynamicRun:
                 self.rng_from_restart = True
             self.scheme.set_history(state.get('scheme'))
             self.system.set_counters(state.get('counters') or {})
+            if getattr(self.system, 'articulated', None) is not None:
+                self.system.articulated.nonlinear_iterations = int(
+                    (state.get('counters') or {}).get('nonlinear_iterations_count', 0))
             saved = state.get('locations'), state.get('orientations')
             # The snapshot files hold the same numbers, but their quaternions are renormalised when read
             # (SPEC 1.3); the record keeps them exactly as the uninterrupted run has them.
@@ -73,13 +76,17 @@ class DynamicRun:
         locations, orientations = self.system.configuration.copy_arrays()
         return {'locations': locations, 'orientations': orientations,
                 'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
-                'counters': self.system.counters(self.scheme)}
+                'counters': self.counters()}
 
-    def write_info(self, extra_lines=()):
+    def counters(self):
+        """The run's counters for ``.info`` and the restart records (articulated: the nonlinear count too)."""
         counters = self.system.counters(self.scheme)
         if getattr(self.system, 'articulated', None) is not None:  # the published count of the nonlinear solver
             counters['nonlinear_iterations_count'] = self.system.articulated.nonlinear_iterations
-        run_output.write_info(self.options.output_name + '.info', counters, extra_lines)
+        return counters
+
+    def write_info(self, extra_lines=()):
+        run_output.write_info(self.options.output_name + '.info', self.counters(), extra_lines)
 
     def run(self):
         """The time loop; returns the exit status."""

@@ -113,25 +113,22 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             body.body_length = body_length
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
-    read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies)
+    read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies, restart_record)
     return bodies, types
 
 
-def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies=False):
+def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies=False, restart_record=None):
     """Append the bodies of every ``articulated`` line to ``bodies`` and ``types``; returns the ArticulatedSet or None.
 
     Body ``i`` of a line's clones file uses vertex file ``i % n`` of its ``.list_vertex`` file (``n`` bodies per
     articulated body, the first number of the ``.const`` file).  The set is kept as ``options._articulated_set``.
+    With ``initial_step > 0`` the bodies start from the saved step (as :func:`read_bodies`).
     """
     from multi_bodies.solver import articulated as art
     specs = getattr(options, 'articulated', None) or []
     options._articulated_set = None
     if not specs:
         return None
-    if getattr(options, 'initial_step', 0) > 0:
-        raise utils.UserInputError('%s: restarts (initial_step > 0) of runs with articulated bodies are not '
-                                   'supported; start from a clones file of the saved step instead'
-                                   % options.where('initial_step'))
     articulated = art.ArticulatedSet()
     for spec in specs:
         names = art.read_list_vertex_file(spec.list_vertex_file, spec.where)
@@ -148,7 +145,7 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
                     raise utils.UserInputError('%s: articulated_deterministic_forward_euler_rollers needs single-'
                                                'blob bodies, but %s has %d blobs'
                                                % (spec.where, name, references[name].shape[0]))
-        locations, orientations = read_clones_file(spec.clones_file, spec.where)
+        locations, orientations = read_saved_or_input(options, spec, restart_record)
         if locations.shape[0] % const.num_bodies:
             raise utils.UserInputError('%s: %s has %d bodies, not a multiple of the %d bodies of one articulated '
                                        'body (%s)' % (spec.where, spec.clones_file, locations.shape[0],
@@ -170,6 +167,27 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
         types.append((spec.ID, locations.shape[0]))
     options._articulated_set = articulated
     return articulated
+
+
+def read_saved_or_input(options, spec, restart_record):
+    """(locations, orientations) of a line's clones file, or of its snapshot at ``initial_step`` on a restart."""
+    restart_step = getattr(options, 'initial_step', 0)
+    if restart_step <= 0:
+        return read_clones_file(spec.clones_file, spec.where)
+    if getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
+        path = config_name(options.output_name, spec.ID)
+        offsets = (restart_record or {}).get('config_offsets') or {}
+        if spec.ID not in offsets or not os.path.isfile(path):
+            raise utils.UserInputError('%s: initial_step %d restarts a save_clones one_file run, but %s%s has no '
+                                       'record of step %d for %s; restart from a saved step'
+                                       % (options.where('initial_step'), restart_step, options.output_name,
+                                          RESTART_SUFFIX, restart_step, path))
+        return read_config_snapshot(path, offsets[spec.ID])
+    path = clones_name(options.output_name, spec.ID, restart_step)
+    if not os.path.isfile(path):
+        raise utils.UserInputError('%s: initial_step %d restarts from %s, which does not exist; restart from a '
+                                   'saved step' % (options.where('initial_step'), restart_step, path))
+    return read_clones_file(path, spec.where)
 
 
 def array_runs(bodies):
