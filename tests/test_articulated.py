@@ -341,6 +341,29 @@ def test_articulated_restart_continues_the_uninterrupted_run(tmp_path, monkeypat
     assert open('whole.info').read().split('nonlinear')[1] == open('pieces.info').read().split('nonlinear')[1]
 
 
+@needs_published
+def test_vtk_output_shows_the_joints(tmp_path, monkeypatch):
+    """save_vtk: output_name.joints.<step>.vtp holds every joint at q_p + R_p l_p; read back (pyvista) it is
+    also at q_q + R_q l_q of the saved configuration, to the nonlinear tolerance (the joint holds)."""
+    folder = copy_example(tmp_path, 'bacteria')
+    (folder / 'user_defined_functions.py').unlink()  # not needed without the torque (it imports numexpr)
+    monkeypatch.chdir(folder)
+    options = read_input_file('inputfile_bacteria_constant_angular_velocity.dat', 'dynamic')
+    options.n_steps, options.output_name, options.save_vtk = 2, 'vtk', True
+    assert run_dynamics(options, log=lambda *a: None) == 0
+    assert 'vtk.joints.00000002.vtp' in open('vtk.joints.pvd').read()
+    pyvista = pytest.importorskip('pyvista', reason='pyvista is not installed: the VTK files cannot be read back')
+    frame = read_frames('vtk.bacteria.config')[-1]
+    const = art.read_const_file('vtk.bacteria_active.const', 'test')
+    joints = art.ArticulatedSet()
+    joints.add(const, 0, 1)
+    a, _ = joints.lab_links(Configuration(frame[:, :3], frame[:, 3:]), 2 * options.dt)
+    from_q = frame[joints.bodies[:, 1], :3] + a[:, 3:]
+    points = np.asarray(pyvista.read('vtk.joints.00000002.vtp').points)
+    assert points.shape == (3, 3)
+    assert np.max(np.abs(points - from_q)) < 1e-9
+
+
 # ------------------------------------------------------------------------------------------ input
 def test_const_file_expressions_and_errors(tmp_path):
     """The 12 extra fields of a .const line are expressions of t (link and its rate); bad input names file/line."""
