@@ -313,6 +313,9 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     import and a ``set_slip_by_ID`` that fails.
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
+    if script == 'mcmc' and getattr(options, 'articulated', None):
+        raise utils.UserInputError("%s: the Monte Carlo sampler has no joints; remove the 'articulated' line or run "
+                                   "it with multi_bodies.py and an articulated scheme" % options.articulated[0].where)
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
