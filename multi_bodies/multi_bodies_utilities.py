@@ -98,8 +98,13 @@ def run_mobility(options, system, configuration, force_table=None):
     with utils.Timer() as timer:
         # The same solve as every scheme: body_solver.solve (torques on single blobs and rods projected).
         problem = system.mobility_problem(configuration)
-        result = body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
-                                   system.build_preconditioner(configuration), tolerance=options.solver_tolerance)
+        if getattr(system, 'articulated', None) is not None:  # joints: doc/articulated.md (time t = 0)
+            from multi_bodies.solver.articulated import articulated_velocities
+            result = articulated_velocities(system, system.articulated, configuration, 0.0, force_torque, slip)
+        else:
+            result = body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
+                                       system.build_preconditioner(configuration),
+                                       tolerance=options.solver_tolerance)
     print('Time to solve mobility problem = %s' % timer.elapsed)
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))
@@ -107,6 +112,8 @@ def run_mobility(options, system, configuration, force_table=None):
     if result.constraint_force_torque is not None:  # prescribed bodies: the force-torque that holds them
         force_torque = np.where(system.fixed_bodies[:, None], result.constraint_force_torque, force_torque)
     save_table(options.output_name + '.force.dat', force_torque)
+    if getattr(result, 'multipliers', None) is not None:  # joint forces (Nc, 3)
+        save_table(options.output_name + '.joint_forces.dat', result.multipliers)
     write_velocity_field(options, system, problem.r_vectors, result.lambda_blobs)
     if not result.converged:
         print('error: GMRES did not converge to solver_tolerance %g in %d iterations (relative residual '
@@ -163,6 +170,10 @@ def run(options):
     # ...), hooks, bodies, arrays, backends, System, start check.
     setup = prepare(options, 'static', log=print)
     system = setup.system
+    if options.scheme != 'mobility' and getattr(system, 'articulated', None) is not None:
+        raise utils.UserInputError("%s: with articulated bodies the static problem is 'mobility' (velocities "
+                                   "of the joined bodies under given forces); %s ignores the joints"
+                                   % (options.where('scheme'), options.scheme))
     # Everything is validated before the first byte is written: the tables the problem reads, the
     # source-target backend of the velocity field, the output folder.
     force_table = velocity_table = None

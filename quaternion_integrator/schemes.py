@@ -29,6 +29,7 @@ import numpy as np
 from quaternion_integrator.scheme_base import (InvalidConfiguration, Scheme, euler_update,  # noqa: F401
                                                rotate_quaternions)
 from quaternion_integrator.stochastic_schemes import STOCHASTIC_SCHEME_CLASSES
+from quaternion_integrator.articulated_schemes import ARTICULATED_SCHEME_CLASSES
 from utils import UserInputError
 
 __all__ = ['InvalidConfiguration', 'make_scheme', 'SCHEMES', 'STOCHASTIC_SCHEMES', 'euler_update']
@@ -120,6 +121,7 @@ class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwa
 SCHEMES = {cls.name: cls for cls in (DeterministicForwardEuler, DeterministicForwardEulerDenseAlgebra,
                                      DeterministicAdamsBashforth, DeterministicMidpoint, DeterministicForwardEulerRollers,
                                      DeterministicAdamsBashforthRollers)}
+SCHEMES.update({cls.name: cls for cls in ARTICULATED_SCHEME_CLASSES})  # joints: doc/articulated.md
 
 def _all_schemes():
     schemes = dict(SCHEMES)

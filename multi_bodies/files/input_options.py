@@ -45,7 +45,10 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
                       'stochastic_GDC_RFD')
-DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES
+# Articulated bodies (doc/articulated.md; quaternion_integrator.articulated_schemes holds the classes).
+ARTICULATED_SCHEMES = ('articulated_deterministic_forward_euler', 'articulated_deterministic_midpoint',
+                       'articulated_deterministic_forward_euler_rollers')
+DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES + ARTICULATED_SCHEMES
 MCMC_MOVES = ('all_bodies', 'one_body')                        # many_bodyMCMC.sampler.MOVES
 MCMC_ENERGY_IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')  # many_bodyMCMC.mcmc_energy.IMPLEMENTATIONS
 # Largest magnitude of a number option: its square still fits in a double.
@@ -177,6 +180,9 @@ OPTION_TABLE = {
     'blob_blob_force_implementation': _option('str', 'None', SD, Choice(_FORCE_IMPLEMENTATIONS)),
     'body_body_force_torque_implementation': _option('str', 'None', SDM, Choice(('None', 'python'))),
     'solver_tolerance': _option('float', 1e-8, SD, Range(0, 1, True, True, fix='a relative tolerance, e.g. 1e-8')),
+    # articulated schemes only (max-norm of the joint residuals, length units)
+    'nonlinear_solver_tolerance': _option('float', 1e-8, ('dynamic',),
+                                          Range(0, low_open=True, fix='the largest joint residual, e.g. 1e-8')),
     'rf_delta': _option('float', 1e-3, ('stochastic',), Range(0, low_open=True, fix='1e-3 is the default')),
     'save_clones': _option('str', 'one_file_per_step', DM, _SAVE_CLONES),
     'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM),
@@ -204,12 +210,16 @@ OPTION_TABLE = {
 
 # Options of later versions of the published code that this package does not implement.
 UNSUPPORTED_LATER_OPTIONS = (
-    'tilt_angle', 'articulated', 'repulsion_strength_firm', 'firm_delta',
+    'tilt_angle', 'repulsion_strength_firm', 'firm_delta',
     'hydro_interactions', 'call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
     'green_particles', 'cells', 'domType', 'Lub_Cut', 'zmin', 'zmax',
-    'nonlinear_solver_tolerance', 'slip_length', 'plot_velocity_field_shell',
+    'slip_length', 'plot_velocity_field_shell',
     'save_HydroGrid_cells', 'hydrodynamic_radius', 'mu', 'vacf', 'stiffness_wall',
 )
+
+ArticulatedSpec = namedtuple('ArticulatedSpec', ['list_vertex_file', 'clones_file', 'const_file', 'ID', 'where'])
+ArticulatedSpec.__doc__ = """One ``articulated`` line (doc/articulated.md): the ``.list_vertex``, ``.clones`` and
+``.const`` file names, the ID (clones file name without ``.clones``) and ``where``."""
 
 StructureSpec = namedtuple('StructureSpec', ['vertex_file', 'clones_file', 'slip_file', 'ID', 'where',
                                              'velocity_file', 'obstacle'], defaults=(None, False))
@@ -255,6 +265,7 @@ class Options:
         self._lines = dict(lines)
         self.structures = list(structures)
         self.obstacles = list(obstacles)
+        self.articulated = []  # ArticulatedSpec per 'articulated' line (set by the parser)
         self.warnings = []
         for name, option in OPTION_TABLE.items():
             setattr(self, name, values.get(name, option.default))
@@ -362,6 +373,7 @@ def parse_input_text(text, input_file='<input>', program=None):
     """
     values, lines, structures, repeated = {}, {}, [], []
     obstacles = []
+    articulated = []
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split('#', 1)[0].strip()
         if not line:
@@ -374,6 +386,14 @@ def parse_input_text(text, input_file='<input>', program=None):
         value = parts[1].strip()
         if name in ('structure', 'obstacle'):
             (structures if name == 'structure' else obstacles).append(parse_structure_line(name, value, where))
+            continue
+        if name == 'articulated':
+            files = value.split()
+            if len(files) != 3:
+                raise UserInputError("%s: 'articulated' expects three file names (list_vertex clones const), got "
+                                     "%d: '%s'" % (where, len(files), value))
+            articulated.append(ArticulatedSpec(files[0], files[1], files[2], structure_id_from_clones(files[1]),
+                                               where))
             continue
         if name in UNSUPPORTED_LATER_OPTIONS:
             raise UserInputError(
@@ -389,6 +409,8 @@ def parse_input_text(text, input_file='<input>', program=None):
                             % (where, name, lines[name]))
         lines[name] = number
     options = Options(input_file, values, lines, structures, obstacles)
+    options.articulated = articulated
+    check_articulated(options)
     check_options(options, program)
     check_periodic_box(options)
     options.warnings = repeated + unused_option_warnings(options, program)
@@ -401,7 +423,7 @@ def usage_tags(program, scheme):
         program = 'static' if scheme in STATIC_SCHEMES else 'dynamic'
     tags = {program}
     if program == 'dynamic':
-        if not scheme.startswith('deterministic'):
+        if not scheme.startswith('deterministic') and scheme not in ARTICULATED_SCHEMES:
             tags.add('stochastic')
         if 'rollers' in scheme:
             tags.add('rollers')
@@ -483,6 +505,19 @@ def check_value(name, value, where=None, program=None):
         if rule is not None and not rule.allows(value):
             known = rule is not option.rule and option.rule is not None and option.rule.allows(value)
             raise UserInputError(rule.message(where or name, name, value, known=known))
+
+
+def check_articulated(options):
+    """Articulated bodies need an articulated scheme, and an articulated scheme needs articulated bodies."""
+    lines = getattr(options, 'articulated', [])
+    if lines and options.scheme not in ARTICULATED_SCHEMES + STATIC_SCHEMES:
+        raise UserInputError("%s: scheme '%s' cannot move articulated bodies (the 'articulated' line %s); use %s"
+                             % (options.where('scheme'), options.scheme, lines[0].where,
+                                ', '.join(ARTICULATED_SCHEMES)))
+    if options.scheme in ARTICULATED_SCHEMES and not lines:
+        raise UserInputError("%s: scheme '%s' moves articulated bodies, but the file has no 'articulated "
+                             "<file.list_vertex> <file.clones> <file.const>' line" % (options.where('scheme'),
+                                                                                      options.scheme))
 
 
 def check_periodic_box(options):

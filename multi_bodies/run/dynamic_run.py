@@ -21,7 +21,7 @@ import numpy as np
 import utils
 from multi_bodies.files.input_options import check_options
 from multi_bodies.run import run_output
-from multi_bodies.run.run_setup import prepare, start_output, write_run_start
+from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies, write_run_start
 from quaternion_integrator.schemes import make_scheme
 
 class DynamicRun:
@@ -70,6 +70,9 @@ class DynamicRun:
                 self.rng_from_restart = True
             self.scheme.set_history(state.get('scheme'))
             self.system.set_counters(state.get('counters') or {})
+            if getattr(self.system, 'articulated', None) is not None:
+                self.system.articulated.nonlinear_iterations = int(
+                    (state.get('counters') or {}).get('nonlinear_iterations_count', 0))
             saved = state.get('locations'), state.get('orientations')
             # The snapshot files hold the same numbers, but their quaternions are renormalised when read
             # (SPEC 1.3); the record keeps them exactly as the uninterrupted run has them.
@@ -90,16 +93,24 @@ class DynamicRun:
         locations, orientations = self.system.configuration.copy_arrays()
         return {'locations': locations, 'orientations': orientations,
                 'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
-                'counters': self.system.counters(self.scheme)}
+                'counters': self.counters()}
+
+    def counters(self):
+        """The run's counters for ``.info`` and the restart records (articulated: the nonlinear count too)."""
+        counters = self.system.counters(self.scheme)
+        if getattr(self.system, 'articulated', None) is not None:  # the published count of the nonlinear solver
+            counters['nonlinear_iterations_count'] = self.system.articulated.nonlinear_iterations
+        return counters
 
     def write_info(self, extra_lines=()):
-        run_output.write_info(self.options.output_name + '.info', self.system.counters(self.scheme), extra_lines)
+        run_output.write_info(self.options.output_name + '.info', self.counters(), extra_lines)
 
     def run(self):
         """The time loop; returns the exit status."""
         options, system, scheme = self.options, self.system, self.scheme
         restart = options.initial_step > 0
         write_run_start(options, self.types, system.num_blobs, self.rng, restart=restart)
+        write_articulated_copies(options)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=(self.restart, self.restart_end),

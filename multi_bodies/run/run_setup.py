@@ -65,42 +65,17 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
     ``prescribed_velocity``: None for a free body, (6,) lab-frame ``[v, w]`` for a body of
     prescribed kinematics (zeros for an obstacle, the row of the ``structure`` line's velocity file).
     """
-    if not options.structures:
+    if not options.structures and not getattr(options, 'articulated', None):
         raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
                                    % options.input_file)
     bodies, types = [], []
     for spec in all_structure_specs(options):
-        clones = spec.clones_file
-        snapshot = None
-        restart_step = getattr(options, 'initial_step', 0)
-        stop_files = (restart_record or {}).get('stop_files') or {}
-        if restart_step > 0 and spec.ID in stop_files:  # a step saved when a signal stopped the run
-            clones = run_output.stop_snapshot_path(options.output_name, restart_record, spec.ID)
-        elif restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
-            clones = config_name(options.output_name, spec.ID)
-            offsets = (restart_record or {}).get('config_offsets') or {}
-            if spec.ID not in offsets or not os.path.isfile(clones):
-                raise utils.UserInputError(
-                    '%s: initial_step %d restarts a save_clones one_file run, but %s%s has no record of step %d '
-                    'for %s; restart from a saved step' % (options.where('initial_step'), restart_step,
-                                                          options.output_name, RESTART_SUFFIX, restart_step, clones))
-            snapshot = read_config_snapshot(clones, offsets[spec.ID])
-        elif restart_step > 0:
-            clones = clones_name(options.output_name, spec.ID, options.initial_step)
-            if not os.path.isfile(clones):
-                raise utils.UserInputError(
-                    '%s: initial_step %d restarts from %s, which does not exist; restart from a saved step '
-                    '(save_clones one_file_per_step writes one file per saved step)'
-                    % (options.where('initial_step'), options.initial_step, clones))
+        clones, (locations, orientations) = saved_or_input_configuration(options, spec, restart_record)
         reference, radii = read_vertex_file(spec.vertex_file, spec.where, return_radii=True)
         if radii is not None and single_blob_bodies:
             raise utils.UserInputError('%s: %s gives blob radii (fourth column), but the roller schemes use the one '
                                        'blob_radius of the input file; remove the fourth column'
                                        % (spec.where, spec.vertex_file))
-        if snapshot is None:
-            locations, orientations = read_clones_file(clones, spec.where)
-        else:
-            locations, orientations = snapshot  # quaternions renormalised by the reader
         slip = None
         if spec.slip_file is not None:
             slip = read_slip_file(spec.slip_file, spec.where)
@@ -125,7 +100,39 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             body.prescribed_velocity = None if prescribed is None else prescribed[index].copy()
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
+    read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies, restart_record)
     return bodies, types
+
+
+def saved_or_input_configuration(options, spec, restart_record=None):
+    """(file read, (locations (n, 3), orientations (n, 4))) of one line's bodies.
+
+    The line's clones file at the start of a run; on a restart (``initial_step > 0``) the snapshot of
+    that step: the step a signal stopped the run at, the ``.config`` record of a ``one_file`` run, or
+    the step's ``.clones`` file (quaternions renormalised by the readers).
+    """
+    clones = spec.clones_file
+    restart_step = getattr(options, 'initial_step', 0)
+    stop_files = (restart_record or {}).get('stop_files') or {}
+    if restart_step > 0 and spec.ID in stop_files:  # a step saved when a signal stopped the run
+        clones = run_output.stop_snapshot_path(options.output_name, restart_record, spec.ID)
+    elif restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
+        clones = config_name(options.output_name, spec.ID)
+        offsets = (restart_record or {}).get('config_offsets') or {}
+        if spec.ID not in offsets or not os.path.isfile(clones):
+            raise utils.UserInputError(
+                '%s: initial_step %d restarts a save_clones one_file run, but %s%s has no record of step %d '
+                'for %s; restart from a saved step' % (options.where('initial_step'), restart_step,
+                                                      options.output_name, RESTART_SUFFIX, restart_step, clones))
+        return clones, read_config_snapshot(clones, offsets[spec.ID])
+    elif restart_step > 0:
+        clones = clones_name(options.output_name, spec.ID, options.initial_step)
+        if not os.path.isfile(clones):
+            raise utils.UserInputError(
+                '%s: initial_step %d restarts from %s, which does not exist; restart from a saved step '
+                '(save_clones one_file_per_step writes one file per saved step)'
+                % (options.where('initial_step'), options.initial_step, clones))
+    return clones, read_clones_file(clones, spec.where)
 
 
 def all_structure_specs(options):
@@ -144,6 +151,79 @@ def prescribed_velocities(spec, num_bodies):
     if getattr(spec, 'velocity_file', None) is None:
         return None
     return read_body_table(spec.velocity_file, num_bodies, 'velocity', spec.where)
+
+
+def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies=False, restart_record=None):
+    """Append the bodies of every ``articulated`` line to ``bodies`` and ``types``; returns the ArticulatedSet or None.
+
+    Body ``i`` of a line's clones file uses vertex file ``i % n`` of its ``.list_vertex`` file (``n`` bodies per
+    articulated body, the first number of the ``.const`` file).  The set is kept as ``options._articulated_set``.
+    With ``initial_step > 0`` the bodies start from the saved step (as :func:`read_bodies`).
+    """
+    from multi_bodies.solver import articulated as art
+    specs = getattr(options, 'articulated', None) or []
+    options._articulated_set = None
+    if not specs:
+        return None
+    articulated = art.ArticulatedSet()
+    for spec in specs:
+        names = art.read_list_vertex_file(spec.list_vertex_file, spec.where)
+        const = art.read_const_file(spec.const_file, spec.where)
+        if const.num_bodies != len(names):
+            raise utils.UserInputError('%s: %s names %d vertex files but %s has %d bodies per articulated body'
+                                       % (spec.where, spec.list_vertex_file, len(names), spec.const_file,
+                                          const.num_bodies))
+        references = {}
+        for name in names:
+            if name not in references:
+                references[name] = read_vertex_file(name, spec.where)
+                if single_blob_bodies and references[name].shape[0] != 1:
+                    raise utils.UserInputError('%s: articulated_deterministic_forward_euler_rollers needs single-'
+                                               'blob bodies, but %s has %d blobs'
+                                               % (spec.where, name, references[name].shape[0]))
+        _, (locations, orientations) = saved_or_input_configuration(options, spec, restart_record)
+        if locations.shape[0] % const.num_bodies:
+            raise utils.UserInputError('%s: %s has %d bodies, not a multiple of the %d bodies of one articulated '
+                                       'body (%s)' % (spec.where, spec.clones_file, locations.shape[0],
+                                                      const.num_bodies, spec.const_file))
+        print('Creating articulated bodies = %s' % spec.clones_file)
+        first = len(bodies)
+        lengths = {}
+        for i, (location, orientation) in enumerate(zip(locations, orientations)):
+            name = names[i % const.num_bodies]
+            body = Body(location, orientation, references[name], options.blob_radius)
+            body.ID = spec.ID
+            set_slip_by_ID(body, None)
+            simplify_slip_function(body)
+            if name not in lengths:
+                lengths[name] = body.calc_body_length()
+            body.body_length = lengths[name]
+            bodies.append(body)
+        articulated.add(const, first, locations.shape[0] // const.num_bodies)
+        types.append((spec.ID, locations.shape[0]))
+    options._articulated_set = articulated
+    return articulated
+
+
+def array_runs(bodies):
+    """Numbers of consecutive bodies sharing one reference configuration (the types of ``BodyArrays``)."""
+    runs, previous = [], None
+    for b in bodies:
+        r = b.reference_configuration
+        if runs and r.shape == previous.shape and np.array_equal(r, previous):
+            runs[-1] += 1
+        else:
+            runs.append(1)
+            previous = r
+    return runs
+
+
+def write_articulated_copies(options):
+    """Copies of the ``.list_vertex`` and ``.const`` files of every articulated line (``output_name.<file name>``)."""
+    import shutil
+    for spec in getattr(options, 'articulated', None) or []:
+        for path in (spec.list_vertex_file, spec.const_file):
+            shutil.copyfile(path, '%s.%s' % (options.output_name, os.path.basename(path)))
 
 
 def _is_default_helper(function, name):
@@ -210,7 +290,8 @@ def check_start(options, system, types):
     if invalid.size:
         first = int(invalid[0])
         start = 0
-        for (structure_id, count), spec in zip(types, all_structure_specs(options)):
+        for (structure_id, count), spec in zip(types, all_structure_specs(options) +
+                                               list(getattr(options, 'articulated', None) or [])):
             if first < start + count:
                 raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
                                            '%d bodies are affected. Move the bodies up in the clones file.'
@@ -248,6 +329,9 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
     run_output.check_periodic_length(options)
+    if script == 'mcmc' and getattr(options, 'articulated', None):
+        raise utils.UserInputError("%s: the Monte Carlo sampler has no joints; remove the 'articulated' line or run "
+                                   "it with multi_bodies.py and an articulated scheme" % options.articulated[0].where)
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
@@ -256,7 +340,9 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
                                     restart_record=restart_record)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
-    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    articulated = getattr(options, '_articulated_set', None)
+    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if articulated is not None
+                                   else [count for _, count in types])
     fixed = [spec for spec in all_structure_specs(options) if spec.obstacle or spec.velocity_file is not None]
     if fixed and script == 'mcmc':
         raise utils.UserInputError('%s: the Monte Carlo program has no obstacles or bodies of prescribed '
@@ -271,6 +357,8 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
     system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=log)
+    system.articulated = articulated  # joints of the articulated bodies (None without 'articulated' lines)
+    system.nonlinear_tolerance = options.nonlinear_solver_tolerance
     log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))

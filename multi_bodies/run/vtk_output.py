@@ -353,15 +353,34 @@ class AlsoWriteVtk:
         self.series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
                                 options.dt, options.periodic_length, wrap_periodic=False,
                                 first_step=options.initial_step)
+        # articulated bodies: the joints too, output_name.joints.<step>.vtp (doc/articulated.md)
+        self.joints = getattr(system, 'articulated', None)
+        if self.joints is not None:
+            self.output_name, self.dt = options.output_name, options.dt
+            self.joint_collection = PvdCollection(collection_name(options.output_name, 'joints'),
+                                                  options.initial_step if options.initial_step > 0 else None)
 
     def save(self, step, *args, **kwargs):
         """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step``."""
         result = self.snapshot_writer.save(step, *args, **kwargs)
         self.series.write(step, self.system.arrays, self.system.configuration)
+        if self.joints is not None:
+            self.write_joints(step)
         return result
 
+    def write_joints(self, step):
+        """``output_name.joints.<step>.vtp``: each joint at ``q_p + R_p l_p`` with its residual and bodies."""
+        configuration, time = self.system.configuration, step_time(step, self.dt)
+        a, _ = self.joints.lab_links(configuration, time)
+        points = configuration.locations[self.joints.bodies[:, 0]] + a[:, :3]
+        residual = np.linalg.norm(self.joints.violation(configuration, time), axis=1)
+        path = step_file_name(self.output_name, 'joints', step)
+        write_vtp(path, points, [('residual', residual), ('body_p', self.joints.bodies[:, 0].astype(np.int64)),
+                                 ('body_q', self.joints.bodies[:, 1].astype(np.int64))])
+        self.joint_collection.add(time, path)
+
     def __getattr__(self, name):
-        if name in ('snapshot_writer', 'system', 'series'):
+        if name in ('snapshot_writer', 'system', 'series', 'joints', 'joint_collection', 'output_name', 'dt'):
             raise AttributeError(name)
         return getattr(self.snapshot_writer, name)
 
@@ -374,7 +393,10 @@ def load_run(options):
     """Bodies of the input file: (BodyArrays with the slip of the slip files and hooks, types)."""
     hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
     bodies, types = read_bodies(options, hooks.set_slip_by_ID)
-    body_arrays = bodies_to_arrays(bodies, [count for _, count in types])
+    # articulated lines mix vertex files: the array types are the runs of bodies sharing one reference
+    from multi_bodies.run.run_setup import array_runs
+    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if getattr(options, 'articulated', None)
+                                   else [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
     return body_arrays, types

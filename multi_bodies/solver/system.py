@@ -271,7 +271,12 @@ class System:
             extra = self.hooks.bodies_external_force_torque(self.synced_bodies(configuration), r_vectors,
                                                             **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
-        if self.body_body_forces is not None:
+        bodies_law = getattr(self.hooks, 'body_body_of_bodies', None)
+        if bodies_law is not None and self.body_body_name == 'python':  # published style: takes the bodies
+            extra = bodies_law(self.synced_bodies(configuration), r_vectors,
+                               omega_one_roller=self.omega_one_roller, **self.physics)
+            force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
+        elif self.body_body_forces is not None:
             force_torque = force_torque + np.asarray(self.body_body_forces(
                 configuration.locations, configuration.orientations, **self.physics)).reshape(-1, 6)
         return force_torque

@@ -183,6 +183,7 @@ class PhysicsHooks:
         self.preprocess = mbf.preprocess
         self.postprocess = mbf.postprocess
         self.calc_blob_blob_forces_pycuda = None
+        self.body_body_of_bodies = None  # published calc_body_body_forces_torques_python (bodies, r_vectors)
         self.pycuda_file = None
         self.overridden = []
         self.sources = []
@@ -247,6 +248,17 @@ class PhysicsHooks:
                     call_user_function(function, 'set_slip_by_ID', body, slip)
             self.set_slip_by_ID = set_slip
             self._replaced('set_slip_by_ID', function, '(body)' if one_argument else '(body, slip)')
+        if 'calc_body_body_forces_torques_python' in found:
+            function = found['calc_body_body_forces_torques_python']
+
+            def body_body_of_bodies(bodies, r_vectors, **kw):
+                nb = len(bodies)
+                value = call_user_function(function, 'calc_body_body_forces_torques_python', bodies, r_vectors, **kw)
+                return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], function,
+                                     'calc_body_body_forces_torques_python', 'the force and torque of every body')
+            self.body_body_of_bodies = body_body_of_bodies
+            self._replaced('calc_body_body_forces_torques_python', function,
+                           '(bodies, r_vectors) -> (2 Nb, 3), with body_body_force_torque_implementation python')
         for name in ('preprocess', 'postprocess'):
             if name in found:
                 function = found[name]
@@ -366,6 +378,10 @@ def import_module_file(path, module_name):
 PUBLISHED_MODULE_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                                      'multi_bodies_functions.py')
 PACKAGE_MODULE_NAME = 'multi_bodies.multi_bodies_functions'
+# Published hooks with no default here: ``calc_body_body_forces_torques_python(bodies, r_vectors, **kw) ->
+# (2 Nb, 3)``, the python body-body force-torque of later published versions (the bacteria example), used with
+# ``body_body_force_torque_implementation python``.
+PUBLISHED_EXTRA_HOOKS = ('calc_body_body_forces_torques_python',)
 
 
 def _fresh_copy_of_this_module():
@@ -420,6 +436,10 @@ def import_user_file(path):
         frames = [f for f in traceback.extract_tb(err.__traceback__)
                   if os.path.abspath(f.filename) == os.path.abspath(path)]
         line = (', line %d' % frames[-1].lineno) if frames else ''
+        if isinstance(err, ImportError) and getattr(err, 'name', None):
+            missing = err.name.split('.')[0]
+            raise UserInputError('%s%s: the user file imports %s, which is not installed; pip install %s or remove '
+                                 'the import' % (path, line, missing, missing))
         raise UserInputError('%s%s: importing the user-defined functions raised %s: %s; fix the file or remove it '
                              'from the run directory' % (path, line, type(err).__name__, err))
     finally:
@@ -441,7 +461,7 @@ def import_user_file(path):
     defaults = set(map(id, before_copy.values())) | set(map(id, before_this.values())) | \
         set(map(id, _public_callables(mbf).values()))
     found, notes = {}, []
-    for name in mbf.HOOK_NAMES:
+    for name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS:
         candidates = []
         for where, table in (('multi_bodies_functions.%s = ...' % name, rebound_copy),
                              ('multi_bodies.multi_bodies_functions.%s = ...' % name, rebound_here)):
@@ -457,7 +477,7 @@ def import_user_file(path):
                 notes.append('%s: %s is given twice (%s and %s); %s is used'
                              % (path, name, candidates[0][0], ', '.join(others), candidates[0][0]))
     for table in (rebound_copy, rebound_here):
-        for name in sorted(set(table) - set(mbf.HOOK_NAMES)):
+        for name in sorted(set(table) - set(mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS)):
             if isinstance(table[name], type) or name in ('np', 'partial', 'Quaternion'):
                 continue
             notes.append('%s: rebinds multi_bodies_functions.%s, which this package does not call, so it has no '
