@@ -40,6 +40,7 @@ from multi_bodies.solver import body_solver
 from multi_bodies.advice import sphere_tables
 from multi_bodies.files.structure_generators import smallest_distance
 
+from multi_bodies.advice import advisor_physics
 from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
 from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
@@ -82,6 +83,10 @@ class Advisor(AdvisorReport):
     def __init__(self, scene, accuracy=0.01, quick=False, coarsen=False, log=None):
         self.scene, self.accuracy, self.quick, self.coarsen = scene, float(accuracy), quick, coarsen
         self.log = log or (lambda text: None)
+        self.program = advisor_physics.program_of(scene.options)
+        self.hooks_per_blob = [name for name in advisor_physics.PER_BLOB_HOOKS if not scene.hooks.is_default(name)]
+        self.check = None
+        self._physics_check = None
         self.choices = []
         self.notes = []
         self.recommendation = {}
@@ -137,15 +142,51 @@ class Advisor(AdvisorReport):
 
     # -------------------------------------------------------------- run everything
     def run(self):
-        """Measure every choice; returns self (``choices``, ``recommendation``, ``notes``)."""
+        """Measure every choice, keep to the program's options, check the physics; returns self.
+
+        Progress: one line per measurement through ``log`` (the script sends them to stderr).
+        """
         steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
                  ('resolution', self.measure_resolution), ('wall', self.measure_wall),
-                 ('rollers', self.measure_rollers), ('dt', self.measure_dt)]
-        for name, step in steps:
+                 ('rollers', self.measure_rollers), ('dt', self.measure_dt),
+                 ('scope', self.keep_to_program), ('check', self.keep_physics), ('dt bounds', self.recommend_dt)]
+        for index, (name, step) in enumerate(steps):
+            self.log('advise: [%d/%d] %s ...' % (index + 1, len(steps), name))
             start = time.perf_counter()
             step()
-            self.log('%s: %.2f s' % (name, time.perf_counter() - start))
+            self.log('advise: [%d/%d] %s done in %.2f s' % (index + 1, len(steps), name,
+                                                            time.perf_counter() - start))
         return self
+
+    def keep_to_program(self):
+        """Recommend only options the input's program uses (advisor_physics.scope)."""
+        self.notes += advisor_physics.scope(self.recommendation, self.scene.options, self.program)
+
+    def keep_physics(self):
+        advisor_physics.keep_physics(self)
+
+    def physics_check(self):
+        """The user's model set up as the program does, with its forces and velocities (made once)."""
+        if self._physics_check is None:
+            self._physics_check = advisor_physics.PhysicsCheck(self)
+        return self._physics_check
+
+    def write_files(self):
+        """Write the vertex files of the recommended models (``self.files``)."""
+        import os
+        from multi_bodies.files.structure_files import write_vertex_file
+        for path, (blobs, comment) in self.files.items():
+            folder = os.path.dirname(path)
+            if folder:
+                os.makedirs(folder, exist_ok=True)
+            write_vertex_file(path, blobs, comment=comment)
+
+    def current_model_error(self):
+        """Largest estimated error of the user's own models (resolution rows 'current'; rollers), 0 if unknown."""
+        errors = [c.estimated_error for c in self.choices if c.estimated_error is not None and (
+            (c.topic == 'resolution' and c.candidate.startswith('current')) or
+            (c.topic == 'rollers' and c.candidate.endswith('(current)')))]
+        return max(errors, default=0.0)
 
     def add(self, topic, structure, candidate, blobs, error, cost, meets, note=''):
         if error is not None and not np.isfinite(error):
@@ -600,6 +641,9 @@ class Advisor(AdvisorReport):
             self.recommendation.pop('scheme', None)
             self.recommendation['scheme'] = roller_scheme
             self.recommendation['blob_radius'] = '%.12g' % radii.pop()
+            # Torque-free rollers: the rigid spheres of the input carry no drive.
+            self.recommendation['free_kinematics'] = 'True'
+            self.recommendation['omega_one_roller'] = '0 0 0'
             for s in spheres:
                 vertex = self.write_vertex(s['ID'], 'blob', np.zeros((1, 3)))
                 self.recommendation['structure:%s' % s['ID']] = '%s %s' % (vertex, s['spec'].clones_file)
@@ -624,6 +668,17 @@ class Advisor(AdvisorReport):
                  max((c.cost_s for c in chosen if c.cost_s is not None), default=None),
                  error is not None and error <= self.accuracy, 'cost assumes the GMRES iterations measured here')
         multiblob = {v: k for k, v in ROLLER_SCHEMES.items()}.get(scene.options.scheme)
+        options = scene.options
+        driven = not options.free_kinematics or np.any(np.asarray(options.omega_one_roller) != 0)
+        if driven:
+            # The rigid schemes have no omega_one_roller or free_kinematics: the drive would be dropped.
+            for key in shells + ['blob_radius']:
+                self.recommendation.pop(key, None)
+            self.notes.append('rollers: the rollers are driven (free_kinematics %s, omega_one_roller %s); the rigid '
+                              'multiblob schemes ignore both options, so a multiblob model would drop the drive: the '
+                              'roller model is kept' % (options.free_kinematics,
+                                                        ' '.join('%g' % w for w in options.omega_one_roller)))
+            return
         if multiblob is None:
             for key in shells + ['blob_radius']:
                 self.recommendation.pop(key, None)
@@ -639,6 +694,9 @@ class Advisor(AdvisorReport):
     def measure_dt(self):
         scene = self.scene
         options = scene.options
+        if self.program == 'mcmc':
+            self.add('dt', None, 'no time step (Monte Carlo)', None, None, None, True)
+            return
         if options.scheme in STATIC_SCHEMES:
             self.add('dt', None, 'no time step (static problem %s)' % options.scheme, None, None, None, True)
             return
@@ -713,7 +771,8 @@ class Advisor(AdvisorReport):
             stable = dt > 0 and dt < limit
             if stable:
                 safe.append(scheme)
-            self.add('dt', None, '%s: stable below dt = %.4g (input dt %g)' % (scheme, limit, dt), None, None,
+            self.add('dt', None, '%s: linearly stable below dt = %.4g (input dt %g; stability only, see the dt '
+                     'bounds)' % (scheme, limit, dt), None, None,
                      None if solve_cost is None else solve_cost * row['solves_per_step'], stable,
                      'order %d; %s; dt mu k < %g' % (row['order'], row['source'], row['stability']))
         # Stochastic: the rms Brownian step of the lowest body against the Debye lengths.
@@ -747,13 +806,68 @@ class Advisor(AdvisorReport):
         else:
             self.notes.append('dt: no stochastic scheme of the shipped weak-error table applies; only the '
                               'Brownian-step estimate above is given')
-        if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
-            if 'deterministic_forward_euler' in safe:
-                self.recommendation['scheme'] = 'deterministic_forward_euler'
-            else:
-                limit = SCHEME_TABLE[options.scheme]['stability'] / rate
-                self.recommendation['dt'] = '%.3g' % (0.5 * limit)
-        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian)
+        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian, mu=mu)
+
+    def recommend_dt(self):
+        """The adequate time step: the smallest of the stability, no-crossing, accuracy and weak-error bounds.
+
+        Speeds come from one mobility problem of the user's model (``physics_check``); the bound that binds is
+        named, and a smaller dt than the input's is recommended with n_steps and n_save that keep the
+        simulated time and the save interval.
+        """
+        options, scene = self.scene.options, self.scene
+        if self.program != 'dynamic' or getattr(self, 'dt_summary', None) is None:
+            return
+        checker = self.physics_check()
+        scheme = self.recommendation.get('scheme', options.scheme)
+        speeds = advisor_physics.blob_speeds(checker.user_system, checker.user_velocities, options.scheme)
+        speed = float(np.max(speeds)) if len(speeds) else 0.0
+        wall_gap = float(np.min(scene.r_vectors[:, 2])) if scene.wall else np.inf
+        pair_gap = float(np.min(self.blob_gaps()))
+        lengths = []
+        if scene.wall and options.repulsion_strength_wall != 0:
+            lengths.append(options.debye_length_wall)
+        if options.blob_blob_force_implementation != 'None' and options.repulsion_strength != 0:
+            lengths.append(options.debye_length)
+        base = scheme.replace('_rollers', '')
+        order = 2 if any(word in scheme for word in ('adams_bashforth', 'trapezoidal', 'Trapz', 'Mid', 'midpoint')) \
+            else 1
+        rate = self.dt_summary['rate']
+        stability = SCHEME_TABLE[base]['stability'] / rate if base in SCHEME_TABLE and rate > 0 else np.inf
+        weak_dt = None
+        stochastic = not scheme.startswith('deterministic')
+        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0:
+            constant, power = STOCHASTIC_SCHEME_TABLE[scheme]['weak_error']
+            time_unit = scene.a ** 2 * 6 * np.pi * scene.eta * scene.a / options.kT  # a^2 / (kT mu0)
+            weak_dt = (self.accuracy / constant) ** (1.0 / power) * time_unit
+        bounds = advisor_physics.dt_bounds(order, stability, speed, wall_gap, pair_gap, lengths, self.accuracy,
+                                           weak_dt)
+        mu = self.dt_summary.get('mu', 0.0)
+        if stochastic and options.kT > 0 and mu > 0 and np.isfinite(wall_gap):
+            bounds.append(('Brownian no crossing', (0.5 * wall_gap) ** 2 / (2 * options.kT * mu),
+                           'the rms Brownian step sqrt(2 kT mu dt) stays below half the wall gap'))
+        name, limit, _ = min(bounds, key=lambda b: b[1])
+        for bound, value, reason in bounds:
+            self.add('dt', None, 'bound %s: dt <= %.4g' % (bound, value), None, None, None, options.dt <= value,
+                     reason + ('; BINDS' if bound == name else ''))
+        self.dt_bound = dict(dt=float(limit), binds=name, bounds={b: float(v) for b, v, _ in bounds}, speed=speed)
+        if not np.isfinite(limit):
+            self.notes.append('dt: no bound applies (no force moves the bodies and no stiffness was found)')
+            return
+        if options.dt <= limit:
+            self.notes.append('dt: the input dt = %g is within every bound (the %s bound, dt <= %.3g, binds)'
+                              % (options.dt, name, limit))
+            return
+        digits = 10 ** np.floor(np.log10(limit))
+        new_dt = float(np.floor(limit / digits * 10) / 10 * digits)
+        self.recommendation['dt'] = '%.3g' % new_dt
+        if options.n_steps:
+            self.recommendation['n_steps'] = '%d' % int(np.ceil(options.n_steps * options.dt / new_dt))
+            self.recommendation['n_save'] = '%d' % max(1, int(round(options.n_save * options.dt / new_dt)))
+        self.notes.append('dt: the input dt = %g exceeds the %s bound (dt <= %.3g, speed %.3g at the start): '
+                          'recommended dt %s%s' % (options.dt, name, limit, speed, self.recommendation['dt'],
+                                                   ', with n_steps and n_save that keep the simulated time and '
+                                                   'the save interval' if options.n_steps else ''))
 
 
 def advise(input_file, accuracy=0.01, quick=False, coarsen=False, log=None):

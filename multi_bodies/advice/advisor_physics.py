@@ -1,0 +1,320 @@
+"""Advice that keeps the physics: scope, per-blob parameters, the check run and the time-step bounds.
+
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 7).  A recommendation
+that changes the blobs of a body (a new shell, or single-blob rollers)
+must not change the forces on the bodies: gravity and the wall and pair
+repulsions of the default laws act per blob, so their parameters
+(``g``, ``repulsion_strength_wall``, ``repulsion_strength``) are rescaled
+here so that every body keeps its total force and torque at the input
+configuration (least squares over the bodies, one factor per parameter,
+since each is one number for the whole scene).  Gravity is matched
+exactly; the wall and pair factors are matched at the input positions
+(the new blobs sit at other heights, so the force-height law differs a
+little away from them).
+
+Then the recommended input is checked: it is read and set up as the
+program would (``run_setup.prepare``: the start check refuses blobs below
+the wall), and one mobility problem is solved (``System.deterministic_velocities``,
+or the roller velocities) for the user's input and for the recommended one.
+The model change is kept only if the total force per body and the body
+velocities agree within the target (velocities: the target plus the
+user's model's own estimated error, since a refinement corrects that
+error).  Otherwise it is dropped and the report says why.
+
+Shapes: forces and velocities (Nb, 6) per body ``[F, T]`` / ``[U, W]``;
+roller velocities (N, 3).  Lengths and times in the user's units.
+"""
+import contextlib
+import io
+
+import numpy as np
+
+import utils
+from multi_bodies.files.input_options import OPTION_TABLE, STATIC_SCHEMES, is_used, parse_input_text
+from multi_bodies.solver.physics import ONE_BLOB_NAMES
+
+# The per-blob parameters of the default laws, rescaled when the blob count of a body changes.
+PER_BLOB_PARAMETERS = ('g', 'repulsion_strength_wall', 'repulsion_strength')
+# Hooks whose body total depends on the number of blobs.
+PER_BLOB_HOOKS = ONE_BLOB_NAMES + ('blob_blob_force',)
+# Recommendation keys that change the model of the bodies (dropped together when the check fails).
+MODEL_KEYS = ('blob_radius', 'free_kinematics', 'omega_one_roller') + PER_BLOB_PARAMETERS
+# Static problems that use dense blocks only (no blob vector product).
+DENSE_BLOCK_SCHEMES = ('body_mobility', 'resistance')
+
+
+def program_of(options):
+    """'mcmc', 'static' or 'dynamic': the program that reads this input.
+
+    A Monte Carlo input sets options that only ``many_body_MCMC.py`` uses (``mcmc_move``, ``n_burn_in``,
+    ``mcmc_energy_implementation``, ...) and no ``scheme``.
+    """
+    mcmc_only = [name for name, row in OPTION_TABLE.items() if tuple(row.used_by) == ('mcmc',)]
+    if not options.is_set('scheme') and any(options.is_set(name) for name in mcmc_only):
+        return 'mcmc'
+    return 'static' if options.scheme in STATIC_SCHEMES else 'dynamic'
+
+
+def is_model_key(key):
+    return key.startswith('structure:') or key in MODEL_KEYS
+
+
+def scope(recommendation, options, program):
+    """Drop recommended options the program does not use; returns the notes of what was dropped."""
+    notes = []
+    scheme = recommendation.get('scheme', options.scheme)
+    for key in list(recommendation):
+        name = key.split(':')[0]
+        if program == 'mcmc' and (name in ('structure', 'blob_radius') or not is_used(name, 'mcmc', scheme)):
+            del recommendation[key]
+            notes.append('scope: %s dropped: the Monte Carlo sampler uses no hydrodynamics (no solver, no mobility '
+                         'backend, no time step); its results depend on the energy only' % name)
+        elif name == 'mobility_vector_prod_implementation' and program == 'static' and scheme in DENSE_BLOCK_SCHEMES:
+            del recommendation[key]
+            notes.append('scope: %s dropped: scheme %s builds dense blocks and does not use the blob vector product'
+                         % (name, scheme))
+        elif name == 'mobility_blobs_implementation' and 'rollers' in scheme:
+            del recommendation[key]
+            notes.append('scope: %s dropped: the roller schemes use the blob vector product only' % name)
+        elif name in OPTION_TABLE and name != 'scheme' and OPTION_TABLE[name].used_by \
+                and not is_used(name, program, scheme):
+            del recommendation[key]
+            notes.append('scope: %s dropped: a %s run with scheme %s does not use it' % (name, program, scheme))
+    if program == 'static' and 'scheme' in recommendation:
+        notes.append('scope: scheme %s dropped: the static problem %s is what the user asked for'
+                     % (recommendation.pop('scheme'), options.scheme))
+    return notes
+
+
+# ------------------------------------------------------------------ set-up of an input, quietly
+def read_options(text, input_file, program):
+    """Options of an input text (as the program reads it), warnings silenced."""
+    with contextlib.redirect_stderr(io.StringIO()):
+        return parse_input_text(text, input_file, None if program == 'mcmc' else program)
+
+
+def set_up(options, program):
+    """The System of ``options`` as the program sets it up (start check included); UserInputError if refused."""
+    from multi_bodies.run.run_setup import prepare
+    script = {'dynamic': 'dynamics', 'static': 'static'}[program]
+    with contextlib.redirect_stdout(io.StringIO()):
+        return prepare(options, script, log=lambda line: None).system
+
+
+def force_parts(system):
+    """(rest (Nb, 6), {parameter: contribution (Nb, 6)}) of the forces-torques at the system's configuration.
+
+    Each per-blob parameter enters the default laws linearly, so its contribution is the force with only
+    that parameter on minus the force with all of them off (``rest``: what does not depend on them).
+    """
+    saved = dict(system.physics)
+    configuration = system.configuration
+    off = dict(saved, **{name: 0.0 for name in PER_BLOB_PARAMETERS})
+    try:
+        system.physics = off
+        rest = system.forces_torques(configuration)
+        parts = {}
+        for name in PER_BLOB_PARAMETERS:
+            system.physics = dict(off, **{name: saved[name]})
+            parts[name] = system.forces_torques(configuration) - rest
+    finally:
+        system.physics = saved
+    return rest, parts
+
+
+def velocities(system, scheme):
+    """Body velocities of one mobility problem: (Nb, 6), or (N, 3) linear velocities of rollers."""
+    configuration = system.configuration
+    if 'rollers' in scheme:
+        return system.roller_velocities(configuration).velocities
+    return system.deterministic_velocities(configuration).velocities
+
+
+def force_difference(old, new):
+    """Largest difference of the per-body forces (and torques) against the largest of the user's, relative."""
+    old, new = np.asarray(old).reshape(-1, 6), np.asarray(new).reshape(-1, 6)
+    worst = 0.0
+    for part in (slice(0, 3), slice(3, 6)):
+        scale = np.max(np.linalg.norm(old[:, part], axis=1)) if len(old) else 0.0
+        difference = np.max(np.linalg.norm(new[:, part] - old[:, part], axis=1)) if len(old) else 0.0
+        if part.start == 3:  # torques: measured against force x body size when they vanish
+            scale = max(scale, 1e-9 * np.max(np.linalg.norm(old[:, :3], axis=1)))
+        if scale > 0:
+            worst = max(worst, difference / scale)
+        elif difference > 0:
+            worst = np.inf
+    return float(worst)
+
+
+def velocity_difference(old, new, length):
+    """Relative difference of body velocities; rotations measured as W x ``length`` against the speeds."""
+    old, new = np.asarray(old), np.asarray(new)
+    if old.shape != new.shape:  # rollers against rigid bodies: compare the linear velocities
+        old, new = old.reshape(old.shape[0], -1)[:, :3], new.reshape(new.shape[0], -1)[:, :3]
+    speed = np.max(np.linalg.norm(old[:, :3], axis=1))
+    worst = np.max(np.linalg.norm(new[:, :3] - old[:, :3], axis=1)) / speed if speed > 0 else 0.0
+    if old.shape[1] == 6:
+        spin = max(np.max(np.linalg.norm(old[:, 3:], axis=1)) * length, speed)
+        if spin > 0:
+            worst = max(worst, np.max(np.linalg.norm(new[:, 3:] - old[:, 3:], axis=1)) * length / spin)
+    return float(worst)
+
+
+# ------------------------------------------------------------------ keep the physics, then check
+class PhysicsCheck:
+    """The user's model (System, forces, velocities) and the checks of a recommendation against it.
+
+    ``advisor``: the Advisor (its scene, recommendation, notes, files, accuracy, log).
+    """
+
+    def __init__(self, advisor):
+        self.advisor = advisor
+        scene = advisor.scene
+        self.scene, self.options, self.program = scene, scene.options, advisor.program
+        with open(scene.options.input_file) as f:
+            self.text = f.read()
+        self.user_system = set_up(self.options, self.program)
+        self.user_rest, self.user_parts = force_parts(self.user_system)
+        self.user_forces = self.user_rest + sum(self.user_parts.values())
+        self.user_velocities = velocities(self.user_system, self.options.scheme)
+        reference = scene.arrays.reference_blobs
+        self.length = float(np.max(np.linalg.norm(reference - reference.mean(axis=0), axis=1))) + scene.a
+
+    def recommended_options(self, recommendation):
+        from multi_bodies.advice.advisor_report import apply_recommendation
+        text = apply_recommendation(self.text, recommendation, [s['ID'] for s in self.scene.structures])
+        return read_options(text, self.options.input_file, self.program)
+
+    def rescale(self, recommendation):
+        """Put rescaled per-blob parameters into ``recommendation``; returns a note (or None when nothing changed)."""
+        advisor = self.advisor
+        options = self.recommended_options(recommendation)
+        system = set_up(options, self.program)
+        rest, parts = force_parts(system)
+        total = np.max(np.linalg.norm(self.user_forces[:, :3], axis=1))
+        said = []
+        for name in PER_BLOB_PARAMETERS:
+            old, new = self.user_parts[name], parts[name]
+            value = getattr(options, name)
+            if value == 0 or np.sum(new * new) == 0.0 or np.max(np.abs(old)) <= 1e-12 * max(total, 1e-300):
+                continue
+            factor = float(np.sum(old * new) / np.sum(new * new))
+            if abs(factor - 1.0) > 1e-9:
+                recommendation[name] = '%.12g' % (getattr(self.options, name) * factor)
+                said.append('%s %g -> %s (x %.4g)' % (name, getattr(self.options, name), recommendation[name],
+                                                      factor))
+        if self.advisor.hooks_per_blob:
+            advisor.notes.append('physics: your override file replaces %s, which acts per blob: its body total '
+                                 'depends on the number of blobs; the check below decides whether the new model '
+                                 'keeps it' % ', '.join(advisor.hooks_per_blob))
+        if said:
+            return ('physics: the new model has other blobs per body; gravity and the wall and pair repulsions act '
+                    'per blob, so the per-blob parameters are rescaled to keep the total force and torque on each '
+                    'body at the input positions (gravity exactly; wall and pair matched at the input heights): '
+                    + '; '.join(said))
+        return None
+
+    def check(self, recommendation, allowed_velocity_error):
+        """(holds, message): run the recommended input for one mobility problem and compare with the user's."""
+        options = self.recommended_options(recommendation)
+        try:
+            system = set_up(options, self.program)
+        except utils.UserInputError as err:
+            return False, 'the recommended input is refused at set-up: %s' % err
+        try:
+            rest, parts = force_parts(system)
+            forces = rest + sum(parts.values())
+            new_velocities = velocities(system, options.scheme)
+        except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
+            return False, 'the recommended input fails its first mobility problem: %s' % err
+        if forces.shape != self.user_forces.shape:
+            return False, 'the recommended input has %d bodies, the user\'s %d' % (len(forces), len(self.user_forces))
+        force_error = force_difference(self.user_forces, forces)
+        velocity_error = velocity_difference(self.user_velocities, new_velocities, self.length)
+        holds = force_error <= self.advisor.accuracy and velocity_error <= allowed_velocity_error
+        message = ('one mobility problem of the recommended input against the user\'s: total force and torque per '
+                   'body differ by %.3g%% (target %.3g%%), body velocities by %.3g%% (allowed %.3g%%: the target '
+                   'plus the user\'s model\'s own estimated error)' % (
+                       100 * force_error, 100 * self.advisor.accuracy, 100 * velocity_error,
+                       100 * allowed_velocity_error))
+        self.last = dict(force_error=force_error, velocity_error=velocity_error, allowed=allowed_velocity_error,
+                         holds=holds)
+        return holds, message
+
+
+def keep_physics(advisor):
+    """Rescale the per-blob parameters of a model change and check the recommendation; drop it if it fails.
+
+    Adds notes and ``advisor.check`` (dict of the check's numbers, or None when there was nothing to check).
+    """
+    recommendation = advisor.recommendation
+    advisor.check = None
+    if advisor.program == 'mcmc':
+        return
+    model_change = any(is_model_key(k) for k in recommendation) or (
+        'scheme' in recommendation and ('rollers' in recommendation['scheme']) != ('rollers' in
+                                                                                    advisor.scene.options.scheme))
+    if not recommendation:
+        return
+    checker = advisor.physics_check()
+    if model_change:
+        advisor.write_files()  # the recommended vertex files: the check reads the input as the program does
+        try:
+            note = checker.rescale(recommendation)
+        except (utils.UserInputError, utils.SimulationStopped, np.linalg.LinAlgError) as err:
+            note = None
+            advisor.notes.append('physics: the recommended model could not be set up (%s)' % err)
+        if note:
+            advisor.notes.append(note)
+    allowed = advisor.accuracy + (advisor.current_model_error() if model_change else 0.0)
+    holds, message = checker.check(recommendation, allowed)
+    advisor.check = dict(getattr(checker, 'last', {}), message=message, holds=holds)
+    if holds:
+        advisor.notes.append('check: holds: ' + message)
+        return
+    dropped = [k for k in recommendation if is_model_key(k) or k == 'scheme']
+    for key in dropped:
+        recommendation.pop(key)
+    advisor.notes.append('check: FAILED, so %s %s not recommended: %s' % (
+        ', '.join(k.split(':')[0] if not k.startswith('structure:') else 'structure %s' % k.split(':')[1]
+                  for k in dropped) or 'nothing', 'is' if len(dropped) == 1 else 'are', message))
+    if recommendation:
+        holds, message = checker.check(recommendation, advisor.accuracy)
+        advisor.check = dict(getattr(checker, 'last', {}), message=message, holds=holds)
+        advisor.notes.append('check of the remaining lines: %s: %s' % ('holds' if holds else 'FAILED', message))
+        if not holds:
+            recommendation.clear()
+
+
+# ------------------------------------------------------------------ time step
+def blob_speeds(system, body_velocities, scheme):
+    """Speed of every blob (N,) from body velocities (Nb, 6) (rigid motion) or roller velocities (N, 3)."""
+    v = np.asarray(body_velocities)
+    if 'rollers' in scheme:
+        return np.linalg.norm(v.reshape(-1, 3), axis=1)
+    blob_v = system.arrays.K_dot(system.configuration, v.reshape(-1, 6))
+    return np.linalg.norm(np.asarray(blob_v).reshape(-1, 3), axis=1)
+
+
+def dt_bounds(order, stability_dt, speed, wall_gap, pair_gap, lengths, accuracy, weak_dt=None):
+    """Bounds on the time step, list of (name, dt, reason); the smallest binds.
+
+    order: the scheme's order; stability_dt: the linear-stability limit (inf if unknown); speed: the largest
+    blob speed; wall_gap: the lowest blob height (distance to z = 0, where a run stops); pair_gap: the
+    smallest distance between blobs of two bodies (inf with one body); lengths: the ranges of the potentials
+    (Debye lengths); weak_dt: the time step that the measured weak-error table gives for the target.
+    """
+    bounds = [('stability', stability_dt, 'linear stability of the scheme on the stiffest force (dt mu k)')]
+    if speed > 0:
+        bounds.append(('no crossing', 0.5 * wall_gap / speed,
+                       'a step moves no blob more than half its height above the wall (%.3g)' % wall_gap))
+        if np.isfinite(pair_gap):
+            bounds.append(('no crossing of bodies', 0.25 * pair_gap / speed,
+                           'two bodies close at most half their blob gap (%.3g) per step' % pair_gap))
+        scale = min([wall_gap, pair_gap] + [b for b in lengths if b > 0])
+        bounds.append(('accuracy', scale * accuracy ** (1.0 / order) / speed,
+                       'error per unit time (v dt / l)^p <= target, l = %.3g the shortest length over which the '
+                       'velocity changes (smallest gap or Debye length), order p = %d' % (scale, order)))
+    if weak_dt is not None:
+        bounds.append(('weak error', weak_dt, 'the measured weak-error table of the scheme gives the target here'))
+    return bounds
