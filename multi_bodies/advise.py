@@ -40,19 +40,26 @@ def main(argv=None):
                         help='skip measurements that grow with the scene; use the shipped tables instead')
     parser.add_argument('--coarsen', action='store_true',
                         help='also offer coarsened models (every other blob) of bodies that are not spheres')
-    parser.add_argument('--verbose', action='store_true', help='print the time each measurement took')
+    parser.add_argument('--quiet', action='store_true',
+                        help='no progress lines on stderr (by default one line per measurement)')
+    parser.add_argument('--verbose', action='store_true', help='accepted for old command lines: progress lines '
+                                                               'are printed by default')
     args = parser.parse_args(argv)
     if not 0.0 < args.accuracy < 1.0:
         raise utils.UserInputError('--accuracy is a relative error between 0 and 1 (e.g. 0.01), got %g'
                                    % args.accuracy)
-    log = print if args.verbose else None
+    def log(line):
+        print(line, file=sys.stderr, flush=True)
+    if args.quiet:
+        log = None
     result = advisor.advise(args.input_file, accuracy=args.accuracy, quick=args.quick, coarsen=args.coarsen,
                             log=log)
     sys.stdout.write(result.report())
     path = result.write()
     print('\nwrote %s' % path)
     for name in result.files:
-        print('wrote %s' % name)
+        if result.recommends_file(name):
+            print('wrote %s' % name)
     return 0
 
 

@@ -830,22 +830,34 @@ class Advisor(AdvisorReport):
         if options.blob_blob_force_implementation != 'None' and options.repulsion_strength != 0:
             lengths.append(options.debye_length)
         base = scheme.replace('_rollers', '')
-        order = 2 if any(word in scheme for word in ('adams_bashforth', 'trapezoidal', 'Trapz', 'Mid', 'midpoint')) \
-            else 1
         rate = self.dt_summary['rate']
         stability = SCHEME_TABLE[base]['stability'] / rate if base in SCHEME_TABLE and rate > 0 else np.inf
-        weak_dt = None
         stochastic = not scheme.startswith('deterministic')
-        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0:
-            constant, power = STOCHASTIC_SCHEME_TABLE[scheme]['weak_error']
-            time_unit = scene.a ** 2 * 6 * np.pi * scene.eta * scene.a / options.kT  # a^2 / (kT mu0)
-            weak_dt = (self.accuracy / constant) ** (1.0 / power) * time_unit
-        bounds = advisor_physics.dt_bounds(order, stability, speed, wall_gap, pair_gap, lengths, self.accuracy,
-                                           weak_dt)
+        bounds = advisor_physics.dt_bounds(stability, speed, wall_gap, pair_gap)
         mu = self.dt_summary.get('mu', 0.0)
         if stochastic and options.kT > 0 and mu > 0 and np.isfinite(wall_gap):
             bounds.append(('Brownian no crossing', (0.5 * wall_gap) ** 2 / (2 * options.kT * mu),
                            'the rms Brownian step sqrt(2 kT mu dt) stays below half the wall gap'))
+        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0:
+            constant, power = STOCHASTIC_SCHEME_TABLE[scheme]['weak_error']
+            time_unit = scene.a ** 2 * 6 * np.pi * scene.eta * scene.a / options.kT  # a^2 / (kT mu0)
+            bounds.append(('weak error', (self.accuracy / constant) ** (1.0 / power) * time_unit,
+                           'the measured weak-error table of %s (single blobs above a wall) gives the target'
+                           % scheme))
+        # Accuracy of the drift, measured on this scene by step doubling from the hard bounds.
+        hard = min(value for _, value, _ in bounds)
+        if np.isfinite(hard) and speed > 0:
+            measured_scheme = scheme if not stochastic else (
+                'deterministic_adams_bashforth_rollers' if 'rollers' in scheme else 'deterministic_forward_euler')
+            measured = advisor_physics.measured_dt(checker.options_for_dt(self.recommendation), measured_scheme,
+                                                   hard, self.accuracy, steps=2 if self.quick else 4)
+            self.dt_measurement = measured
+            bounds.append(('accuracy (measured)', measured['dt'],
+                           'error per unit time within the target: %s, step doubling over %d steps of %s%s; %s' % (
+                               _percent(self.accuracy), 2 if self.quick else 4, measured_scheme,
+                               ' (the drift of the stochastic scheme)' if stochastic else '',
+                               '; '.join('dt %.3g: %s' % t for t in measured['tries'])) +
+                           ('' if measured['verified'] else '; NOT verified: the last value is extrapolated')))
         name, limit, _ = min(bounds, key=lambda b: b[1])
         for bound, value, reason in bounds:
             self.add('dt', None, 'bound %s: dt <= %.4g' % (bound, value), None, None, None, options.dt <= value,

@@ -61,14 +61,13 @@ def is_model_key(key):
 
 def scope(recommendation, options, program):
     """Drop recommended options the program does not use; returns the notes of what was dropped."""
-    notes = []
+    notes, mcmc_dropped = [], []
     scheme = recommendation.get('scheme', options.scheme)
     for key in list(recommendation):
         name = key.split(':')[0]
         if program == 'mcmc' and (name in ('structure', 'blob_radius') or not is_used(name, 'mcmc', scheme)):
             del recommendation[key]
-            notes.append('scope: %s dropped: the Monte Carlo sampler uses no hydrodynamics (no solver, no mobility '
-                         'backend, no time step); its results depend on the energy only' % name)
+            mcmc_dropped.append(name)
         elif name == 'mobility_vector_prod_implementation' and program == 'static' and scheme in DENSE_BLOCK_SCHEMES:
             del recommendation[key]
             notes.append('scope: %s dropped: scheme %s builds dense blocks and does not use the blob vector product'
@@ -80,6 +79,10 @@ def scope(recommendation, options, program):
                 and not is_used(name, program, scheme):
             del recommendation[key]
             notes.append('scope: %s dropped: a %s run with scheme %s does not use it' % (name, program, scheme))
+    if mcmc_dropped:
+        notes.append('scope: %s dropped: the Monte Carlo sampler uses no hydrodynamics (no solver, no mobility '
+                     'backend, no time step, no hydrodynamic resolution); its results depend on the energy only'
+                     % ', '.join(mcmc_dropped))
     if program == 'static' and 'scheme' in recommendation:
         notes.append('scope: scheme %s dropped: the static problem %s is what the user asked for'
                      % (recommendation.pop('scheme'), options.scheme))
@@ -179,6 +182,20 @@ class PhysicsCheck:
         self.user_velocities = velocities(self.user_system, self.options.scheme)
         reference = scene.arrays.reference_blobs
         self.length = float(np.max(np.linalg.norm(reference - reference.mean(axis=0), axis=1))) + scene.a
+
+    def options_for_dt(self, recommendation):
+        """Options the time step is measured on: the user's model with the recommended scheme.
+
+        The recommended model moves like the user's within the target (the check), so the cheaper of the
+        two is stepped: the user's, unless the recommended scheme needs the recommended bodies (rollers).
+        """
+        scheme = recommendation.get('scheme', self.options.scheme)
+        if ('rollers' in scheme) == ('rollers' in self.options.scheme):
+            if scheme == self.options.scheme:
+                return self.options
+            return self.recommended_options({'scheme': scheme})
+        return self.recommended_options({k: v for k, v in recommendation.items()
+                                         if k not in ('dt', 'n_steps', 'n_save')})
 
     def recommended_options(self, recommendation):
         from multi_bodies.advice.advisor_report import apply_recommendation
@@ -296,13 +313,66 @@ def blob_speeds(system, body_velocities, scheme):
     return np.linalg.norm(np.asarray(blob_v).reshape(-1, 3), axis=1)
 
 
-def dt_bounds(order, stability_dt, speed, wall_gap, pair_gap, lengths, accuracy, weak_dt=None):
-    """Bounds on the time step, list of (name, dt, reason); the smallest binds.
+def trajectory(options, scheme_name, dt, steps):
+    """Body locations (Nb, 3) after ``steps`` steps of ``scheme_name`` at ``dt`` from the input configuration.
 
-    order: the scheme's order; stability_dt: the linear-stability limit (inf if unknown); speed: the largest
-    blob speed; wall_gap: the lowest blob height (distance to z = 0, where a run stops); pair_gap: the
-    smallest distance between blobs of two bodies (inf with one body); lengths: the ranges of the potentials
-    (Debye lengths); weak_dt: the time step that the measured weak-error table gives for the target.
+    Raises utils.SimulationStopped (a blob below the wall, GMRES not converged) or LinAlgError.
+    """
+    from quaternion_integrator.schemes import make_scheme
+    system = set_up(options, 'dynamic')
+    scheme = make_scheme(scheme_name, dt, options)
+    for step in range(steps):
+        scheme.step(system, step, None)
+    return np.array(system.configuration.locations, dtype=float)
+
+
+def measured_dt(options, scheme_name, dt_start, accuracy, steps=4, refinements=6):
+    """The time step whose measured error per unit time meets ``accuracy`` (step doubling), and how it was found.
+
+    From ``dt_start`` (the hard bounds: stability and no crossing), the scene is run over the horizon
+    ``steps * dt`` at dt, dt/2 and dt/4; the observed order ``p = log2(|x1 - x2| / |x2 - x3|)`` and the
+    Richardson estimate of the error at dt, ``e = |x1 - x2| 2^p / (2^p - 1)`` relative to the largest
+    body displacement over the horizon (a relative displacement error; over a horizon of a few steps it
+    is the error per unit time times the horizon over the displacement time, the same at any horizon
+    for steady motion), give ``dt* = dt (accuracy / e)^(1/p)``.  When dt* is well below dt the
+    measurement is repeated from dt* (at most ``refinements`` times).  A run that stops (a blob through
+    the wall) divides dt by 4.
+
+    Returns dict(dt (float, <= dt_start), error (measured at the returned dt, None if extrapolated), order,
+    horizon, tries: list of (dt, outcome text), verified).
+    """
+    dt, tries = float(dt_start), []
+    result = None
+    for _ in range(refinements + 4):
+        try:
+            x0 = np.array(set_up(options, 'dynamic').configuration.locations, dtype=float)
+            x1, x2, x3 = (trajectory(options, scheme_name, dt / k, steps * k) for k in (1, 2, 4))
+        except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
+            tries.append((dt, 'stops: %s' % str(err).split(';')[0]))
+            dt /= 4.0
+            continue
+        displacement = np.max(np.linalg.norm(x3 - x0, axis=1))
+        d12, d23 = np.max(np.linalg.norm(x1 - x2, axis=1)), np.max(np.linalg.norm(x2 - x3, axis=1))
+        if displacement == 0 or d12 == 0:
+            tries.append((dt, 'no error measurable (displacement %.3g)' % displacement))
+            return dict(dt=dt, error=0.0, order=None, horizon=steps * dt, tries=tries, verified=True)
+        order = float(np.clip(np.log2(d12 / d23), 0.5, 3.0)) if d23 > 0 else 3.0
+        error = d12 * 2 ** order / (2 ** order - 1) / displacement
+        tries.append((dt, 'error %.3g%% over %d steps (observed order %.2f)' % (100 * error, steps, order)))
+        if error <= accuracy:  # measured, not extrapolated: this dt meets the target
+            return dict(dt=dt, error=error, order=order, horizon=steps * dt, tries=tries, verified=True)
+        target_dt = dt * (accuracy / error) ** (1.0 / order)
+        result = dict(dt=target_dt, error=None, order=order, horizon=steps * dt, tries=tries, verified=False)
+        dt = min(target_dt, 0.5 * dt)
+    return result or dict(dt=dt, error=None, order=None, horizon=steps * dt, tries=tries, verified=False)
+
+
+def dt_bounds(stability_dt, speed, wall_gap, pair_gap):
+    """Hard bounds on the time step, list of (name, dt, reason).
+
+    stability_dt: the linear-stability limit (inf if unknown); speed: the largest blob speed at the start;
+    wall_gap: the lowest blob height (distance to z = 0, where a run stops); pair_gap: the smallest
+    distance between blobs of two bodies (inf with one body).
     """
     bounds = [('stability', stability_dt, 'linear stability of the scheme on the stiffest force (dt mu k)')]
     if speed > 0:
@@ -311,10 +381,4 @@ def dt_bounds(order, stability_dt, speed, wall_gap, pair_gap, lengths, accuracy,
         if np.isfinite(pair_gap):
             bounds.append(('no crossing of bodies', 0.25 * pair_gap / speed,
                            'two bodies close at most half their blob gap (%.3g) per step' % pair_gap))
-        scale = min([wall_gap, pair_gap] + [b for b in lengths if b > 0])
-        bounds.append(('accuracy', scale * accuracy ** (1.0 / order) / speed,
-                       'error per unit time (v dt / l)^p <= target, l = %.3g the shortest length over which the '
-                       'velocity changes (smallest gap or Debye length), order p = %d' % (scale, order)))
-    if weak_dt is not None:
-        bounds.append(('weak error', weak_dt, 'the measured weak-error table of the scheme gives the target here'))
     return bounds

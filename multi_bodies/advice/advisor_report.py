@@ -68,6 +68,10 @@ class AdvisorReport:
             lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
         return '\n'.join(lines) + '\n'
 
+    def recommends_file(self, path):
+        """True when a recommended structure line names the vertex file ``path``."""
+        return any(k.startswith('structure:') and v.split()[0] == path for k, v in self.recommendation.items())
+
     def write(self):
         """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
         from multi_bodies.files.structure_files import write_vertex_file
@@ -76,7 +80,8 @@ class AdvisorReport:
         if folder:
             os.makedirs(folder, exist_ok=True)
         for path, (blobs, comment) in self.files.items():
-            write_vertex_file(path, blobs, comment=comment)
+            if self.recommends_file(path):
+                write_vertex_file(path, blobs, comment=comment)
         path = output + '.advice.json'
         with open(path, 'w') as f:
             json.dump(self.as_json(), f, indent=1)
