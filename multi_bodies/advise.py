@@ -48,10 +48,9 @@ def main(argv=None):
     if not 0.0 < args.accuracy < 1.0:
         raise utils.UserInputError('--accuracy is a relative error between 0 and 1 (e.g. 0.01), got %g'
                                    % args.accuracy)
-    def log(line):
+    def progress(line):
         print(line, file=sys.stderr, flush=True)
-    if args.quiet:
-        log = None
+    log = None if args.quiet else progress
     result = advisor.advise(args.input_file, accuracy=args.accuracy, quick=args.quick, coarsen=args.coarsen,
                             log=log)
     sys.stdout.write(result.report())

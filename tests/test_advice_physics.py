@@ -46,6 +46,7 @@ def applied_options(result, name):
 
 
 def one_sphere(folder, height=1.5, g=0.05, scheme='deterministic_adams_bashforth', extra=()):
+    folder = os.path.abspath(folder)
     """One 12-blob shell of hydrodynamic radius 1 (made by the structure generator) at ``height``."""
     run = subprocess.run([sys.executable, '-m', 'multi_bodies.files.structure_generators', 'shell', '--blobs', '12',
                           '--output', folder], capture_output=True, text=True, env=ENV, cwd=REPO)

@@ -17,7 +17,9 @@ class AdvisorReport:
                 'choices': [dict(topic=c.topic, structure=c.structure, candidate=c.candidate, blobs=c.blobs,
                                  estimated_error=c.estimated_error, cost_s=c.cost_s, meets_target=c.meets_target)
                             for c in self.choices],
-                'recommendation': dict(self.recommendation)}
+                'recommendation': dict(self.recommendation),
+                'check': getattr(self, 'check', None),
+                'dt_bound': getattr(self, 'dt_bound', None)}
 
     def report(self):
         """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
