@@ -234,3 +234,14 @@ def test_sphere_msd_quick_start_ends_at_end_and_samples_equilibrium(tmp_path):
     script.run(0.01, 2000, 1.0, runs=8, seed=1, data_dir=str(tmp_path), data_name='late', logger=late,
                start_height=3.5)
     assert [w for w in late.warnings if 'not at equilibrium' in w]
+
+
+def test_ensemble_of_a_deterministic_scheme_warns_that_replicas_are_identical(tmp_path, capsys):
+    from multi_bodies.ensembles import ensemble_runner
+    name = os.path.join(MULTI_BODIES, 'inputfile_dynamic.dat')
+    ensemble_runner.build_plan(name, 2, master_seed=1, output_dir=str(tmp_path / 'ensemble'))
+    assert 'replicas of each parameter point are identical' in capsys.readouterr().err
+    # A stochastic scheme draws from the replica's seed: no warning.
+    ensemble_runner.build_plan(name, 2, vary=[('scheme', ['stochastic_first_order_RFD'])], master_seed=1,
+                               output_dir=str(tmp_path / 'ensemble2'))
+    assert 'identical' not in capsys.readouterr().err
