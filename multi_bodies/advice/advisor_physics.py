@@ -24,8 +24,10 @@ error).  Otherwise it is dropped and the report says why.
 Shapes: forces and velocities (Nb, 6) per body ``[F, T]`` / ``[U, W]``;
 roller velocities (N, 3).  Lengths and times in the user's units.
 """
+import atexit
 import contextlib
 import io
+import shutil
 
 import numpy as np
 
@@ -41,6 +43,9 @@ PER_BLOB_HOOKS = ONE_BLOB_NAMES + ('blob_blob_force',)
 MODEL_KEYS = ('blob_radius', 'free_kinematics', 'omega_one_roller') + PER_BLOB_PARAMETERS
 # Static problems that use dense blocks only (no blob vector product).
 DENSE_BLOCK_SCHEMES = ('body_mobility', 'resistance')
+# Blobs (with the larger of the user's and the recommended model) beyond which the check and the time-step
+# measurement run on the bodies nearest the lowest body instead of the whole scene.
+CHECK_BLOB_LIMIT = 3000
 
 
 def program_of(options):
@@ -133,15 +138,20 @@ def velocities(system, scheme):
     return system.deterministic_velocities(configuration).velocities
 
 
-def force_difference(old, new):
-    """Largest difference of the per-body forces (and torques) against the largest of the user's, relative."""
+def force_difference(old, new, length):
+    """Largest difference of the per-body forces and torques, relative to the user's largest (Nb, 6) each.
+
+    Torques are measured against the larger of the largest torque and the largest force times ``length``
+    (the body size), so that the residual torque of a sphere made of a few blobs is not compared with zero.
+    """
     old, new = np.asarray(old).reshape(-1, 6), np.asarray(new).reshape(-1, 6)
+    if not len(old):
+        return 0.0
+    force_scale = np.max(np.linalg.norm(old[:, :3], axis=1))
+    torque_scale = max(np.max(np.linalg.norm(old[:, 3:], axis=1)), force_scale * length)
     worst = 0.0
-    for part in (slice(0, 3), slice(3, 6)):
-        scale = np.max(np.linalg.norm(old[:, part], axis=1)) if len(old) else 0.0
-        difference = np.max(np.linalg.norm(new[:, part] - old[:, part], axis=1)) if len(old) else 0.0
-        if part.start == 3:  # torques: measured against force x body size when they vanish
-            scale = max(scale, 1e-9 * np.max(np.linalg.norm(old[:, :3], axis=1)))
+    for part, scale in ((slice(0, 3), force_scale), (slice(3, 6), torque_scale)):
+        difference = np.max(np.linalg.norm(new[:, part] - old[:, part], axis=1))
         if scale > 0:
             worst = max(worst, difference / scale)
         elif difference > 0:
@@ -176,12 +186,66 @@ class PhysicsCheck:
         self.scene, self.options, self.program = scene, scene.options, advisor.program
         with open(scene.options.input_file) as f:
             self.text = f.read()
+        self.ids = [s['ID'] for s in scene.structures]
+        self.clones_map = {}
+        self.subset_note = None
+        self.neighbourhood(advisor.recommendation, advisor.files)
         self.user_system = set_up(self.options, self.program)
         self.user_rest, self.user_parts = force_parts(self.user_system)
         self.user_forces = self.user_rest + sum(self.user_parts.values())
         self.user_velocities = velocities(self.user_system, self.options.scheme)
         reference = scene.arrays.reference_blobs
         self.length = float(np.max(np.linalg.norm(reference - reference.mean(axis=0), axis=1))) + scene.a
+
+    def neighbourhood(self, recommendation, files):
+        """Large scenes: check on the bodies nearest the lowest body (at most CHECK_BLOB_LIMIT blobs).
+
+        The bodies are written to temporary clones files and the input text (``self.text``,
+        ``self.options``, ``self.ids``) is rewritten to use them; ``self.subset_note`` says so.
+        """
+        import tempfile
+        from multi_bodies.files.snapshots import write_clones_file
+        scene = self.scene
+        arrays = scene.arrays
+        blobs = np.diff(arrays.blob_offsets).astype(float)  # per body, the user's model
+        for k, structure in enumerate(scene.structures):
+            value = recommendation.get('structure:%s' % structure['ID'])
+            if value and value.split()[0] in files:
+                blobs[structure['bodies']] = np.maximum(blobs[structure['bodies']], len(files[value.split()[0]][0]))
+        if blobs.sum() <= CHECK_BLOB_LIMIT or arrays.num_bodies <= 2:
+            return
+        centres = np.asarray(arrays.configuration.locations)
+        lowest = int(arrays.blob_body_index[int(np.argmin(scene.r_vectors[:, 2]))])
+        order = np.argsort(np.linalg.norm(centres - centres[lowest], axis=1), kind='stable')
+        count = int(max(2, np.searchsorted(np.cumsum(blobs[order]), CHECK_BLOB_LIMIT, side='right')))
+        chosen = np.zeros(arrays.num_bodies, dtype=bool)
+        chosen[order[:count]] = True
+        folder = tempfile.mkdtemp(prefix='advice_check_')
+        atexit.register(shutil.rmtree, folder, True)
+        locations, orientations = arrays.configuration.locations, arrays.configuration.orientations
+        lines, index, kept = [], 0, []
+        for raw in self.text.splitlines():
+            words = raw.split('#', 1)[0].split()
+            if not words or words[0] != 'structure':
+                lines.append(raw)
+                continue
+            structure = scene.structures[index]
+            index += 1
+            selected = np.flatnonzero(chosen[structure['bodies']]) + structure['bodies'].start
+            if selected.size == 0:
+                continue
+            path = '%s/%s.clones' % (folder, structure['ID'])
+            write_clones_file(path, np.asarray(locations)[selected], np.asarray(orientations)[selected])
+            self.clones_map[words[2]] = path
+            words[2] = path
+            lines.append(' '.join(words))
+            kept.append(structure['ID'])
+        self.text = '\n'.join(lines) + '\n'
+        self.ids = kept
+        self.options = read_options(self.text, self.options.input_file, self.program)
+        self.subset_note = ('on the %d bodies nearest the lowest body (the whole scene would need %d blobs with the '
+                            'recommended model; the check is limited to %d)' % (count, int(blobs.sum()),
+                                                                               CHECK_BLOB_LIMIT))
 
     def options_for_dt(self, recommendation):
         """Options the time step is measured on: the user's model with the recommended scheme.
@@ -199,7 +263,16 @@ class PhysicsCheck:
 
     def recommended_options(self, recommendation):
         from multi_bodies.advice.advisor_report import apply_recommendation
-        text = apply_recommendation(self.text, recommendation, [s['ID'] for s in self.scene.structures])
+        adapted = {}
+        for key, value in recommendation.items():
+            if key.startswith('structure:'):
+                if key.split(':', 1)[1] not in self.ids:
+                    continue  # a structure type with no body in the checked neighbourhood
+                words = value.split()
+                words[1] = self.clones_map.get(words[1], words[1])
+                value = ' '.join(words)
+            adapted[key] = value
+        text = apply_recommendation(self.text, adapted, self.ids)
         return read_options(text, self.options.input_file, self.program)
 
     def rescale(self, recommendation):
@@ -246,14 +319,23 @@ class PhysicsCheck:
             return False, 'the recommended input fails its first mobility problem: %s' % err
         if forces.shape != self.user_forces.shape:
             return False, 'the recommended input has %d bodies, the user\'s %d' % (len(forces), len(self.user_forces))
-        force_error = force_difference(self.user_forces, forces)
+        force_error = force_difference(self.user_forces, forces, self.length)
         velocity_error = velocity_difference(self.user_velocities, new_velocities, self.length)
         holds = force_error <= self.advisor.accuracy and velocity_error <= allowed_velocity_error
-        message = ('one mobility problem of the recommended input against the user\'s: total force and torque per '
-                   'body differ by %.3g%% (target %.3g%%), body velocities by %.3g%% (allowed %.3g%%: the target '
+        message = ('one mobility problem of the recommended input against the user\'s%s: total force and torque '
+                   'per body differ by %.3g%% (target %.3g%%), body velocities by %.3g%% (allowed %.3g%%: the target '
                    'plus the user\'s model\'s own estimated error)' % (
+                       ' (%s)' % self.subset_note if self.subset_note else '',
                        100 * force_error, 100 * self.advisor.accuracy, 100 * velocity_error,
                        100 * allowed_velocity_error))
+        if force_error > self.advisor.accuracy:  # which law the new model does not keep
+            shares = {name: force_difference(self.user_forces, self.user_forces - self.user_parts[name] + parts[name],
+                                             self.length) for name in PER_BLOB_PARAMETERS}
+            shares['other forces (hooks not scaled by these parameters)'] = force_difference(
+                self.user_forces, self.user_forces - self.user_rest + rest, self.length)
+            worst = max(shares, key=shares.get)
+            message += ('; the largest mismatch is in the forces of %s (%.3g%%): one factor per parameter cannot '
+                        'keep them for every body' % (worst, 100 * shares[worst]))
         self.last = dict(force_error=force_error, velocity_error=velocity_error, allowed=allowed_velocity_error,
                          holds=holds)
         return holds, message
