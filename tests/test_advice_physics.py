@@ -83,6 +83,8 @@ def test_refined_sphere_keeps_its_weight_and_moves_as_the_exact_sphere(tmp_path,
     exact = MU_PERP_1_5 / (6 * np.pi) * user_force[0, 2]
     assert u[2] == pytest.approx(exact, rel=0.01)
     assert np.max(np.abs(u[[0, 1, 3, 4, 5]])) <= 1e-6 * abs(exact)  # no sideways motion or spin by symmetry
+    # The recommended input runs (two steps of its scheme, no blob through the wall).
+    assert isinstance(run_for(options, options.dt, 2 * options.dt), np.ndarray)
     # The advisor's own check ran and says so.
     assert result.check is not None and result.check['holds']
     assert any(note.startswith('check: holds') for note in result.notes)
@@ -128,6 +130,8 @@ def test_rollers_keep_their_drive(tmp_path, monkeypatch):
     speed = np.max(np.linalg.norm(v_user, axis=1))
     assert np.max(np.linalg.norm(v_undriven - v_user, axis=1)) > 0.5 * speed
     assert np.max(np.linalg.norm(v_new - v_user, axis=1)) <= 0.01 * speed
+    # The recommended input runs with its (possibly new) dt: a few steps, no blob through the wall.
+    assert isinstance(run_for(options, options.dt, 3 * options.dt), np.ndarray)
 
 
 def run_for(options, dt, time):
