@@ -130,8 +130,18 @@ def test_rollers_keep_their_drive(tmp_path, monkeypatch):
     speed = np.max(np.linalg.norm(v_user, axis=1))
     assert np.max(np.linalg.norm(v_undriven - v_user, axis=1)) > 0.5 * speed
     assert np.max(np.linalg.norm(v_new - v_user, axis=1)) <= 0.01 * speed
-    # The recommended input runs with its (possibly new) dt: a few steps, no blob through the wall.
-    assert isinstance(run_for(options, options.dt, 3 * options.dt), np.ndarray)
+    # The recommended input runs with its dt: over its whole run it stays within the target of a run at a
+    # step 16 times smaller (relative to the displacement), and it costs no more steps than the user's.
+    assert options.n_steps * options.dt == pytest.approx(50 * 0.016, rel=1e-9)  # the same simulated time
+    assert options.n_steps <= 50
+    user_options = read_input_file('inputfile_rollers.dat')
+    start = np.array(set_up(user_options).configuration.locations)
+    horizon = options.n_steps * options.dt
+    reference = run_for(user_options, options.dt / 16, horizon)
+    recommended_run = run_for(options, options.dt, horizon)
+    assert isinstance(recommended_run, np.ndarray), recommended_run
+    displacement = np.max(np.linalg.norm(reference - start, axis=1))
+    assert np.max(np.linalg.norm(recommended_run - reference, axis=1)) <= 0.01 * displacement
 
 
 def run_for(options, dt, time):

@@ -869,6 +869,17 @@ class Advisor(AdvisorReport):
         if options.dt <= limit:
             self.notes.append('dt: the input dt = %g is within every bound (the %s bound, dt <= %.3g, binds)'
                               % (options.dt, name, limit))
+            # A larger step that keeps the saved times: dt m with m a divisor of n_save, within the bounds.
+            factor = max([m for m in range(1, options.n_save + 1) if options.n_save % m == 0 and
+                          options.dt * m <= limit], default=1)
+            if factor > 1 and options.n_steps % factor == 0:
+                self.recommendation['dt'] = '%.12g' % (options.dt * factor)
+                self.recommendation['n_steps'] = '%d' % (options.n_steps // factor)
+                self.recommendation['n_save'] = '%d' % (options.n_save // factor)
+                self.notes.append('dt: a step %d times longer (dt %s) is still within every bound and saves the '
+                                  'same times (n_save %d -> %s): %d times fewer solves'
+                                  % (factor, self.recommendation['dt'], options.n_save,
+                                     self.recommendation['n_save'], factor))
             return
         digits = 10 ** np.floor(np.log10(limit))
         new_dt = float(np.floor(limit / digits * 10) / 10 * digits)
