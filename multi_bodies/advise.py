@@ -2,7 +2,7 @@
 
 Run from the folder the input file is meant to run in (as the other scripts)::
 
-    python advise.py --input-file inputfile_dynamic.dat [--accuracy 0.01] [--quick] [--coarsen]
+    python advise.py --input-file inputfile_dynamic.dat [--accuracy 0.01] [--quick] [--coarsen] [--quiet]
 
 It reads the scene as ``multi_bodies.py`` and ``multi_bodies_utilities.py``
 do and measures, on this machine: the resolution of each structure type, wall
@@ -11,6 +11,15 @@ the mobility backends, and the stability of the time step (see
 doc/advisor.md).  It prints a table per choice, the recommendation and the
 input lines to change, and writes ``output_name.advice.json`` (plus the
 ``.vertex`` files of the models it recommends, ``output_name.advice.*.vertex``).
+
+A recommended model keeps the physics: per-blob parameters (``g``, the wall
+and pair repulsion strengths) are rescaled so that every body keeps its
+total force, driven rollers stay rollers, and the recommended input is set
+up and solved once against the user's before it is printed (the
+``check:`` note).  Only options of the input's program are recommended,
+and the time step is bounded by stability, no crossing of the wall or of
+bodies and its measured error (the bound that binds is named).  One
+progress line per measurement goes to standard error (``--quiet``: none).
 
 ``--quick`` skips what grows with the scene (pair errors, the dense solve,
 timings of other models) and says which numbers then come from the shipped

@@ -1,7 +1,8 @@
 """The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
 
-Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md); its tables, models and scene are in
-``advisor_models``, its output in ``advisor_report``.  It reads
+Library of ``multi_bodies/advise.py`` (floor 7, ARCHITECTURE.md); its tables, models and scene are in
+``advisor_models``, its output in ``advisor_report``, the physics-keeping rules (scope, rescaled
+per-blob parameters, the check run, the time-step bounds) in ``advisor_physics``.  It reads
 the scene as the scripts do (``read_input_file``, ``read_bodies``,
 ``bodies_to_arrays``, the user's hooks from the run directory) and measures,
 for each choice a user makes in the input file, the error of each option and
@@ -15,7 +16,13 @@ its cost per step on this machine:
 * ``rollers``: multiblob against single-blob roller spheres;
 * ``solver``: one dense solve against one preconditioned GMRES solve;
 * ``backend``: one ``M f`` on every usable backend;
-* ``dt``: stability estimates of the time step.
+* ``dt``: the time step: stability, no crossing of the wall or of bodies, and its error measured
+  on the scene by step doubling (``recommend_dt``; the bound that binds is named).
+
+After the measurements the recommendation is limited to the options of the
+input's program (``keep_to_program``), a model change gets rescaled per-blob
+parameters and is checked by one mobility problem against the user's model
+(``keep_physics``; dropped when the check fails), and the time step is bounded.
 
 Error, everywhere: the largest relative error among a body's six
 self-mobility diagonal entries (translation along x, y (parallel to the

@@ -1,6 +1,6 @@
 """What the advisor measures with: scheme tables, dense mobilities of small sets of bodies, sphere models.
 
-Helpers of ``multi_bodies/advice/advisor.py`` (floor 3): the shipped scheme tables
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 7): the shipped scheme tables
 (deterministic stability limits, the measured weak-error table of the
 stochastic schemes) and the cost ranking over them; dense body mobilities of
 one body, a pair of bodies or single-blob rollers, with and without the

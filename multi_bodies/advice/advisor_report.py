@@ -1,6 +1,6 @@
 """The advisor's output: the table of every choice, the recommendation, the input lines and ``.advice.json``.
 
-Helpers of ``multi_bodies/advice/advisor.py`` (floor 3).  ``AdvisorReport`` is the
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 7).  ``AdvisorReport`` is the
 output half of ``advisor.Advisor`` (it reads ``choices``, ``recommendation``,
 ``notes``, ``scene`` and ``accuracy``); ``apply_recommendation`` rewrites an
 input file with the recommended lines.
