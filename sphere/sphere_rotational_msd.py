@@ -168,7 +168,8 @@ def run(dt, n_steps, end_time, runs=10, scheme='RFD', mobility_model='best', com
               'columns: t, MSD x y z u_x u_y u_z, standard errors of the same'
               % (model.a, model.eta, model.weight, sph.KT, model.repulsion_strength, model.debye_length,
                  model.com_offset.tolist(), scheme, mobility_model, dt, n_steps, burn_in, runs, seed,
-                 'equilibrium' if start_height is None else 'height %s' % start_height, integrator.rejections, ' '.join('%.8g' % s for s in slopes)))
+                 'equilibrium' if start_height is None else 'height %s' % start_height, integrator.rejections,
+                 ' '.join('%.8g' % s for s in slopes)))
     diagonal = np.arange(6)
     np.savetxt(path + '.txt', np.column_stack((times, msd[:, diagonal, diagonal], msd_error[:, diagonal, diagonal])),
                header=header)
