@@ -41,6 +41,8 @@ import time
 
 import numpy as np
 
+import utils
+
 import mobility
 from mobility import choose
 from multi_bodies.solver import body_solver
@@ -825,7 +827,10 @@ class Advisor(AdvisorReport):
         options, scene = self.scene.options, self.scene
         if self.program != 'dynamic' or getattr(self, 'dt_summary', None) is None:
             return
-        checker = self.physics_check()
+        try:
+            checker = self.physics_check()
+        except (utils.UserInputError, utils.SimulationStopped, np.linalg.LinAlgError):
+            return  # said by the check
         scheme = self.recommendation.get('scheme', options.scheme)
         speeds = advisor_physics.blob_speeds(checker.user_system, checker.user_velocities, options.scheme)
         speed = float(np.max(speeds)) if len(speeds) else 0.0

@@ -355,7 +355,14 @@ def keep_physics(advisor):
                                                                                     advisor.scene.options.scheme))
     if not recommendation:
         return
-    checker = advisor.physics_check()
+    try:
+        checker = advisor.physics_check()
+    except (utils.UserInputError, utils.SimulationStopped, np.linalg.LinAlgError) as err:
+        advisor.notes.append('check: the input itself cannot be set up and solved as the program would (%s); '
+                             'no model change is recommended' % err)
+        for key in [k for k in recommendation if is_model_key(k) or k == 'scheme']:
+            recommendation.pop(key)
+        return
     if model_change:
         advisor.write_files()  # the recommended vertex files: the check reads the input as the program does
         try:
