@@ -181,10 +181,12 @@ class Advisor(AdvisorReport):
         return self._physics_check
 
     def write_files(self):
-        """Write the vertex files of the recommended models (``self.files``)."""
+        """Write the vertex files of the recommended models (those of ``self.files`` a structure line names)."""
         import os
         from multi_bodies.files.structure_files import write_vertex_file
         for path, (blobs, comment) in self.files.items():
+            if not self.recommends_file(path):
+                continue
             folder = os.path.dirname(path)
             if folder:
                 os.makedirs(folder, exist_ok=True)
