@@ -27,6 +27,7 @@ roller velocities (N, 3).  Lengths and times in the user's units.
 import atexit
 import contextlib
 import io
+import os
 import shutil
 
 import numpy as np
@@ -208,7 +209,7 @@ class PhysicsCheck:
         scene = self.scene
         arrays = scene.arrays
         blobs = np.diff(arrays.blob_offsets).astype(float)  # per body, the user's model
-        for k, structure in enumerate(scene.structures):
+        for structure in scene.structures:
             value = recommendation.get('structure:%s' % structure['ID'])
             if value and value.split()[0] in files:
                 blobs[structure['bodies']] = np.maximum(blobs[structure['bodies']], len(files[value.split()[0]][0]))
@@ -306,6 +307,7 @@ class PhysicsCheck:
 
     def check(self, recommendation, allowed_velocity_error):
         """(holds, message): run the recommended input for one mobility problem and compare with the user's."""
+        self.last = {}
         options = self.recommended_options(recommendation)
         try:
             system = set_up(options, self.program)
@@ -380,7 +382,9 @@ def keep_physics(advisor):
         return
     dropped = [k for k in recommendation if is_model_key(k) or k == 'scheme']
     for key in dropped:
-        recommendation.pop(key)
+        value = recommendation.pop(key)
+        if key.startswith('structure:') and value.split()[0] in advisor.files and os.path.isfile(value.split()[0]):
+            os.remove(value.split()[0])  # written for the check only
     advisor.notes.append('check: FAILED, so %s %s not recommended: %s' % (
         ', '.join(k.split(':')[0] if not k.startswith('structure:') else 'structure %s' % k.split(':')[1]
                   for k in dropped) or 'nothing', 'is' if len(dropped) == 1 else 'are', message))
