@@ -843,7 +843,9 @@ class Advisor(AdvisorReport):
             lengths.append(options.debye_length_wall)
         if options.blob_blob_force_implementation != 'None' and options.repulsion_strength != 0:
             lengths.append(options.debye_length)
-        base = scheme.replace('_rollers', '')
+        base = scheme.replace('_rollers', '').replace('_dense_algebra', '')
+        if base not in SCHEME_TABLE:  # stochastic: the explicit deterministic part (Adams-Bashforth or Euler)
+            base = 'deterministic_adams_bashforth' if 'adams_bashforth' in base else 'deterministic_forward_euler'
         rate = self.dt_summary['rate']
         stability = SCHEME_TABLE[base]['stability'] / rate if base in SCHEME_TABLE and rate > 0 else np.inf
         stochastic = not scheme.startswith('deterministic')
