@@ -1,7 +1,8 @@
 """The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
 
-Library of ``multi_bodies/advise.py`` (floor 3, ARCHITECTURE.md); its tables, models and scene are in
-``advisor_models``, its output in ``advisor_report``.  It reads
+Library of ``multi_bodies/advise.py`` (floor 7, ARCHITECTURE.md); its tables, models and scene are in
+``advisor_models``, its output in ``advisor_report``, the physics-keeping rules (scope, rescaled
+per-blob parameters, the check run, the time-step bounds) in ``advisor_physics``.  It reads
 the scene as the scripts do (``read_input_file``, ``read_bodies``,
 ``bodies_to_arrays``, the user's hooks from the run directory) and measures,
 for each choice a user makes in the input file, the error of each option and
@@ -15,7 +16,13 @@ its cost per step on this machine:
 * ``rollers``: multiblob against single-blob roller spheres;
 * ``solver``: one dense solve against one preconditioned GMRES solve;
 * ``backend``: one ``M f`` on every usable backend;
-* ``dt``: stability estimates of the time step.
+* ``dt``: the time step: stability, no crossing of the wall or of bodies, and its error measured
+  on the scene by step doubling (``recommend_dt``; the bound that binds is named).
+
+After the measurements the recommendation is limited to the options of the
+input's program (``keep_to_program``), a model change gets rescaled per-blob
+parameters and is checked by one mobility problem against the user's model
+(``keep_physics``; dropped when the check fails), and the time step is bounded.
 
 Error, everywhere: the largest relative error among a body's six
 self-mobility diagonal entries (translation along x, y (parallel to the
@@ -34,12 +41,15 @@ import time
 
 import numpy as np
 
+import utils
+
 import mobility
 from mobility import choose
 from multi_bodies.solver import body_solver
 from multi_bodies.advice import sphere_tables
 from multi_bodies.files.structure_generators import smallest_distance
 
+from multi_bodies.advice import advisor_physics
 from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
 from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
@@ -82,6 +92,10 @@ class Advisor(AdvisorReport):
     def __init__(self, scene, accuracy=0.01, quick=False, coarsen=False, log=None):
         self.scene, self.accuracy, self.quick, self.coarsen = scene, float(accuracy), quick, coarsen
         self.log = log or (lambda text: None)
+        self.program = advisor_physics.program_of(scene.options)
+        self.hooks_per_blob = [name for name in advisor_physics.PER_BLOB_HOOKS if not scene.hooks.is_default(name)]
+        self.check = None
+        self._physics_check = None
         self.choices = []
         self.notes = []
         self.recommendation = {}
@@ -137,15 +151,53 @@ class Advisor(AdvisorReport):
 
     # -------------------------------------------------------------- run everything
     def run(self):
-        """Measure every choice; returns self (``choices``, ``recommendation``, ``notes``)."""
+        """Measure every choice, keep to the program's options, check the physics; returns self.
+
+        Progress: one line per measurement through ``log`` (the script sends them to stderr).
+        """
         steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
                  ('resolution', self.measure_resolution), ('wall', self.measure_wall),
-                 ('rollers', self.measure_rollers), ('dt', self.measure_dt)]
-        for name, step in steps:
+                 ('rollers', self.measure_rollers), ('dt', self.measure_dt),
+                 ('scope', self.keep_to_program), ('check', self.keep_physics), ('dt bounds', self.recommend_dt)]
+        for index, (name, step) in enumerate(steps):
+            self.log('advise: [%d/%d] %s ...' % (index + 1, len(steps), name))
             start = time.perf_counter()
             step()
-            self.log('%s: %.2f s' % (name, time.perf_counter() - start))
+            self.log('advise: [%d/%d] %s done in %.2f s' % (index + 1, len(steps), name,
+                                                            time.perf_counter() - start))
         return self
+
+    def keep_to_program(self):
+        """Recommend only options the input's program uses (advisor_physics.scope)."""
+        self.notes += advisor_physics.scope(self.recommendation, self.scene.options, self.program)
+
+    def keep_physics(self):
+        advisor_physics.keep_physics(self)
+
+    def physics_check(self):
+        """The user's model set up as the program does, with its forces and velocities (made once)."""
+        if self._physics_check is None:
+            self._physics_check = advisor_physics.PhysicsCheck(self)
+        return self._physics_check
+
+    def write_files(self):
+        """Write the vertex files of the recommended models (those of ``self.files`` a structure line names)."""
+        import os
+        from multi_bodies.files.structure_files import write_vertex_file
+        for path, (blobs, comment) in self.files.items():
+            if not self.recommends_file(path):
+                continue
+            folder = os.path.dirname(path)
+            if folder:
+                os.makedirs(folder, exist_ok=True)
+            write_vertex_file(path, blobs, comment=comment)
+
+    def current_model_error(self):
+        """Largest estimated error of the user's own models (resolution rows 'current'; rollers), 0 if unknown."""
+        errors = [c.estimated_error for c in self.choices if c.estimated_error is not None and (
+            (c.topic == 'resolution' and c.candidate.startswith('current')) or
+            (c.topic == 'rollers' and c.candidate.endswith('(current)')))]
+        return max(errors, default=0.0)
 
     def add(self, topic, structure, candidate, blobs, error, cost, meets, note=''):
         if error is not None and not np.isfinite(error):
@@ -600,6 +652,9 @@ class Advisor(AdvisorReport):
             self.recommendation.pop('scheme', None)
             self.recommendation['scheme'] = roller_scheme
             self.recommendation['blob_radius'] = '%.12g' % radii.pop()
+            # Torque-free rollers: the rigid spheres of the input carry no drive.
+            self.recommendation['free_kinematics'] = 'True'
+            self.recommendation['omega_one_roller'] = '0 0 0'
             for s in spheres:
                 vertex = self.write_vertex(s['ID'], 'blob', np.zeros((1, 3)))
                 self.recommendation['structure:%s' % s['ID']] = '%s %s' % (vertex, s['spec'].clones_file)
@@ -624,6 +679,17 @@ class Advisor(AdvisorReport):
                  max((c.cost_s for c in chosen if c.cost_s is not None), default=None),
                  error is not None and error <= self.accuracy, 'cost assumes the GMRES iterations measured here')
         multiblob = {v: k for k, v in ROLLER_SCHEMES.items()}.get(scene.options.scheme)
+        options = scene.options
+        driven = not options.free_kinematics or np.any(np.asarray(options.omega_one_roller) != 0)
+        if driven:
+            # The rigid schemes have no omega_one_roller or free_kinematics: the drive would be dropped.
+            for key in shells + ['blob_radius']:
+                self.recommendation.pop(key, None)
+            self.notes.append('rollers: the rollers are driven (free_kinematics %s, omega_one_roller %s); the rigid '
+                              'multiblob schemes ignore both options, so a multiblob model would drop the drive: the '
+                              'roller model is kept' % (options.free_kinematics,
+                                                        ' '.join('%g' % w for w in options.omega_one_roller)))
+            return
         if multiblob is None:
             for key in shells + ['blob_radius']:
                 self.recommendation.pop(key, None)
@@ -639,6 +705,9 @@ class Advisor(AdvisorReport):
     def measure_dt(self):
         scene = self.scene
         options = scene.options
+        if self.program == 'mcmc':
+            self.add('dt', None, 'no time step (Monte Carlo)', None, None, None, True)
+            return
         if options.scheme in STATIC_SCHEMES:
             self.add('dt', None, 'no time step (static problem %s)' % options.scheme, None, None, None, True)
             return
@@ -713,7 +782,8 @@ class Advisor(AdvisorReport):
             stable = dt > 0 and dt < limit
             if stable:
                 safe.append(scheme)
-            self.add('dt', None, '%s: stable below dt = %.4g (input dt %g)' % (scheme, limit, dt), None, None,
+            self.add('dt', None, '%s: linearly stable below dt = %.4g (input dt %g; stability only, see the dt '
+                     'bounds)' % (scheme, limit, dt), None, None,
                      None if solve_cost is None else solve_cost * row['solves_per_step'], stable,
                      'order %d; %s; dt mu k < %g' % (row['order'], row['source'], row['stability']))
         # Stochastic: the rms Brownian step of the lowest body against the Debye lengths.
@@ -747,13 +817,96 @@ class Advisor(AdvisorReport):
         else:
             self.notes.append('dt: no stochastic scheme of the shipped weak-error table applies; only the '
                               'Brownian-step estimate above is given')
-        if options.scheme in SCHEME_TABLE and options.scheme not in safe and dt > 0 and rate > 0:
-            if 'deterministic_forward_euler' in safe:
-                self.recommendation['scheme'] = 'deterministic_forward_euler'
-            else:
-                limit = SCHEME_TABLE[options.scheme]['stability'] / rate
-                self.recommendation['dt'] = '%.3g' % (0.5 * limit)
-        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian)
+        self.dt_summary = dict(rate=rate, safe=safe, dt_brownian=dt_brownian, mu=mu)
+
+    def recommend_dt(self):
+        """The adequate time step: the smallest of the stability, no-crossing, accuracy and weak-error bounds.
+
+        Speeds come from one mobility problem of the user's model (``physics_check``); the bound that binds is
+        named, and a smaller dt than the input's is recommended with n_steps and n_save that keep the
+        simulated time and the save interval.
+        """
+        options, scene = self.scene.options, self.scene
+        if self.program != 'dynamic' or getattr(self, 'dt_summary', None) is None:
+            return
+        try:
+            checker = self.physics_check()
+        except (utils.UserInputError, utils.SimulationStopped, np.linalg.LinAlgError):
+            return  # said by the check
+        scheme = self.recommendation.get('scheme', options.scheme)
+        speeds = advisor_physics.blob_speeds(checker.user_system, checker.user_velocities, options.scheme)
+        speed = float(np.max(speeds)) if len(speeds) else 0.0
+        wall_gap = float(np.min(scene.r_vectors[:, 2])) if scene.wall else np.inf
+        pair_gap = float(np.min(self.blob_gaps()))
+        lengths = []
+        if scene.wall and options.repulsion_strength_wall != 0:
+            lengths.append(options.debye_length_wall)
+        if options.blob_blob_force_implementation != 'None' and options.repulsion_strength != 0:
+            lengths.append(options.debye_length)
+        base = scheme.replace('_rollers', '').replace('_dense_algebra', '')
+        if base not in SCHEME_TABLE:  # stochastic: the explicit deterministic part (Adams-Bashforth or Euler)
+            base = 'deterministic_adams_bashforth' if 'adams_bashforth' in base else 'deterministic_forward_euler'
+        rate = self.dt_summary['rate']
+        stability = SCHEME_TABLE[base]['stability'] / rate if base in SCHEME_TABLE and rate > 0 else np.inf
+        stochastic = not scheme.startswith('deterministic')
+        bounds = advisor_physics.dt_bounds(stability, speed, wall_gap, pair_gap)
+        mu = self.dt_summary.get('mu', 0.0)
+        if stochastic and options.kT > 0 and mu > 0 and np.isfinite(wall_gap):
+            bounds.append(('Brownian no crossing', (0.5 * wall_gap) ** 2 / (2 * options.kT * mu),
+                           'the rms Brownian step sqrt(2 kT mu dt) stays below half the wall gap'))
+        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0:
+            constant, power = STOCHASTIC_SCHEME_TABLE[scheme]['weak_error']
+            time_unit = scene.a ** 2 * 6 * np.pi * scene.eta * scene.a / options.kT  # a^2 / (kT mu0)
+            bounds.append(('weak error', (self.accuracy / constant) ** (1.0 / power) * time_unit,
+                           'the measured weak-error table of %s (single blobs above a wall) gives the target'
+                           % scheme))
+        # Accuracy of the drift, measured on this scene by step doubling from the hard bounds.
+        hard = min(value for _, value, _ in bounds)
+        if np.isfinite(hard) and speed > 0:
+            measured_scheme = scheme if not stochastic else (
+                'deterministic_adams_bashforth_rollers' if 'rollers' in scheme else 'deterministic_forward_euler')
+            measured = advisor_physics.measured_dt(checker.options_for_dt(self.recommendation), measured_scheme,
+                                                   hard, self.accuracy, steps=2 if self.quick else 4)
+            self.dt_measurement = measured
+            bounds.append(('accuracy (measured)', measured['dt'],
+                           'error per unit time within the target: %s, step doubling over %d steps of %s%s; %s' % (
+                               _percent(self.accuracy), 2 if self.quick else 4, measured_scheme,
+                               ' (the drift of the stochastic scheme)' if stochastic else '',
+                               '; '.join('dt %.3g: %s' % t for t in measured['tries'])) +
+                           ('' if measured['verified'] else '; NOT verified: the last value is extrapolated')))
+        name, limit, _ = min(bounds, key=lambda b: b[1])
+        for bound, value, reason in bounds:
+            self.add('dt', None, 'bound %s: dt <= %.4g' % (bound, value), None, None, None, options.dt <= value,
+                     reason + ('; BINDS' if bound == name else ''))
+        self.dt_bound = dict(dt=float(limit), binds=name, bounds={b: float(v) for b, v, _ in bounds}, speed=speed)
+        if not np.isfinite(limit):
+            self.notes.append('dt: no bound applies (no force moves the bodies and no stiffness was found)')
+            return
+        if options.dt <= limit:
+            self.notes.append('dt: the input dt = %g is within every bound (the %s bound, dt <= %.3g, binds)'
+                              % (options.dt, name, limit))
+            # A larger step that keeps the saved times: dt m with m a divisor of n_save, within the bounds.
+            factor = max([m for m in range(1, options.n_save + 1) if options.n_save % m == 0 and
+                          options.dt * m <= limit], default=1)
+            if factor > 1 and options.n_steps % factor == 0:
+                self.recommendation['dt'] = '%.12g' % (options.dt * factor)
+                self.recommendation['n_steps'] = '%d' % (options.n_steps // factor)
+                self.recommendation['n_save'] = '%d' % (options.n_save // factor)
+                self.notes.append('dt: a step %d times longer (dt %s) is still within every bound and saves the '
+                                  'same times (n_save %d -> %s): %d times fewer solves'
+                                  % (factor, self.recommendation['dt'], options.n_save,
+                                     self.recommendation['n_save'], factor))
+            return
+        digits = 10 ** np.floor(np.log10(limit))
+        new_dt = float(np.floor(limit / digits * 10) / 10 * digits)
+        self.recommendation['dt'] = '%.3g' % new_dt
+        if options.n_steps:
+            self.recommendation['n_steps'] = '%d' % int(np.ceil(options.n_steps * options.dt / new_dt))
+            self.recommendation['n_save'] = '%d' % max(1, int(round(options.n_save * options.dt / new_dt)))
+        self.notes.append('dt: the input dt = %g exceeds the %s bound (dt <= %.3g, speed %.3g at the start): '
+                          'recommended dt %s%s' % (options.dt, name, limit, speed, self.recommendation['dt'],
+                                                   ', with n_steps and n_save that keep the simulated time and '
+                                                   'the save interval' if options.n_steps else ''))
 
 
 def advise(input_file, accuracy=0.01, quick=False, coarsen=False, log=None):

@@ -1,6 +1,6 @@
 """What the advisor measures with: scheme tables, dense mobilities of small sets of bodies, sphere models.
 
-Helpers of ``multi_bodies/advice/advisor.py`` (floor 3): the shipped scheme tables
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 7): the shipped scheme tables
 (deterministic stability limits, the measured weak-error table of the
 stochastic schemes) and the cost ranking over them; dense body mobilities of
 one body, a pair of bodies or single-blob rollers, with and without the
@@ -295,7 +295,13 @@ class Scene:
 
     def __init__(self, input_file, directory=None):
         self.directory = os.path.dirname(os.path.abspath(input_file)) if directory is None else directory
-        self.options = read_input_file(input_file)
+        import contextlib
+        import io
+        from multi_bodies.advice.advisor_physics import program_of
+        with contextlib.redirect_stderr(io.StringIO()):  # warnings once, for the program that reads the file
+            probe = read_input_file(input_file)
+        self.program = program_of(probe)
+        self.options = read_input_file(input_file, 'mcmc' if self.program == 'mcmc' else None)
         self.hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
         self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
                                               single_blob_bodies='rollers' in self.options.scheme)

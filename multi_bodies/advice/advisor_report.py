@@ -1,6 +1,6 @@
 """The advisor's output: the table of every choice, the recommendation, the input lines and ``.advice.json``.
 
-Helpers of ``multi_bodies/advice/advisor.py`` (floor 3).  ``AdvisorReport`` is the
+Helpers of ``multi_bodies/advice/advisor.py`` (floor 7).  ``AdvisorReport`` is the
 output half of ``advisor.Advisor`` (it reads ``choices``, ``recommendation``,
 ``notes``, ``scene`` and ``accuracy``); ``apply_recommendation`` rewrites an
 input file with the recommended lines.
@@ -17,7 +17,9 @@ class AdvisorReport:
                 'choices': [dict(topic=c.topic, structure=c.structure, candidate=c.candidate, blobs=c.blobs,
                                  estimated_error=c.estimated_error, cost_s=c.cost_s, meets_target=c.meets_target)
                             for c in self.choices],
-                'recommendation': dict(self.recommendation)}
+                'recommendation': dict(self.recommendation),
+                'check': getattr(self, 'check', None),
+                'dt_bound': getattr(self, 'dt_bound', None)}
 
     def report(self):
         """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
@@ -68,6 +70,10 @@ class AdvisorReport:
             lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
         return '\n'.join(lines) + '\n'
 
+    def recommends_file(self, path):
+        """True when a recommended structure line names the vertex file ``path``."""
+        return any(k.startswith('structure:') and v.split()[0] == path for k, v in self.recommendation.items())
+
     def write(self):
         """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
         from multi_bodies.files.structure_files import write_vertex_file
@@ -76,7 +82,8 @@ class AdvisorReport:
         if folder:
             os.makedirs(folder, exist_ok=True)
         for path, (blobs, comment) in self.files.items():
-            write_vertex_file(path, blobs, comment=comment)
+            if self.recommends_file(path):
+                write_vertex_file(path, blobs, comment=comment)
         path = output + '.advice.json'
         with open(path, 'w') as f:
             json.dump(self.as_json(), f, indent=1)

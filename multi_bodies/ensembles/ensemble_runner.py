@@ -229,6 +229,14 @@ def build_plan(input_file, replicas, vary=(), output_dir='ensemble', master_seed
                                      'output_basename': basename, 'seed': seed, 'spawn_key': spawn_key,
                                      'input_sha256': _sha256(text)})
             plan['_inputs'][folder] = text
+    if replicas > 1:  # a deterministic scheme ignores the seed: its replicas would all be the same run
+        from multi_bodies.files.input_options import DETERMINISTIC_SCHEMES, STATIC_SCHEMES
+        same = sorted({dict(o).get('scheme', base_options.scheme) for o in points} &
+                      set(DETERMINISTIC_SCHEMES + STATIC_SCHEMES))
+        if same:
+            print('warning: scheme %s is deterministic: the %d replicas of each parameter point are identical runs '
+                  '(the seed has no effect); use --replicas 1, or a stochastic scheme for independent replicas'
+                  % (', '.join(same), replicas), file=sys.stderr)
     if len({point['name'] for point in plan['points']}) != len(plan['points']):
         raise UserInputError('--vary: two parameter points get the same folder name (%s); give distinct values'
                              % ', '.join(point['name'] for point in plan['points']))
