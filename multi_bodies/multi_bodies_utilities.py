@@ -188,6 +188,12 @@ def run(options):
         except utils.UserInputError as err:
             raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
                                        % (options.where('mobility_vector_prod_implementation'), err))
+        from multi_bodies.run import velocity_field
+        velocity_field.check_grid(options.plot_velocity_field, system.num_blobs, options.where('plot_velocity_field'))
+    if options.scheme in ('body_mobility', 'resistance'):  # dense algebra: refuse up front what cannot fit
+        run_output.refuse_if_too_big(run_output.dense_memory(system.num_blobs, system.num_bodies),
+                                     'the dense %s problem of %d blobs' % (options.scheme, system.num_blobs),
+                                     options.where('scheme'), 'use fewer blobs (or the iterative mobility problem)')
     run_output.prepare_output_directory(options.output_name, options.where('output_name'))
 
     copy = options.output_name + '.inputfile'

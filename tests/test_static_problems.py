@@ -380,3 +380,22 @@ def test_static_mobility_with_torques_on_single_blobs_converges(tmp_path, monkey
                                                   np.zeros((3, 3)), mobility.single_wall_fluid_mobility, 1.0, 0.25)
     np.testing.assert_allclose(velocities, dense, rtol=0, atol=1e-8 * np.abs(dense).max())
     assert np.abs(dense[:, 3:]).max() < 1e-12 * np.abs(dense).max()  # one blob: no rotation (pinv)
+
+
+@pytest.mark.parametrize('scheme, extra', [('body_mobility', ''), ('resistance', ''),
+                                           ('mobility', 'plot_velocity_field 0 4 40 0 4 40 0 4 40\n')])
+def test_static_problem_too_big_is_refused_before_writing(scheme, extra, tmp_path, monkeypatch):
+    """Dense static problems and velocity grids that need more memory than is available are refused up front,
+    naming the memory they need, and nothing is written (the memory available is made tiny here)."""
+    from multi_bodies.run import run_output
+    gen_dir = tmp_path / 'Structures'
+    gen_dir.mkdir()
+    (gen_dir / 'blob.vertex').write_text('1\n0.0 0.0 0.0\n')
+    (gen_dir / 'blobs.clones').write_text('2\n0 0 1.5 1 0 0 0\n2 0 1.5 1 0 0 0\n')
+    (tmp_path / 'in.dat').write_text('scheme %s\neta 1.0\nblob_radius 0.25\noutput_name data/run\n%s'
+                                     'structure Structures/blob.vertex Structures/blobs.clones\n' % (scheme, extra))
+    monkeypatch.setattr(run_output, 'available_memory', lambda: 1000)
+    with pytest.raises(Exception) as err:
+        run_script(str(tmp_path), 'in.dat', monkeypatch)
+    assert 'needs about' in str(err.value) and 'line' in str(err.value)
+    assert not (tmp_path / 'data').exists() or not any((tmp_path / 'data').iterdir())
