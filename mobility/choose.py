@@ -21,7 +21,7 @@ is measured, not read from a fixed order:
 Timings are the best of a few repeats after a warm-up call (which also
 compiles the GPU kernels), cached per process and problem size.
 
-Floor 1 (ARCHITECTURE.md): imports only ``mobility`` and ``utils``.
+Floor 1 (see multi_bodies/__init__.py): imports only ``mobility`` and ``utils``.
 """
 import time
 

@@ -1,6 +1,6 @@
 """The model advisor: measure, on the user's own scene, the cheapest model that meets an accuracy target.
 
-Library of ``multi_bodies/advise.py`` (floor 7, ARCHITECTURE.md); its tables, models and scene are in
+Library of ``multi_bodies/advise.py`` (floor 7, see multi_bodies/__init__.py); its tables, models and scene are in
 ``advisor_models``, its output in ``advisor_report``, the physics-keeping rules (scope, rescaled
 per-blob parameters, the check run, the time-step bounds) in ``advisor_physics``.  It reads
 the scene as the scripts do (``read_input_file``, ``read_bodies``,

@@ -1,4 +1,4 @@
-"""Ensembles of dynamic runs: replicas and parameter sweeps, run on Dask (library floor 3).
+"""Ensembles of dynamic runs: replicas and parameter sweeps, run on Dask (floor 7).
 
 An ensemble is one input file run ``R`` times at every point of a parameter
 grid (``--vary kT=0.5,1,2 --vary dt=...``: the Cartesian product), each run

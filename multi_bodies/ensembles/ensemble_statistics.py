@@ -1,4 +1,4 @@
-"""Statistics of a finished ensemble: heights, mean-square displacements, ``.info`` counts (library floor 3).
+"""Statistics of a finished ensemble: heights, mean-square displacements, ``.info`` counts (floor 7).
 
 :func:`aggregate` reads the manifest ``D/ensemble.json`` written by
 :mod:`multi_bodies.ensembles.ensemble_runner` and, for every parameter point, every

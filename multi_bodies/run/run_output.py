@@ -1,4 +1,4 @@
-"""Output of a run, shared by every script that writes one (library floor 3).
+"""Output of a run, shared by every script that writes one (floor 6).
 
 The dynamic script (``multi_bodies.py``), the Monte Carlo script
 (``many_body_MCMC.py``), the ensemble runner and the single-body codes write

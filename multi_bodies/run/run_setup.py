@@ -22,7 +22,7 @@ When everything is checked, :func:`start_output` creates the output folder
 and :func:`write_run_start` the first files (``.inputfile``,
 ``.random_state``, ``.bodies_info``).
 
-Library floor (ARCHITECTURE.md floor 3): nothing here writes simulation
+Floor 6 (multi_bodies.run, see multi_bodies/__init__.py): nothing here writes simulation
 output other than the file it is asked to write.
 """
 import os

@@ -1,6 +1,6 @@
 """VTK files of rigid multiblob runs for ParaView: one blob file and one body file per saved step.
 
-Library floor (ARCHITECTURE.md floor 3).  Used by ``clones_to_vtk.py`` (to
+Floor 6 (multi_bodies.run, see multi_bodies/__init__.py).  Used by ``clones_to_vtk.py`` (to
 convert the ``.clones`` series of a finished or stopped run) and by
 ``multi_bodies.py`` when the input says ``save_vtk True``.  Files, all
 prefixed by ``output_name`` (see doc/visualisation.md):
