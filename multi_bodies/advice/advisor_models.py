@@ -19,6 +19,7 @@ import scipy.linalg
 
 import mobility
 from body.body import K_matrices, bodies_to_arrays
+from multi_bodies.solver.body_solver import body_mobility_from_resistance
 from multi_bodies.solver import user_hooks
 from multi_bodies.advice import sphere_tables
 from multi_bodies.files.input_options import read_input_file
@@ -113,8 +114,8 @@ def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='py
         K[row:row + 3 * n, 6 * k:6 * k + 6] = K_matrices(np.asarray(blobs)[None], np.asarray(centre)[None])[0]
         row += 3 * n
     factor = scipy.linalg.cho_factor(M)
-    resistance = K.T @ scipy.linalg.cho_solve(factor, K)
-    return np.linalg.pinv(resistance)  # pinv: a straight rod has no resistance to spinning about its axis
+    # pinv (the package's one body mobility): a straight rod has no resistance to spinning about its axis
+    return body_mobility_from_resistance(K.T @ scipy.linalg.cho_solve(factor, K))
 
 
 def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='python'):
@@ -218,7 +219,7 @@ def bulk_radius(blobs, blob_radius):
     backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
     M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
     K = K_matrices(arms[None], np.zeros((1, 3)))[0]
-    N = np.linalg.pinv(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
+    N = body_mobility_from_resistance(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
     return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
 
 
