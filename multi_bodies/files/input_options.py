@@ -208,14 +208,23 @@ OPTION_TABLE = {
     'target_acceptance': _option('float', 0.3, ('mcmc',), Range(0, 1, True, True)),
 }
 
-# Options of later versions of the published code that this package does not implement.
-UNSUPPORTED_LATER_OPTIONS = (
-    'tilt_angle', 'repulsion_strength_firm', 'firm_delta',
-    'hydro_interactions', 'call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
-    'green_particles', 'cells', 'domType', 'Lub_Cut', 'zmin', 'zmax',
-    'slip_length', 'plot_velocity_field_shell',
-    'save_HydroGrid_cells', 'hydrodynamic_radius', 'mu', 'vacf', 'stiffness_wall',
-)
+# Options of later versions of the published code that this package does not implement, with the feature
+# they belong to (named in the refusal, so a user knows what is missing rather than only that a line is wrong).
+UNSUPPORTED_FEATURES = {
+    'the HydroGrid interface (structure factors)': ('call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
+                                                    'save_HydroGrid_cells', 'green_particles', 'cells'),
+    'lubrication corrections (the Lubrication solver)': ('repulsion_strength_firm', 'firm_delta', 'Lub_Cut',
+                                                         'domType', 'tilt_angle', 'stiffness_wall', 'mu',
+                                                         'vacf', 'zmin', 'zmax'),
+    'a solver of a later published version': ('hydro_interactions', 'slip_length', 'plot_velocity_field_shell',
+                                              'hydrodynamic_radius'),
+}
+UNSUPPORTED_LATER_OPTIONS = tuple(name for names in UNSUPPORTED_FEATURES.values() for name in names)
+
+
+def unsupported_feature(name):
+    """The feature of a later published version that option ``name`` belongs to."""
+    return next(feature for feature, names in UNSUPPORTED_FEATURES.items() if name in names)
 
 ArticulatedSpec = namedtuple('ArticulatedSpec', ['list_vertex_file', 'clones_file', 'const_file', 'ID', 'where'])
 ArticulatedSpec.__doc__ = """One ``articulated`` line (doc/articulated.md): the ``.list_vertex``, ``.clones`` and
@@ -397,8 +406,10 @@ def parse_input_text(text, input_file='<input>', program=None):
             continue
         if name in UNSUPPORTED_LATER_OPTIONS:
             raise UserInputError(
-                "%s: option '%s' belongs to a later version of the published code and is unsupported "
-                "here; remove the line (see doc/static_problems.md for the options we support)" % (where, name))
+                "%s: option '%s' is unsupported here: it belongs to %s, a feature of a later version of the "
+                "published code that this package does not have; remove the line (see doc/options.md for the "
+                "options we support)"
+                % (where, name, unsupported_feature(name)))
         if name not in OPTION_TABLE:
             close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure', 'obstacle'], n=1)
             hint = " (did you mean '%s'?)" % close[0] if close else ''
