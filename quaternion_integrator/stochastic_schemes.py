@@ -129,7 +129,8 @@ class StochasticScheme(Scheme):
 
     @staticmethod
     def body_lengths(system):
-        return np.array([getattr(b, 'body_length', 1.0) for b in system.bodies], dtype=float)
+        """The bodies' length scales (Nb,), structure the system holds (``System.body_lengths``)."""
+        return system.body_lengths
 
     def check(self, system, configuration):
         """Raise _Rejected when ``configuration`` has a blob centre below the wall."""

@@ -205,6 +205,16 @@ class System:
     def num_blobs(self):
         return self.arrays.num_blobs
 
+    @property
+    def body_lengths(self):
+        """Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
+
+        Read once from the bodies the run was set up with; the schemes never read Body objects.
+        """
+        if getattr(self, '_body_lengths', None) is None:
+            self._body_lengths = np.array([getattr(b, 'body_length', 1.0) for b in self.bodies], dtype=float)
+        return self._body_lengths
+
     def set_configuration(self, configuration):
         """Make ``configuration`` (a Configuration, or (locations, orientations)) the run's current one."""
         configuration = as_configuration(configuration)
