@@ -31,34 +31,42 @@ the same files with the same names (the manual's section 5.1):
   appends one line per segment).
 
 Nothing here knows about physics: the caller passes arrays and counters.
+This module writes the snapshots with their records, the counters and the
+end of a run; the encoding of saved state and the generator are in
+:mod:`multi_bodies.run.run_state`, the format and checks of restart records
+in :mod:`multi_bodies.run.restart_records` (their names are re-exported here).
 """
-import base64
 import hashlib
-import io
-import json
 import os
-import pickle
 import shutil
 import signal
-import struct
 import sys
 import threading
 import time
 import re
-import uuid
 
 import numpy as np
 
-from stochastic_forcing import generators
-from utils import UserInputError, warn_user
+from utils import UserInputError
 from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, config_name,  # noqa: F401
                                           format_clones, read_config_snapshot, truncate_config,
                                           write_clones_file)
 
-RESTART_SUFFIX = '.restart'
-RUN_SUFFIX = '.run'
-STOP_SUFFIX = '.stopped'
-ASIDE_SUFFIX = '.set_aside'
+# Moved to run_state and restart_records; re-exported here for the callers of run_output.
+from multi_bodies.run.run_state import (RESTART_SUFFIX, RUN_SUFFIX, STOP_SUFFIX, ASIDE_SUFFIX, STATE_FORMAT,
+                                        STATE_VERSION, encode_state, decode_state, state_to_bytes,
+                                        state_from_bytes, _PublishedStateUnpickler, read_published_state,
+                                        read_random_state, load_random_state, make_generator, save_random_state,
+                                        atomic_write, _remove_quietly)  # noqa: F401,E402
+from multi_bodies.run.restart_records import (RESTART_MAGIC, RECORD_HEADER, RECORD_TAG, RestartFileError,
+                                              _not_a_restart_file, restart_index, read_restart_entry,
+                                              last_valid_restart_record, DYNAMICS_OPTIONS, FORCE_OPTION,
+                                              FORCE_HINT, KILL_HOOK, _digest, run_fingerprint,
+                                              fingerprint_changes, new_run_id, write_run_file, read_run_id,
+                                              stop_snapshot_path, snapshot_bytes, snapshot_mismatches,
+                                              last_complete_pair, check_restart, recorded_snapshots,
+                                              find_restart_record, read_restart_records,
+                                              restart_record)  # noqa: F401,E402
 
 
 # ------------------------------------------------------------------ set-up of the output folder
@@ -94,235 +102,6 @@ def copy_input_file(input_file, output_name, restart=False):
     else:
         shutil.copyfile(input_file, copy)
     return copy
-
-
-# ------------------------------------------------------------------ run state as data (never code)
-# The generator state and the restart records are written as JSON: dicts,
-# lists, strings, ints (any size: PCG64 state words) and floats (repr, so they
-# round-trip exactly); a numpy array or scalar becomes {"__ndarray__": dtype,
-# shape, base64 of its bytes}, a tuple {"__tuple__": [...]}, a dict whose keys
-# are not all strings {"__dict__": [[key, value], ...]}.  Reading them builds
-# only these types: no file can make the reader run code.
-
-STATE_FORMAT = 'rigid_multiblob run state'
-STATE_VERSION = 1
-
-
-def encode_state(value):
-    """``value`` (nested dict/list/tuple of None, bool, int, float, str, numpy arrays and scalars) as JSON data.
-
-    Raises TypeError for anything else (an object the restart cannot hold as data).
-    """
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, (np.ndarray, np.generic)):
-        array = np.asarray(value)
-        if array.dtype.hasobject or array.dtype.fields is not None:
-            raise TypeError('cannot save an array of dtype %s as run state' % array.dtype)
-        return {'__ndarray__': {'dtype': array.dtype.str, 'shape': list(array.shape),
-                                'scalar': isinstance(value, np.generic),
-                                'data': base64.b64encode(np.ascontiguousarray(array).tobytes()).decode('ascii')}}
-    if isinstance(value, int):  # also subclasses (IntEnum): their plain value
-        return int(value)
-    if isinstance(value, float):
-        return float(value)
-    if isinstance(value, tuple):
-        return {'__tuple__': [encode_state(v) for v in value]}
-    if isinstance(value, list):
-        return [encode_state(v) for v in value]
-    if isinstance(value, dict):
-        if all(isinstance(k, str) and not k.startswith('__') for k in value):
-            return {k: encode_state(v) for k, v in value.items()}
-        return {'__dict__': [[encode_state(k), encode_state(v)] for k, v in value.items()]}
-    raise TypeError('cannot save %s as run state (only numbers, strings, arrays, lists, tuples and dicts)'
-                    % type(value).__name__)
-
-
-def decode_state(data):
-    """Inverse of ``encode_state`` (arrays come back writable, with their dtype and shape)."""
-    if isinstance(data, list):
-        return [decode_state(v) for v in data]
-    if not isinstance(data, dict):
-        return data
-    if len(data) == 1:
-        (key, inner), = data.items()
-        if key == '__ndarray__':
-            dtype = np.dtype(str(inner['dtype']))
-            if dtype.hasobject or dtype.fields is not None:
-                raise ValueError('run state holds an array of dtype %s' % dtype)
-            shape = tuple(int(n) for n in inner['shape'])
-            array = np.frombuffer(base64.b64decode(inner['data']), dtype=dtype).reshape(shape).copy()
-            return array[()] if inner.get('scalar') else array
-        if key == '__tuple__':
-            return tuple(decode_state(v) for v in inner)
-        if key == '__dict__':
-            return {decode_state(k): decode_state(v) for k, v in inner}
-    return {k: decode_state(v) for k, v in data.items()}
-
-
-def state_to_bytes(value):
-    """UTF-8 JSON text of ``encode_state(value)``."""
-    return json.dumps(encode_state(value), separators=(',', ':')).encode('utf-8')
-
-
-def state_from_bytes(data):
-    """Inverse of ``state_to_bytes``; raises ValueError for text that is not such JSON."""
-    return decode_state(json.loads(data.decode('utf-8')))
-
-
-# ------------------------------------------------------------------ random generator
-class _PublishedStateUnpickler(pickle.Unpickler):
-    """Unpickler for the published ``numpy.random.RandomState().get_state()`` pickle, and nothing else.
-
-    ``find_class`` admits only numpy's array reconstruction (``_reconstruct``,
-    ``_frombuffer``, ``ndarray``), ``dtype`` and the latin-1 bytes of Python 3
-    pickles: a pickle that names any other callable (the way a pickle runs
-    code) is refused before anything is called.
-    """
-
-    _RECONSTRUCT = np.zeros(1).__reduce__()[0]        # numpy's _reconstruct (protocols 0 to 4)
-    _FROMBUFFER = np.zeros(1).__reduce_ex__(5)[0]     # numpy's _frombuffer (protocol 5)
-
-    @staticmethod
-    def _latin1_bytes(text, encoding):
-        """``_codecs.encode`` as Python 3 pickles (protocols 0-2) use it for bytes: latin-1 only."""
-        if encoding not in ('latin1', 'latin-1') or not isinstance(text, str):
-            raise pickle.UnpicklingError('_codecs.encode with %r is not part of a numpy random state' % encoding)
-        return text.encode('latin1')
-
-    ALLOWED = {('numpy.core.multiarray', '_reconstruct'): _RECONSTRUCT,
-               ('numpy._core.multiarray', '_reconstruct'): _RECONSTRUCT,
-               ('numpy.core.numeric', '_frombuffer'): _FROMBUFFER,
-               ('numpy._core.numeric', '_frombuffer'): _FROMBUFFER,
-               ('numpy', 'ndarray'): np.ndarray,
-               ('numpy', 'dtype'): np.dtype,
-               ('_codecs', 'encode'): _latin1_bytes}
-
-    def find_class(self, module, name):
-        try:
-            return self.ALLOWED[(module, name)]
-        except KeyError:
-            raise pickle.UnpicklingError('%s.%s is not part of a numpy random state' % (module, name))
-
-
-def read_published_state(data):
-    """The published legacy state from pickle bytes: ('MT19937', keys uint32 (624,), pos, has_gauss, gauss).
-
-    Raises ValueError when ``data`` is not exactly such a tuple (or names
-    anything but numpy arrays and dtypes).
-    """
-    state = _PublishedStateUnpickler(io.BytesIO(data), encoding='latin1').load()
-    if not (isinstance(state, tuple) and len(state) == 5 and state[0] in ('MT19937', b'MT19937')):
-        raise ValueError('not a numpy RandomState state (MT19937, keys, pos, has_gauss, cached_gaussian)')
-    keys = state[1]
-    if not (isinstance(keys, np.ndarray) and keys.shape == (624,) and keys.dtype.kind in 'ui'):
-        raise ValueError('the MT19937 keys are not 624 unsigned 32-bit integers')
-    pos, has_gauss, gauss = state[2], state[3], state[4]
-    if not (isinstance(pos, (int, np.integer)) and 0 <= int(pos) <= 624 and isinstance(has_gauss, (int, np.integer))
-            and isinstance(gauss, (float, int, np.floating))):
-        raise ValueError('pos, has_gauss or cached_gaussian of the MT19937 state is not a number in range')
-    return ('MT19937', keys.astype(np.uint32), int(pos), int(has_gauss), float(gauss))
-
-
-def read_random_state(path, where='random_state'):
-    """The generator state in ``path`` as a dict (``bit_generator.state``), or the published tuple.
-
-    A file of this package is JSON text (``save_random_state``); a file of
-    the published code is a pickle of ``RandomState().get_state()``, read by
-    the restricted ``_PublishedStateUnpickler`` and returned as that 5-tuple.
-    Raises UserInputError (naming ``where``) for a missing file or anything else.
-    """
-    import stat
-    try:
-        if os.path.exists(path) and not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path):
-            raise UserInputError('%s: %s is not a regular file (a pipe or device would be read forever); give a '
-                                 '.random_state file' % (where, path))
-        with open(path, 'rb') as f:
-            data = f.read()
-    except FileNotFoundError:
-        raise UserInputError('%s: the random state file %s does not exist' % (where, path))
-    except IsADirectoryError:
-        raise UserInputError('%s: the random state file %s is a folder' % (where, path))
-    except OSError as err:
-        raise UserInputError('%s: cannot read the random state file %s (%s)' % (where, path, err.strerror or err))
-    try:
-        if data.lstrip()[:1] == b'{':
-            document = json.loads(data.decode('utf-8'))
-            if not (isinstance(document, dict) and document.get('format') == STATE_FORMAT):
-                raise ValueError('JSON without "format": "%s"' % STATE_FORMAT)
-            return decode_state(document['state'])
-        return read_published_state(data)
-    except Exception as err:  # any parse error: the file is refused, nothing in it was run
-        raise UserInputError('%s: %s is not a random state file written by this package or the published code '
-                             '(%s: %s); nothing in it was run or used. Give a .random_state file, or use seed '
-                             'instead' % (where, path, type(err).__name__, err))
-
-
-def load_random_state(path, where='random_state', generator='auto'):
-    """The generator continuing the state in ``path`` (see ``read_random_state``).
-
-    ``generator`` (the ``random_generator`` option): 'auto' gives the
-    published generator (numpy's legacy ``RandomState`` on MT19937,
-    :class:`stochastic_forcing.generators.PublishedGenerator`) for a
-    published state or a saved state of that generator, so a published run
-    repeats its draws, and a ``numpy.random.Generator`` otherwise;
-    'published' and 'default' force one.  A published state loaded into the
-    default generator draws other numbers than the published code (a notice
-    says so).  Raises UserInputError (naming ``where``) for a file that holds
-    no valid state.
-    """
-    state = read_random_state(path, where)
-    if isinstance(state, tuple):
-        if generator != 'default':
-            return generators.PublishedGenerator.from_legacy_state(state)
-        warn_user('%s: %s holds a published numpy RandomState state (MT19937, position %d); with random_generator '
-                  'default the run uses an MT19937 Generator started at that state, whose draws differ from those '
-                  'of the published code (random_generator published repeats them)' % (where, path, state[2]))
-        state = {'bit_generator': 'MT19937', 'state': {'key': state[1], 'pos': state[2]}}
-    name = state.get('bit_generator') if isinstance(state, dict) else None
-    if not (isinstance(name, str) and isinstance(getattr(np.random, name, None), type)
-            and issubclass(getattr(np.random, name), np.random.BitGenerator)):
-        raise UserInputError('%s: %s does not hold a numpy random state; give a .random_state file, or use seed '
-                             'instead' % (where, path))
-    legacy = generator == 'published' or (generator == 'auto' and generators.is_legacy_state(state))
-    try:
-        if legacy:
-            if name != 'MT19937':
-                raise ValueError('the published generator runs on MT19937, the file holds a %s state' % name)
-            rng = generators.PublishedGenerator()
-            rng.bit_generator.state = state
-            return rng
-        bit_generator = getattr(np.random, name)()
-        bit_generator.state = {'bit_generator': name, 'state': state['state']} if 'has_gauss' in state else state
-    except Exception as err:
-        raise UserInputError('%s: %s holds a damaged random state (%s)' % (where, path, err))
-    return np.random.Generator(bit_generator)
-
-
-def make_generator(options):
-    """The run's generator (SPEC decision 7): from ``random_state`` if given, else seeded by ``seed``.
-
-    ``random_generator`` chooses numpy's ``Generator`` ('default', PCG64) or
-    the published code's legacy ``RandomState`` ('published'); 'auto' (the
-    default) is 'published' for a published ``random_state`` and 'default'
-    otherwise.  Without ``seed`` or ``random_state``, numpy seeds from the
-    operating system (the state is still saved in ``.random_state``, so the
-    run can be repeated).
-    """
-    kind = getattr(options, 'random_generator', 'auto') or 'auto'
-    if options.random_state is not None:
-        return load_random_state(options.random_state, options.where('random_state'), kind)
-    if options.seed is not None and options.seed < 0:
-        raise UserInputError('%s: seed must be a non-negative integer, got %d'
-                             % (options.where('seed'), options.seed))
-    return generators.make('published' if kind == 'published' else 'default', options.seed)
-
-
-def save_random_state(path, rng):
-    """Write ``rng.bit_generator.state`` to ``path`` as JSON (readable by ``load_random_state``)."""
-    document = {'format': STATE_FORMAT, 'version': STATE_VERSION, 'kind': 'random_state',
-                'state': encode_state(rng.bit_generator.state)}
-    atomic_write(path, json.dumps(document, indent=1) + '\n')
 
 
 # ------------------------------------------------------------------ checks before a run
@@ -401,26 +180,6 @@ def warn_if_large_output(options, types, record_bytes, log):
             'one_file to write fewer' % (options.where('n_save'), files, format_bytes(size), saves))
 
 
-# ------------------------------------------------------------------ files
-def atomic_write(path, data, binary=False):
-    """Write ``data`` to ``path`` through a temporary file, so a stop never leaves a truncated file."""
-    part = path + '.part'
-    try:
-        with open(part, 'wb' if binary else 'w') as f:
-            f.write(data)
-        os.replace(part, path)
-    except BaseException:
-        _remove_quietly(part)
-        raise
-
-
-def _remove_quietly(path):
-    try:
-        os.remove(path)
-    except OSError:
-        pass
-
-
 def write_bodies_info(path, types, num_blobs):
     """``.bodies_info``: number of body types, their names, bodies per type, bodies, blobs."""
     text = ('num_of_body_types  %d\n' % len(types)
@@ -483,184 +242,6 @@ def append_time(path, elapsed, restart=False, note=None):
             f.write(line)
     else:
         atomic_write(path, line)
-
-
-# ------------------------------------------------------------------ snapshots and restart records
-# ``output_name.restart``: RESTART_MAGIC, then records appended one after the
-# other.  A record is a header RECORD_HEADER (b'REC1', step int64, payload
-# length uint64, SHA-256 of the payload) and the payload, UTF-8 JSON of
-# {'step', 'config_offsets', 'state'} (``state_to_bytes``).  Finding the
-# record of one step reads the headers only (seeking over payloads); a
-# record's checksum is checked before it is used.
-RESTART_MAGIC = b'RMB-RESTART 1\n'
-RECORD_HEADER = struct.Struct('>4sqQ32s')
-RECORD_TAG = b'REC1'
-
-
-class RestartFileError(UserInputError):
-    """A ``.restart`` file that is not one of this package (an earlier pickle-based one, or anything else)."""
-
-
-def _not_a_restart_file(path):
-    return RestartFileError(
-        '%s is not a restart file of this version (an older .restart was a Python pickle, which is not read '
-        'because loading a pickle can run code); nothing in it was used. Rename or remove it to restart from '
-        'the snapshot alone (the run continues without the scheme history and generator state of that step)'
-        % path)
-
-
-def restart_index(path, report=warn_user):
-    """Headers of the records of ``path``: list of (step, payload start, record end) in file order.
-
-    Reads only the headers.  A record cut by a hard stop, or bytes that are
-    not a record header, end the list; ``report`` gets one message saying
-    where.  Raises RestartFileError when ``path`` does not start with RESTART_MAGIC.
-    """
-    entries = []
-    size = os.path.getsize(path)
-    with open(path, 'rb') as f:
-        if f.read(len(RESTART_MAGIC)) != RESTART_MAGIC:
-            raise _not_a_restart_file(path)
-        position = len(RESTART_MAGIC)
-        while position < size:
-            header = f.read(RECORD_HEADER.size)
-            if len(header) < RECORD_HEADER.size:
-                report('%s: the record at byte %d is cut short (a hard stop while saving?); it is ignored'
-                       % (path, position))
-                break
-            tag, step, length, _ = RECORD_HEADER.unpack(header)
-            start = position + RECORD_HEADER.size
-            if tag != RECORD_TAG:
-                report('%s: byte %d does not start a record (the file is damaged); it and what follows are '
-                       'ignored' % (path, position))
-                break
-            if start + length > size:
-                report('%s: the record of step %d at byte %d is cut short (a hard stop while saving?); it is '
-                       'ignored' % (path, step, position))
-                break
-            entries.append((int(step), start, start + int(length)))
-            position = start + int(length)
-            f.seek(position)
-    return entries
-
-
-def read_restart_entry(path, entry):
-    """The record of ``entry`` (from ``restart_index``) as a dict, or None when its checksum does not match."""
-    step, start, end = entry
-    with open(path, 'rb') as f:
-        f.seek(start - RECORD_HEADER.size)
-        _, _, _, digest = RECORD_HEADER.unpack(f.read(RECORD_HEADER.size))
-        payload = f.read(end - start)
-    if hashlib.sha256(payload).digest() != digest:
-        return None
-    record = state_from_bytes(payload)
-    if not (isinstance(record, dict) and record.get('step') == step):
-        return None
-    return record
-
-
-def last_valid_restart_record(path, report=warn_user):
-    """(record, end offset) of the last record of ``path`` whose checksum matches; (None, start of records).
-
-    Damaged records after it are reported and left out.
-    """
-    entries = restart_index(path, report)
-    for entry in reversed(entries):
-        record = read_restart_entry(path, entry)
-        if record is not None:
-            return record, entry[2]
-        report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
-    return None, len(RESTART_MAGIC)
-
-
-# ------------------------------------------------------------------ what a record depends on
-# Options whose change makes a continuation differ from the uninterrupted run
-# (the record's fingerprint holds their values; a restart with another value
-# is refused unless restart_inexact is set).
-DYNAMICS_OPTIONS = ('scheme', 'dt', 'eta', 'g', 'kT', 'blob_radius', 'repulsion_strength_wall', 'debye_length_wall',
-                    'repulsion_strength', 'debye_length', 'periodic_length', 'domain', 'omega_one_roller',
-                    'free_kinematics', 'update_PC', 'rf_delta', 'solver_tolerance',
-                    'mobility_blobs_implementation', 'mobility_vector_prod_implementation',
-                    'blob_blob_force_implementation', 'body_body_force_torque_implementation',
-                    'mcmc_move', 'mcmc_energy_implementation', 'max_translation', 'max_angle_shift', 'n_burn_in',
-                    'target_acceptance')
-FORCE_OPTION = 'restart_inexact'
-FORCE_HINT = ('set "%s True" in the input file to continue anyway (the continuation then differs from an '
-              'uninterrupted run)' % FORCE_OPTION)
-KILL_HOOK = 'RMB_TEST_KILL_BETWEEN_SNAPSHOT_AND_RECORD'  # test hook: SIGKILL after snapshot k, before its record
-
-
-def _digest(data):
-    return hashlib.sha256(data).hexdigest()
-
-
-def run_fingerprint(options, types, bodies):
-    """What a restart record depends on, as {name: text}: structures in order, their blobs, radii, slips, options.
-
-    types: list of (structure ID, number of bodies) in body order; bodies: the Body list (``reference_configuration``
-    (n, 3), ``blob_radius``, ``slip_reference`` (n, 3) or None).  Two runs with equal fingerprints compute the same
-    trajectory from the same snapshot, generator and scheme history.
-    """
-    found = {'structures': ', '.join('%s x %d' % (name, count) for name, count in types)}
-    start = 0
-    for name, count in types:
-        if count:
-            body = bodies[start]
-            blobs = np.ascontiguousarray(body.reference_configuration, dtype=float)
-            found['blobs of %s' % name] = '%d blobs, sha256 %s' % (blobs.shape[0], _digest(blobs.tobytes())[:16])
-            radii = np.ascontiguousarray(getattr(body, 'blob_radii', body.blob_radius), dtype=float)
-            found['blob radius of %s' % name] = ('%r' % float(radii) if radii.ndim == 0 else
-                                                 'sha256 %s' % _digest(radii.tobytes())[:16])
-            slip = getattr(body, 'slip_reference', None)
-            if slip is not None:
-                found['slip of %s' % name] = 'sha256 %s' % _digest(np.ascontiguousarray(slip, float).tobytes())[:16]
-        start += count
-    for name in DYNAMICS_OPTIONS:
-        if hasattr(options, name):
-            value = getattr(options, name)
-            found[name] = repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
-    return found
-
-
-def fingerprint_changes(recorded, current):
-    """'what changed' lines between a record's fingerprint and this run's (empty when they agree)."""
-    changes = []
-    for name in list(recorded) + [n for n in current if n not in recorded]:
-        if recorded.get(name) != current.get(name):
-            changes.append('%s: was %s, now %s' % (name, recorded.get(name, '(absent)'), current.get(name, '(absent)')))
-    return changes
-
-
-def new_run_id():
-    """A fresh run identifier (16 hex digits): carried by every restart record and ``output_name.run``."""
-    return uuid.uuid4().hex[:16]
-
-
-def write_run_file(output_name, run_id, first_step):
-    """``output_name.run``: the run identifier and its segments (JSON; a side file, the snapshot formats stay the
-    published ones)."""
-    path = output_name + RUN_SUFFIX
-    segments = []
-    try:
-        with open(path) as f:
-            document = json.load(f)
-        if document.get('run_id') == run_id:
-            segments = list(document.get('segments', []))
-    except (OSError, ValueError, AttributeError):
-        pass
-    segments.append({'first_step': int(first_step), 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
-                     'pid': os.getpid()})
-    atomic_write(path, json.dumps({'format': STATE_FORMAT, 'kind': 'run', 'run_id': run_id,
-                                   'segments': segments}, indent=1) + '\n')
-
-
-def read_run_id(output_name):
-    """The run identifier of ``output_name.run`` (None when absent or unreadable)."""
-    try:
-        with open(output_name + RUN_SUFFIX) as f:
-            return json.load(f).get('run_id')
-    except (OSError, ValueError, AttributeError):
-        return None
 
 
 # ------------------------------------------------------------------ moving earlier outputs aside
@@ -927,198 +508,6 @@ def config_snapshot_end(path, offset):
             if not f.readline().endswith(b'\n'):
                 return None
         return f.tell()
-
-
-def stop_snapshot_path(output_name, record, structure_id):
-    """Path of the ``.clones`` file a stop record (``record['stop_files']``) names for ``structure_id``."""
-    name = (record.get('stop_files') or {})[structure_id]
-    if os.path.isabs(name) or '..' in name.replace('\\', '/').split('/'):
-        raise UserInputError('%s%s: the record of step %d names %r, not a file of the run folder'
-                             % (output_name, RESTART_SUFFIX, record['step'], name))
-    return os.path.join(os.path.dirname(output_name), name)
-
-
-def snapshot_bytes(output_name, save_clones, structure_id, record):
-    """The bytes of the snapshot of ``structure_id`` that ``record`` belongs to (None when absent)."""
-    step = record['step']
-    stop_files = record.get('stop_files') or {}
-    if structure_id in stop_files:
-        path = stop_snapshot_path(output_name, record, structure_id)
-    elif save_clones == 'one_file' and not record.get('stop'):
-        offsets = record.get('config_offsets') or {}
-        if structure_id not in offsets:
-            return None
-        path = config_name(output_name, structure_id)
-        length = ((record.get('snapshots') or {}).get(structure_id) or [None, None])[1]
-        try:
-            with open(path, 'rb') as f:
-                f.seek(int(offsets[structure_id]))
-                return f.read(length) if length is not None else None
-        except OSError:
-            return None
-    else:
-        path = clones_name(output_name, structure_id, step)
-    try:
-        with open(path, 'rb') as f:
-            return f.read()
-    except OSError:
-        return None
-
-
-def snapshot_mismatches(output_name, save_clones, types, record):
-    """IDs of ``types`` whose snapshot is missing or differs from the checksum ``record`` holds for it.
-
-    A record of an earlier version (no checksums) gives no mismatch.
-    """
-    digests = record.get('snapshots')
-    if not digests:
-        return []
-    bad = []
-    for structure_id, _ in types:
-        data = snapshot_bytes(output_name, save_clones, structure_id, record)
-        if structure_id not in digests or data is None or _digest(data) != digests[structure_id][0]:
-            bad.append(structure_id)
-    return bad
-
-
-def last_complete_pair(output_name, save_clones, types, report=warn_user):
-    """(record, end) of the last record of ``output_name.restart`` whose snapshot is complete and unchanged.
-
-    (None, None) when there is none.  Records passed over are reported.
-    """
-    path = output_name + RESTART_SUFFIX
-    if not os.path.isfile(path):
-        return None, None
-    for entry in reversed(restart_index(path, report)):
-        record = read_restart_entry(path, entry)
-        if record is None:
-            report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
-            continue
-        bad = snapshot_mismatches(output_name, save_clones, types, record)
-        if bad:
-            report('%s: the snapshot of step %d of %s is missing or differs from its record; step %d is skipped'
-                   % (path, entry[0], ', '.join(bad), entry[0]))
-            continue
-        return record, entry[2]
-    return None, None
-
-
-def check_restart(options, record, types, fingerprint, report=warn_user):
-    """Decide whether a restart from ``initial_step`` is exact; returns True to use ``record``'s state.
-
-    Refuses (UserInputError saying why and how to force) a restart without a record of that step, one whose
-    snapshot differs from its record (edited, or a lone snapshot of a stop between snapshot and record), and one
-    whose fingerprint (structures, blobs, radii, options) differs from this run's.  With ``restart_inexact True``
-    each of these is a warning instead; the record's generator and history are then used only when the
-    snapshot is the record's.
-    """
-    k = options.initial_step
-    force = bool(getattr(options, FORCE_OPTION, False))
-    where = options.where('initial_step')
-    path = options.output_name + RESTART_SUFFIX
-    problems, use_record = [], record is not None
-    if record is None:
-        pair, _ = last_complete_pair(options.output_name, options.save_clones, types, report=lambda text: None)
-        last = ' (the last step with a complete snapshot and record is %d)' % pair['step'] if pair else ''
-        problems.append('%s has no restart record of step %d (none complete)%s, so the generator state and the scheme history '
-                        'of that step are unknown (a run stopped between writing the snapshot and its record, or a '
-                        'snapshot of another program)' % (path, k, last))
-    else:
-        bad = snapshot_mismatches(options.output_name, options.save_clones, types, record)
-        if bad:
-            problems.append('the snapshot of step %d of %s differs from the one its record in %s was written with '
-                            '(the file was edited or replaced)' % (k, ', '.join(bad), path))
-            use_record = False
-        recorded = record.get('fingerprint')
-        if recorded:
-            changes = fingerprint_changes(recorded, fingerprint)
-            if changes:
-                problems.append('the run differs from the one that wrote the record of step %d: %s'
-                                % (k, '; '.join(changes)))
-    if not problems:
-        return use_record
-    if not force:
-        raise UserInputError('%s: initial_step %d cannot restart exactly: %s. Restart from another step, or %s'
-                             % (where, k, ' and '.join(problems), FORCE_HINT))
-    report('%s: inexact restart from step %d (%s True): %s; %s' % (
-        where, k, FORCE_OPTION, ' and '.join(problems),
-        'the record\'s generator and scheme history are used' if use_record else
-        'the generator starts from seed/random_state and multistep schemes restart with one first-order step'))
-    return use_record
-
-
-def recorded_snapshots(output_name, save_clones, structure_id):
-    """What of a series has restart records, for readers that take the current run's steps only.
-
-    ``one_file_per_step``: the set of steps with a record; ``one_file``: the number of ``.config`` frames of
-    ``structure_id`` that have one (frames after them were written without their record).  None when the run
-    has no readable ``.restart`` (a run of the published code): then every snapshot is taken.
-    """
-    path = output_name + RESTART_SUFFIX
-    if not os.path.isfile(path):
-        return None
-    quiet = lambda text: None  # noqa: E731
-    try:
-        entries = restart_index(path, quiet)
-    except (UserInputError, OSError):
-        return None
-    if save_clones != 'one_file':
-        return {step for step, _, _ in entries}
-    offsets = set()
-    for entry in entries:
-        record = read_restart_entry(path, entry)
-        if record is not None and structure_id in (record.get('config_offsets') or {}):
-            offsets.add(int(record['config_offsets'][structure_id]))
-    return len(offsets)
-
-
-def find_restart_record(output_name, step):
-    """(record, end byte) of the last record of ``step`` in ``output_name.restart``; (None, None) when none.
-
-    Raises UserInputError as ``restart_record`` does.
-    """
-    path = output_name + RESTART_SUFFIX
-    if os.path.isdir(path):
-        raise UserInputError('%s is a folder, not a restart file; rename or remove it' % path)
-    if not os.path.isfile(path):
-        return None, None
-    entries = [entry for entry in restart_index(path) if entry[0] == step]
-    if not entries:
-        return None, None
-    record = read_restart_entry(path, entries[-1])
-    if record is None:
-        raise UserInputError('%s: the record of step %d fails its checksum (the file is damaged); restart from '
-                             'another saved step, or remove the file to restart from the snapshot alone'
-                             % (path, step))
-    return record, entries[-1][2]
-
-
-def read_restart_records(output_name):
-    """All records of ``output_name.restart`` whose checksum matches, in the order written.
-
-    A record cut by a hard stop ends the list; damaged ones are skipped; both with a message.
-    """
-    path = output_name + RESTART_SUFFIX
-    if not os.path.isfile(path):
-        return []
-    records = []
-    for entry in restart_index(path):
-        record = read_restart_entry(path, entry)
-        if record is None:
-            warn_user('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
-        else:
-            records.append(record)
-    return records
-
-
-def restart_record(output_name, step):
-    """The last restart record saved at ``step``, or None when there is none.
-
-    Only the headers are read, then that one record.  Raises UserInputError
-    when the record of ``step`` fails its checksum (flipped bits) or the
-    file is not a restart file of this package: a damaged record is never used.
-    """
-    return find_restart_record(output_name, step)[0]
 
 
 # ------------------------------------------------------------------ ending a run
