@@ -562,6 +562,23 @@ class StochasticFirstOrderRFDDense(DenseScheme):
         return self.move(old, U, self.dt), U
 
 
+def root_and_pseudo_inverse_root(N, rcond=1e-14):
+    """``N^{1/2}`` and ``pinv(N) N^{1/2}`` of a symmetric positive semi-definite N (n, n), from one ``eigh``.
+
+    ``N^{1/2} = V sqrt(max(lambda, 0)) V^T`` (as ``symmetric_root_matrix``); ``pinv(N) N^{1/2} =
+    V diag(1 / sqrt(lambda)) V^T`` over the eigenvalues above ``rcond`` times the largest (the
+    eigenvalues are the singular values of N, so this is ``np.linalg.pinv(N, rcond)`` times the root:
+    one decomposition instead of an eigendecomposition and an SVD).
+    """
+    eigenvalues, vectors = np.linalg.eigh(0.5 * (N + N.T))
+    positive = np.maximum(eigenvalues, 0.0)
+    root = (vectors * np.sqrt(positive)) @ vectors.T
+    kept = np.abs(eigenvalues) > rcond * np.max(np.abs(eigenvalues), initial=0.0)
+    scale = np.zeros_like(eigenvalues)
+    scale[kept & (eigenvalues > 0)] = 1.0 / np.sqrt(eigenvalues[kept & (eigenvalues > 0)])
+    return root, (vectors * scale) @ vectors.T
+
+
 class Fixman(DenseScheme):
     """Fixman's midpoint scheme with dense algebra (Delong et al. 2015).
 
@@ -581,9 +598,9 @@ class Fixman(DenseScheme):
         W2 = rng.standard_normal(nb6)
         matrices = system.dense_matrices(old)
         N = matrices[3]
-        root = symmetric_root_matrix(N)
+        root, inverse_root = root_and_pseudo_inverse_root(N)
         U_p = self.dense_velocity(system, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
-        corrector = np.linalg.pinv(N, rcond=1e-14) @ (np.sqrt(self.kT / self.dt) * (root @ (W1 + W2)))
+        corrector = np.sqrt(self.kT / self.dt) * (inverse_root @ (W1 + W2))  # pinv(N) N^{1/2} (W1 + W2)
         mid = self.move(old, U_p, 0.5 * self.dt)
         self.check(system, mid)
         matrices_mid = system.dense_matrices(mid)
