@@ -35,6 +35,7 @@ schemes alike.
 from collections import namedtuple
 
 import numpy as np
+import scipy.linalg.lapack as _lapack
 import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions
@@ -436,7 +437,8 @@ def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
 def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, inverse=True):
     """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
 
-    ``M`` from ``blob_mobility_matrix``, ``N = pinv(K^T M^{-1} K)`` (:func:`body_mobility_from_resistance`).
+    ``M`` from ``blob_mobility_matrix``, ``M^{-1}`` by Cholesky (:func:`spd_inverse`), ``N = pinv(K^T M^{-1} K)``
+    (:func:`body_mobility_from_resistance`).
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
@@ -444,8 +446,25 @@ def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_r
     K = body_arrays.K_dense(configuration, r_vectors)
     if not inverse:
         return M, None, K, None
-    M_inv = np.linalg.inv(M)
+    M_inv = spd_inverse(M)
     return M, M_inv, K, body_mobility_from_resistance(K.T @ M_inv @ K)
+
+
+def spd_inverse(matrix):
+    """Inverse of a symmetric positive definite matrix (n, n) from its Cholesky factor (LAPACK potrf/potri).
+
+    About half the work of ``np.linalg.inv`` (LU) and symmetric by construction; a
+    matrix that is not positive definite (blobs overlapping the wall can make the
+    wall-corrected mobility indefinite) falls back to ``np.linalg.inv``.
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    factor, info = _lapack.dpotrf(matrix, lower=False, clean=True)
+    if info == 0:
+        inverse, info = _lapack.dpotri(factor, lower=False)
+    if info != 0:
+        return np.linalg.inv(matrix)
+    upper = np.triu(inverse)
+    return upper + np.triu(upper, 1).T
 
 
 def dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius):
