@@ -5,16 +5,24 @@ height z = 2.5 with random orientations, gravity and the default soft
 repulsions (blob-blob on the same backend as M f), solver_tolerance 1e-8,
 kT = 1, rf_delta 1e-3.  Prints, per number of bodies, backend and scheme,
 the seconds per step (median of ``--repeats`` steps after one warm-up step),
-the GMRES iterations per step of the deterministic solves and of the noise
-and RFD solves, the solves per step, the Lanczos iterations per step, and
-the ratio to the Adams-Bashforth step measured in the same run.
+the ratio to the Adams-Bashforth step measured in the same run, the speed-up
+on the published figure, the products ``M f`` per step by where they go
+(GMRES Krylov products, true residuals, Lanczos, random finite differences),
+the preconditioner applications per step and the share of the step spent in
+``M f``.
 
     python benchmarks/bench_dynamics.py [--bodies 10 100 1000] [--repeats 5]
         [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz ...] [--backends C++ python]
+        [--loaded] [--large]
+
+``--loaded``: one busy background process (started here, killed at the end)
+shares the cores; ``--large``: also one step of 1,000 boomerangs under
+Slip_Trapz and of 10,000 rollers under stochastic_adams_bashforth_rollers.
 
 The published code's figures on the same kind of 2-core machine (numba
 backends, 100 boomerangs): stochastic_Slip_Trapz 2.0 s per step,
-deterministic_adams_bashforth 1.35 s per step.
+deterministic_adams_bashforth 1.35 s per step, 2.8 s with one busy process
+on the same 2 cores.  The published code is not run here.
 """
 import argparse
 import linecache
