@@ -143,11 +143,11 @@ def busy_loop():  # pragma: no cover - runs in the background process of --loade
         pass
 
 
-def time_steps(num_bodies, backend, scheme_name, repeats):
+def time_steps(num_bodies, backend, scheme_name, repeats, noise_tolerance=None):
     """(median seconds per step, counters per step) over ``repeats`` steps after one warm-up step."""
     system = boomerang_system(num_bodies, backend)
     counter = count_products(system)
-    options = SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1)
+    options = SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=noise_tolerance)
     scheme = make_scheme(scheme_name, 0.01, options)
     rng = np.random.default_rng(3)
     scheme.step(system, 0, rng)  # warm-up (and the Euler start of the multistep schemes)
@@ -212,6 +212,8 @@ def main(argv=None):
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--loaded', action='store_true',
                         help='run with one busy background process (started here, killed at the end)')
+    parser.add_argument('--noise-tolerance', type=float, default=None,
+                        help='tolerance of the noise and RFD sub-solves and of Lanczos (default: the solver tolerance)')
     parser.add_argument('--large', action='store_true',
                         help='also 1,000 boomerangs Slip_Trapz and a 10,000-roller stochastic AB step (minutes)')
     args = parser.parse_args(argv)
@@ -229,9 +231,9 @@ def main(argv=None):
 
 def run(args):
     from mobility import threads as mobility_threads
-    print('OMP_NUM_THREADS = %s, kernel threads = %s, OMP_WAIT_POLICY = %s, background load: %s'
+    print('OMP_NUM_THREADS = %s, kernel threads = %s, background load: %s, noise tolerance: %s'
           % (os.environ.get('OMP_NUM_THREADS', '(unset)'), mobility_threads.describe(),
-             os.environ.get('OMP_WAIT_POLICY', '(unset)'), 'one busy process' if args.loaded else 'none'))
+             'one busy process' if args.loaded else 'none', args.noise_tolerance or 'solver_tolerance 1e-8'))
     print('products of M f per step: all, in GMRES (Krylov), in residuals, in Lanczos, in RFD; pc = preconditioner '
           'applications; kernel = share of the step in M f; pub = speed-up on the published step (%s)'
           % ', '.join('%s %.2f s' % item for item in (PUBLISHED_LOADED if args.loaded else PUBLISHED_100).items()))
@@ -248,13 +250,14 @@ def run(args):
                 dense = 'dense' in scheme_name or scheme_name in ('Fixman', 'stochastic_Slip_Mid_DLA')
                 if dense and n > DENSE_LIMIT:
                     continue
-                seconds, per = time_steps(n, backend, scheme_name, args.repeats)
+                seconds, per = time_steps(n, backend, scheme_name, args.repeats,
+                                          None if scheme_name.startswith('deterministic') else args.noise_tolerance)
                 if scheme_name == 'deterministic_adams_bashforth':
                     reference = seconds
                 published = published_figures.get(scheme_name) if n == 100 else None
                 print_row(n, backend, scheme_name, seconds, reference, per, published)
     if args.large:
-        seconds, per = time_steps(1000, 'C++', 'stochastic_Slip_Trapz', 1)
+        seconds, per = time_steps(1000, 'C++', 'stochastic_Slip_Trapz', 1, args.noise_tolerance)
         print_row(1000, 'C++', 'stochastic_Slip_Trapz', seconds, None, per, None)
         seconds, per = roller_step(10000, 1)
         print_row(10000, 'C++', 'stochastic_adams_bashforth_rollers', seconds, None, per, None)

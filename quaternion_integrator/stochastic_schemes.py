@@ -87,6 +87,14 @@ class StochasticScheme(Scheme):
         # The ranges are the option table's (declared once); checked here too for schemes made directly.
         for name, value in (('kT', self.kT), ('rf_delta', self.delta), ('update_PC', self.update_PC)):
             check_value(name, value, where(name))
+        # relative tolerance of the noise and RFD sub-solves and of Lanczos (None: solver_tolerance); a speed
+        # option, off by default (doc/dynamics.md, speed options)
+        self.noise_tolerance = getattr(options, 'noise_solver_tolerance', None)
+        if self.noise_tolerance is not None:
+            self.noise_tolerance = float(self.noise_tolerance)
+            if not 0.0 < self.noise_tolerance < 1.0:
+                raise UserInputError('%s: noise_solver_tolerance must be in (0, 1), got %g; leave it unset to use '
+                                     'solver_tolerance' % (where('noise_solver_tolerance'), self.noise_tolerance))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
         self._preconditioner = None
         self._preconditioner_step = None
@@ -141,12 +149,16 @@ class StochasticScheme(Scheme):
         """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
-        result = system.solve(problem, rhs, preconditioner, kind='stochastic')
+        result = system.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
         split = getattr(problem, 'split_body_unknowns', None)
         if split is not None:  # bodies of prescribed kinematics are not moved by noise or RFD solves
             velocities, _ = split(result.velocities, prescribed_motion=False)
             result = result._replace(velocities=velocities)
         return result
+
+    def lanczos_noise(self, system, problem, z, factor, preconditioner):
+        """``factor M^{1/2} z`` at ``problem`` (System.lanczos_noise) at the scheme's ``noise_tolerance``."""
+        return system.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
 
     def rfd_drift(self, system, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
@@ -287,7 +299,7 @@ class StochasticFirstOrderRFD(StochasticScheme):
         z = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
         U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
         U = U + self.rfd_drift(system, old, W_rfd, pc)
         return self.move(old, U, self.dt), U
@@ -305,7 +317,7 @@ class StochasticAdamsBashforth(StochasticScheme):
         z = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
         U_s = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
         U_d = self.deterministic_part(system, problem, old, pc)
         U_s = U_s + self.rfd_drift(system, old, W_rfd, pc)
@@ -338,7 +350,7 @@ class StochasticTractionEM(StochasticScheme):
         D_M, D_KT, D_K = rfd(products, old, W_rfd, self.delta, displace, centred=False,
                              at_configuration=products_at(problem, lam, U_R))
         z = rng.standard_normal(3 * system.num_blobs)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
         if not self.thermal_drift:
             return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
         return problem, pc, noise, D_M - D_K, -D_KT
@@ -387,7 +399,7 @@ class StochasticSlipTrapz(StochasticScheme):
         W_s = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = system.lanczos_noise(problem, W1, self.noise_factor(), pc)
+        n1 = self.lanczos_noise(system, problem, W1, self.noise_factor(), pc)
         U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
         U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
@@ -410,8 +422,8 @@ class StochasticSlipMid(StochasticScheme):
         W3 = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = system.lanczos_noise(problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
-        n_c = system.lanczos_noise(problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
+        n1 = self.lanczos_noise(system, problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
+        n_c = self.lanczos_noise(system, problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
         U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
         U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
@@ -434,7 +446,7 @@ class StochasticEM(StochasticScheme):
         W = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, W, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, W, self.noise_factor(), pc)
         U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
         return self.move(old, U, self.dt), U
 
@@ -501,12 +513,12 @@ class StochasticGDCRFD(StochasticScheme):
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         factor = self.noise_factor()
-        U_tilde = rigid_projection(system, old, system.lanczos_noise(problem, W, factor, pc))
+        U_tilde = rigid_projection(system, old, self.lanczos_noise(system, problem, W, factor, pc))
         divergence = 0.0
         if self.thermal_drift and self.kT > 0:
             lengths = self.body_lengths(system)
             q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
-            noise_rfd = system.lanczos_noise(system.mobility_problem(q_rfd), W, factor, pc)
+            noise_rfd = self.lanczos_noise(system, system.mobility_problem(q_rfd), W, factor, pc)
             U_rfd = rigid_projection(system, q_rfd, noise_rfd)
             W_tilde = W_rfd.copy()
             W_tilde[:, :3] /= lengths[:, None]
@@ -514,7 +526,7 @@ class StochasticGDCRFD(StochasticScheme):
         mid = self.move(old, U_tilde, 0.5 * self.dt)
         self.check(system, mid)
         problem_mid = system.mobility_problem(mid)
-        noise_mid = system.lanczos_noise(problem_mid, W, factor, pc)
+        noise_mid = self.lanczos_noise(system, problem_mid, W, factor, pc)
         U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid)
         U = U * (1.0 + 0.5 * self.dt * divergence)
         return self.move(old, U, self.dt), U

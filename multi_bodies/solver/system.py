@@ -339,15 +339,17 @@ class System:
                                                        self.eta, self.blob_radius,
                                                        stacked_mobility=self.stacked_mobility)
 
-    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic'):
+    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic', tolerance=None):
         """:func:`body_solver.solve` at ``solver_tolerance``, counted for ``.info``; stops the run if it fails.
 
         rhs (3N + 6Nb,) (``problem.rhs(...)``); preconditioner as body_solver.solve (None: unpreconditioned);
         x0: first guess of the normalised system (``SolveResult.normalised_solution`` of an earlier solve);
         kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters.
+        tolerance : relative tolerance of this solve; None is ``solver_tolerance``.
         Returns body_solver.SolveResult; raises SimulationStopped when GMRES does not converge.
         """
-        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=self.tolerance,
+        tolerance = self.tolerance if tolerance is None else float(tolerance)
+        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance,
                                    print_residual=self.print_residual)
         self.solves[kind] += 1
         self.gmres_iterations += result.iterations
@@ -358,23 +360,25 @@ class System:
         if not result.converged:
             raise SimulationStopped('GMRES did not converge to solver_tolerance %g in %d iterations (relative '
                                     'residual %.3e); try a larger solver_tolerance or check the configuration'
-                                    % (self.tolerance, result.iterations, result.residual))
+                                    % (tolerance, result.iterations, result.residual))
         return result
 
-    def lanczos_noise(self, problem, z, factor, preconditioner=None):
+    def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
         """``factor * M^{1/2} z`` at the configuration of ``problem`` (3N,), counted for ``.info``.
 
         With a preconditioner the Lanczos iteration runs on ``L^{-1} M L^{-T}``
         and the result is multiplied by ``L`` (covariance ``M``; SPEC decision 1).
         A Lanczos call that does not converge is counted and warned about once per call.
+        tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``.
         """
+        tolerance = self.tolerance if tolerance is None else float(tolerance)
         if preconditioner is None:
             matvec, L_mult = problem.M_dot, None
         else:
             def matvec(v):
                 return preconditioner.L_inv_dot(problem.M_dot(preconditioner.L_inv_T_dot(v)))
             L_mult = preconditioner.L_dot
-        result = lanczos_square_root(matvec, z, self.tolerance, max_iterations=self.lanczos_max_iterations,
+        result = lanczos_square_root(matvec, z, tolerance, max_iterations=self.lanczos_max_iterations,
                                      factor=factor, L_mult=L_mult, print_residual=self.print_residual)
         self._count_lanczos(result)
         return result.noise
