@@ -76,6 +76,7 @@ class StochasticScheme(Scheme):
     every ``update_PC`` steps, SPEC §4.3).
     """
     dense = False
+    pair_products = True  # share passes over the blob pairs between independent products (C++ backend)
     thermal_drift = True  # False switches every drift term off (a negative control for the tests; wrong physics)
 
     def __init__(self, dt, options=None):
@@ -187,16 +188,17 @@ class StochasticScheme(Scheme):
             return displace_bodies(q, scale, direction, lengths)
         return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
 
-    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor):
+    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor, W_R=None):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
         by ``delta W_R`` (no body-length scaling) the slip is ``factor delta (M' W_s - M W_s) / delta`` and
         the force ``-factor delta (K'^T W_s - K^T W_s) / delta``, with ``factor = 2 kT / delta``
         (trapezoidal) or ``kT / delta`` (midpoint).  Zero when ``thermal_drift`` is off.
+        ``W_R`` (Nb, 6): the solve's velocities when the caller made it (``slip_rfd_solve``).
         """
-        W_R = self.noise_solve(system, problem, preconditioner,
-                               rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+        if W_R is None:
+            W_R = self.slip_rfd_solve(system, problem, W_s, preconditioner)
 
         def products(q):
             moved = system.mobility_problem(q)
@@ -205,6 +207,40 @@ class StochasticScheme(Scheme):
                         at_configuration=(problem.M_dot(W_s), problem.KT_dot(W_s)))
         scale = factor * self.delta if self.thermal_drift else 0.0
         return scale * D_M, -scale * D_KT
+
+    def slip_rfd_solve(self, system, problem, W_s, preconditioner):
+        """``W_R = N K^T M^{-1} W_s`` (Nb, 6) by one noise solve (right-hand side ``[-W_s; 0]``)."""
+        return self.noise_solve(system, problem, preconditioner,
+                                rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+
+    def noise_and_slip_rfd_solve(self, system, problem, W1, factor, W_s, preconditioner):
+        """``(factor M^{1/2} W1, W_R)`` at ``problem``: the Lanczos call and the independent RFD solve.
+
+        With a paired product (``System.paired_mobility_product``, the C++ backend) the two run side by
+        side and share each pass over the blob pairs (one product of two vectors instead of two);
+        otherwise one after the other.  The same numbers either way, to rounding.
+        """
+        paired = getattr(system, 'paired_mobility_product', None) if self.pair_products else None
+        if paired is None or not hasattr(problem, 'with_mobility_product'):
+            return (self.lanczos_noise(system, problem, W1, factor, preconditioner),
+                    self.slip_rfd_solve(system, problem, W_s, preconditioner))
+        from concurrent.futures import ThreadPoolExecutor
+        from multi_bodies.solver.system import PairedProducts
+        pairer = PairedProducts(paired, problem.mobility_product)
+        shared = problem.with_mobility_product(pairer.product)
+
+        def noise():
+            try:
+                return self.lanczos_noise(system, shared, W1, factor, preconditioner)
+            finally:
+                pairer.leave()
+        with ThreadPoolExecutor(1) as pool:
+            noise_future = pool.submit(noise)
+            try:
+                W_R = self.slip_rfd_solve(system, shared, W_s, preconditioner)
+            finally:
+                pairer.leave()
+            return noise_future.result(), W_R
 
     def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
         """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
@@ -399,9 +435,9 @@ class StochasticSlipTrapz(StochasticScheme):
         W_s = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = self.lanczos_noise(system, problem, W1, self.noise_factor(), pc)
+        n1, W_R = self.noise_and_slip_rfd_solve(system, problem, W1, self.noise_factor(), W_s, pc)
         U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R)
         U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
                                        pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)

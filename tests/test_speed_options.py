@@ -37,3 +37,33 @@ def test_noise_tolerance_changes_the_step_by_its_size_and_costs_fewer_products()
     assert lanczos_loose < lanczos_exact
     difference = np.linalg.norm(loose - exact) / np.linalg.norm(exact)
     assert 1e-9 < difference < 1e-2, difference
+
+
+def test_paired_products_give_the_products_of_the_single_kernel():
+    """One pass over the pairs for two vectors (C++) equals the established one-vector product, wall and no wall."""
+    cpp = pytest.importorskip('mobility.cpp_backend')
+    import mobility
+    rng = np.random.default_rng(11)
+    r = rng.random((300, 3)) * [20.0, 20.0, 3.0] + [0.0, 0.0, 0.3]  # some blobs closer than a to the wall
+    v1, v2 = rng.normal(size=900), rng.normal(size=900)
+    for name, wall in (('C++', True), ('C++_no_wall', False)):
+        single = mobility.mobility_vector_product(name)
+        m1, m2 = cpp.trans_times_force_two(r, v1, v2, 1.3, 0.5, wall)
+        for got, v in ((m1, v1), (m2, v2)):
+            expected = single(r, v, 1.3, 0.5)
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+def test_paired_slip_trapz_step_equals_the_unpaired_step():
+    """The Lanczos call and the RFD solve sharing passes over the pairs (side by side in two threads) give
+    the step of the same random numbers computed one after the other, to rounding."""
+    pytest.importorskip('mobility.cpp_backend')
+    import bench_dynamics
+    steps = {}
+    for pair in (False, True):
+        system = bench_dynamics.boomerang_system(9, 'C++')
+        assert system.paired_mobility_product is not None
+        scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options(None))
+        scheme.pair_products = pair
+        steps[pair] = scheme.advance(system, system.configuration, 0, np.random.default_rng(5))[1]
+    np.testing.assert_allclose(steps[True], steps[False], rtol=1e-9, atol=1e-12)

@@ -128,6 +128,14 @@ class MobilityProblem:
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
         self._projectors = None
 
+    def with_mobility_product(self, mobility_product):
+        """The same problem (same configuration, a shallow copy) with another ``M f`` product."""
+        import copy
+        twin = copy.copy(self)
+        twin.mobility_product = mobility_product
+        twin.operator = spla.LinearOperator((self.size, self.size), matvec=twin.matvec, dtype=float)
+        return twin
+
     def project_forces(self, force_torque):
         """Remove from force-torque (Nb, 6) the part that no blob force can balance.
 

@@ -136,6 +136,8 @@ class System:
         self.print_residual = print_residual
         self.vector_product_name, self.blobs_name = vector_product_name, blobs_name
         self.mobility_product = mobility.mobility_vector_product(vector_product_name)
+        # (M v1, M v2) in one pass over the pairs, or None where the backend has no such product
+        self.paired_mobility_product = paired_product(vector_product_name, body_arrays, self.periodic_length)
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
         self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
         self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
@@ -504,6 +506,77 @@ class System:
             raise SimulationStopped('GMRES for the roller torques did not converge to solver_tolerance %g '
                                     '(relative residual %.3e)' % (self.tolerance, result.residual))
         return result.x * norm, result.x
+
+
+def paired_product(name, body_arrays, periodic_length):
+    """``f(r (N, 3), v1 (3N,), v2 (3N,), eta, a) -> (M v1, M v2)`` of the C++ backend, else None.
+
+    Only for the C++ wall and no-wall products of one blob radius without periodic images (the cases of
+    ``mobility.cpp_backend.trans_times_force_two``).
+    """
+    if name not in ('C++', 'C++' + NO_WALL) or getattr(body_arrays, 'radii_given', False) \
+            or np.any(np.asarray(periodic_length) != 0):
+        return None
+    try:
+        from mobility import cpp_backend
+    except ImportError:
+        return None
+    wall = name == 'C++'
+
+    def product(r_vectors, v1, v2, eta, a):
+        return cpp_backend.trans_times_force_two(r_vectors, v1, v2, eta, a, wall)
+    return product
+
+
+class PairedProducts:
+    """Pairs the products ``M v`` of two threads at one configuration into one pass over the blob pairs.
+
+    ``product(r_vectors, v, eta, a, periodic_length)`` has the signature of a mobility product: a call
+    waits until the other participant asks for a product too (then one of them computes both with
+    ``paired_product``) or has left (then it computes its own with ``single_product``).  Each
+    participant calls ``leave()`` when it needs no more products.
+    """
+
+    def __init__(self, paired_product, single_product, participants=2):
+        import threading
+        self._paired, self._single = paired_product, single_product
+        self._condition = threading.Condition()
+        self._pending = None
+        self._active = participants
+        self.pairs = 0
+
+    def product(self, r_vectors, vector, eta, a, periodic_length=(0.0, 0.0, 0.0)):
+        with self._condition:
+            other = self._pending
+            if other is None and self._active > 1:
+                mine = {'vector': vector, 'r': r_vectors, 'result': None}
+                self._pending = mine
+                self._condition.wait_for(lambda: mine['result'] is not None or self._active < 2)
+                if mine['result'] is not None:
+                    return mine['result']
+                self._pending = None  # the other left: compute it alone
+                other = None
+            elif other is not None:
+                self._pending = None
+        if other is None or other['r'] is not r_vectors and not np.array_equal(other['r'], r_vectors):
+            result = self._single(r_vectors, vector, eta, a, periodic_length)
+            if other is not None:  # different configurations: the other one alone too
+                other_result = self._single(other['r'], other['vector'], eta, a, periodic_length)
+                with self._condition:
+                    other['result'] = other_result
+                    self._condition.notify_all()
+            return result
+        mine_result, other_result = self._paired(r_vectors, vector, other['vector'], eta, a)
+        with self._condition:
+            self.pairs += 1
+            other['result'] = other_result
+            self._condition.notify_all()
+        return mine_result
+
+    def leave(self):
+        with self._condition:
+            self._active -= 1
+            self._condition.notify_all()
 
 
 def resolve_blob_blob_implementation(name, hooks, log=None):
