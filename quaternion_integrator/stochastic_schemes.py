@@ -214,33 +214,42 @@ class StochasticScheme(Scheme):
                                 rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
 
     def noise_and_slip_rfd_solve(self, system, problem, W1, factor, W_s, preconditioner):
-        """``(factor M^{1/2} W1, W_R)`` at ``problem``: the Lanczos call and the independent RFD solve.
+        """``(factor M^{1/2} W1, W_R)`` at ``problem``: the Lanczos call and the independent RFD solve
+        (:meth:`side_by_side`)."""
+        return self.side_by_side(
+            system, problem,
+            lambda shared: self.lanczos_noise(system, shared, W1, factor, preconditioner),
+            lambda shared: self.slip_rfd_solve(system, shared, W_s, preconditioner))
 
-        With a paired product (``System.paired_mobility_product``, the C++ backend) the two run side by
-        side and share each pass over the blob pairs (one product of two vectors instead of two);
-        otherwise one after the other.  The same numbers either way, to rounding.
+    def side_by_side(self, system, problem, first, second):
+        """``(first(problem), second(problem))`` for two computations at one configuration that do not
+        depend on each other (each a callable of a problem).
+
+        With a paired product (``System.paired_mobility_product``, the C++ backend) they run side by side
+        in two threads and share each pass over the blob pairs (one product of two vectors instead of
+        two, ``system.PairedProducts``); otherwise one after the other.  The same numbers either way, to
+        rounding; ``pair_products = False`` switches the pairing off.
         """
         paired = getattr(system, 'paired_mobility_product', None) if self.pair_products else None
         if paired is None or not hasattr(problem, 'with_mobility_product'):
-            return (self.lanczos_noise(system, problem, W1, factor, preconditioner),
-                    self.slip_rfd_solve(system, problem, W_s, preconditioner))
+            return first(problem), second(problem)
         from concurrent.futures import ThreadPoolExecutor
         from multi_bodies.solver.system import PairedProducts
         pairer = PairedProducts(paired, problem.mobility_product)
         shared = problem.with_mobility_product(pairer.product)
 
-        def noise():
+        def run_first():
             try:
-                return self.lanczos_noise(system, shared, W1, factor, preconditioner)
+                return first(shared)
             finally:
                 pairer.leave()
         with ThreadPoolExecutor(1) as pool:
-            noise_future = pool.submit(noise)
+            future = pool.submit(run_first)
             try:
-                W_R = self.slip_rfd_solve(system, shared, W_s, preconditioner)
+                result = second(shared)
             finally:
                 pairer.leave()
-            return noise_future.result(), W_R
+            return future.result(), result
 
     def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
         """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
@@ -353,9 +362,10 @@ class StochasticAdamsBashforth(StochasticScheme):
         z = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
+        noise, U_d = self.side_by_side(system, problem,
+                                       lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
+                                       lambda shared: self.deterministic_part(system, shared, old, pc))
         U_s = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
-        U_d = self.deterministic_part(system, problem, old, pc)
         U_s = U_s + self.rfd_drift(system, old, W_rfd, pc)
         U = self.multistep(U_d, U_s)
         return self.move(old, U, self.dt), U
@@ -374,7 +384,11 @@ class StochasticTractionEM(StochasticScheme):
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        R = self.noise_solve(system, problem, pc, rhs=problem.rhs(force_torque=W_s))
+        z = rng.standard_normal(3 * system.num_blobs)  # drawn after W_rfd, as before
+        noise, R = self.side_by_side(system, problem,
+                                     lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
+                                     lambda shared: self.noise_solve(system, shared, pc,
+                                                                     rhs=shared.rhs(force_torque=W_s)))
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
 
         def products(q):
@@ -385,8 +399,6 @@ class StochasticTractionEM(StochasticScheme):
             return displace_bodies(q, scale, direction, lengths)
         D_M, D_KT, D_K = rfd(products, old, W_rfd, self.delta, displace, centred=False,
                              at_configuration=products_at(problem, lam, U_R))
-        z = rng.standard_normal(3 * system.num_blobs)
-        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
         if not self.thermal_drift:
             return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
         return problem, pc, noise, D_M - D_K, -D_KT

@@ -54,16 +54,19 @@ def test_paired_products_give_the_products_of_the_single_kernel():
             np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
 
 
-def test_paired_slip_trapz_step_equals_the_unpaired_step():
-    """The Lanczos call and the RFD solve sharing passes over the pairs (side by side in two threads) give
-    the step of the same random numbers computed one after the other, to rounding."""
+@pytest.mark.parametrize('scheme_name', ['stochastic_Slip_Trapz', 'stochastic_adams_bashforth',
+                                         'stochastic_traction_EM', 'stochastic_traction_AB'])
+def test_paired_step_equals_the_unpaired_step(scheme_name):
+    """The Lanczos call and an independent solve at the same configuration sharing passes over the pairs
+    (side by side in two threads) give the step of the same random numbers computed one after the other,
+    to rounding."""
     pytest.importorskip('mobility.cpp_backend')
     import bench_dynamics
     steps = {}
     for pair in (False, True):
         system = bench_dynamics.boomerang_system(9, 'C++')
         assert system.paired_mobility_product is not None
-        scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options(None))
+        scheme = make_scheme(scheme_name, 0.01, options(None))
         scheme.pair_products = pair
         steps[pair] = scheme.advance(system, system.configuration, 0, np.random.default_rng(5))[1]
     np.testing.assert_allclose(steps[True], steps[False], rtol=1e-9, atol=1e-12)
