@@ -161,9 +161,11 @@ class MobilityProblem:
     def _range_projectors(self):
         if self._projectors is None:
             self._projectors = []
-            for (bodies, blobs), n_blobs in zip(self.body_arrays.type_slices, self.body_arrays.type_blobs):
+            full_rank = full_rank_types(self.body_arrays)
+            for k, ((bodies, blobs), n_blobs) in enumerate(zip(self.body_arrays.type_slices,
+                                                                self.body_arrays.type_blobs)):
                 nb = bodies.stop - bodies.start
-                if nb == 0:
+                if nb == 0 or full_rank[k]:
                     continue
                 K = K_matrices(self.r_vectors[blobs].reshape(nb, n_blobs, 3), self.locations[bodies])
                 _, singular, Vt = np.linalg.svd(K, full_matrices=True)
@@ -215,6 +217,33 @@ class MobilityProblem:
         if noise_force is not None:
             rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
         return rhs
+
+
+def full_rank_types(body_arrays):
+    """Per structure type: True when every body's ``K`` (3n, 6) has rank 6 (list of bool, cached).
+
+    The rank of ``K`` does not change when a body moves rigidly, so it is found once, from the reference
+    blobs at the identity orientation (singular values above 1e-10 times the largest, as
+    ``MobilityProblem.project_forces``), and kept on ``body_arrays``.
+    """
+    cached = getattr(body_arrays, '_full_rank_types', None)
+    if cached is not None:
+        return cached
+    result = []
+    for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
+        nb = bodies.stop - bodies.start
+        if nb == 0:
+            result.append(True)
+            continue
+        reference = np.asarray(body_arrays.reference_blobs[blobs], dtype=float).reshape(nb, n_blobs, 3)
+        singular = np.linalg.svd(K_matrices(reference, np.zeros((nb, 3))), compute_uv=False)
+        result.append(singular.shape[1] == 6  # a body of one blob has 3 singular values: never rank 6
+                      and bool(np.all(singular[:, -1] > 1e-6 * np.maximum(singular[:, 0], 1e-300))))
+    try:
+        body_arrays._full_rank_types = result
+    except AttributeError:  # an object that takes no new attributes: compute again next time
+        pass
+    return result
 
 
 class BlockDiagonalPreconditioner:
