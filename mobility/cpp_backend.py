@@ -26,6 +26,11 @@ def _make_product(kind, wall):
     return product
 
 
+def has_product_two():
+    """True when the built extension has the two-vector product (rebuild with setup.py build_ext otherwise)."""
+    return hasattr(_ext, 'product_two')
+
+
 def trans_times_force_two(r_vectors, v1, v2, eta, a, wall=True):
     """``(M v1, M v2)`` (3N,) each, in one pass over the pairs (pair coefficients computed once).
 

@@ -521,6 +521,8 @@ def paired_product(name, body_arrays, periodic_length):
         from mobility import cpp_backend
     except ImportError:
         return None
+    if not cpp_backend.has_product_two():  # an extension built before product_two: no pairing
+        return None
     wall = name == 'C++'
 
     def product(r_vectors, v1, v2, eta, a):
