@@ -27,8 +27,12 @@ Shapes and units: ``r_vectors`` (N, 3) in length units, the wall at z = 0;
 (x0, y0, z0, x1, ...); results are velocities (or angular velocities) in the
 same unit system.
 """
-from . import python_backend as _python
-from .product_names import PRODUCT_KINDS
+from . import threads as _threads
+
+_threads.apply_wait_policy()  # before any OpenMP kernel loads (mobility.threads: passive waiting threads)
+
+from . import python_backend as _python  # noqa: E402
+from .product_names import PRODUCT_KINDS  # noqa: E402
 from .backends import (available_implementations, blob_mobility_matrix, blob_product,
                        mobility_vector_product, source_target_product, split_implementation_name, usable_names)
 

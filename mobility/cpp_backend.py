@@ -26,6 +26,20 @@ def _make_product(kind, wall):
     return product
 
 
+def has_product_two():
+    """True when the built extension has the two-vector product (rebuild with setup.py build_ext otherwise)."""
+    return hasattr(_ext, 'product_two')
+
+
+def trans_times_force_two(r_vectors, v1, v2, eta, a, wall=True):
+    """``(M v1, M v2)`` (3N,) each, in one pass over the pairs (pair coefficients computed once).
+
+    One radius ``a`` (a number), no periodic images; ``wall``: the single-wall mobility, else free space.
+    The same numbers as two calls of the trans_times_force product, to rounding.
+    """
+    return _ext.product_two(r_vectors, np.ravel(v1), np.ravel(v2), float(eta), float(a), bool(wall))
+
+
 def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):
     return _ext.source_target(source_r, target_r, np.ravel(force), np.ravel(radius_source),
                               np.ravel(radius_target), float(eta), _L(periodic_length), wall)

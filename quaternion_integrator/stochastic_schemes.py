@@ -76,6 +76,7 @@ class StochasticScheme(Scheme):
     every ``update_PC`` steps, SPEC §4.3).
     """
     dense = False
+    pair_products = True  # share passes over the blob pairs between independent products (C++ backend)
     thermal_drift = True  # False switches every drift term off (a negative control for the tests; wrong physics)
 
     def __init__(self, dt, options=None):
@@ -87,6 +88,14 @@ class StochasticScheme(Scheme):
         # The ranges are the option table's (declared once); checked here too for schemes made directly.
         for name, value in (('kT', self.kT), ('rf_delta', self.delta), ('update_PC', self.update_PC)):
             check_value(name, value, where(name))
+        # relative tolerance of the noise and RFD sub-solves and of Lanczos (None: solver_tolerance); a speed
+        # option, off by default (doc/dynamics.md, speed options)
+        self.noise_tolerance = getattr(options, 'noise_solver_tolerance', None)
+        if self.noise_tolerance is not None:
+            self.noise_tolerance = float(self.noise_tolerance)
+            if not 0.0 < self.noise_tolerance < 1.0:
+                raise UserInputError('%s: noise_solver_tolerance must be in (0, 1), got %g; leave it unset to use '
+                                     'solver_tolerance' % (where('noise_solver_tolerance'), self.noise_tolerance))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
         self._preconditioner = None
         self._preconditioner_step = None
@@ -142,12 +151,16 @@ class StochasticScheme(Scheme):
         """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
-        result = system.solve(problem, rhs, preconditioner, kind='stochastic')
+        result = system.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
         split = getattr(problem, 'split_body_unknowns', None)
         if split is not None:  # bodies of prescribed kinematics are not moved by noise or RFD solves
             velocities, _ = split(result.velocities, prescribed_motion=False)
             result = result._replace(velocities=velocities)
         return result
+
+    def lanczos_noise(self, system, problem, z, factor, preconditioner):
+        """``factor M^{1/2} z`` at ``problem`` (System.lanczos_noise) at the scheme's ``noise_tolerance``."""
+        return system.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
 
     def rfd_drift(self, system, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
@@ -176,16 +189,17 @@ class StochasticScheme(Scheme):
             return displace_bodies(q, scale, direction, lengths)
         return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
 
-    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor):
+    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor, W_R=None):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
         by ``delta W_R`` (no body-length scaling) the slip is ``factor delta (M' W_s - M W_s) / delta`` and
         the force ``-factor delta (K'^T W_s - K^T W_s) / delta``, with ``factor = 2 kT / delta``
         (trapezoidal) or ``kT / delta`` (midpoint).  Zero when ``thermal_drift`` is off.
+        ``W_R`` (Nb, 6): the solve's velocities when the caller made it (``slip_rfd_solve``).
         """
-        W_R = self.noise_solve(system, problem, preconditioner,
-                               rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+        if W_R is None:
+            W_R = self.slip_rfd_solve(system, problem, W_s, preconditioner)
 
         def products(q):
             moved = system.mobility_problem(q)
@@ -194,6 +208,49 @@ class StochasticScheme(Scheme):
                         at_configuration=(problem.M_dot(W_s), problem.KT_dot(W_s)))
         scale = factor * self.delta if self.thermal_drift else 0.0
         return scale * D_M, -scale * D_KT
+
+    def slip_rfd_solve(self, system, problem, W_s, preconditioner):
+        """``W_R = N K^T M^{-1} W_s`` (Nb, 6) by one noise solve (right-hand side ``[-W_s; 0]``)."""
+        return self.noise_solve(system, problem, preconditioner,
+                                rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+
+    def noise_and_slip_rfd_solve(self, system, problem, W1, factor, W_s, preconditioner):
+        """``(factor M^{1/2} W1, W_R)`` at ``problem``: the Lanczos call and the independent RFD solve
+        (:meth:`side_by_side`)."""
+        return self.side_by_side(
+            system, problem,
+            lambda shared: self.lanczos_noise(system, shared, W1, factor, preconditioner),
+            lambda shared: self.slip_rfd_solve(system, shared, W_s, preconditioner))
+
+    def side_by_side(self, system, problem, first, second):
+        """``(first(problem), second(problem))`` for two computations at one configuration that do not
+        depend on each other (each a callable of a problem).
+
+        With a paired product (``System.paired_mobility_product``, the C++ backend) they run side by side
+        in two threads and share each pass over the blob pairs (one product of two vectors instead of
+        two, ``system.PairedProducts``); otherwise one after the other.  The same numbers either way, to
+        rounding; ``pair_products = False`` switches the pairing off.
+        """
+        paired = getattr(system, 'paired_mobility_product', None) if self.pair_products else None
+        if paired is None or not hasattr(problem, 'with_mobility_product'):
+            return first(problem), second(problem)
+        from concurrent.futures import ThreadPoolExecutor
+        from multi_bodies.solver.system import PairedProducts
+        pairer = PairedProducts(paired, problem.mobility_product)
+        shared = problem.with_mobility_product(pairer.product)
+
+        def run_first():
+            try:
+                return first(shared)
+            finally:
+                pairer.leave()
+        with ThreadPoolExecutor(1) as pool:
+            future = pool.submit(run_first)
+            try:
+                result = second(shared)
+            finally:
+                pairer.leave()
+            return future.result(), result
 
     def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
         """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
@@ -288,7 +345,7 @@ class StochasticFirstOrderRFD(StochasticScheme):
         z = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
         U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
         U = U + self.rfd_drift(system, old, W_rfd, pc)
         return self.move(old, U, self.dt), U
@@ -306,9 +363,10 @@ class StochasticAdamsBashforth(StochasticScheme):
         z = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
+        noise, U_d = self.side_by_side(system, problem,
+                                       lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
+                                       lambda shared: self.deterministic_part(system, shared, old, pc))
         U_s = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
-        U_d = self.deterministic_part(system, problem, old, pc)
         U_s = U_s + self.rfd_drift(system, old, W_rfd, pc)
         U = self.multistep(U_d, U_s)
         return self.move(old, U, self.dt), U
@@ -327,7 +385,11 @@ class StochasticTractionEM(StochasticScheme):
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        R = self.noise_solve(system, problem, pc, rhs=problem.rhs(force_torque=W_s))
+        z = rng.standard_normal(3 * system.num_blobs)  # drawn after W_rfd, as before
+        noise, R = self.side_by_side(system, problem,
+                                     lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
+                                     lambda shared: self.noise_solve(system, shared, pc,
+                                                                     rhs=shared.rhs(force_torque=W_s)))
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
 
         def products(q):
@@ -338,8 +400,6 @@ class StochasticTractionEM(StochasticScheme):
             return displace_bodies(q, scale, direction, lengths)
         D_M, D_KT, D_K = rfd(products, old, W_rfd, self.delta, displace, centred=False,
                              at_configuration=products_at(problem, lam, U_R))
-        z = rng.standard_normal(3 * system.num_blobs)
-        noise = system.lanczos_noise(problem, z, self.noise_factor(), pc)
         if not self.thermal_drift:
             return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
         return problem, pc, noise, D_M - D_K, -D_KT
@@ -388,9 +448,9 @@ class StochasticSlipTrapz(StochasticScheme):
         W_s = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = system.lanczos_noise(problem, W1, self.noise_factor(), pc)
+        n1, W_R = self.noise_and_slip_rfd_solve(system, problem, W1, self.noise_factor(), W_s, pc)
         U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta)
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R)
         U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
                                        pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
@@ -411,8 +471,8 @@ class StochasticSlipMid(StochasticScheme):
         W3 = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = system.lanczos_noise(problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
-        n_c = system.lanczos_noise(problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
+        n1 = self.lanczos_noise(system, problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
+        n_c = self.lanczos_noise(system, problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
         U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
         U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
@@ -435,7 +495,7 @@ class StochasticEM(StochasticScheme):
         W = rng.standard_normal(3 * system.num_blobs)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        noise = system.lanczos_noise(problem, W, self.noise_factor(), pc)
+        noise = self.lanczos_noise(system, problem, W, self.noise_factor(), pc)
         U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
         return self.move(old, U, self.dt), U
 
@@ -502,12 +562,12 @@ class StochasticGDCRFD(StochasticScheme):
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         factor = self.noise_factor()
-        U_tilde = rigid_projection(system, old, system.lanczos_noise(problem, W, factor, pc))
+        U_tilde = rigid_projection(system, old, self.lanczos_noise(system, problem, W, factor, pc))
         divergence = 0.0
         if self.thermal_drift and self.kT > 0:
             lengths = self.body_lengths(system)
             q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
-            noise_rfd = system.lanczos_noise(system.mobility_problem(q_rfd), W, factor, pc)
+            noise_rfd = self.lanczos_noise(system, system.mobility_problem(q_rfd), W, factor, pc)
             U_rfd = rigid_projection(system, q_rfd, noise_rfd)
             W_tilde = W_rfd.copy()
             W_tilde[:, :3] /= lengths[:, None]
@@ -515,7 +575,7 @@ class StochasticGDCRFD(StochasticScheme):
         mid = self.move(old, U_tilde, 0.5 * self.dt)
         self.check(system, mid)
         problem_mid = system.mobility_problem(mid)
-        noise_mid = system.lanczos_noise(problem_mid, W, factor, pc)
+        noise_mid = self.lanczos_noise(system, problem_mid, W, factor, pc)
         U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid)
         U = U * (1.0 + 0.5 * self.dt * divergence)
         return self.move(old, U, self.dt), U
@@ -563,6 +623,23 @@ class StochasticFirstOrderRFDDense(DenseScheme):
         return self.move(old, U, self.dt), U
 
 
+def root_and_pseudo_inverse_root(N, rcond=1e-14):
+    """``N^{1/2}`` and ``pinv(N) N^{1/2}`` of a symmetric positive semi-definite N (n, n), from one ``eigh``.
+
+    ``N^{1/2} = V sqrt(max(lambda, 0)) V^T`` (as ``symmetric_root_matrix``); ``pinv(N) N^{1/2} =
+    V diag(1 / sqrt(lambda)) V^T`` over the eigenvalues above ``rcond`` times the largest (the
+    eigenvalues are the singular values of N, so this is ``np.linalg.pinv(N, rcond)`` times the root:
+    one decomposition instead of an eigendecomposition and an SVD).
+    """
+    eigenvalues, vectors = np.linalg.eigh(0.5 * (N + N.T))
+    positive = np.maximum(eigenvalues, 0.0)
+    root = (vectors * np.sqrt(positive)) @ vectors.T
+    kept = np.abs(eigenvalues) > rcond * np.max(np.abs(eigenvalues), initial=0.0)
+    scale = np.zeros_like(eigenvalues)
+    scale[kept & (eigenvalues > 0)] = 1.0 / np.sqrt(eigenvalues[kept & (eigenvalues > 0)])
+    return root, (vectors * scale) @ vectors.T
+
+
 class Fixman(DenseScheme):
     """Fixman's midpoint scheme with dense algebra (Delong et al. 2015).
 
@@ -582,9 +659,9 @@ class Fixman(DenseScheme):
         W2 = rng.standard_normal(nb6)
         matrices = system.dense_matrices(old)
         N = matrices[3]
-        root = symmetric_root_matrix(N)
+        root, inverse_root = root_and_pseudo_inverse_root(N)
         U_p = self.dense_velocity(system, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
-        corrector = np.linalg.pinv(N, rcond=1e-14) @ (np.sqrt(self.kT / self.dt) * (root @ (W1 + W2)))
+        corrector = np.sqrt(self.kT / self.dt) * (inverse_root @ (W1 + W2))  # pinv(N) N^{1/2} (W1 + W2)
         mid = self.move(old, U_p, 0.5 * self.dt)
         self.check(system, mid)
         matrices_mid = system.dense_matrices(mid)

@@ -313,6 +313,92 @@ Array blob_product(const std::string &kind, const Array &r, const Array &vector,
   return flat_result(ux, uy, uz, b.damping, 1.0 / (8.0 * M_PI * eta * std::pow(a, power)));
 }
 
+// Trans-trans product of two vectors in one pass over the unordered pairs (no periodic images):
+// the pair coefficients are computed once and applied to both vectors.
+template <bool Wall>
+void trans_times_force_symmetric_two(const Blobs &b, const Blobs &c, std::vector<double> &out) {
+  const std::size_t n = b.n;
+  const int threads = max_threads();
+  std::vector<double> acc(static_cast<std::size_t>(threads) * 6 * n, 0.0);
+  const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data();
+  const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
+  const double *gx = c.vx.data(), *gy = c.vy.data(), *gz = c.vz.data();
+#pragma omp parallel if (worth_threads(n, n / 2))
+  {
+    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 6 * n;
+    double *ay = ax + n, *az = ay + n, *bx = az + n, *by = bx + n, *bz = by + n;
+#pragma omp for schedule(dynamic, 16)
+    for (std::size_t i = 0; i < n; ++i) {
+      const double xi = x[i], yi = y[i], zi = z[i], fxi = fx[i], fyi = fy[i], fzi = fz[i], gxi = gx[i], gyi = gy[i],
+                   gzi = gz[i];
+      double uxi = 0.0, uyi = 0.0, uzi = 0.0, vxi = 0.0, vyi = 0.0, vzi = 0.0;
+      rmb::trans_times_force_pair<Wall>(0.0, 0.0, 0.0, zi, zi, fxi, fyi, fzi, uxi, uyi, uzi);
+      rmb::trans_times_force_pair<Wall>(0.0, 0.0, 0.0, zi, zi, gxi, gyi, gzi, vxi, vyi, vzi);
+      std::size_t j_first = i + 1;
+#if defined(__AVX512F__)
+      {
+        using V = rmb::double8;
+        const V pxi = V{} + xi, pyi = V{} + yi, pzi = V{} + zi, vfx = V{} + fxi, vfy = V{} + fyi, vfz = V{} + fzi,
+                vgx = V{} + gxi, vgy = V{} + gyi, vgz = V{} + gzi;
+        V sux{}, suy{}, suz{}, svx{}, svy{}, svz{};
+        for (; j_first + 8 <= n; j_first += 8) {
+          const std::size_t j = j_first;
+          const V rx = pxi - load8(x + j), ry = pyi - load8(y + j), rz = pzi - load8(z + j);
+          const rmb::TransTransBlock<V> k = rmb::trans_trans_coefficients<Wall, V>(rx, ry, rz, pzi, load8(z + j));
+          V usx{}, usy{}, usz{}, wsx{}, wsy{}, wsz{};
+          rmb::apply_trans_trans<Wall, false, V>(k, rx, ry, rz, load8(fx + j), load8(fy + j), load8(fz + j), sux, suy,
+                                                 suz);
+          rmb::apply_trans_trans<Wall, true, V>(k, rx, ry, rz, vfx, vfy, vfz, usx, usy, usz);
+          rmb::apply_trans_trans<Wall, false, V>(k, rx, ry, rz, load8(gx + j), load8(gy + j), load8(gz + j), svx, svy,
+                                                 svz);
+          rmb::apply_trans_trans<Wall, true, V>(k, rx, ry, rz, vgx, vgy, vgz, wsx, wsy, wsz);
+          store8(ax + j, load8(ax + j) + usx), store8(ay + j, load8(ay + j) + usy), store8(az + j, load8(az + j) + usz);
+          store8(bx + j, load8(bx + j) + wsx), store8(by + j, load8(by + j) + wsy), store8(bz + j, load8(bz + j) + wsz);
+        }
+        uxi += horizontal_sum(sux), uyi += horizontal_sum(suy), uzi += horizontal_sum(suz);
+        vxi += horizontal_sum(svx), vyi += horizontal_sum(svy), vzi += horizontal_sum(svz);
+      }
+#endif
+#pragma omp simd reduction(+ : uxi, uyi, uzi, vxi, vyi, vzi)
+      for (std::size_t j = j_first; j < n; ++j) {
+        const double rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+        const rmb::TransTransBlock<double> k = rmb::trans_trans_coefficients<Wall>(rx, ry, rz, zi, z[j]);
+        double utx = 0.0, uty = 0.0, utz = 0.0, usx = 0.0, usy = 0.0, usz = 0.0;
+        double wtx = 0.0, wty = 0.0, wtz = 0.0, wsx = 0.0, wsy = 0.0, wsz = 0.0;
+        rmb::apply_trans_trans<Wall, false>(k, rx, ry, rz, fx[j], fy[j], fz[j], utx, uty, utz);
+        rmb::apply_trans_trans<Wall, true>(k, rx, ry, rz, fxi, fyi, fzi, usx, usy, usz);
+        rmb::apply_trans_trans<Wall, false>(k, rx, ry, rz, gx[j], gy[j], gz[j], wtx, wty, wtz);
+        rmb::apply_trans_trans<Wall, true>(k, rx, ry, rz, gxi, gyi, gzi, wsx, wsy, wsz);
+        uxi += utx, uyi += uty, uzi += utz, vxi += wtx, vyi += wty, vzi += wtz;
+        ax[j] += usx, ay[j] += usy, az[j] += usz, bx[j] += wsx, by[j] += wsy, bz[j] += wsz;
+      }
+      ax[i] += uxi, ay[i] += uyi, az[i] += uzi, bx[i] += vxi, by[i] += vyi, bz[i] += vzi;
+    }
+  }
+  out.assign(6 * n, 0.0);
+  for (int t = 0; t < threads; ++t) {
+    const double *a = acc.data() + static_cast<std::size_t>(t) * 6 * n;
+    for (std::size_t i = 0; i < 6 * n; ++i) out[i] += a[i];
+  }
+}
+
+py::tuple product_two(const Array &r, const Array &v1, const Array &v2, double eta, double a, bool wall) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  Blobs b = make_blobs(r, &v1, std::vector<double>(n, a), a, wall, "r_vectors");
+  Blobs c = make_blobs(r, &v2, std::vector<double>(n, a), a, wall, "r_vectors");
+  std::vector<double> out;
+  {
+    py::gil_scoped_release release;
+    wall ? trans_times_force_symmetric_two<true>(b, c, out) : trans_times_force_symmetric_two<false>(b, c, out);
+  }
+  const double factor = 1.0 / (8.0 * M_PI * eta * a);
+  std::vector<double> ux(out.begin(), out.begin() + n), uy(out.begin() + n, out.begin() + 2 * n),
+      uz(out.begin() + 2 * n, out.begin() + 3 * n), wx(out.begin() + 3 * n, out.begin() + 4 * n),
+      wy(out.begin() + 4 * n, out.begin() + 5 * n), wz(out.begin() + 5 * n, out.end());
+  return py::make_tuple(flat_result(ux, uy, uz, b.damping, factor), flat_result(wx, wy, wz, c.damping, factor));
+}
+
 Array product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
               const Array &periodic_length, bool wall, const std::string &precision) {
   return wall ? blob_product<true>(kind, r, vector, eta, a, periodic_length, precision)
@@ -648,5 +734,8 @@ PYBIND11_MODULE(_mobility_cpp, m) {
         py::arg("periodic_length"), py::arg("domain"), "Dense (3N, 3N) blob mobility with per-blob radii (N,).");
   m.def("dense_free_surface", &dense_free_surface, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
         py::arg("periodic_length"), "Dense (3N, 3N) free-surface blob mobility, one radius a.");
+  m.def("product_two", &product_two, py::arg("r_vectors"), py::arg("v1"), py::arg("v2"), py::arg("eta"),
+        py::arg("a"), py::arg("wall"),
+        "trans_times_force of two vectors (3N,) each in one pass over the pairs (no periodic images): (M v1, M v2).");
   m.def("max_threads", &max_threads, "Number of OpenMP threads the kernels use.");
 }

@@ -40,6 +40,7 @@ import traceback
 
 import numpy as np
 
+from mobility.threads import available_cores
 from utils import UserInputError
 
 MANIFEST_NAME = 'ensemble.json'
@@ -730,7 +731,7 @@ def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address='
     inside its output folder; None: Dask's default under the temporary folder).
 
     Every worker gets ``omp_threads`` OpenMP/BLAS threads (default: the
-    machine's cores divided by ``workers``, at least 1), set before the
+    cores this process may run on divided by ``workers``, at least 1; ``mobility.threads``), set before the
     worker process starts, so the workers do not oversubscribe the cores.
     ``retries``: how often a task may lose its worker before it fails.
     """
@@ -739,7 +740,7 @@ def make_local_cluster(workers, omp_threads=None, retries=3, dashboard_address='
     if workers < 1:
         raise UserInputError('--workers must be at least 1 for a Dask cluster, got %d (0 runs in this process)'
                              % workers)
-    threads = omp_threads or max(1, (os.cpu_count() or 1) // workers)
+    threads = omp_threads or max(1, available_cores() // workers)
     environment = dict(dask.config.get('distributed.nanny.pre-spawn-environ', {}), **thread_environment(threads))
     with dask.config.set({'distributed.scheduler.allowed-failures': int(retries),
                           'distributed.nanny.pre-spawn-environ': environment}):

@@ -35,6 +35,7 @@ schemes alike.
 from collections import namedtuple
 
 import numpy as np
+import scipy.linalg.lapack as _lapack
 import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions
@@ -52,7 +53,7 @@ lambda_blobs : ndarray (N, 3), blob constraint forces (force units).
 velocities : ndarray (Nb, 6), ``[v, w]`` per body.
 iterations : int, GMRES inner iterations.
 converged : bool, GMRES reached ``tolerance``.
-residual : float, ``|b - A x| / |b|`` of the returned solution (the true residual, one more product).
+residual : float, ``|b - A x| / |b|`` of the returned solution (the true residual; :func:`gmres_solve`).
 normalised_solution : ndarray (3N + 6Nb,), the solution of the normalised system ``A y = b / |b|``:
     the first guess for the next solve of a similar right-hand side (SPEC 4.2); None for a zero
     right-hand side (nothing was solved: keep the guess you had).
@@ -127,6 +128,14 @@ class MobilityProblem:
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
         self._projectors = None
 
+    def with_mobility_product(self, mobility_product):
+        """The same problem (same configuration, a shallow copy) with another ``M f`` product."""
+        import copy
+        twin = copy.copy(self)
+        twin.mobility_product = mobility_product
+        twin.operator = spla.LinearOperator((self.size, self.size), matvec=twin.matvec, dtype=float)
+        return twin
+
     def project_forces(self, force_torque):
         """Remove from force-torque (Nb, 6) the part that no blob force can balance.
 
@@ -152,9 +161,11 @@ class MobilityProblem:
     def _range_projectors(self):
         if self._projectors is None:
             self._projectors = []
-            for (bodies, blobs), n_blobs in zip(self.body_arrays.type_slices, self.body_arrays.type_blobs):
+            full_rank = full_rank_types(self.body_arrays)
+            for k, ((bodies, blobs), n_blobs) in enumerate(zip(self.body_arrays.type_slices,
+                                                                self.body_arrays.type_blobs)):
                 nb = bodies.stop - bodies.start
-                if nb == 0:
+                if nb == 0 or full_rank[k]:
                     continue
                 K = K_matrices(self.r_vectors[blobs].reshape(nb, n_blobs, 3), self.locations[bodies])
                 _, singular, Vt = np.linalg.svd(K, full_matrices=True)
@@ -206,6 +217,33 @@ class MobilityProblem:
         if noise_force is not None:
             rhs[n3:] -= np.asarray(noise_force, dtype=float).reshape(-1)
         return rhs
+
+
+def full_rank_types(body_arrays):
+    """Per structure type: True when every body's ``K`` (3n, 6) has rank 6 (list of bool, cached).
+
+    The rank of ``K`` does not change when a body moves rigidly, so it is found once, from the reference
+    blobs at the identity orientation (singular values above 1e-10 times the largest, as
+    ``MobilityProblem.project_forces``), and kept on ``body_arrays``.
+    """
+    cached = getattr(body_arrays, '_full_rank_types', None)
+    if cached is not None:
+        return cached
+    result = []
+    for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
+        nb = bodies.stop - bodies.start
+        if nb == 0:
+            result.append(True)
+            continue
+        reference = np.asarray(body_arrays.reference_blobs[blobs], dtype=float).reshape(nb, n_blobs, 3)
+        singular = np.linalg.svd(K_matrices(reference, np.zeros((nb, 3))), compute_uv=False)
+        result.append(singular.shape[1] == 6  # a body of one blob has 3 singular values: never rank 6
+                      and bool(np.all(singular[:, -1] > 1e-6 * np.maximum(singular[:, 0], 1e-300))))
+    try:
+        body_arrays._full_rank_types = result
+    except AttributeError:  # an object that takes no new attributes: compute again next time
+        pass
+    return result
 
 
 class BlockDiagonalPreconditioner:
@@ -332,7 +370,8 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
 
     operator : LinearOperator or object with ``matvec``; rhs (n,); preconditioner : LinearOperator or None;
     x0 (n,) or None (zeros).  Returns :data:`GmresResult` with the true relative residual
-    ``|rhs - A x| / |rhs|`` (one more product).  A zero right-hand side gives ``x = 0`` at once.
+    ``|rhs - A x| / |rhs|`` (SciPy's own last
+    product at ``x`` when it made one, else one more product).  A zero right-hand side gives ``x = 0`` at once.
     """
     rhs = np.asarray(rhs, dtype=float).reshape(-1)
     rhs_norm = float(np.linalg.norm(rhs))
@@ -345,10 +384,41 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
         if print_residual:
             print('gmres = %d %s' % (iterations[0], residual_norm))
 
-    solution, info = compat.gmres(operator, rhs, tolerance, x0=x0, atol=0.0, restart=restart, maxiter=maxiter,
+    remembered = _LastProduct(operator, rhs.size)
+    solution, info = compat.gmres(remembered, rhs, tolerance, x0=x0, atol=0.0, restart=restart, maxiter=maxiter,
                                   M=preconditioner, callback=count, callback_type='legacy')
-    residual = float(np.linalg.norm(rhs - operator.matvec(solution)) / rhs_norm)
+    product = remembered.product_of(solution)
+    if product is None:  # SciPy's last product was not at the solution: one more
+        product = np.asarray(operator.matvec(solution)).reshape(-1)
+    residual = float(np.linalg.norm(rhs - product) / rhs_norm)
     return GmresResult(solution, iterations[0], info == 0, residual)
+
+
+class _LastProduct(spla.LinearOperator):
+    """``operator`` that remembers its last input and output (n,), so the true residual costs no product.
+
+    SciPy's GMRES ends every restart cycle with the true residual ``b - A x``
+    of the iterate it returns; :func:`gmres_solve` reuses that product
+    instead of computing it again (one product of ``M f`` fewer per solve,
+    the same numbers).
+    """
+
+    def __init__(self, operator, size):
+        self._operator = operator
+        self._last = None
+        super().__init__(dtype=float, shape=(size, size))
+
+    def _matvec(self, x):
+        x = np.asarray(x, dtype=float).reshape(-1)
+        y = np.asarray(self._operator.matvec(x), dtype=float).reshape(-1)
+        self._last = (x.copy(), y)
+        return y
+
+    def product_of(self, x):
+        """``A x`` if ``x`` was the last input (bitwise), else None."""
+        if self._last is None or not np.array_equal(self._last[0], np.asarray(x).reshape(-1)):
+            return None
+        return self._last[1]
 
 
 def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
@@ -404,7 +474,8 @@ def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
 def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, inverse=True):
     """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
 
-    ``M`` from ``blob_mobility_matrix``, ``N = pinv(K^T M^{-1} K)`` (:func:`body_mobility_from_resistance`).
+    ``M`` from ``blob_mobility_matrix``, ``M^{-1}`` by Cholesky (:func:`spd_inverse`), ``N = pinv(K^T M^{-1} K)``
+    (:func:`body_mobility_from_resistance`).
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
@@ -412,8 +483,25 @@ def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_r
     K = body_arrays.K_dense(configuration, r_vectors)
     if not inverse:
         return M, None, K, None
-    M_inv = np.linalg.inv(M)
+    M_inv = spd_inverse(M)
     return M, M_inv, K, body_mobility_from_resistance(K.T @ M_inv @ K)
+
+
+def spd_inverse(matrix):
+    """Inverse of a symmetric positive definite matrix (n, n) from its Cholesky factor (LAPACK potrf/potri).
+
+    About half the work of ``np.linalg.inv`` (LU) and symmetric by construction; a
+    matrix that is not positive definite (blobs overlapping the wall can make the
+    wall-corrected mobility indefinite) falls back to ``np.linalg.inv``.
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    factor, info = _lapack.dpotrf(matrix, lower=False, clean=True)
+    if info == 0:
+        inverse, info = _lapack.dpotri(factor, lower=False)
+    if info != 0:
+        return np.linalg.inv(matrix)
+    upper = np.triu(inverse)
+    return upper + np.triu(upper, 1).T
 
 
 def dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius):

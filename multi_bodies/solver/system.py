@@ -136,6 +136,8 @@ class System:
         self.print_residual = print_residual
         self.vector_product_name, self.blobs_name = vector_product_name, blobs_name
         self.mobility_product = mobility.mobility_vector_product(vector_product_name)
+        # (M v1, M v2) in one pass over the pairs, or None where the backend has no such product
+        self.paired_mobility_product = paired_product(vector_product_name, body_arrays, self.periodic_length)
         self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
         self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
         self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
@@ -349,15 +351,17 @@ class System:
                                                        self.eta, self.blob_radius,
                                                        stacked_mobility=self.stacked_mobility)
 
-    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic'):
+    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic', tolerance=None):
         """:func:`body_solver.solve` at ``solver_tolerance``, counted for ``.info``; stops the run if it fails.
 
         rhs (3N + 6Nb,) (``problem.rhs(...)``); preconditioner as body_solver.solve (None: unpreconditioned);
         x0: first guess of the normalised system (``SolveResult.normalised_solution`` of an earlier solve);
         kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters.
+        tolerance : relative tolerance of this solve; None is ``solver_tolerance``.
         Returns body_solver.SolveResult; raises SimulationStopped when GMRES does not converge.
         """
-        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=self.tolerance,
+        tolerance = self.tolerance if tolerance is None else float(tolerance)
+        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance,
                                    print_residual=self.print_residual)
         self.solves[kind] += 1
         self.gmres_iterations += result.iterations
@@ -368,23 +372,25 @@ class System:
         if not result.converged:
             raise SimulationStopped('GMRES did not converge to solver_tolerance %g in %d iterations (relative '
                                     'residual %.3e); try a larger solver_tolerance or check the configuration'
-                                    % (self.tolerance, result.iterations, result.residual))
+                                    % (tolerance, result.iterations, result.residual))
         return result
 
-    def lanczos_noise(self, problem, z, factor, preconditioner=None):
+    def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
         """``factor * M^{1/2} z`` at the configuration of ``problem`` (3N,), counted for ``.info``.
 
         With a preconditioner the Lanczos iteration runs on ``L^{-1} M L^{-T}``
         and the result is multiplied by ``L`` (covariance ``M``; SPEC decision 1).
         A Lanczos call that does not converge is counted and warned about once per call.
+        tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``.
         """
+        tolerance = self.tolerance if tolerance is None else float(tolerance)
         if preconditioner is None:
             matvec, L_mult = problem.M_dot, None
         else:
             def matvec(v):
                 return preconditioner.L_inv_dot(problem.M_dot(preconditioner.L_inv_T_dot(v)))
             L_mult = preconditioner.L_dot
-        result = lanczos_square_root(matvec, z, self.tolerance, max_iterations=self.lanczos_max_iterations,
+        result = lanczos_square_root(matvec, z, tolerance, max_iterations=self.lanczos_max_iterations,
                                      factor=factor, L_mult=L_mult, print_residual=self.print_residual)
         self._count_lanczos(result)
         return result.noise
@@ -510,6 +516,79 @@ class System:
             raise SimulationStopped('GMRES for the roller torques did not converge to solver_tolerance %g '
                                     '(relative residual %.3e)' % (self.tolerance, result.residual))
         return result.x * norm, result.x
+
+
+def paired_product(name, body_arrays, periodic_length):
+    """``f(r (N, 3), v1 (3N,), v2 (3N,), eta, a) -> (M v1, M v2)`` of the C++ backend, else None.
+
+    Only for the C++ wall and no-wall products of one blob radius without periodic images (the cases of
+    ``mobility.cpp_backend.trans_times_force_two``).
+    """
+    if name not in ('C++', 'C++' + NO_WALL) or getattr(body_arrays, 'radii_given', False) \
+            or np.any(np.asarray(periodic_length) != 0):
+        return None
+    try:
+        from mobility import cpp_backend
+    except ImportError:
+        return None
+    if not cpp_backend.has_product_two():  # an extension built before product_two: no pairing
+        return None
+    wall = name == 'C++'
+
+    def product(r_vectors, v1, v2, eta, a):
+        return cpp_backend.trans_times_force_two(r_vectors, v1, v2, eta, a, wall)
+    return product
+
+
+class PairedProducts:
+    """Pairs the products ``M v`` of two threads at one configuration into one pass over the blob pairs.
+
+    ``product(r_vectors, v, eta, a, periodic_length)`` has the signature of a mobility product: a call
+    waits until the other participant asks for a product too (then one of them computes both with
+    ``paired_product``) or has left (then it computes its own with ``single_product``).  Each
+    participant calls ``leave()`` when it needs no more products.
+    """
+
+    def __init__(self, paired_product, single_product, participants=2):
+        import threading
+        self._paired, self._single = paired_product, single_product
+        self._condition = threading.Condition()
+        self._pending = None
+        self._active = participants
+        self.pairs = 0
+
+    def product(self, r_vectors, vector, eta, a, periodic_length=(0.0, 0.0, 0.0)):
+        with self._condition:
+            other = self._pending
+            if other is None and self._active > 1:
+                mine = {'vector': vector, 'r': r_vectors, 'result': None}
+                self._pending = mine
+                self._condition.wait_for(lambda: mine['result'] is not None or self._active < 2)
+                if mine['result'] is not None:
+                    return mine['result']
+                self._pending = None  # the other left: compute it alone
+                other = None
+            elif other is not None:
+                self._pending = None
+        if other is None or other['r'] is not r_vectors and not np.array_equal(other['r'], r_vectors):
+            result = self._single(r_vectors, vector, eta, a, periodic_length)
+            if other is not None:  # different configurations: the other one alone too
+                other_result = self._single(other['r'], other['vector'], eta, a, periodic_length)
+                with self._condition:
+                    other['result'] = other_result
+                    self._condition.notify_all()
+            return result
+        mine_result, other_result = self._paired(r_vectors, vector, other['vector'], eta, a)
+        with self._condition:
+            self.pairs += 1
+            other['result'] = other_result
+            self._condition.notify_all()
+        return mine_result
+
+    def leave(self):
+        with self._condition:
+            self._active -= 1
+            self._condition.notify_all()
 
 
 def resolve_blob_blob_implementation(name, hooks, log=None):
