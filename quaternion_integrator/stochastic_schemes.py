@@ -93,9 +93,7 @@ class StochasticScheme(Scheme):
         self.noise_tolerance = getattr(options, 'noise_solver_tolerance', None)
         if self.noise_tolerance is not None:
             self.noise_tolerance = float(self.noise_tolerance)
-            if not 0.0 < self.noise_tolerance < 1.0:
-                raise UserInputError('%s: noise_solver_tolerance must be in (0, 1), got %g; leave it unset to use '
-                                     'solver_tolerance' % (where('noise_solver_tolerance'), self.noise_tolerance))
+            check_value('noise_solver_tolerance', self.noise_tolerance, where('noise_solver_tolerance'))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
         self._preconditioner = None
         self._preconditioner_step = None

@@ -74,3 +74,15 @@ def test_paired_step_equals_the_unpaired_step(scheme_name):
         scheme.pair_products = pair
         steps[pair] = scheme.advance(system, system.configuration, 0, np.random.default_rng(5))[1]
     np.testing.assert_allclose(steps[True], steps[False], rtol=1e-9, atol=1e-12)
+
+
+def test_noise_tolerance_is_an_input_file_option():
+    """The option reaches the scheme from the input file, and an out-of-range value names its line."""
+    from multi_bodies.files.input_options import parse_input_text
+    text = 'scheme stochastic_Slip_Trapz\ndt 0.01\nnoise_solver_tolerance 1e-4\n'
+    parsed = parse_input_text(text, 'in.dat', program='dynamic')
+    assert make_scheme(parsed.scheme, parsed.dt, parsed).noise_tolerance == 1e-4
+    assert make_scheme(parsed.scheme, parsed.dt, parse_input_text('scheme stochastic_Slip_Trapz\ndt 0.01\n', 'in.dat',
+                                                                  program='dynamic')).noise_tolerance is None
+    with pytest.raises(UserInputError, match='in.dat, line 3: noise_solver_tolerance'):
+        parse_input_text(text.replace('1e-4', '2'), 'in.dat', program='dynamic')

@@ -190,6 +190,9 @@ OPTION_TABLE = {
     'free_kinematics': _option('bool', True, ('rollers',)),
     'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall'))),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
+    # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
+    'noise_solver_tolerance': _option('float', None, ('stochastic',),
+                                      Range(0, 1, True, True, fix='leave it out to use solver_tolerance')),
     'plot_velocity_field': _option('grid9', None, ('static',)),
     'force_file': _option('optional_str', None, ('static',)),
     'velocity_file': _option('optional_str', None, ('static',)),
