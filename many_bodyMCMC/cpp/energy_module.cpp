@@ -25,6 +25,7 @@
 #include <omp.h>
 #endif
 
+#include "openmp_threads.h"
 #include "pair_laws.h"
 
 namespace py = pybind11;
@@ -173,13 +174,6 @@ double pair_energy_cross(const Array &targets, const Array &sources, long exclud
                           : cross_sum<false>(tp, m, x, y, z, exclude_start, exclude_stop, law);
 }
 
-int max_threads() {
-#ifdef _OPENMP
-  return omp_get_max_threads();
-#else
-  return 1;
-#endif
-}
 
 }  // namespace
 
@@ -192,5 +186,5 @@ PYBIND11_MODULE(_energy_cpp, m) {
         py::arg("exclude_stop"), py::arg("periodic_length"), py::arg("repulsion_strength"), py::arg("debye_length"),
         py::arg("blob_radius"),
         "Sum over targets (m, 3) and sources (N, 3) outside [exclude_start, exclude_stop) of the pair energy.");
-  m.def("max_threads", &max_threads, "OpenMP threads available");
+  m.def("max_threads", &rmb::max_threads, "OpenMP threads available");
 }

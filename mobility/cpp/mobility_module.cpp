@@ -21,19 +21,13 @@
 #endif
 
 #include "blob_pair_kernels.h"
+#include "openmp_threads.h"
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 namespace {
 
-int max_threads() {
-#ifdef _OPENMP
-  return omp_get_max_threads();
-#else
-  return 1;
-#endif
-}
 
 // Below this many pair evaluations a product runs on one thread: starting a
 // parallel region costs more than it saves, and on a busy machine a team of
@@ -44,13 +38,6 @@ bool worth_threads(std::size_t targets, std::size_t sources) {
   return static_cast<double>(targets) * static_cast<double>(sources) > kMinPairsForThreads;
 }
 
-int thread_id() {
-#ifdef _OPENMP
-  return omp_get_thread_num();
-#else
-  return 0;
-#endif
-}
 
 // Blobs as separate coordinate arrays, in units of `scale`, with the wall
 // regularisation applied when asked: z_eff = max(z, radius), vector damped by
@@ -154,14 +141,14 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
   const std::size_t n = b.n;
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
-  const int threads = max_threads();
+  const int threads = rmb::max_threads();
   std::vector<double> acc(static_cast<std::size_t>(threads) * 3 * n, 0.0);
   const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data();
   const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
   const double Lx = L[0], Ly = L[1], Lz = L[2];
 #pragma omp parallel if (worth_threads(n, n / 2 * n_shifts))
   {
-    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
+    double *ax = acc.data() + static_cast<std::size_t>(rmb::thread_index()) * 3 * n;
     double *ay = ax + n, *az = ay + n;
 #pragma omp for schedule(dynamic, 16)
     for (std::size_t i = 0; i < n; ++i) {
@@ -318,14 +305,14 @@ Array blob_product(const std::string &kind, const Array &r, const Array &vector,
 template <bool Wall>
 void trans_times_force_symmetric_two(const Blobs &b, const Blobs &c, std::vector<double> &out) {
   const std::size_t n = b.n;
-  const int threads = max_threads();
+  const int threads = rmb::max_threads();
   std::vector<double> acc(static_cast<std::size_t>(threads) * 6 * n, 0.0);
   const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data();
   const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
   const double *gx = c.vx.data(), *gy = c.vy.data(), *gz = c.vz.data();
 #pragma omp parallel if (worth_threads(n, n / 2))
   {
-    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 6 * n;
+    double *ax = acc.data() + static_cast<std::size_t>(rmb::thread_index()) * 6 * n;
     double *ay = ax + n, *az = ay + n, *bx = az + n, *by = bx + n, *bz = by + n;
 #pragma omp for schedule(dynamic, 16)
     for (std::size_t i = 0; i < n; ++i) {
@@ -472,14 +459,14 @@ void radii_symmetric_sum(const Blobs &b, const std::vector<double> &L, std::vect
   const std::size_t n = b.n;
   const std::vector<double> shifts = image_shifts(L);
   const std::size_t n_shifts = shifts.size() / 3;
-  const int threads = max_threads();
+  const int threads = rmb::max_threads();
   std::vector<double> acc(static_cast<std::size_t>(threads) * 3 * n, 0.0);
   const double *x = b.x.data(), *y = b.y.data(), *z = b.z.data(), *rad = b.radius.data();
   const double *fx = b.vx.data(), *fy = b.vy.data(), *fz = b.vz.data();
   const double Lx = L[0], Ly = L[1], Lz = L[2];
 #pragma omp parallel if (worth_threads(n, n / 2 * n_shifts))
   {
-    double *ax = acc.data() + static_cast<std::size_t>(thread_id()) * 3 * n;
+    double *ax = acc.data() + static_cast<std::size_t>(rmb::thread_index()) * 3 * n;
     double *ay = ax + n, *az = ay + n;
 #pragma omp for schedule(dynamic, 16)
     for (std::size_t i = 0; i < n; ++i) {
@@ -737,5 +724,5 @@ PYBIND11_MODULE(_mobility_cpp, m) {
   m.def("product_two", &product_two, py::arg("r_vectors"), py::arg("v1"), py::arg("v2"), py::arg("eta"),
         py::arg("a"), py::arg("wall"),
         "trans_times_force of two vectors (3N,) each in one pass over the pairs (no periodic images): (M v1, M v2).");
-  m.def("max_threads", &max_threads, "Number of OpenMP threads the kernels use.");
+  m.def("max_threads", &rmb::max_threads, "Number of OpenMP threads the kernels use.");
 }

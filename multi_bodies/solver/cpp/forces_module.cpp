@@ -26,6 +26,7 @@
 #include <omp.h>
 #endif
 
+#include "openmp_threads.h"
 #include "pair_laws.h"
 
 namespace py = pybind11;
@@ -33,21 +34,7 @@ using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 namespace {
 
-int max_threads_available() {
-#ifdef _OPENMP
-  return omp_get_max_threads();
-#else
-  return 1;
-#endif
-}
 
-int this_thread() {
-#ifdef _OPENMP
-  return omp_get_thread_num();
-#else
-  return 0;
-#endif
-}
 
 template <bool Radii>
 Array blob_blob_forces_any(const Array &r_vectors, const Array &periodic_length, double repulsion_strength,
@@ -69,14 +56,14 @@ Array blob_blob_forces_any(const Array &r_vectors, const Array &periodic_length,
   double *out = result.mutable_data();
   {
     py::gil_scoped_release release;
-    const int threads = max_threads_available();
+    const int threads = rmb::max_threads();
     // Each unordered pair is visited once; thread t adds into its own accumulator, summed at the end.
     std::vector<double> accumulators(static_cast<std::size_t>(threads) * 3 * n, 0.0);
     // one thread for small systems: a parallel region costs more than ~1e5 pairs
     const bool use_threads = static_cast<double>(n) * n > 2e5;
 #pragma omp parallel for schedule(dynamic, 16) if (use_threads)
     for (long i = 0; i < n; ++i) {
-      double *acc = accumulators.data() + static_cast<std::size_t>(this_thread()) * 3 * n;
+      double *acc = accumulators.data() + static_cast<std::size_t>(rmb::thread_index()) * 3 * n;
       double fx = 0.0, fy = 0.0, fz = 0.0;
       const double xi = x[i], yi = y[i], zi = z[i];
       for (long j = i + 1; j < n; ++j) {
@@ -265,13 +252,6 @@ Array minimum_images(const Array &d, const Array &periodic_length) {
   return out;
 }
 
-int max_threads() {
-#ifdef _OPENMP
-  return omp_get_max_threads();
-#else
-  return 1;
-#endif
-}
 
 }  // namespace
 
@@ -291,5 +271,5 @@ PYBIND11_MODULE(_forces_cpp, m) {
         "(energies, forces) of the header's law 'wall', 'blob_blob' or 'body_body' at the heights or distances x.");
   m.def("minimum_images", &minimum_images, py::arg("displacements"), py::arg("periodic_length"),
         "Minimum image of displacements (..., 3) in the box periodic_length (3,) (L <= 0: not periodic).");
-  m.def("max_threads", &max_threads, "Number of OpenMP threads the kernel uses.");
+  m.def("max_threads", &rmb::max_threads, "Number of OpenMP threads the kernel uses.");
 }
