@@ -39,17 +39,16 @@ def boomerang_suspension(count, seed=0):
 
 def solve(count, implementation, tolerance):
     arrays = boomerang_suspension(count)
-    r_vectors = arrays.blob_positions()
+    configuration = arrays.configuration
     forces = np.tile([0.0, 0.0, -1.0, 0.0, 0.0, 0.0], (count, 1))
     start = time.perf_counter()
-    operator = body_solver.saddle_point_operator(arrays, r_vectors, mobility.mobility_vector_product(implementation),
-                                                 1.0, 0.25)
-    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, r_vectors,
+    problem = body_solver.MobilityProblem(arrays, configuration, mobility.mobility_vector_product(implementation),
+                                          1.0, 0.25)
+    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, configuration,
                                                              mobility.blob_mobility_matrix(implementation), 1.0, 0.25)
     set_up = time.perf_counter() - start
-    result = body_solver.solve_mobility_problem(operator, preconditioner,
-                                                body_solver.mobility_rhs(forces, np.zeros((arrays.num_blobs, 3))),
-                                                arrays.num_blobs, tolerance)
+    result = body_solver.solve(problem, body_solver.mobility_rhs(forces, np.zeros((arrays.num_blobs, 3))),
+                               preconditioner, tolerance=tolerance)
     total = time.perf_counter() - start
     return result, set_up, total
 
