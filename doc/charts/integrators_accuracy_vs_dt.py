@@ -25,6 +25,9 @@ import tempfile
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))  # the repository
+from multi_bodies.files import snapshots  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 SCRIPT = os.path.join(REPO, 'multi_bodies', 'multi_bodies.py')
@@ -67,12 +70,8 @@ def run(scheme, dt, folder, debye=1.0):
         return None, result.stderr.strip().splitlines()[-1] if result.stderr.strip() else 'failed'
 
     def locations(step):
-        rows = []
-        for structure_id in IDS:
-            with open('%s.%s.%s.clones' % (output, structure_id, str(step).zfill(8))) as f:
-                lines = [line.split() for line in f if line.strip() and not line.startswith('#')][1:]
-            rows += [[float(v) for v in line[:3]] for line in lines]
-        return np.array(rows)
+        return np.concatenate([snapshots.read_clones_file(snapshots.clones_name(output, structure_id, step))[0]
+                               for structure_id in IDS])
 
     with open(output + '.time') as f:
         seconds = float(f.read())

@@ -11,8 +11,12 @@ the input refers to the vertex file by a path relative to the folder.
 """
 import argparse
 import os
+import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))  # the repository
+from multi_bodies.files import snapshots  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 STRUCTURES = os.path.join(os.path.dirname(os.path.dirname(HERE)), 'multi_bodies', 'Structures')
@@ -59,10 +63,8 @@ def main():
     args = parser.parse_args()
     os.makedirs(args.folder, exist_ok=True)
     centres = place(args.spheres)
-    with open(os.path.join(args.folder, 'suspension.clones'), 'w') as f:
-        f.write('%d\n' % len(centres))
-        for x, y, z in centres:
-            f.write('%r %r %r 1 0 0 0\n' % (float(x), float(y), float(z)))
+    snapshots.write_clones_file(os.path.join(args.folder, 'suspension.clones'), centres,
+                                np.tile([1.0, 0.0, 0.0, 0.0], (len(centres), 1)))
     vertex = os.path.relpath(os.path.join(STRUCTURES, VERTEX), args.folder)
     with open(os.path.join(args.folder, 'inputfile_suspension.dat'), 'w') as f:
         f.write(INPUT.format(spheres=args.spheres, blob_radius=BLOB_RADIUS, vertex=vertex))
