@@ -4,7 +4,7 @@ An ensemble is one input file run ``R`` times at every point of a parameter
 grid (``--vary kT=0.5,1,2 --vary dt=...``: the Cartesian product), each run
 with its own seed.  This module
 
-* plans it (:func:`build_plan`): one folder per parameter point and replica
+* plans it (:func:`build_plan`, in :mod:`multi_bodies.ensembles.ensemble_plan`): one folder per parameter point and replica
   under the output folder ``D``, ``D/<point>/r<replica>/input.dat`` (the
   user's input with the structure paths made absolute and the overrides
   appended), seeds from ``numpy.random.SeedSequence(master)`` spawned once
@@ -27,29 +27,27 @@ that names the extra to install.  The statistics of a finished ensemble are
 in :mod:`multi_bodies.ensembles.ensemble_statistics`.
 """
 import contextlib
-import hashlib
-import itertools
 import json
 import os
-import re
 import socket
 import sys
 import threading
 import time
 import traceback
 
-import numpy as np
 
 from mobility.threads import available_cores
 from utils import UserInputError
+# The plan and manifest (ensemble_plan); re-exported here for the callers of the runner.
+from multi_bodies.ensembles.ensemble_plan import LOCK_NAME, LOCK_WRITE_SECONDS  # noqa: F401
+from multi_bodies.ensembles.ensemble_plan import (MANIFEST_NAME, REPLICA_INPUT_NAME, STATUS_NAME, LOG_NAME,
+                                                  MANIFEST_VERSION, ENSEMBLE_OWNED_OPTIONS, parse_vary,
+                                                  point_name, parameter_points, replica_seeds, replica_input_text,
+                                                  _sha256, build_plan, _atomic_write_text, read_manifest,
+                                                  _check_inside, write_plan, existing_master_seed, ensemble_lock,
+                                                  _age, _alive, replica_specs, read_status,
+                                                  is_finished)  # noqa: F401
 
-MANIFEST_NAME = 'ensemble.json'
-REPLICA_INPUT_NAME = 'input.dat'
-STATUS_NAME = 'status.json'
-LOG_NAME = 'replica.log'
-MANIFEST_VERSION = 1
-# Options the ensemble sets in every replica's input; they cannot be varied.
-ENSEMBLE_OWNED_OPTIONS = ('output_name', 'seed', 'random_state', 'initial_step')
 INSTALL_HINT = "pip install -e '.[ensemble]' (or: pip install 'dask[distributed]' dask-jobqueue)"
 
 # One replica at a time per process: a run reads its hooks and relative paths from the working directory.
@@ -76,353 +74,6 @@ def require_jobqueue():
         raise UserInputError('--jobqueue needs dask-jobqueue, which is not installed (%s); install the ensemble '
                              'extra: %s' % (err, INSTALL_HINT))
     return dask_jobqueue
-
-
-# ------------------------------------------------------------------ the plan
-def parse_vary(items):
-    """``['kT=0.5,1,2', 'dt=0.01,0.02']`` -> ``[('kT', ['0.5', '1', '2']), ('dt', [...])]``.
-
-    Values stay text: each replica's input file is checked by the input
-    reader, so a value of the wrong type fails that point's replicas with the
-    reader's message.  Raises UserInputError for a malformed item, an unknown
-    option, an option the ensemble owns, or a name given twice.
-    """
-    from multi_bodies.files.input_options import OPTION_TABLE
-    import difflib
-    parsed, seen = [], set()
-    for item in items or ():
-        name, sep, values_text = item.partition('=')
-        name = name.strip()
-        values = [value.strip() for value in values_text.split(',')]
-        if not sep or not name or not values_text.strip() or any(not value for value in values):
-            raise UserInputError("--vary %s: write NAME=V1,V2,... (e.g. --vary kT=0.5,1,2)" % item)
-        if name in ENSEMBLE_OWNED_OPTIONS:
-            raise UserInputError('--vary %s: %s is set by the ensemble for every replica and cannot be varied'
-                                 % (item, name))
-        if name == 'structure':
-            raise UserInputError('--vary %s: structure lines cannot be varied; make one input file per set of '
-                                 'structures' % item)
-        if name not in OPTION_TABLE:
-            close = [option for option in OPTION_TABLE if option.lower() == name.lower()]
-            close = close or difflib.get_close_matches(name, list(OPTION_TABLE), n=1)
-            raise UserInputError("--vary %s: unknown option '%s'%s" % (item, name,
-                                 " (did you mean '%s'?)" % close[0] if close else ''))
-        if name in seen:
-            raise UserInputError('--vary %s: %s is varied twice; give all its values in one --vary' % (item, name))
-        seen.add(name)
-        parsed.append((name, values))
-    return parsed
-
-
-def point_name(overrides):
-    """Folder name of a parameter point, e.g. ``kT-0.5_dt-0.01`` (``base`` without overrides)."""
-    if not overrides:
-        return 'base'
-    return '_'.join('%s-%s' % (name, re.sub(r'[^A-Za-z0-9.+-]', '_', value)) for name, value in overrides)
-
-
-def parameter_points(vary):
-    """Cartesian product of the varied values: list of lists of (name, value), first option slowest."""
-    names = [name for name, _ in vary]
-    return [list(zip(names, combination)) for combination in itertools.product(*[values for _, values in vary])]
-
-
-def replica_seeds(master_seed, num_points, num_replicas):
-    """Seeds of every replica: ``seeds[p][r]`` = (seed, spawn_key).
-
-    ``SeedSequence(master_seed).spawn(num_points)[p].spawn(num_replicas)[r]``
-    gives the stream of replica r at point p (spawn key ``(p, r)``); its first
-    64-bit word is the ``seed`` written in the replica's input file (the run
-    seeds ``numpy.random.default_rng(seed)`` with it, SPEC decision 7).  More
-    replicas or points later keep the seeds of the earlier ones.
-    """
-    seeds = []
-    for point_sequence in np.random.SeedSequence(master_seed).spawn(num_points):
-        row = []
-        for sequence in point_sequence.spawn(num_replicas):
-            row.append((int(sequence.generate_state(1, dtype=np.uint64)[0]), [int(k) for k in sequence.spawn_key]))
-        seeds.append(row)
-    return seeds
-
-
-def replica_input_text(original_text, source_dir, overrides, output_name, seed, header=''):
-    """Input file of one replica: the user's lines, structure paths made absolute, then the overrides.
-
-    Lines setting an option that the replica overrides (``output_name``,
-    ``seed``, ``random_state``, ``initial_step`` and the varied options) are
-    kept as comments, so the file says what it replaced.
-    """
-    replaced = set(ENSEMBLE_OWNED_OPTIONS) | {name for name, _ in overrides}
-    lines = []
-    for raw in original_text.splitlines():
-        words = raw.split('#', 1)[0].split()
-        if words and words[0] in replaced:
-            lines.append('# (set by the ensemble below) ' + raw)
-        elif words and words[0] == 'structure':
-            paths = [w if os.path.isabs(w) else os.path.normpath(os.path.join(source_dir, w)) for w in words[1:]]
-            lines.append('structure ' + ' '.join(paths))
-        else:
-            lines.append(raw)
-    lines.append('')
-    lines.append('# ---- ensemble overrides%s ----' % (': ' + header if header else ''))
-    lines.append('output_name %s' % output_name)
-    lines.append('seed %d' % seed)
-    lines.append('initial_step 0')
-    for name, value in overrides:
-        lines.append('%s %s' % (name, value))
-    return '\n'.join(lines) + '\n'
-
-
-def _sha256(text):
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def build_plan(input_file, replicas, vary=(), output_dir='ensemble', master_seed=None):
-    """The manifest of an ensemble (a dict, JSON-ready); nothing is written.
-
-    input_file : the user's input file (read here; structure paths are taken
-        relative to its folder, where the replicas also run)
-    replicas : replicas per parameter point (>= 1)
-    vary : output of :func:`parse_vary`
-    master_seed : int >= 0, or None for one drawn from the operating system
-        (recorded in the manifest, so the ensemble can be repeated)
-
-    Keys: ``input_file``, ``input_sha256``, ``run_directory``, ``master_seed``,
-    ``replicas_per_point``, ``vary``, ``points`` (name, overrides),
-    ``replicas`` (point index and name, replica index, ``folder`` relative to
-    the output folder, ``output_basename``, ``seed``, ``spawn_key``,
-    ``input_sha256`` of the replica's input), ``output_dir`` (absolute), and
-    ``_inputs`` (folder -> input text; not saved).
-    """
-    from multi_bodies.files.input_options import parse_input_text
-    if replicas < 1:
-        raise UserInputError('--replicas must be at least 1, got %d' % replicas)
-    if master_seed is not None and master_seed < 0:
-        raise UserInputError('--seed must be a non-negative integer, got %d' % master_seed)
-    if not os.path.isfile(input_file):
-        raise UserInputError("input file '%s' not found (give it with --input-file)" % input_file)
-    with open(input_file) as f:
-        original_text = f.read()
-    base_options = parse_input_text(original_text, input_file)  # the user's file itself must be valid
-    if master_seed is None:
-        master_seed = int(np.random.SeedSequence().entropy)
-    input_path = os.path.abspath(input_file)
-    source_dir = os.path.dirname(input_path)
-    output_dir = os.path.abspath(output_dir)
-    basename = os.path.basename(base_options.output_name) or 'run'
-    points = parameter_points(list(vary)) if vary else [[]]
-    seeds = replica_seeds(master_seed, len(points), replicas)
-    plan = {'version': MANIFEST_VERSION, 'input_file': input_path, 'input_sha256': _sha256(original_text),
-            'run_directory': source_dir, 'master_seed': int(master_seed), 'replicas_per_point': int(replicas),
-            'vary': [[name, list(values)] for name, values in vary], 'output_dir': output_dir,
-            'points': [], 'replicas': [], '_inputs': {}}
-    for p, overrides in enumerate(points):
-        name = point_name(overrides)
-        plan['points'].append({'name': name, 'overrides': [[k, v] for k, v in overrides]})
-        for r in range(replicas):
-            folder = '%s/r%04d' % (name, r)
-            seed, spawn_key = seeds[p][r]
-            text = replica_input_text(original_text, source_dir, overrides,
-                                      os.path.join(output_dir, folder, basename), seed,
-                                      header='replica %d of point %s, master seed %d, spawn key %s'
-                                             % (r, name, master_seed, spawn_key))
-            plan['replicas'].append({'point': p, 'point_name': name, 'replica': r, 'folder': folder,
-                                     'output_basename': basename, 'seed': seed, 'spawn_key': spawn_key,
-                                     'input_sha256': _sha256(text)})
-            plan['_inputs'][folder] = text
-    if replicas > 1:  # a deterministic scheme ignores the seed: its replicas would all be the same run
-        from multi_bodies.files.input_options import DETERMINISTIC_SCHEMES, STATIC_SCHEMES
-        same = sorted({dict(o).get('scheme', base_options.scheme) for o in points} &
-                      set(DETERMINISTIC_SCHEMES + STATIC_SCHEMES))
-        if same:
-            print('warning: scheme %s is deterministic: the %d replicas of each parameter point are identical runs '
-                  '(the seed has no effect); use --replicas 1, or a stochastic scheme for independent replicas'
-                  % (', '.join(same), replicas), file=sys.stderr)
-    if len({point['name'] for point in plan['points']}) != len(plan['points']):
-        raise UserInputError('--vary: two parameter points get the same folder name (%s); give distinct values'
-                             % ', '.join(point['name'] for point in plan['points']))
-    return plan
-
-
-def _atomic_write_text(path, text):
-    part = path + '.part'
-    with open(part, 'w') as f:
-        f.write(text)
-    os.replace(part, path)
-
-
-def read_manifest(output_dir):
-    """The manifest ``output_dir/ensemble.json`` as a dict; UserInputError when missing or unreadable."""
-    path = os.path.join(output_dir, MANIFEST_NAME)
-    try:
-        with open(path) as f:
-            manifest = json.load(f)
-    except FileNotFoundError:
-        raise UserInputError('%s not found: %s is not the output folder of an ensemble (run ensemble.py '
-                             '--input-file ... --output-dir %s first)' % (path, output_dir, output_dir))
-    except ValueError as err:
-        raise UserInputError('%s is not a valid ensemble manifest (%s)' % (path, err))
-    if not isinstance(manifest, dict) or 'replicas' not in manifest:
-        raise UserInputError('%s is not an ensemble manifest (no replica list)' % path)
-    manifest['output_dir'] = os.path.abspath(output_dir)
-    for point in manifest.get('points') or []:
-        _check_inside(manifest['output_dir'], point.get('name') if isinstance(point, dict) else None,
-                      'point name', path)
-    for replica in manifest['replicas']:
-        _check_inside(manifest['output_dir'], replica.get('folder') if isinstance(replica, dict) else None,
-                      'replica folder', path)
-    return manifest
-
-
-def _check_inside(output_dir, name, what, manifest_path):
-    """Refuse a ``name`` from the manifest that is not a relative path inside ``output_dir`` (``../..``, ``/x``).
-
-    The manifest is data: a name that would make the runner or ``--aggregate``
-    read or write outside the ensemble folder is a UserInputError.
-    """
-    root = os.path.realpath(output_dir)
-    ok = isinstance(name, str) and name and not os.path.isabs(name)
-    if ok:
-        target = os.path.realpath(os.path.join(root, name))
-        ok = target != root and os.path.commonpath([root, target]) == root
-    if not ok:
-        raise UserInputError('%s: the %s %r is not a folder inside the ensemble folder %s; the manifest was '
-                             'changed by hand or is not this ensemble\'s, so nothing is read or written'
-                             % (manifest_path, what, name, output_dir))
-
-
-def write_plan(plan):
-    """Create the folders, write every replica's ``input.dat`` and the manifest.
-
-    A folder that already holds an ``input.dat`` with other content (another
-    input file, seed or override in the same output folder) raises
-    UserInputError: choose another --output-dir.  Same content: the folder is
-    kept as it is (a rerun resumes or skips it).
-    """
-    output_dir = plan['output_dir']
-    try:
-        os.makedirs(output_dir, exist_ok=True)
-    except OSError as err:
-        raise UserInputError('--output-dir %s: cannot create it (%s)' % (output_dir, err.strerror or err))
-    for replica in plan['replicas']:
-        folder = os.path.join(output_dir, replica['folder'])
-        path = os.path.join(folder, REPLICA_INPUT_NAME)
-        text = plan['_inputs'][replica['folder']]
-        if os.path.isfile(path):
-            with open(path) as f:
-                if f.read() != text:
-                    raise UserInputError(
-                        '--output-dir %s: %s holds a replica of another ensemble (other input file, master seed '
-                        'or overrides); choose another --output-dir, or remove that folder to start afresh'
-                        % (output_dir, path))
-            continue
-        os.makedirs(folder, exist_ok=True)
-        _atomic_write_text(path, text)
-    manifest = {key: value for key, value in plan.items() if not key.startswith('_') and key != 'output_dir'}
-    manifest['created'] = time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())
-    _atomic_write_text(os.path.join(output_dir, MANIFEST_NAME), json.dumps(manifest, indent=1) + '\n')
-
-
-def existing_master_seed(output_dir):
-    """The master seed of the manifest in ``output_dir``, or None when there is none."""
-    try:
-        with open(os.path.join(output_dir, MANIFEST_NAME)) as f:
-            return int(json.load(f)['master_seed'])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
-LOCK_NAME = 'ensemble.lock'
-
-
-@contextlib.contextmanager
-def ensemble_lock(output_dir):
-    """Hold ``output_dir/ensemble.lock`` while an ensemble runs there, so that two drivers never share a folder.
-
-    The lock file names the host and process.  One left by a process of this
-    host that no longer runs is taken over; one held by a live process, or
-    by a process of another host, raises UserInputError.
-    """
-    try:
-        os.makedirs(output_dir, exist_ok=True)
-    except OSError as err:
-        raise UserInputError('--output-dir %s: cannot create it (%s)' % (output_dir, err.strerror or err))
-    path = os.path.join(output_dir, LOCK_NAME)
-    host, pid = socket.gethostname(), os.getpid()
-    for _ in range(2):
-        try:
-            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                with open(path) as f:
-                    holder = json.load(f)
-            except (OSError, ValueError):
-                holder = {}
-            if holder.get('host') == host and isinstance(holder.get('pid'), int) and not _alive(holder['pid']):
-                os.remove(path)  # stale: its process has gone
-                continue
-            if not holder and _age(path) > LOCK_WRITE_SECONDS:
-                # empty or unreadable: a driver killed between creating the lock and writing its name in it
-                os.remove(path)
-                continue
-            raise UserInputError('%s: another ensemble.py (pid %s on %s, started %s) is running in this folder; '
-                                 'wait for it or stop it (if it no longer runs, remove %s)'
-                                 % (output_dir, holder.get('pid', '?'), holder.get('host', '?'),
-                                    holder.get('started', '?'), path))
-        with os.fdopen(descriptor, 'w') as f:
-            json.dump({'host': host, 'pid': pid, 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}, f)
-        break
-    try:
-        yield path
-    finally:
-        try:
-            os.remove(path)
-        except FileNotFoundError:
-            pass
-
-
-LOCK_WRITE_SECONDS = 5.0  # a live driver writes its name into the lock at once; an empty older one is stale
-
-
-def _age(path):
-    try:
-        return time.time() - os.path.getmtime(path)
-    except OSError:
-        return 0.0
-
-
-def _alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def replica_specs(plan):
-    """The task argument of every replica (small JSON-ready dicts)."""
-    return [{'folder': replica['folder'],
-             'path': os.path.join(plan['output_dir'], replica['folder']),
-             'input_file': os.path.join(plan['output_dir'], replica['folder'], REPLICA_INPUT_NAME),
-             'run_directory': plan['run_directory'],
-             'input_sha256': replica['input_sha256']} for replica in plan['replicas']]
-
-
-def read_status(path):
-    """``status.json`` of a replica folder as a dict, or None when absent or unreadable."""
-    try:
-        with open(os.path.join(path, STATUS_NAME)) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return None
-
-
-def is_finished(spec):
-    """True when the replica finished earlier with the same input (a rerun skips it)."""
-    status = read_status(spec['path'])
-    return bool(status) and status.get('status') == 'done' and status.get('input_sha256') == spec['input_sha256']
 
 
 # ------------------------------------------------------------------ one replica (the task)
