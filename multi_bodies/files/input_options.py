@@ -475,8 +475,10 @@ def unused_option_warnings(options, program=None):
         return messages
     for name in unused_options(options, program):
         used_by = OPTION_TABLE[name].used_by
-        extra = (' (the wall is chosen by the mobility implementations: names ending in _no_wall are free space)'
-                 if name == 'domain' else '')
+        extra = {'domain': ' (the wall is chosen by the mobility implementations: names ending in _no_wall are '
+                           'free space)',
+                 'omega_one_roller': ' (except by a published-style calc_body_body_forces_torques_python of '
+                                     'user_defined_functions.py, which receives it)'}.get(name, '')
         fix = 'choose a stochastic scheme or remove the line' if 'stochastic' in used_by else 'remove the line'
         messages.append("%s: option '%s' is ignored by scheme '%s' (it is used by %s only)%s; %s"
                         % (options.where(name), name, options.scheme,
