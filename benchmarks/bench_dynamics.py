@@ -162,7 +162,13 @@ def time_steps(num_bodies, backend, scheme_name, repeats, noise_tolerance=None):
     options = SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=noise_tolerance)
     scheme = make_scheme(scheme_name, 0.01, options)
     rng = np.random.default_rng(3)
-    scheme.step(system, 0, rng)  # warm-up (and the Euler start of the multistep schemes)
+    return timed_steps(system, scheme, counter, rng, repeats)
+
+
+def timed_steps(system, scheme, counter, rng, repeats):
+    """(median seconds, counters per step) of ``repeats`` steps after one warm-up step (the Euler start of the
+    multistep schemes)."""
+    scheme.step(system, 0, rng)
     before = dict(system.counters(scheme), **counter.snapshot())
     times = []
     for step in range(1, repeats + 1):
@@ -170,8 +176,7 @@ def time_steps(num_bodies, backend, scheme_name, repeats, noise_tolerance=None):
         scheme.step(system, step, rng)
         times.append(time.perf_counter() - start)
     after = dict(system.counters(scheme), **counter.snapshot())
-    per_step = {key: (after[key] - before[key]) / repeats for key in after}
-    return float(np.median(times)), per_step
+    return float(np.median(times)), {key: (after[key] - before[key]) / repeats for key in after}
 
 
 def roller_step(num_rollers, repeats):
@@ -193,15 +198,7 @@ def roller_step(num_rollers, repeats):
     counter = count_products(system)
     scheme = make_scheme('stochastic_adams_bashforth_rollers', 0.01, SimpleNamespace(kT=1.0, rf_delta=1e-3,
                                                                                       update_PC=1))
-    scheme.step(system, 0, rng)
-    before = dict(system.counters(scheme), **counter.snapshot())
-    times = []
-    for step in range(1, repeats + 1):
-        start = time.perf_counter()
-        scheme.step(system, step, rng)
-        times.append(time.perf_counter() - start)
-    after = dict(system.counters(scheme), **counter.snapshot())
-    return float(np.median(times)), {key: (after[key] - before[key]) / repeats for key in after}
+    return timed_steps(system, scheme, counter, rng, repeats)
 
 
 ROW = '%7d %7s %36s %9.4g %6s %9s %6.1f %6.1f %5.1f %5.1f %5.1f %6.1f %6.1f %5.0f%%'

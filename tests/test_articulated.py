@@ -16,6 +16,7 @@ from multi_bodies.run.dynamic_run import run_dynamics
 from multi_bodies.run.run_setup import prepare
 from multi_bodies.solver import articulated as art
 from utils import UserInputError
+from multi_bodies.files import snapshots
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PUBLISHED = os.path.join(REPO_ROOT, '..', 'shared', 'reference', 'published_2025', 'multi_bodies')
@@ -28,14 +29,8 @@ needs_numexpr = pytest.mark.skipif(importlib.util.find_spec('numexpr') is None,
 
 
 def read_frames(path):
-    """Every snapshot of a ``save_clones one_file`` ``.config``: array (n_frames, Nb, 7)."""
-    rows = [line.split() for line in open(path) if line.strip() and not line.startswith('#')]
-    frames, i = [], 0
-    while i < len(rows):
-        n = int(rows[i][0])
-        frames.append(np.array(rows[i + 1:i + 1 + n], dtype=float))
-        i += 1 + n
-    return np.array(frames)
+    """Every snapshot of a ``save_clones one_file`` ``.config`` (n_frames, Nb, 7), by the package's reader."""
+    return snapshots.read_config_frames(str(path))
 
 
 def copy_example(tmp_path, name):
@@ -187,22 +182,29 @@ def setup_system(folder, text, monkeypatch, script='static'):
     return options, prepare(options, script, log=lambda *a: None)
 
 
-def test_locked_chain_under_gravity_moves_as_the_fused_rigid_body(tmp_path, monkeypatch):
-    """A chain whose joints constrain all 6 relative dof is one rigid body: each body's velocity is that rigid
-    motion, ``v_k = V + W x (q_k - q_0)``, ``w_k = W``, with (V, W) of the same blobs fused into one body.  The
-    chain sediments near the wall (gravity on every blob, one force per blob), so W is not zero.  Both come from
-    GMRES at solver_tolerance 1e-12: agreement to 1e-9 of |V|."""
-    common = write_chain(tmp_path, 3, 2.5, 3.0, locked=True)
+def fused_and_chain_velocities(tmp_path, common, monkeypatch):
+    """(velocity (6,) of the blobs fused into one body, the chain's set-up, the chain's articulated velocities)
+    of the mobility problem written by ``write_chain`` (both from GMRES at solver_tolerance 1e-12)."""
+    from multi_bodies.solver import body_solver
     _, fused = setup_system(tmp_path, '\n'.join(['scheme mobility', 'structure fused.vertex fused.clones']
                                                 + common), monkeypatch)
     _, chain = setup_system(tmp_path, '\n'.join(['scheme mobility', 'articulated chain.list_vertex chain.clones '
                                                  'chain.const'] + common), monkeypatch)
     system = fused.system
     problem = system.mobility_problem(system.configuration)
-    from multi_bodies.solver import body_solver
     reference = body_solver.solve(problem, problem.rhs(force_torque=system.forces_torques(system.configuration)),
                                   system.build_preconditioner(system.configuration), tolerance=1e-12).velocities[0]
     result = art.articulated_velocities(chain.system, chain.system.articulated, chain.system.configuration, 0.0)
+    return reference, chain, result
+
+
+def test_locked_chain_under_gravity_moves_as_the_fused_rigid_body(tmp_path, monkeypatch):
+    """A chain whose joints constrain all 6 relative dof is one rigid body: each body's velocity is that rigid
+    motion, ``v_k = V + W x (q_k - q_0)``, ``w_k = W``, with (V, W) of the same blobs fused into one body.  The
+    chain sediments near the wall (gravity on every blob, one force per blob), so W is not zero.  Both come from
+    GMRES at solver_tolerance 1e-12: agreement to 1e-9 of |V|."""
+    common = write_chain(tmp_path, 3, 2.5, 3.0, locked=True)
+    reference, chain, result = fused_and_chain_velocities(tmp_path, common, monkeypatch)
     assert result.converged
     V, W = reference[:3], reference[3:]
     q = chain.system.configuration.locations
@@ -244,16 +246,7 @@ def test_chain_of_single_blobs_with_the_multiblob_schemes_is_the_pinv_answer(tmp
     GMRES at solver_tolerance 1e-12: agreement to 1e-9 of |V|."""
     common = write_chain(tmp_path, 5, 2.5, 3.0, locked=False, shape=np.zeros((1, 3)))
     common = [line.replace('python', 'python_no_wall') if 'mobility' in line else line for line in common]
-    _, fused = setup_system(tmp_path, '\n'.join(['scheme mobility', 'structure fused.vertex fused.clones']
-                                                + common), monkeypatch)
-    _, chain = setup_system(tmp_path, '\n'.join(['scheme mobility', 'articulated chain.list_vertex chain.clones '
-                                                 'chain.const'] + common), monkeypatch)
-    system = fused.system
-    problem = system.mobility_problem(system.configuration)
-    from multi_bodies.solver import body_solver
-    reference = body_solver.solve(problem, problem.rhs(force_torque=system.forces_torques(system.configuration)),
-                                  system.build_preconditioner(system.configuration), tolerance=1e-12).velocities[0]
-    result = art.articulated_velocities(chain.system, chain.system.articulated, chain.system.configuration, 0.0)
+    reference, chain, result = fused_and_chain_velocities(tmp_path, common, monkeypatch)
     assert result.converged
     V = reference[:3]
     assert np.linalg.norm(reference[3:]) < 1e-9 * np.linalg.norm(V) and V[2] < 0

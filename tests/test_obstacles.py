@@ -22,6 +22,7 @@ import mobility
 from body.body import Body, bodies_to_arrays
 from multi_bodies.files import structure_generators as gen
 from multi_bodies.solver import body_solver, obstacles
+from multi_bodies.files import snapshots
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(REPO_ROOT, 'multi_bodies', 'examples', 'obstacle_shells')
@@ -186,14 +187,8 @@ def example_copy(tmp_path, replacements=()):
 
 
 def read_config(path):
-    """All snapshots of a ``.config`` file, shape (frames, bodies, 7)."""
-    rows = [line.split() for line in open(path)]
-    frames, i = [], 0
-    while i < len(rows):
-        n = int(rows[i][0])
-        frames.append(np.array(rows[i + 1:i + 1 + n], dtype=float))
-        i += 1 + n
-    return np.array(frames)
+    """All snapshots of a ``.config`` file, shape (frames, bodies, 7), by the package's snapshot reader."""
+    return snapshots.read_config_frames(str(path))
 
 
 def run_dynamics_script(run_dir, monkeypatch):
