@@ -39,7 +39,8 @@ def make_parser():
     parser.add_argument('--input-file', help='input file of multi_bodies.py; the replicas run in its folder')
     parser.add_argument('--replicas', type=int, default=1, help='replicas per parameter point (default 1)')
     parser.add_argument('--vary', action='append', default=[], metavar='NAME=V1,V2,...',
-                        help='sweep an input-file option over these values; repeat for a grid (Cartesian product)')
+                        help='sweep an input-file option over these values; repeat for a grid (Cartesian product); '
+                             'NAME1:NAME2=V1:W1,V2:W2 varies options together (e.g. dt:n_steps=0.01:400,0.02:200)')
     parser.add_argument('--output-dir', default='ensemble', help='folder of the ensemble (default ./ensemble)')
     parser.add_argument('--seed', type=int, default=None, metavar='MASTER',
                         help='master seed of numpy.random.SeedSequence (default: from the manifest of a rerun, '

@@ -178,6 +178,23 @@ def test_vary_errors_name_the_option():
     assert runner.parse_vary(['kT=0.5,1', 'dt=0.01']) == [('kT', ['0.5', '1']), ('dt', ['0.01'])]
 
 
+def test_linked_options_change_together(scene, tmp_path):
+    """``--vary dt:n_steps=...`` gives one point per pair (not the 2 x 2 grid), and each replica's input sets both."""
+    vary = runner.parse_vary(['dt:n_steps=0.01:40,0.02:20'])
+    assert vary == [('dt:n_steps', ['0.01:40', '0.02:20'])]
+    plan = runner.build_plan(scene, 1, vary, str(tmp_path / 'linked'), MASTER_SEED)
+    assert [point['overrides'] for point in plan['points']] == [[['dt', '0.01'], ['n_steps', '40']],
+                                                                [['dt', '0.02'], ['n_steps', '20']]]
+    text = plan['_inputs']['dt-0.02_n_steps-20/r0000']
+    from multi_bodies.files.input_options import parse_input_text
+    options = parse_input_text(text, 'replica')
+    assert (options.dt, options.n_steps) == (0.02, 20)
+    with pytest.raises(UserInputError, match="has 1 part"):
+        runner.parse_vary(['dt:n_steps=0.01:40,0.02'])
+    with pytest.raises(UserInputError, match='n_steps is varied twice'):
+        runner.parse_vary(['dt:n_steps=0.01:40', 'n_steps=10'])
+
+
 def test_other_ensemble_in_the_same_folder_is_refused(serial, scene):
     plan, _ = serial
     other = runner.build_plan(scene, REPLICAS, VARY, plan['output_dir'], MASTER_SEED + 1)

@@ -33,10 +33,14 @@ ENSEMBLE_OWNED_OPTIONS = ('output_name', 'seed', 'random_state', 'initial_step')
 def parse_vary(items):
     """``['kT=0.5,1,2', 'dt=0.01,0.02']`` -> ``[('kT', ['0.5', '1', '2']), ('dt', [...])]``.
 
-    Values stay text: each replica's input file is checked by the input
-    reader, so a value of the wrong type fails that point's replicas with the
-    reader's message.  Raises UserInputError for a malformed item, an unknown
-    option, an option the ensemble owns, or a name given twice.
+    Options that change together are one axis: ``'dt:n_steps=0.01:400,0.02:200'``
+    -> ``('dt:n_steps', ['0.01:400', '0.02:200'])`` gives the two points
+    (dt 0.01, n_steps 400) and (dt 0.02, n_steps 200), e.g. the same
+    simulated time at every time step.  Values stay text: each replica's input
+    file is checked by the input reader, so a value of the wrong type fails
+    that point's replicas with the reader's message.  Raises UserInputError for
+    a malformed item, an unknown option, an option the ensemble owns, or a name
+    given twice.
     """
     from multi_bodies.files.input_options import OPTION_TABLE
     import difflib
@@ -46,22 +50,30 @@ def parse_vary(items):
         name = name.strip()
         values = [value.strip() for value in values_text.split(',')]
         if not sep or not name or not values_text.strip() or any(not value for value in values):
-            raise UserInputError("--vary %s: write NAME=V1,V2,... (e.g. --vary kT=0.5,1,2)" % item)
-        if name in ENSEMBLE_OWNED_OPTIONS:
-            raise UserInputError('--vary %s: %s is set by the ensemble for every replica and cannot be varied'
-                                 % (item, name))
-        if name == 'structure':
-            raise UserInputError('--vary %s: structure lines cannot be varied; make one input file per set of '
-                                 'structures' % item)
-        if name not in OPTION_TABLE:
-            close = [option for option in OPTION_TABLE if option.lower() == name.lower()]
-            close = close or difflib.get_close_matches(name, list(OPTION_TABLE), n=1)
-            raise UserInputError("--vary %s: unknown option '%s'%s" % (item, name,
-                                 " (did you mean '%s'?)" % close[0] if close else ''))
-        if name in seen:
-            raise UserInputError('--vary %s: %s is varied twice; give all its values in one --vary' % (item, name))
-        seen.add(name)
-        parsed.append((name, values))
+            raise UserInputError("--vary %s: write NAME=V1,V2,... (e.g. --vary kT=0.5,1,2), or "
+                                 "NAME1:NAME2=V1:W1,V2:W2,... for options that change together" % item)
+        names = [part.strip() for part in name.split(':')]
+        for value in values:
+            if len(value.split(':')) != len(names):
+                raise UserInputError("--vary %s: the value '%s' has %d part(s) for the %d option(s) %s; write one "
+                                     "value per option, separated by ':'" % (item, value, len(value.split(':')),
+                                                                             len(names), ', '.join(names)))
+        for one in names:
+            if one in ENSEMBLE_OWNED_OPTIONS:
+                raise UserInputError('--vary %s: %s is set by the ensemble for every replica and cannot be varied'
+                                     % (item, one))
+            if one == 'structure':
+                raise UserInputError('--vary %s: structure lines cannot be varied; make one input file per set of '
+                                     'structures' % item)
+            if one not in OPTION_TABLE:
+                close = [option for option in OPTION_TABLE if option.lower() == one.lower()]
+                close = close or difflib.get_close_matches(one, list(OPTION_TABLE), n=1)
+                raise UserInputError("--vary %s: unknown option '%s'%s" % (item, one,
+                                     " (did you mean '%s'?)" % close[0] if close else ''))
+            if one in seen:
+                raise UserInputError('--vary %s: %s is varied twice; give all its values in one --vary' % (item, one))
+            seen.add(one)
+        parsed.append((':'.join(names), [':'.join(part.strip() for part in value.split(':')) for value in values]))
     return parsed
 
 
@@ -73,9 +85,14 @@ def point_name(overrides):
 
 
 def parameter_points(vary):
-    """Cartesian product of the varied values: list of lists of (name, value), first option slowest."""
-    names = [name for name, _ in vary]
-    return [list(zip(names, combination)) for combination in itertools.product(*[values for _, values in vary])]
+    """Cartesian product of the varied axes: list of lists of (name, value), first axis slowest."""
+    points = []
+    for combination in itertools.product(*[values for _, values in vary]):
+        overrides = []
+        for (name, _), value in zip(vary, combination):  # an axis 'dt:n_steps' sets both options
+            overrides.extend(zip(name.split(':'), value.split(':')))
+        points.append(overrides)
+    return points
 
 
 def replica_seeds(master_seed, num_points, num_replicas):

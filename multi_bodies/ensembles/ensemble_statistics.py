@@ -230,7 +230,7 @@ def point_table(point_stats):
 
 def summary_table(manifest, statistics):
     """CSV text: one row per point with its varied values, finished replicas and mean ``.info`` counters."""
-    names = [name for name, _ in manifest['vary']]
+    names = [one for name, _ in manifest['vary'] for one in name.split(':')]  # 'dt:n_steps' is two columns
     counters = []
     for point_stats in statistics.values():
         counters.extend(key for key in point_stats['info'] if key not in counters)
