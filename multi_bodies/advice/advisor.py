@@ -546,13 +546,16 @@ class Advisor(ResolutionMeasurements, AdvisorReport):
                           'bounded but off by 0.4 at 4.5' % (dt, ', '.join(safe) or 'none'))
         # Roller schemes move single blobs only; the rigid schemes are for the other runs.
         rollers = 'rollers' in options.scheme
-        applicable = {name: row for name, row in STOCHASTIC_SCHEME_TABLE.items() if ('rollers' in name) == rollers}
-        ranked = cheapest_scheme(applicable, self.accuracy, solve_cost or 0.0)
+        applicable = {name: row for name, row in STOCHASTIC_SCHEME_TABLE.items() if ('rollers' in name) == rollers
+                      and not (name == 'stochastic_EM' and self.scene.wall)}  # no drift: wrong above a wall
+        # The table's dt are in units of the relaxation time tau = 1/(mu k) of the stiffest mode (its scene:
+        # blobs in a stiff trap near the wall); here tau = 1/rate of the estimates above.
+        ranked = cheapest_scheme(applicable, self.accuracy, solve_cost or 0.0, 1.0 / rate) if rate > 0 else []
         for cost, scheme, dt_target in ranked:
             row = applicable[scheme]
-            self.add('dt', None, '%s: weak error %s at dt = %.4g %s' % (scheme, _percent(self.accuracy), dt_target,
-                                                                      row['time_unit']), None, self.accuracy, cost,
-                     True, 'cost per unit time; %s' % row['source'])
+            self.add('dt', None, '%s: weak error %s at dt = %.4g (%.3g tau, tau = 1/(mu k) = %.4g)'
+                     % (scheme, _percent(self.accuracy), dt_target, dt_target * rate, 1.0 / rate), None,
+                     self.accuracy, cost, True, 'cost per unit time; %s' % row['source'])
         if ranked:
             self.notes.append('dt: cheapest stochastic scheme for %s: %s' % (_percent(self.accuracy), ranked[0][1]))
         else:
@@ -595,12 +598,12 @@ class Advisor(ResolutionMeasurements, AdvisorReport):
         if stochastic and options.kT > 0 and mu > 0 and np.isfinite(wall_gap):
             bounds.append(('Brownian no crossing', (0.5 * wall_gap) ** 2 / (2 * options.kT * mu),
                            'the rms Brownian step sqrt(2 kT mu dt) stays below half the wall gap'))
-        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0:
+        if stochastic and scheme in STOCHASTIC_SCHEME_TABLE and options.kT > 0 and rate > 0:
             constant, power = STOCHASTIC_SCHEME_TABLE[scheme]['weak_error']
-            time_unit = scene.a ** 2 * 6 * np.pi * scene.eta * scene.a / options.kT  # a^2 / (kT mu0)
-            bounds.append(('weak error', (self.accuracy / constant) ** (1.0 / power) * time_unit,
-                           'the measured weak-error table of %s (single blobs above a wall) gives the target'
-                           % scheme))
+            bounds.append(('weak error', (self.accuracy / abs(constant)) ** (1.0 / power) / rate,
+                           'the measured weak-error table of %s gives the target: relative bias of the variance '
+                           'of the stiffest coordinate %.3g (dt/tau)^%.2f, tau = 1/(mu k) = %.4g'
+                           % (scheme, abs(constant), power, 1.0 / rate)))
         # Accuracy of the drift, measured on this scene by step doubling from the hard bounds.
         hard = min(value for _, value, _ in bounds)
         if np.isfinite(hard) and speed > 0:

@@ -50,39 +50,55 @@ SCHEME_TABLE = {
     'deterministic_adams_bashforth': {'order': 2, 'solves_per_step': 1, 'stability': 1.0,
                                       'source': 'AB2: real stability interval [-1, 0]'},
 }
-# One row per stochastic scheme whose weak error was resolved by the validation runs of
-# doc/brownian_validation.md (python doc/charts/brownian_validation.py --parts weak): relative error of the
-# mean height <z> ~ C dt^p for single-blob bodies above a soft wall (kT/(g a) = 0.5, wall b = a/4), dt in
-# units of a^2/(kT mu0); 'solves_per_step' counts GMRES solves plus Lanczos calls (rollers: the Lanczos
-# call).  Schemes whose bias stayed within 2 standard errors up to dt = 0.32 (Fixman, Slip_Mid, the
-# dense schemes) are left out rather than given a made-up constant.
-_WEAK_SOURCE = 'doc/brownian_validation.md, single blobs above a soft wall, 2026-12-01'
+# One row per stochastic scheme, from the weak-order study of doc/brownian_validation.md
+# (python doc/charts/brownian_weak_order.py): the relative bias of the equilibrium variance of blobs held in a
+# stiff harmonic trap at z = 1.5 a above the wall is C (dt/tau)^p, tau = 1/(mu_perp k) the trap's relaxation
+# time (stochastic_EM: in free space, tau = 1/(mu0 k)); C and p fitted at the three smallest time steps whose
+# bias was resolved (4 standard errors).  The sign of C is that of the bias.  'solves_per_step' counts GMRES
+# solves plus Lanczos calls (rollers: Lanczos calls); None for the dense schemes, which are not ranked by it.
+_WEAK_SOURCE = 'doc/brownian_validation.md, weak-order study (blobs in a trap near the wall), 2026-12-01'
+
+
+def _weak_row(solves, constant, order):
+    return {'solves_per_step': solves, 'lanczos_per_step': 1, 'weak_error': (constant, order),
+            'time_unit': 'tau = 1/(mu k)', 'source': _WEAK_SOURCE}
+
+
 STOCHASTIC_SCHEME_TABLE = {
-    'stochastic_first_order_RFD': {'solves_per_step': 4, 'lanczos_per_step': 1, 'weak_error': (0.061, 1.0),
-                                   'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_traction_EM': {'solves_per_step': 3, 'lanczos_per_step': 1, 'weak_error': (0.076, 1.0),
-                               'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_Slip_Trapz': {'solves_per_step': 4, 'lanczos_per_step': 1, 'weak_error': (0.07, 1.0),
-                              'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
-    'stochastic_adams_bashforth_rollers': {'solves_per_step': 1, 'lanczos_per_step': 1,
-                                           'weak_error': (0.055, 0.66), 'time_unit': 'a^2/(kT mu0)',
-                                           'source': _WEAK_SOURCE},
-    'stochastic_trapezoidal_rollers': {'solves_per_step': 1, 'lanczos_per_step': 1, 'weak_error': (0.06, 1.0),
-                                       'time_unit': 'a^2/(kT mu0)', 'source': _WEAK_SOURCE},
+    'stochastic_first_order_RFD': _weak_row(4, 0.665, 1.11),
+    'stochastic_traction_EM': _weak_row(3, 0.665, 1.11),
+    'stochastic_adams_bashforth': _weak_row(5, 0.855, 2.24),
+    'stochastic_traction_AB': _weak_row(4, 0.873, 2.25),
+    'stochastic_Slip_Trapz': _weak_row(4, -0.305, 2.27),
+    'stochastic_Slip_Mid': _weak_row(5, 0.311, 3.20),
+    'stochastic_GDC_RFD': _weak_row(4, -0.307, 1.09),
+    'stochastic_EM': _weak_row(2, 0.627, 1.08),
+    'stochastic_first_order_RFD_dense_algebra': _weak_row(None, 0.621, 1.10),
+    'Fixman': _weak_row(None, 0.346, 3.73),
+    'stochastic_Slip_Mid_DLA': _weak_row(None, 0.275, 3.00),
+    'stochastic_first_order_rollers': _weak_row(1, 0.547, 0.96),
+    'stochastic_adams_bashforth_rollers': _weak_row(1, 0.506, 1.82),
+    'stochastic_mid_point_rollers': _weak_row(2, 0.259, 3.07),
+    'stochastic_trapezoidal_rollers': _weak_row(1, -0.32, 2.21),
 }
 
 
-def cheapest_scheme(table, accuracy, solve_seconds):
+def cheapest_scheme(table, accuracy, solve_seconds, time_unit=1.0):
     """The scheme of a weak-error table that reaches ``accuracy`` at the smallest cost per unit time.
 
-    For each row, the time step that gives the target is ``dt* = (accuracy / C)^(1/p)`` and the cost
-    per unit of simulated time is ``solves_per_step * solve_seconds / dt*``.  Returns a list of
-    (cost per unit time, scheme, dt*) sorted cheapest first (empty for an empty table).
+    For each row, the time step that gives the target is ``dt* = (accuracy / |C|)^(1/p) * time_unit``
+    (``time_unit``: the scene's relaxation time tau = 1/(mu k) for the shipped table, whose dt are in
+    units of tau) and the cost per unit of simulated time is ``solves_per_step * solve_seconds / dt*``.
+    Rows without ``solves_per_step`` (the dense schemes, whose cost is not a number of solves) are not
+    ranked.  Returns a list of (cost per unit time, scheme, dt*) sorted cheapest first (empty for an
+    empty table).
     """
     ranked = []
     for scheme, row in table.items():
+        if row.get('solves_per_step') is None:
+            continue
         constant, order = row['weak_error']
-        dt_target = (accuracy / constant) ** (1.0 / order)
+        dt_target = (accuracy / abs(constant)) ** (1.0 / order) * time_unit
         ranked.append((row['solves_per_step'] * solve_seconds / dt_target, scheme, dt_target))
     return sorted(ranked)
 
