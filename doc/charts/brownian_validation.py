@@ -1,4 +1,4 @@
-"""Validation report of the Brownian schemes: equilibrium, weak error against dt and cost, stability.
+"""Validation report of the Brownian schemes: equilibrium histograms, stability, and a multi-blob body.
 
 Scene (same as tests/test_stochastic.py): single-blob bodies of radius a = 1
 above the wall, eta = 1/(6 pi) (so mu0 = 1/(6 pi eta a) = 1), kT = 1,
@@ -9,22 +9,21 @@ from quadrature.
 
 Charts (PNG, matplotlib) and tables (markdown, printed):
 
-1. ``heights_<scheme>.png``: the height histogram of each scheme against the
-   Gibbs-Boltzmann density.
-2. ``weak_error.png``: |<z> - exact| against dt (log-log, with the standard
-   error as an error bar) and against the wall-clock seconds per unit of
-   simulated time, one curve per scheme; the table gives the slope of the
-   fit (observed weak order).
-3. ``invalid_rate.png``: invalid configurations per step against dt on the
-   soft and the stiff wall; the table gives the largest dt with fewer than
-   one rejection per 1000 body-steps.
-4. ``boomerang_equilibrium.png``: the height and tilt histograms of 15-blob
-   boomerangs under stochastic_Slip_Trapz against the exact marginals.
+1. ``brownian_heights.png``: the height histogram of each scheme with its
+   standard-error band against the Gibbs-Boltzmann density.
+2. ``brownian_invalid_rate.png``: invalid configurations per 1000 body-steps
+   against dt on the soft and the stiff wall (zero drawn as zero, stopped
+   runs marked).
+3. ``brownian_boomerang_equilibrium.png``: the height and tilt histograms of
+   15-blob boomerangs under stochastic_Slip_Trapz against the exact marginals.
 
-    python doc/charts/brownian_validation.py [--quick] [--out doc/charts] [--schemes ...]
+The weak order of every scheme is measured on its own scene by
+``doc/charts/brownian_weak_order.py``.
+
+    python doc/charts/brownian_validation.py [--quick] [--parts heights invalid boomerang] [--schemes ...]
 
 ``--quick`` uses fewer bodies and steps (a few minutes on 2 cores); without
-it the statistical errors are about 3 times smaller (about an hour).
+it the statistical errors are about 3 times smaller (see doc/brownian_validation.md for the cost).
 """
 import argparse
 import os
@@ -39,7 +38,6 @@ trapezoid = getattr(np, 'trapezoid', None) or np.trapz  # numpy < 2.0 names it t
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
-from multi_bodies.solver import physics as mbf  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files import structure_generators as gen  # noqa: E402
 from multi_bodies.solver.system import System  # noqa: E402
@@ -53,7 +51,7 @@ ITERATIVE = ['stochastic_first_order_RFD', 'stochastic_adams_bashforth', 'stocha
 DENSE = ['stochastic_first_order_RFD_dense_algebra', 'Fixman', 'stochastic_Slip_Mid_DLA']
 ROLLERS = ['stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers', 'stochastic_mid_point_rollers',
            'stochastic_trapezoidal_rollers']
-CLAIMED_ORDER = {name: 1 for name in ITERATIVE + DENSE + ROLLERS}
+HEIGHT_EDGES = np.linspace(0.0, 5.0, 51)
 
 
 def wall_energy(z, b):
@@ -95,28 +93,45 @@ def blob_system(n_bodies, b, seed, backend):
 
 
 def run(scheme_name, n_bodies, n_steps, dt, b=SOFT, seed=1, backend='C++'):
-    """Per-body mean heights, all heights (for histograms), invalid count, seconds per unit time.
+    """One run of ``n_bodies`` bodies for ``n_steps`` steps of ``dt``.
 
-    A whole step of all bodies is retried when one blob crosses the wall, so at large dt and many bodies
-    the scheme stops (100 rejections in a row, utils.SimulationStopped), as a user's run would.
+    Returns a namespace: ``per_body_mean`` (n_bodies,) time-averaged heights,
+    ``per_body_histogram`` (n_bodies, bins) height densities on HEIGHT_EDGES
+    (every fifth step), ``invalid`` rejected trial configurations,
+    ``steps`` steps done, ``stopped`` the message when the run stopped early,
+    ``seconds_per_unit_time``.  A whole step of all bodies is retried when
+    one blob crosses the wall, so at large dt and many bodies the scheme
+    stops (100 rejections in a row, utils.SimulationStopped), as a user's run
+    would; the rate is then that of the steps it made.
     """
+    import contextlib
+    import io
     system = blob_system(n_bodies, b, seed, backend if scheme_name not in DENSE else 'python')
     scheme = make_scheme(scheme_name, dt, SimpleNamespace(kT=KT, rf_delta=1e-3, update_PC=1))
     rng = np.random.default_rng(seed + 1)
     sums = np.zeros(n_bodies)
-    samples = []
+    counts = np.zeros((n_bodies, HEIGHT_EDGES.size - 1))
+    stopped, done = None, 0
     start = time.perf_counter()
-    import contextlib
-    import io
     for step in range(n_steps):
-        with contextlib.redirect_stdout(io.StringIO()):  # the 'Invalid configuration number' lines
-            scheme.step(system, step, rng)
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # the 'Invalid configuration number' lines
+                scheme.step(system, step, rng)
+        except Exception as err:  # utils.SimulationStopped (100 rejections in a row), or a failed solve
+            stopped = str(err).split(';')[0]
+            break
+        done += 1
         z = system.arrays.locations[:, 2]
         sums += z
         if step % 5 == 0:
-            samples.append(z.copy())
+            index = np.clip(np.searchsorted(HEIGHT_EDGES, z, side='right') - 1, 0, counts.shape[1] - 1)
+            counts[np.arange(n_bodies), index] += 1
     seconds = time.perf_counter() - start
-    return sums / n_steps, np.concatenate(samples), scheme.invalid_configurations, seconds / (n_steps * dt)
+    widths = np.diff(HEIGHT_EDGES)
+    histogram = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1) / widths
+    return SimpleNamespace(per_body_mean=sums / max(done, 1), per_body_histogram=histogram,
+                           invalid=scheme.invalid_configurations, steps=done, stopped=stopped,
+                           seconds_per_unit_time=seconds / (max(done, 1) * dt))
 
 
 def mean_and_error(per_body):
@@ -124,60 +139,49 @@ def mean_and_error(per_body):
 
 
 def sizes(scheme, quick):
-    """(bodies, simulated time) per run."""
+    """(bodies, simulated time) per run: about 30 height relaxation times (0.6 each) at the least."""
     if scheme in DENSE:
-        return (16, 10.0) if quick else (16, 40.0)
+        return (16, 20.0) if quick else (16, 200.0)
     if scheme in ROLLERS:
-        return (300, 4.0) if quick else (400, 30.0)
-    return (150, 3.0) if quick else (200, 15.0)
-
-
-def weak_chart(curves, out, plt):
-    """Table of observed orders and the chart |bias| against dt and against cost; curves: name -> (n, 4)."""
-    print('\n| scheme | observed weak order (fit of log|bias| on log dt, points with |bias| > 2 SE) | claimed |')
-    print('|---|---|---|')
-    for name, p in curves.items():
-        use = np.abs(p[:, 1]) > 2 * p[:, 2]
-        slope = np.polyfit(np.log(p[use, 0]), np.log(np.abs(p[use, 1])), 1)[0] if use.sum() >= 2 else np.nan
-        print('| %s | %s | %d |' % (name, 'n/a (fewer than 2 points with bias > 2 SE)' if np.isnan(slope)
-                                    else '%.2f' % slope, CLAIMED_ORDER[name]))
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for name, p in curves.items():
-        label = name.replace('stochastic_', '')
-        ax1.errorbar(p[:, 0], np.abs(p[:, 1]), yerr=p[:, 2], marker='o', ms=3, label=label, capsize=2)
-        ax2.errorbar(p[:, 3], np.abs(p[:, 1]), yerr=p[:, 2], marker='o', ms=3, label=label, capsize=2)
-    dts = np.unique(np.concatenate([p[:, 0] for p in curves.values()]))
-    ax1.plot(dts, 0.1 * dts, 'k--', lw=0.8, label='slope 1')
-    for ax in (ax1, ax2):
-        ax.set_xscale('log')
-        ax.set_yscale('log')
-        ax.set_ylabel('|<z> - exact| / a (error bar: 1 SE)')
-    ax1.set_xlabel('dt (units a^2 / (kT mu0))')
-    ax2.set_xlabel('wall-clock seconds per unit of simulated time (this machine)')
-    ax1.legend(fontsize=6)
-    fig.tight_layout()
-    path = os.path.join(out, 'brownian_weak_error.png')
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    print('\n' + path)
+        return (150, 3.0) if quick else (300, 20.0)
+    return (100, 3.0) if quick else (200, 20.0)
 
 
 def chart_heights(results, out, plt):
+    """One panel per scheme: its height density (the mean of the bodies' histograms) with a band of 2 standard
+    errors (the spread of the bodies' histograms over sqrt(bodies)), and the Gibbs-Boltzmann density."""
     grid = np.linspace(0.0, 5.0, 1000)
     density = height_density(grid, SOFT)
     density /= trapezoid(density, grid)
+    centres = 0.5 * (HEIGHT_EDGES[1:] + HEIGHT_EDGES[:-1])
     names = list(results)
     cols = 4
     rows = int(np.ceil(len(names) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3 * rows), squeeze=False)
     for ax, name in zip(axes.flat, names):
-        ax.hist(results[name], bins=60, range=(0, 5), density=True, alpha=0.6, label='scheme')
-        ax.plot(grid, density, 'k-', lw=1.2, label='Gibbs-Boltzmann')
-        ax.set_title(name.replace('stochastic_', ''), fontsize=9)
+        result = results[name]
+        per_body = result.per_body_histogram
+        mean = per_body.mean(axis=0)
+        error = per_body.std(axis=0, ddof=1) / np.sqrt(per_body.shape[0])
+        ax.fill_between(centres, mean - 2 * error, mean + 2 * error, step='mid', color='C0', alpha=0.3,
+                        label='scheme ± 2 SE')
+        ax.step(centres, mean, where='mid', color='C0', lw=1.0)
+        ax.plot(grid, density, 'k-', lw=1.0, label='Gibbs-Boltzmann')
+        exact_bins = np.array([trapezoid(density[(grid >= lo) & (grid <= hi)], grid[(grid >= lo) & (grid <= hi)])
+                               for lo, hi in zip(HEIGHT_EDGES[:-1], HEIGHT_EDGES[1:])]) / np.diff(HEIGHT_EDGES)
+        # Counted where a bin is expected to hold at least 1% of the samples: below that most bodies never visit
+        # it and the spread of the bodies' histograms is no estimate of its standard error.
+        counted = exact_bins * np.diff(HEIGHT_EDGES) >= 0.01
+        outside = int(np.sum(np.abs(mean - exact_bins)[counted] > 2 * error[counted]))
+        ax.set_title('%s (%d bodies, T = %g)' % (name.replace('stochastic_', ''), per_body.shape[0], result.time),
+                     fontsize=8)
+        ax.text(0.97, 0.95, 'bins off by > 2 SE: %d of %d\n(bins holding >= 1%%)' % (outside, counted.sum()),
+                transform=ax.transAxes,
+                ha='right', va='top', fontsize=7)
         ax.set_xlabel('z / a')
     for ax in list(axes.flat)[len(names):]:
         ax.axis('off')
-    axes.flat[0].legend(fontsize=8)
+    axes.flat[0].legend(fontsize=7, loc='center right')
     fig.tight_layout()
     path = os.path.join(out, 'brownian_heights.png')
     fig.savefig(path, dpi=80)
@@ -185,15 +189,57 @@ def chart_heights(results, out, plt):
     return path
 
 
+def chart_invalid(rates, dts, out, plt):
+    """Rejections per 1000 body-steps against dt, zero drawn at zero (symlog axis), stopped runs marked."""
+    from matplotlib.lines import Line2D
+    markers = ['o', 's', '^', 'v', 'D', 'P', 'X', '*', 'h', '<', '>', 'p', 'd']
+    styles = ['-', '--', '-.', ':']
+    colours = plt.get_cmap('tab20').colors
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)
+    names = sorted({name for name, _ in rates}, key=lambda n: (ITERATIVE + DENSE + ROLLERS).index(n))
+    for ax, b in zip(axes, (SOFT, STIFF)):
+        for k, name in enumerate(names):
+            if (name, b) not in rates:
+                continue
+            values = rates[(name, b)]
+            y = np.array([v[0] for v in values])
+            stopped = np.array([v[1] for v in values])
+            style = dict(color=colours[(2 * k) % 20 + (2 * k) // 20], marker=markers[k % len(markers)],
+                         linestyle=styles[k % len(styles)], markersize=5, linewidth=1.0)
+            ax.plot(dts, y, label=name.replace('stochastic_', ''), **style)
+            if stopped.any():  # the rate of the steps it made, ringed in red: the run stopped there
+                ax.plot(np.array(dts)[stopped], y[stopped], linestyle='none', marker='o', markersize=11,
+                        markerfacecolor='none', markeredgecolor='red', markeredgewidth=1.5)
+        ax.set_xscale('log')
+        ax.set_yscale('symlog', linthresh=1.0)
+        ax.axhline(0.0, color='0.3', lw=0.8)
+        ax.set_ylim(-0.3, 2000.0)
+        ax.set_title('wall Debye length b = %g a' % b)
+        ax.set_xlabel('dt (units a^2 / (kT mu0))')
+        ax.grid(True, which='both', alpha=0.3)
+    axes[0].set_ylabel('invalid configurations per 1000 body-steps (symlog: 0 is 0)')
+    handles, labels = axes[0].get_legend_handles_labels()
+    handles.append(Line2D([], [], linestyle='none', marker='o', markersize=11, markerfacecolor='none',
+                          markeredgecolor='red'))
+    labels.append('run stopped (100 rejections in a row)')
+    axes[0].legend(handles, labels, fontsize=7, loc='upper left')
+    fig.tight_layout()
+    path = os.path.join(out, 'brownian_invalid_rate.png')
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+INVALID_DTS = [0.01, 0.04, 0.16, 0.2, 0.25, 0.32, 0.4, 0.5, 0.64]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true')
     parser.add_argument('--out', default=os.path.dirname(os.path.abspath(__file__)))
     parser.add_argument('--schemes', nargs='+', default=ITERATIVE + DENSE + ROLLERS)
-    parser.add_argument('--dts', type=float, nargs='+', default=[0.01, 0.02, 0.04, 0.08])
-    parser.add_argument('--parts', nargs='+', default=['heights', 'weak', 'invalid', 'boomerang'])
-    parser.add_argument('--weak-from', nargs='+', metavar='LOG',
-                        help='redraw the weak-error chart from the tables printed by earlier runs (no simulation)')
+    parser.add_argument('--parts', nargs='+', default=['heights', 'invalid', 'boomerang'],
+                        choices=['heights', 'invalid', 'boomerang'])
     args = parser.parse_args(argv)
     import matplotlib
     matplotlib.use('Agg')
@@ -206,82 +252,36 @@ def main(argv=None):
         print('\n## Equilibrium at dt = 0.01\n')
         print('| scheme | bodies | time | <z> | SE | z-score | s per unit time |')
         print('|---|---|---|---|---|---|---|')
-        histograms = {}
+        results = {}
         for name in args.schemes:
             n_bodies, t = sizes(name, args.quick)
-            per_body, samples, invalid, cost = run(name, n_bodies, int(round(t / 0.01)), 0.01)
-            m, se = mean_and_error(per_body)
-            histograms[name] = samples
-            print('| %s | %d | %g | %.4f | %.4f | %+.2f | %.3g |' % (name, n_bodies, t, m, se, (m - exact) / se, cost),
-                  flush=True)
-        print('\n%s' % chart_heights(histograms, args.out, plt))
-
-    if args.weak_from:
-        curves = {}
-        for log in args.weak_from:  # a scheme's rows in a later log replace those of an earlier one
-            rows = {}
-            for line in open(log):
-                cells = [c.strip() for c in line.strip().strip('|').split('|')]
-                if len(cells) == 5 and cells[0] in CLAIMED_ORDER:
-                    try:
-                        rows.setdefault(cells[0], []).append([float(c) for c in cells[1:]])
-                    except ValueError:
-                        pass
-            curves.update(rows)
-        weak_chart({k: np.array(v) for k, v in curves.items()}, args.out, plt)
-        return
-
-    if 'weak' in args.parts:
-        print('\n## Weak error of <z> against dt\n')
-        print('| scheme | dt | <z> - exact | SE | s per unit time |')
-        print('|---|---|---|---|---|')
-        curves = {}
-        for name in args.schemes:
-            n_bodies, t = sizes(name, args.quick)
-            points = []
-            for dt in args.dts:
-                try:
-                    per_body, _, invalid, cost = run(name, n_bodies, int(round(2 * t / dt)), dt, seed=7)
-                except Exception as err:  # 100 rejected steps in a row: the scheme fails at this dt
-                    print('| %s | %g | stopped: %s | | |' % (name, dt, str(err).split(';')[0][:90]), flush=True)
-                    continue
-                m, se = mean_and_error(per_body)
-                points.append((dt, m - exact, se, cost))
-                print('| %s | %g | %+.4f | %.4f | %.3g |' % (name, dt, m - exact, se, cost), flush=True)
-            curves[name] = np.array(points).reshape(-1, 4)
-        weak_chart(curves, args.out, plt)
+            result = run(name, n_bodies, int(round(t / 0.01)), 0.01)
+            result.time = t
+            m, se = mean_and_error(result.per_body_mean)
+            results[name] = result
+            print('| %s | %d | %g | %.4f | %.4f | %+.2f | %.3g |' % (name, n_bodies, t, m, se, (m - exact) / se,
+                                                                    result.seconds_per_unit_time), flush=True)
+        print('\n%s' % chart_heights(results, args.out, plt))
 
     if 'invalid' in args.parts:
         print('\n## Invalid configurations per 1000 body-steps\n')
-        dts = [0.01, 0.04, 0.16, 0.64]
+        dts = INVALID_DTS
         print('| scheme | wall b | ' + ' | '.join('dt %g' % dt for dt in dts) + ' |')
         print('|---|---|' + '---|' * len(dts))
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-        for ax, b in zip(axes, (SOFT, STIFF)):
+        rates = {}
+        for b in (SOFT, STIFF):
             for name in args.schemes:
                 n_bodies = 16 if name in DENSE else 60
-                rates = []
+                values = []
                 for dt in dts:
-                    n_steps = max(20, int(round(2.0 / dt)))
-                    try:
-                        _, _, invalid, _ = run(name, n_bodies, n_steps, dt, b=b, seed=11)
-                        rates.append(1000.0 * invalid / (n_bodies * n_steps))
-                    except Exception as err:  # 100 rejections in a row (or NaN, GMRES) at this dt
-                        print('  %s at dt %g, b %g stopped: %s' % (name, dt, b, str(err).split(';')[0][:90]))
-                        rates.append(np.nan)
-                print('| %s | %g | %s |' % (name, b, ' | '.join('%.3g' % r for r in rates)), flush=True)
-                ax.plot(dts, np.array(rates) + 1e-3, marker='o', ms=3, label=name.replace('stochastic_', ''))
-            ax.set_xscale('log')
-            ax.set_yscale('log')
-            ax.set_title('wall Debye length b = %g a' % b)
-            ax.set_xlabel('dt')
-        axes[0].set_ylabel('invalid configurations per 1000 body-steps (+1e-3)')
-        axes[0].legend(fontsize=6)
-        fig.tight_layout()
-        path = os.path.join(args.out, 'brownian_invalid_rate.png')
-        fig.savefig(path, dpi=80)
-        plt.close(fig)
-        print('\n' + path)
+                    n_steps = max(20, int(round((1.0 if args.quick else 4.0) / dt)))
+                    result = run(name, n_bodies, n_steps, dt, b=b, seed=11)
+                    values.append((1000.0 * result.invalid / (n_bodies * max(result.steps, 1)),
+                                   result.stopped is not None))
+                rates[(name, b)] = values
+                print('| %s | %g | %s |' % (name, b, ' | '.join('%.3g%s' % (r, ' (stopped)' if stop else '')
+                                                             for r, stop in values)), flush=True)
+        print('\n' + chart_invalid(rates, dts, args.out, plt))
 
     if 'boomerang' in args.parts:
         print('\n## Boomerang equilibrium (stochastic_Slip_Trapz)\n')
