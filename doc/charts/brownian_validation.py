@@ -154,6 +154,7 @@ def chart_heights(results, out, plt):
     density = height_density(grid, SOFT)
     density /= trapezoid(density, grid)
     centres = 0.5 * (HEIGHT_EDGES[1:] + HEIGHT_EDGES[:-1])
+    cdf_grid, cdf = exact_cdf(SOFT)
     names = list(results)
     cols = 4
     rows = int(np.ceil(len(names) / cols))
@@ -167,8 +168,7 @@ def chart_heights(results, out, plt):
                         label='scheme ± 2 SE')
         ax.step(centres, mean, where='mid', color='C0', lw=1.0)
         ax.plot(grid, density, 'k-', lw=1.0, label='Gibbs-Boltzmann')
-        exact_bins = np.array([trapezoid(density[(grid >= lo) & (grid <= hi)], grid[(grid >= lo) & (grid <= hi)])
-                               for lo, hi in zip(HEIGHT_EDGES[:-1], HEIGHT_EDGES[1:])]) / np.diff(HEIGHT_EDGES)
+        exact_bins = np.diff(np.interp(HEIGHT_EDGES, cdf_grid, cdf)) / np.diff(HEIGHT_EDGES)  # bin averages
         # Counted where a bin is expected to hold at least 1% of the samples: below that most bodies never visit
         # it and the spread of the bodies' histograms is no estimate of its standard error.
         counted = exact_bins * np.diff(HEIGHT_EDGES) >= 0.01
