@@ -60,7 +60,7 @@ _WEAK_SOURCE = 'doc/brownian_validation.md, weak-order study (blobs in a trap ne
 
 
 def _weak_row(solves, constant, order):
-    return {'solves_per_step': solves, 'lanczos_per_step': 1, 'weak_error': (constant, order),
+    return {'solves_per_step': solves, 'weak_error': (constant, order),
             'time_unit': 'tau = 1/(mu k)', 'source': _WEAK_SOURCE}
 
 
