@@ -26,7 +26,10 @@ work folder; the standard error of O is the spread of the replicas' averages
 
 ``run`` skips the replicas already done (the runner's restart), so it can be
 stopped and started again; ``report`` prints the tables (markdown) and draws
-``brownian_weak_error.png``.  Cost on a 2-core machine: see doc/brownian_validation.md.
+``brownian_weak_error.png``.  ``--quick`` (a quarter of the simulated time)
+keeps its runs apart in the same work folder (``ensemble_quick``); give it to
+``report`` as well.  ``stochastic_EM`` has no drift term and runs in free space
+(``*_no_wall``), where it is valid; the dense schemes run 16 bodies per replica.  Cost on a 2-core machine: see doc/brownian_validation.md.
 """
 import argparse
 import csv
@@ -179,6 +182,7 @@ def run(args):
         path = write_scene(os.path.join(folder, 'scene'), scheme, n_bodies, seed=11, tolerance=args.tolerance)
         ladders = [('ensemble', dts)] + ([('ensemble_extra', EXTRA[scheme])] if scheme in EXTRA else [])
         for name, values in ladders:
+            name += '_quick' if args.quick else ''
             command = [sys.executable, os.path.join(ROOT, 'multi_bodies', 'ensemble.py'), '--input-file', path,
                        '--replicas', str(args.replicas), '--vary', ladder(values, n_bodies, args.quick, tau(scheme)),
                        '--output-dir', os.path.join(folder, name), '--seed', '2026', '--workers', str(args.workers)]
@@ -201,10 +205,10 @@ def replica_observable(folder):
     return float(np.mean((z - Z0) ** 2) * K_Z), (status.get('seconds'), status.get('resumed_from') or 0)
 
 
-def collect(work, scheme):
+def collect(work, scheme, quick=False):
     """Rows (dt, mean O - 1, standard error, replicas, seconds per unit time, failures) of one scheme, by dt."""
     rows = []
-    for name in ('ensemble', 'ensemble_extra'):
+    for name in ('ensemble_quick', 'ensemble_extra_quick') if quick else ('ensemble', 'ensemble_extra'):
         if os.path.isfile(os.path.join(work, scheme, name, 'ensemble.json')):
             rows.extend(collect_ensemble(os.path.join(work, scheme, name)))
     return sorted(rows, key=lambda row: row[0])
@@ -295,9 +299,10 @@ def report(args):
     print('| scheme | dt | dt/tau | <O> - 1 | SE | bias / SE | replicas | s per unit time |')
     print('|---|---|---|---|---|---|---|---|')
     for scheme in args.schemes:
-        if not os.path.isfile(os.path.join(args.work, scheme, 'ensemble', 'ensemble.json')):
+        if not os.path.isfile(os.path.join(args.work, scheme, 'ensemble_quick' if args.quick else 'ensemble',
+                                           'ensemble.json')):
             continue
-        rows = collect(args.work, scheme)
+        rows = collect(args.work, scheme, args.quick)
         curves[scheme] = rows
         for dt, bias, error, replicas, seconds, failures in rows:
             if not np.isfinite(bias):
@@ -387,6 +392,7 @@ def draw(curves, fits, out):
     handles, labels = axes[0].get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.2, 1, 1))
     fig.legend(handles, labels, loc='lower center', ncol=4, fontsize=8, frameon=False)
+    os.makedirs(out, exist_ok=True)
     path = os.path.join(out, 'brownian_weak_error.png')
     fig.savefig(path, dpi=110)
     print('wrote %s' % path)
