@@ -135,6 +135,16 @@ inline double horizontal_sum(rmb::double8 v) {
 #endif
 
 // Trans-trans product, each unordered pair once.
+// Sum of the per-thread accumulators acc (threads blocks of [ux; uy; uz], each n long) into ux, uy, uz.
+void reduce_thread_accumulators(const std::vector<double> &acc, int threads, std::size_t n, std::vector<double> &ux,
+                                std::vector<double> &uy, std::vector<double> &uz) {
+  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
+  for (int t = 0; t < threads; ++t) {
+    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
+    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
+  }
+}
+
 template <bool Wall, bool Periodic, class Real>
 void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, std::vector<double> &ux,
                                  std::vector<double> &uy, std::vector<double> &uz) {
@@ -209,11 +219,7 @@ void trans_times_force_symmetric(const Blobs &b, const std::vector<double> &L, s
       az[i] += uzi;
     }
   }
-  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
-  for (int t = 0; t < threads; ++t) {
-    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
-    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
-  }
+  reduce_thread_accumulators(acc, threads, n, ux, uy, uz);
 }
 
 using PairFunction = void (*)(double, double, double, double, double, double, double, double, double &, double &,
@@ -501,11 +507,7 @@ void radii_symmetric_sum(const Blobs &b, const std::vector<double> &L, std::vect
       az[i] += uzi;
     }
   }
-  ux.assign(n, 0.0), uy.assign(n, 0.0), uz.assign(n, 0.0);
-  for (int t = 0; t < threads; ++t) {
-    const double *ax = acc.data() + static_cast<std::size_t>(t) * 3 * n;
-    for (std::size_t i = 0; i < n; ++i) ux[i] += ax[i], uy[i] += ax[n + i], uz[i] += ax[2 * n + i];
-  }
+  reduce_thread_accumulators(acc, threads, n, ux, uy, uz);
 }
 
 // M f (3N,) with per-blob radii (N,), wall or free space (the published radii_numba products).
