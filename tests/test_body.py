@@ -102,3 +102,34 @@ def test_slip_rotates_with_the_body():
 def test_rotation_matrices_of_arrays():
     arrays, _ = random_system(2)
     np.testing.assert_array_equal(arrays.rotation_matrices(arrays.configuration), rotation_matrices(arrays.orientations))
+
+
+def test_compiled_K_and_KT_equal_numpy_and_dense():
+    """The compiled K U, K^T lambda and saddle-point product (body/cpp/rigid_module.cpp) equal the NumPy versions
+    and the dense K to rounding, on bodies of two types; a blob index that names no body is refused."""
+    from body import body as body_module
+    if body_module._rigid_cpp is None:
+        pytest.skip('body._rigid_cpp is not built (python3 setup.py build_ext --inplace)')
+    from body.body import K_dot_numpy, KT_dot_numpy, saddle_point_product
+    arrays, _ = random_system(3)
+    r = arrays.blob_positions(arrays.configuration)
+    rng = np.random.default_rng(4)
+    U = rng.normal(size=(arrays.num_bodies, 6))
+    lam = rng.normal(size=(arrays.num_blobs, 3))
+    M_lam = rng.normal(size=3 * arrays.num_blobs)
+    K = K_dense(r, arrays.locations, arrays.blob_body_index)
+    args = (r, arrays.locations, arrays.blob_body_index)
+    np.testing.assert_allclose(K_dot(*args, U), K_dot_numpy(*args, U), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(K_dot(*args, U).ravel(), K @ U.ravel(), rtol=0, atol=1e-13)
+    kt = KT_dot(r, arrays.locations, arrays.blob_offsets, arrays.blob_body_index, lam)
+    np.testing.assert_allclose(kt, KT_dot_numpy(r, arrays.locations, arrays.blob_offsets, arrays.blob_body_index,
+                                                lam), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(kt.ravel(), K.T @ lam.ravel(), rtol=0, atol=1e-13)
+    saddle = saddle_point_product(r, arrays.locations, arrays.blob_offsets, arrays.blob_body_index, M_lam,
+                                  lam.ravel(), U.ravel())
+    expected = np.concatenate((M_lam - K @ U.ravel(), -K.T @ lam.ravel()))
+    np.testing.assert_allclose(saddle, expected, rtol=0, atol=1e-13)
+    bad = arrays.blob_body_index.copy()
+    bad[0] = arrays.num_bodies
+    with pytest.raises(ValueError, match='blob_body_index'):
+        K_dot(r, arrays.locations, bad, U)
