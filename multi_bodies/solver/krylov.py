@@ -1,0 +1,168 @@
+"""Restarted GMRES with SciPy's stopping rules and no product beyond the Krylov ones (floor 3).
+
+The published code solves every mobility problem with ``scipy.sparse.linalg.gmres``
+(left preconditioning, relative tolerance on the true residual).  :func:`gmres` keeps
+exactly those rules (Saad and Schultz, SIAM J. Sci. Stat. Comput. 7, 856, 1986, with
+SciPy's inner tolerance control of gh-8400):
+
+* the inner (Arnoldi) iteration stops when the left-preconditioned residual estimate
+  falls below ``ptol``, which starts at ``|P b| rtol`` and is adapted after each cycle
+  as SciPy adapts it;
+* a cycle ends with the true residual ``|b - A x|``; the solve has converged when it is
+  at most ``rtol |b|``; otherwise the next cycle restarts from it.
+
+What differs is the arithmetic, not the rules:
+
+* the residual at the end of a cycle is ``r - (A V) y``, from the products ``A v_j``
+  the Arnoldi iteration made (kept beside the basis), not from one more product
+  ``A x``: equal to ``b - A x`` to rounding, because ``A`` is linear.  So the cycle
+  that converges costs no product beyond its Krylov ones.  A cycle that does not
+  converge (a restart, a breakdown, the iteration limit) and any tolerance below
+  ``ROUNDING_GUARD`` eps take the true residual by a product, as SciPy does after
+  every cycle (an updated residual keeps shrinking below rounding where the true one
+  stagnates, so it cannot be trusted there);
+* the Arnoldi vectors are orthogonalised by classical Gram-Schmidt in two matrix-vector
+  products, repeated when the first pass removed more than ``1 - 1/sqrt(2)`` of the
+  norm (DGKS: Daniel, Gragg, Kaufman and Stewart, Math. Comp. 30, 772, 1976), instead
+  of SciPy's modified Gram-Schmidt in a Python loop; the Givens rotations run on Python
+  floats.  Iterates agree with SciPy's to rounding (the tests compare them).
+
+A warm start ``x0`` costs one product (``b - A x0``), as in SciPy; a zero start none.  A solve
+that converges in its first cycle (every solve of the package at its tolerances) makes one
+product fewer than SciPy's.
+Shapes: every vector is (n,).
+"""
+import math
+
+import numpy as np
+
+REORTHOGONALISE_AGAIN = 1.0 / math.sqrt(2.0)
+ROUNDING_GUARD = 1e3  # tolerances below ROUNDING_GUARD * eps (2.2e-13) are checked with a true residual product
+
+
+def initial_residual(matvec, b, x):
+    """``b - A x`` (n,) for a warm start: the only product of a solve outside the Krylov iteration."""
+    return b - np.asarray(matvec(x), dtype=float).reshape(-1)
+
+
+def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callback=None):
+    """Solve ``A x = b`` by left-preconditioned restarted GMRES.
+
+    Parameters
+    ----------
+    matvec : callable (n,) -> (n,), ``A v``.
+    b : ndarray (n,).
+    rtol : float, converged when ``|b - A x| <= rtol |b|``.
+    psolve : callable (n,) -> (n,) or None, the preconditioner ``P ~ A^{-1}`` (None: identity).
+    x0 : ndarray (n,) or None (zeros).
+    restart : int, Krylov vectors per cycle.
+    maxiter : int, most inner iterations in all (SciPy's legacy count).
+    callback : callable(float) or None, called after every inner iteration with the preconditioned
+        residual estimate divided by ``|b|`` (SciPy's ``callback_type='legacy'``).
+
+    Returns
+    -------
+    (x (n,), info (0 converged, else ``maxiter``), inner iterations, residual ``b - A x`` (n,))
+    """
+    b = np.asarray(b, dtype=float).reshape(-1)
+    n = b.size
+    bnorm = float(np.linalg.norm(b))
+    if bnorm == 0.0:
+        return np.zeros(n), 0, 0, b.copy()
+    if psolve is None:
+        def psolve(v):
+            return np.array(v, dtype=float)  # a copy: the caller's vector is changed in place below
+    atol = rtol * bnorm
+    eps = np.finfo(float).eps
+    if x0 is not None and np.any(x0):
+        x = np.array(x0, dtype=float).reshape(-1)
+        r = initial_residual(matvec, b, x)
+    else:
+        x = np.zeros(n)
+        r = b.copy()
+    rnorm = float(np.linalg.norm(r))
+    if rnorm < atol:
+        return x, 0, 0, r
+    ptol_max_factor = 1.0
+    ptol = float(np.linalg.norm(psolve(b))) * min(ptol_max_factor, atol / bnorm)
+    restart = max(1, min(restart, n))
+    V = np.empty((restart + 1, n))
+    AV = np.empty((restart, n))
+    R = np.zeros((restart, restart))  # the rotated Hessenberg matrix, upper triangular
+    inner = 0
+    presid = 0.0
+    breakdown = False
+    while True:
+        z = np.asarray(psolve(r), dtype=float).reshape(-1)
+        beta = float(np.linalg.norm(z))
+        V[0] = z / beta
+        g = [beta]  # the rotated right-hand side of the small least-squares problem
+        cosines, sines = [], []
+        R[:] = 0.0
+        breakdown = False
+        for j in range(restart):
+            AV[j] = np.asarray(matvec(V[j]), dtype=float).reshape(-1)
+            w = np.asarray(psolve(AV[j]), dtype=float).reshape(-1)
+            if np.shares_memory(w, AV[j]):
+                w = w.copy()
+            h0 = float(np.linalg.norm(w))
+            basis = V[:j + 1]
+            h = basis @ w
+            w -= h @ basis
+            h1 = float(np.linalg.norm(w))
+            if h1 < REORTHOGONALISE_AGAIN * h0:
+                again = basis @ w
+                w -= again @ basis
+                h += again
+                h1 = float(np.linalg.norm(w))
+            if h1 <= eps * h0:
+                breakdown = True
+                h1 = 0.0
+                V[j + 1] = 0.0
+            else:
+                V[j + 1] = w / h1
+            column = h.tolist() + [h1]
+            for k in range(j):  # the earlier rotations
+                c, s = cosines[k], sines[k]
+                column[k], column[k + 1] = c * column[k] + s * column[k + 1], -s * column[k] + c * column[k + 1]
+            f, gg = column[j], column[j + 1]
+            magnitude = math.hypot(f, gg)
+            c, s = (1.0, 0.0) if magnitude == 0.0 else (f / magnitude, gg / magnitude)
+            cosines.append(c)
+            sines.append(s)
+            column[j] = magnitude
+            R[:j + 1, j] = column[:j + 1]
+            g.append(-s * g[j])
+            g[j] = c * g[j]
+            presid = abs(g[j + 1])
+            inner += 1
+            if callback is not None:
+                callback(presid / bnorm)
+            if inner == maxiter or presid <= ptol or breakdown:
+                break
+        k = j + 1
+        y = np.array(g[:k])
+        if R[k - 1, k - 1] == 0.0:
+            y[k - 1] = 0.0
+        for i in range(k - 1, -1, -1):  # back substitution, a zero pivot leaving its unknown at zero
+            if y[i] != 0.0:
+                y[i] /= R[i, i]
+                y[:i] -= y[i] * R[:i, i]
+        x += y @ V[:k]
+        r -= y @ AV[:k]
+        rnorm = float(np.linalg.norm(r))
+        if rnorm > atol or breakdown or inner == maxiter or atol < ROUNDING_GUARD * eps * bnorm:
+            # The true residual by a product, as SciPy takes it after every cycle: before a restart (which
+            # starts from it), for the verdict after a breakdown or the last iteration, and whenever the
+            # tolerance is so close to rounding that the updated residual, which keeps shrinking where the
+            # true one stagnates, could pass it falsely.
+            r = initial_residual(matvec, b, x)
+            rnorm = float(np.linalg.norm(r))
+        if rnorm <= atol or breakdown or inner == maxiter:
+            break
+        if presid <= ptol:  # the inner estimate passed but the true residual did not: ask more of the next cycle
+            ptol_max_factor = max(eps, 0.25 * ptol_max_factor)
+        else:
+            ptol_max_factor = min(1.0, 1.5 * ptol_max_factor)
+        ptol = presid * min(ptol_max_factor, atol / rnorm)
+    return x, (0 if rnorm <= atol else maxiter), inner, r
