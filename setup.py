@@ -64,6 +64,20 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
+        'multi_bodies.solver._preconditioner_cpp',
+        ['multi_bodies/solver/cpp/preconditioner_module.cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
+    Pybind11Extension(
+        'body._rigid_cpp',
+        ['body/cpp/rigid_module.cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
+    Pybind11Extension(
         'many_bodyMCMC._energy_cpp',
         ['many_bodyMCMC/cpp/energy_module.cpp'],
         include_dirs=['mobility/cpp'],

@@ -4,12 +4,15 @@ Boomerangs of 15 blobs (blob radius 0.25) on a square grid of spacing 4 at
 height z = 2.5 with random orientations, gravity and the default soft
 repulsions (blob-blob on the same backend as M f), solver_tolerance 1e-8,
 kT = 1, rf_delta 1e-3.  Prints, per number of bodies, backend and scheme,
-the seconds per step (median of ``--repeats`` steps after one warm-up step),
-the ratio to the Adams-Bashforth step measured in the same run, the speed-up
+the seconds per step (median of ``--repeats`` steps after one warm-up step;
+the schemes' steps are taken in turn, one of each per round, so that a
+drift in the machine's speed touches all of them alike), the ratio to the
+Adams-Bashforth step measured in the same run, the speed-up
 on the published figure, the products ``M f`` per step by where they go
 (GMRES Krylov products, true residuals, Lanczos, random finite differences),
 the preconditioner applications per step and the share of the step spent in
-``M f``.
+``M f``.  The counts and the share come from a second, instrumented run of
+the same steps (the counting itself costs time, so it is not timed).
 
     python benchmarks/bench_dynamics.py [--bodies 10 100 1000] [--repeats 5]
         [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz ...] [--backends C++ python]
@@ -25,7 +28,6 @@ deterministic_adams_bashforth 1.35 s per step, 2.8 s with one busy process
 on the same 2 cores.  The published code is not run here.
 """
 import argparse
-import linecache
 import multiprocessing
 import os
 import sys
@@ -37,7 +39,6 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
-from multi_bodies.solver import physics as mbf  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 from multi_bodies.solver.system import System  # noqa: E402
@@ -75,18 +76,17 @@ PRODUCT_KINDS = ('gmres', 'residual', 'lanczos', 'rfd', 'other', 'paired')
 def product_kind(frame):
     """Where a product of ``M f`` called from ``frame`` goes: one of PRODUCT_KINDS.
 
-    GMRES: SciPy's Krylov products (``matvec(v[col, :])``); residual: SciPy's
-    ``b - matvec(x)`` and any true residual computed after it; Lanczos; RFD
+    GMRES: the Krylov products of ``krylov.gmres``; residual: a warm start's ``b - A x0``
+    (``krylov.initial_residual``; the residual of each cycle costs no product); Lanczos; RFD
     (products at displaced configurations and at the configuration itself).  'paired': passes over the
     pairs that gave two products at once (one GMRES and one Lanczos product), counted once.
     """
     while frame is not None:
         name, code = frame.f_code.co_name, frame.f_code.co_filename
-        if name == 'gmres' and '_isolve' in code:
-            line = linecache.getline(code, frame.f_lineno)
-            return 'residual' if 'matvec(x)' in line else 'gmres'
-        if name == 'gmres_solve':
+        if name == 'initial_residual':  # a warm start's b - A x0
             return 'residual'
+        if name == 'gmres' and code.endswith('krylov.py'):
+            return 'gmres'
         if 'lanczos' in name:
             return 'lanczos'
         if name in ('products', 'rfd', 'products_at', 'difference', 'roller_drift', 'slip_rfd', 'traction_terms'):
@@ -155,32 +155,16 @@ def busy_loop():  # pragma: no cover - runs in the background process of --loade
         pass
 
 
-def time_steps(num_bodies, backend, scheme_name, repeats, noise_tolerance=None):
-    """(median seconds per step, counters per step) over ``repeats`` steps after one warm-up step."""
+def boomerang_run(num_bodies, backend, scheme_name, noise_tolerance=None, counted=False):
+    """A fresh (system, scheme, rng, counter or None) for ``scheme_name`` on ``num_bodies`` boomerangs."""
     system = boomerang_system(num_bodies, backend)
-    counter = count_products(system)
+    counter = count_products(system) if counted else None
     options = SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=noise_tolerance)
-    scheme = make_scheme(scheme_name, 0.01, options)
-    rng = np.random.default_rng(3)
-    return timed_steps(system, scheme, counter, rng, repeats)
+    return system, make_scheme(scheme_name, 0.01, options), np.random.default_rng(3), counter
 
 
-def timed_steps(system, scheme, counter, rng, repeats):
-    """(median seconds, counters per step) of ``repeats`` steps after one warm-up step (the Euler start of the
-    multistep schemes)."""
-    scheme.step(system, 0, rng)
-    before = dict(system.counters(scheme), **counter.snapshot())
-    times = []
-    for step in range(1, repeats + 1):
-        start = time.perf_counter()
-        scheme.step(system, step, rng)
-        times.append(time.perf_counter() - start)
-    after = dict(system.counters(scheme), **counter.snapshot())
-    return float(np.median(times)), {key: (after[key] - before[key]) / repeats for key in after}
-
-
-def roller_step(num_rollers, repeats):
-    """(median seconds, counters per step) of stochastic_adams_bashforth_rollers for rollers on a grid."""
+def roller_run(num_rollers, counted=False):
+    """A fresh (system, scheme, rng, counter or None): stochastic_adams_bashforth_rollers, rollers on a grid."""
     rng = np.random.default_rng(2)
     side = int(np.ceil(np.sqrt(num_rollers)))
     bodies = []
@@ -195,10 +179,46 @@ def roller_step(num_rollers, repeats):
     system = System(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.5,
                     1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='C++',
                     omega_one_roller=np.array([0.0, 1.0, 0.0]), free_kinematics=False)
-    counter = count_products(system)
+    counter = count_products(system) if counted else None
     scheme = make_scheme('stochastic_adams_bashforth_rollers', 0.01, SimpleNamespace(kT=1.0, rf_delta=1e-3,
                                                                                       update_PC=1))
-    return timed_steps(system, scheme, counter, rng, repeats)
+    return system, scheme, rng, counter
+
+
+def interleaved_seconds(makers, repeats):
+    """Median seconds per step of each run, the runs' steps taken in turn (one step of each per round).
+
+    ``makers``: callables returning (system, scheme, rng, None), uninstrumented.  Every run first takes one
+    warm-up step (the Euler start of the multistep schemes).  Taking the steps in turn puts every run under
+    the same machine conditions, so the ratios of one call are fair even when the machine's speed drifts.
+    """
+    runs = [maker() for maker in makers]
+    for system, scheme, rng, _ in runs:
+        scheme.step(system, 0, rng)
+    times = [[] for _ in runs]
+    for step in range(1, repeats + 1):
+        for k, (system, scheme, rng, _) in enumerate(runs):
+            start = time.perf_counter()
+            scheme.step(system, step, rng)
+            times[k].append(time.perf_counter() - start)
+    return [float(np.median(t)) for t in times]
+
+
+def counted_steps(maker, repeats):
+    """Counters per step over ``repeats`` steps after the warm-up step, and the seconds of those steps, from
+    an instrumented run (``maker`` returns a counter); the counting slows a step, so these seconds give only
+    the kernel's share."""
+    system, scheme, rng, counter = maker()
+    scheme.step(system, 0, rng)
+    before = dict(system.counters(scheme), **counter.snapshot())
+    start = time.perf_counter()
+    for step in range(1, repeats + 1):
+        scheme.step(system, step, rng)
+    seconds = (time.perf_counter() - start) / repeats
+    after = dict(system.counters(scheme), **counter.snapshot())
+    per = {key: (after[key] - before[key]) / repeats for key in after}
+    per['kernel_share'] = per['kernel_seconds'] / max(seconds, 1e-300)
+    return per
 
 
 ROW = '%7d %7s %36s %9.4g %6s %9s %6.1f %6.1f %5.1f %5.1f %5.1f %6.1f %6.1f %5.0f%%'
@@ -209,8 +229,7 @@ def print_row(n, backend, scheme_name, seconds, reference, per, published):
     ratio = '%.2f' % (seconds / reference) if reference else '-'
     published_text = '%.1fx' % (published / seconds) if published else '-'
     print(ROW % (n, backend, scheme_name, seconds, ratio, published_text, total, per['gmres'], per['residual'],
-                 per['lanczos'], per['rfd'], per['paired'], per['pc'], 100.0 * per['kernel_seconds'] / max(seconds, 1e-300)),
-          flush=True)
+                 per['lanczos'], per['rfd'], per['paired'], per['pc'], 100.0 * per['kernel_share']), flush=True)
 
 
 def main(argv=None):
@@ -254,23 +273,26 @@ def run(args):
         for backend in args.backends:
             if backend == 'python' and n > PYTHON_LIMIT:
                 continue
-            reference = None
-            for scheme_name in args.schemes:
-                dense = 'dense' in scheme_name or scheme_name in ('Fixman', 'stochastic_Slip_Mid_DLA')
-                if dense and n > DENSE_LIMIT:
-                    continue
-                seconds, per = time_steps(n, backend, scheme_name, args.repeats,
-                                          None if scheme_name.startswith('deterministic') else args.noise_tolerance)
-                if scheme_name == 'deterministic_adams_bashforth':
-                    reference = seconds
-                published = published_figures.get(scheme_name) if n == 100 else None
-                print_row(n, backend, scheme_name, seconds, reference, per, published)
-    if args.large:
-        seconds, per = time_steps(1000, 'C++', 'stochastic_Slip_Trapz', 1, args.noise_tolerance)
-        print_row(1000, 'C++', 'stochastic_Slip_Trapz', seconds, None, per, None)
-        seconds, per = roller_step(10000, 1)
-        print_row(10000, 'C++', 'stochastic_adams_bashforth_rollers', seconds, None, per, None)
+            names = [name for name in args.schemes
+                     if not (('dense' in name or name in ('Fixman', 'stochastic_Slip_Mid_DLA')) and n > DENSE_LIMIT)]
 
+            def maker(name, counted=False):
+                tolerance = None if name.startswith('deterministic') else args.noise_tolerance
+                return lambda: boomerang_run(n, backend, name, tolerance, counted)
+            seconds = interleaved_seconds([maker(name) for name in names], args.repeats)
+            reference = seconds[names.index('deterministic_adams_bashforth')] \
+                if 'deterministic_adams_bashforth' in names else None
+            for name, step_seconds in zip(names, seconds):
+                per = counted_steps(maker(name, counted=True), args.repeats)
+                published = published_figures.get(name) if n == 100 else None
+                print_row(n, backend, name, step_seconds, reference, per, published)
+    if args.large:
+        large = (('stochastic_Slip_Trapz', 1000, lambda counted=False: boomerang_run(
+                      1000, 'C++', 'stochastic_Slip_Trapz', args.noise_tolerance, counted)),
+                 ('stochastic_adams_bashforth_rollers', 10000, lambda counted=False: roller_run(10000, counted)))
+        for name, n, make in large:
+            seconds, = interleaved_seconds([make], 1)
+            print_row(n, 'C++', name, seconds, None, counted_steps(lambda: make(counted=True), 1), None)
 
 if __name__ == '__main__':
     main()

@@ -100,9 +100,12 @@ class Scheme:
         self.roller_torque_guess = None
 
     # -------------------------------------------------------------- velocities with the warm starts
-    def deterministic_solve(self, system, problem, rhs, preconditioner):
-        """The counted deterministic solve of ``rhs`` at ``problem``, from and into ``first_guess``."""
-        result = system.solve(problem, rhs, preconditioner, x0=self.first_guess)
+    def deterministic_solve(self, system, problem, rhs, preconditioner, warm_start=True):
+        """The counted deterministic solve of ``rhs`` at ``problem``, from and into ``first_guess``.
+
+        ``warm_start=False`` starts from zero (the solution is still kept as the next ``first_guess``).
+        """
+        result = system.solve(problem, rhs, preconditioner, x0=self.first_guess if warm_start else None)
         if result.normalised_solution is not None:
             self.first_guess = result.normalised_solution
         return result

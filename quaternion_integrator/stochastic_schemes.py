@@ -77,6 +77,11 @@ class StochasticScheme(Scheme):
     """
     dense = False
     pair_products = True  # share passes over the blob pairs between independent products (C++ backend)
+    # A solve whose right-hand side holds this step's Brownian slip starts from zero, not from the last solution:
+    # the noise, sqrt(2 kT / dt) M^{1/2} W with a fresh W, dominates the right-hand side, so the last solution
+    # is a worse start than zero (100 boomerangs, Slip_Trapz: |b - A x0| = 1.25 |b|) and its residual costs
+    # a product.  Iterates differ from a warm start only within solver_tolerance.
+    cold_start_fresh_noise = True
     thermal_drift = True  # False switches every drift term off (a negative control for the tests; wrong physics)
 
     def __init__(self, dt, options=None):
@@ -187,38 +192,39 @@ class StochasticScheme(Scheme):
             return displace_bodies(q, scale, direction, lengths)
         return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
 
-    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor, W_R=None):
+    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor, W_R=None, at_configuration=None):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
         by ``delta W_R`` (no body-length scaling) the slip is ``factor delta (M' W_s - M W_s) / delta`` and
         the force ``-factor delta (K'^T W_s - K^T W_s) / delta``, with ``factor = 2 kT / delta``
         (trapezoidal) or ``kT / delta`` (midpoint).  Zero when ``thermal_drift`` is off.
-        ``W_R`` (Nb, 6): the solve's velocities when the caller made it (``slip_rfd_solve``).
+        ``W_R`` (Nb, 6): the solve's velocities when the caller made it (``slip_rfd_solve``);
+        ``at_configuration``: ``(M W_s, K^T W_s)`` at ``problem`` when the caller has them
+        (:meth:`slip_rfd_products_at`).
         """
         if W_R is None:
             W_R = self.slip_rfd_solve(system, problem, W_s, preconditioner)
+        if at_configuration is None:
+            at_configuration = self.slip_rfd_products_at(problem, W_s)
 
         def products(q):
             moved = system.mobility_problem(q)
             return moved.M_dot(W_s), moved.KT_dot(W_s)
         D_M, D_KT = rfd(products, configuration, W_R, self.delta, displace_bodies, centred=False,
-                        at_configuration=(problem.M_dot(W_s), problem.KT_dot(W_s)))
+                        at_configuration=at_configuration)
         scale = factor * self.delta if self.thermal_drift else 0.0
         return scale * D_M, -scale * D_KT
+
+    @staticmethod
+    def slip_rfd_products_at(problem, W_s):
+        """``(M W_s (3N,), K^T W_s (Nb, 6))`` at ``problem``: the unmoved end of the slip RFD."""
+        return problem.M_dot(W_s), problem.KT_dot(W_s)
 
     def slip_rfd_solve(self, system, problem, W_s, preconditioner):
         """``W_R = N K^T M^{-1} W_s`` (Nb, 6) by one noise solve (right-hand side ``[-W_s; 0]``)."""
         return self.noise_solve(system, problem, preconditioner,
                                 rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
-
-    def noise_and_slip_rfd_solve(self, system, problem, W1, factor, W_s, preconditioner):
-        """``(factor M^{1/2} W1, W_R)`` at ``problem``: the Lanczos call and the independent RFD solve
-        (:meth:`side_by_side`)."""
-        return self.side_by_side(
-            system, problem,
-            lambda shared: self.lanczos_noise(system, shared, W1, factor, preconditioner),
-            lambda shared: self.slip_rfd_solve(system, shared, W_s, preconditioner))
 
     def side_by_side(self, system, problem, first, second):
         """``(first(problem), second(problem))`` for two computations at one configuration that do not
@@ -323,11 +329,18 @@ class StochasticScheme(Scheme):
             return current + noise_part
         return 1.5 * current - 0.5 * self.previous_velocities + noise_part
 
-    def deterministic_part(self, system, problem, old, preconditioner, noise_slip=None, noise_force=None):
-        """The warm-started solve at ``old`` of its forces and slip plus the given noise terms: velocities (Nb, 6)."""
+    def deterministic_part(self, system, problem, old, preconditioner, noise_slip=None, noise_force=None,
+                           fresh_noise=False):
+        """The solve at ``old`` of its forces and slip plus the given noise terms: velocities (Nb, 6).
+
+        Warm started from the last deterministic solve, except with ``fresh_noise`` (the right-hand side holds
+        this step's Brownian slip, which the last solution knows nothing of): then from zero, see
+        :attr:`cold_start_fresh_noise`.
+        """
         _, force_torque, slip = system.forces_and_slip(old)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
-        return self.deterministic_solve(system, problem, rhs, preconditioner).velocities
+        warm = not (fresh_noise and self.cold_start_fresh_noise)
+        return self.deterministic_solve(system, problem, rhs, preconditioner, warm_start=warm).velocities
 
 
 # ====================================================================== rigid multiblob, iterative
@@ -344,7 +357,7 @@ class StochasticFirstOrderRFD(StochasticScheme):
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise, fresh_noise=True)
         U = U + self.rfd_drift(system, old, W_rfd, pc)
         return self.move(old, U, self.dt), U
 
@@ -404,7 +417,8 @@ class StochasticTractionEM(StochasticScheme):
 
     def attempt(self, system, step_index, rng, old):
         problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force)
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force,
+                                   fresh_noise=True)
         return self.move(old, U, self.dt), U
 
 
@@ -446,9 +460,15 @@ class StochasticSlipTrapz(StochasticScheme):
         W_s = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1, W_R = self.noise_and_slip_rfd_solve(system, problem, W1, self.noise_factor(), W_s, pc)
-        U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R)
+
+        def rfd_solve_and_products(shared):  # W_R and the slip RFD's products at q, beside the Lanczos call
+            return self.slip_rfd_solve(system, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s)
+        n1, (W_R, at_q) = self.side_by_side(
+            system, problem, lambda shared: self.lanczos_noise(system, shared, W1, self.noise_factor(), pc),
+            rfd_solve_and_products)
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R,
+                                                at_configuration=at_q)
+        U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1, fresh_noise=True)
         U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
                                        pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
@@ -471,7 +491,7 @@ class StochasticSlipMid(StochasticScheme):
         pc = self.preconditioner(system, step_index, problem)
         n1 = self.lanczos_noise(system, problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
         n_c = self.lanczos_noise(system, problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
-        U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1)
+        U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1, fresh_noise=True)
         drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
         U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
         return self.move(old, U, self.dt), U
@@ -494,7 +514,7 @@ class StochasticEM(StochasticScheme):
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
         noise = self.lanczos_noise(system, problem, W, self.noise_factor(), pc)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise)
+        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise, fresh_noise=True)
         return self.move(old, U, self.dt), U
 
 
@@ -574,7 +594,7 @@ class StochasticGDCRFD(StochasticScheme):
         self.check(system, mid)
         problem_mid = system.mobility_problem(mid)
         noise_mid = self.lanczos_noise(system, problem_mid, W, factor, pc)
-        U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid)
+        U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
         U = U * (1.0 + 0.5 * self.dt * divergence)
         return self.move(old, U, self.dt), U
 

@@ -32,8 +32,10 @@ from collections import namedtuple
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
+from scipy.linalg.lapack import dstev
 
 LANCZOS_MAX_ITERATIONS = 1000
+REORTHOGONALISE_AGAIN = 1.0 / np.sqrt(2.0)
 
 LanczosResult = namedtuple('LanczosResult', ['noise', 'iterations', 'converged', 'relative_change'])
 LanczosResult.__doc__ = """Result of ``lanczos_square_root``.
@@ -79,27 +81,38 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
     alphas, betas = [], []
     previous, change = None, np.inf
     converged = False
-    y = np.zeros(n)
+    coefficients = np.ones(1)
+    tiny = np.finfo(float).eps / beta0
+    # The approximation is y_i = beta0 V_i c_i with V_i the orthonormal Krylov basis (rows of ``basis``) and
+    # c_i = f(T_i) e_1, f = sqrt; so |y_i - y_{i-1}| = beta0 |c_i - (c_{i-1}, 0)| and |y_{i-1}| = beta0 |c_{i-1}|
+    # (V_i^T V_i = I to rounding, by the full re-orthogonalisation), and y is formed once, at the end.
     for i in range(min(max_iterations, n)):
-        w = np.asarray(matvec(basis[i]), dtype=float).reshape(-1)
+        w = np.array(matvec(basis[i]), dtype=float).reshape(-1)
         if i > 0:
-            w = w - betas[i - 1] * basis[i - 1]
+            w -= betas[i - 1] * basis[i - 1]
         alpha = float(np.dot(w, basis[i]))
-        w = w - alpha * basis[i]
-        # Full re-orthogonalisation against every stored vector (twice is enough, Giraud et al. 2005).
-        for _ in range(2):
-            w = w - basis[:i + 1].T @ (basis[:i + 1] @ w)
-        alphas.append(alpha)
+        w -= alpha * basis[i]
+        # Full re-orthogonalisation against every stored vector; a second pass only when the first removed
+        # more than 1 - 1/sqrt(2) of the norm (the DGKS criterion: Daniel, Gragg, Kaufman and Stewart 1976;
+        # twice is enough, Giraud et al. 2005).
+        stored = basis[:i + 1]
+        before = float(np.linalg.norm(w))
+        w -= stored.T @ (stored @ w)
         beta = float(np.linalg.norm(w))
+        if beta < REORTHOGONALISE_AGAIN * before:
+            w -= stored.T @ (stored @ w)
+            beta = float(np.linalg.norm(w))
+        alphas.append(alpha)
         if i == 0:
             eigenvalues, Q = np.array([alpha]), np.ones((1, 1))
         else:
-            eigenvalues, Q = eigh_tridiagonal(np.array(alphas), np.array(betas))
+            eigenvalues, Q = tridiagonal_eigenpairs(alphas, betas)
         coefficients = Q @ (np.sqrt(np.maximum(eigenvalues, 0.0)) * Q[0, :])
-        y = beta0 * (basis[:i + 1].T @ coefficients)
         exhausted = beta <= 1e-14 * max(abs(alpha), 1e-300) or i + 1 == n
         if previous is not None:
-            change = float(np.linalg.norm(y - previous) / max(np.linalg.norm(previous), np.finfo(float).eps))
+            step = coefficients.copy()
+            step[:-1] -= previous
+            change = float(np.linalg.norm(step) / max(np.linalg.norm(previous), tiny))
             if print_residual:
                 print('lanczos = %d %s' % (i + 1, change))
             if change < tolerance:
@@ -110,12 +123,26 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
             break
         basis[i + 1] = w / beta
         betas.append(beta)
-        previous = y
+        previous = coefficients
     else:
         iterations = min(max_iterations, n)
+    y = beta0 * (basis[:coefficients.size].T @ coefficients)
     if L_mult is not None:
         y = np.asarray(L_mult(y), dtype=float).reshape(-1)
     return LanczosResult(factor * y, iterations, converged, change if np.isfinite(change) else 0.0)
+
+
+def tridiagonal_eigenpairs(diagonal, off_diagonal):
+    """Eigenvalues (k,) ascending and eigenvectors (k, k) (columns) of a symmetric tridiagonal matrix.
+
+    LAPACK ``dstev`` (a tenth of ``scipy.linalg.eigh_tridiagonal``'s call overhead at the sizes of a
+    Lanczos iteration), ``eigh_tridiagonal`` if it fails.
+    """
+    d, e = np.array(diagonal, dtype=float), np.array(off_diagonal, dtype=float)
+    eigenvalues, vectors, info = dstev(d, e)
+    if info != 0:
+        return eigh_tridiagonal(d, e)
+    return eigenvalues, vectors
 
 
 def cholesky_root(matrix, z):

@@ -86,3 +86,155 @@ def test_noise_tolerance_is_an_input_file_option():
                                                                   program='dynamic')).noise_tolerance is None
     with pytest.raises(UserInputError, match='in.dat, line 3: noise_solver_tolerance'):
         parse_input_text(text.replace('1e-4', '2'), 'in.dat', program='dynamic')
+
+
+# ---------------------------------------------------------------------------------------------- GMRES, Lanczos
+def saddle_like_system(n=240, seed=3):
+    """A nonsymmetric, well-conditioned (n, n) matrix, a block-diagonal (Jacobi-like) preconditioner of it and a
+    right-hand side."""
+    rng = np.random.default_rng(seed)
+    A = np.eye(n) * 3.0 + rng.normal(size=(n, n)) / np.sqrt(n)
+    blocks = [np.linalg.inv(A[k:k + 8, k:k + 8]) for k in range(0, n, 8)]
+    P = np.zeros((n, n))
+    for k, block in zip(range(0, n, 8), blocks):
+        P[k:k + 8, k:k + 8] = block
+    return A, P, rng.normal(size=n)
+
+
+@pytest.mark.parametrize('restart, warm, tolerance', [(60, False, 1e-8), (60, True, 1e-12), (4, False, 1e-10),
+                                                      (60, False, 1e-14)])
+def test_gmres_follows_scipy_with_fewer_products(restart, warm, tolerance):
+    """krylov.gmres keeps SciPy's rules (left preconditioning, true residual <= rtol |b|, SciPy's inner
+    tolerance control): the same iteration count and the same solution to rounding, with one product
+    fewer (the converged cycle's residual) above the rounding guard, the same number below it."""
+    import scipy.sparse.linalg as spla
+    from multi_bodies.solver import krylov
+    from stochastic_forcing import compat
+    A, P, b = saddle_like_system()
+    x0 = np.linalg.solve(A, b) + 1e-3 * np.random.default_rng(1).normal(size=b.size) if warm else None
+    counts = {'scipy': 0, 'ours': 0}
+
+    def counted(key):
+        def matvec(v):
+            counts[key] += 1
+            return A @ v
+        return matvec
+    iterations = [0]
+    expected, info = compat.gmres(spla.LinearOperator(A.shape, matvec=counted('scipy'), dtype=float), b,
+                                  tolerance, x0=x0,
+                                  atol=0.0, restart=restart, maxiter=1000, M=spla.aslinearoperator(P),
+                                  callback=lambda _: iterations.__setitem__(0, iterations[0] + 1),
+                                  callback_type='legacy')
+    x, our_info, our_iterations, residual = krylov.gmres(counted('ours'), b, tolerance, psolve=lambda v: P @ v,
+                                                         x0=x0, restart=restart)
+    assert (our_info, our_iterations) == (info, iterations[0])
+    np.testing.assert_allclose(x, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    true = b - A @ x
+    np.testing.assert_allclose(residual, true, rtol=0, atol=1e-13 * np.linalg.norm(b))
+    assert np.linalg.norm(true) <= tolerance * np.linalg.norm(b) * (1 + 1e-6)
+    above_rounding = tolerance >= krylov.ROUNDING_GUARD * np.finfo(float).eps
+    assert counts['ours'] == counts['scipy'] - (1 if above_rounding else 0), counts
+
+
+def test_gmres_below_rounding_reports_failure_not_a_false_convergence():
+    """Asked for a relative residual of 1e-300 the true residual stagnates near rounding: GMRES must say it did
+    not converge (the updated residual alone would shrink to zero and claim convergence)."""
+    from multi_bodies.solver import krylov
+    A, P, b = saddle_like_system()
+    x, info, iterations, residual = krylov.gmres(lambda v: A @ v, b, 1e-300, psolve=lambda v: P @ v, maxiter=200)
+    assert info != 0 and iterations == 200
+    assert np.linalg.norm(residual) > 0.0
+    np.testing.assert_allclose(residual, b - A @ x, rtol=0, atol=1e-14 * np.linalg.norm(b))
+
+
+def published_lanczos_iterations(M, z, tolerance):
+    """Iterations of the Lanczos square root when the change |y_i - y_(i-1)| / |y_(i-1)| is taken from the
+    vectors y_i themselves (the form of the published code)."""
+    from scipy.linalg import eigh_tridiagonal
+    n = z.size
+    V = [z / np.linalg.norm(z)]
+    alphas, betas, previous = [], [], None
+    for i in range(n):
+        w = M @ V[i] - (betas[-1] * V[i - 1] if i else 0.0)
+        alphas.append(w @ V[i])
+        w = w - alphas[-1] * V[i]
+        B = np.array(V)
+        w = w - B.T @ (B @ w)
+        w = w - B.T @ (B @ w)
+        values, Q = (np.array(alphas), np.ones((1, 1))) if i == 0 else eigh_tridiagonal(np.array(alphas),
+                                                                                      np.array(betas))
+        y = np.linalg.norm(z) * (B.T @ (Q @ (np.sqrt(np.maximum(values, 0)) * Q[0])))
+        if previous is not None and np.linalg.norm(y - previous) / np.linalg.norm(previous) < tolerance:
+            return i + 1, y
+        previous = y
+        betas.append(np.linalg.norm(w))
+        V.append(w / betas[-1])
+    return n, y
+
+
+@pytest.mark.parametrize('tolerance', [1e-4, 1e-8, 1e-12])
+def test_lanczos_stops_where_the_published_form_stops(tolerance):
+    """The relative change of the Lanczos approximation is taken from its coefficients in the orthonormal Krylov
+    basis (no 3N-vector per iteration): the same stopping iteration and the same noise as when it is taken from
+    the vectors, on a blob mobility of 60 blobs above a wall."""
+    import mobility
+    from stochastic_forcing import lanczos_square_root
+    rng = np.random.default_rng(8)
+    r = rng.random((60, 3)) * [6.0, 6.0, 2.0] + [0.0, 0.0, 1.0]
+    M = mobility.blob_mobility_matrix('python')(r, 1.0, 0.5)
+    z = rng.standard_normal(180)
+    result = lanczos_square_root(lambda v: M @ v, z, tolerance)
+    iterations, expected = published_lanczos_iterations(M, z, tolerance)
+    assert result.iterations == iterations
+    np.testing.assert_allclose(result.noise, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+def test_compiled_preconditioner_blocks_equal_numpy():
+    """The compiled block products of the preconditioner (its application, L, L^-1, L^-T) equal the NumPy
+    versions on boomerangs and single blobs together, and L^-1 undoes L."""
+    from multi_bodies.solver import body_solver
+    if body_solver._preconditioner_cpp is None:
+        pytest.skip('multi_bodies.solver._preconditioner_cpp is not built (python3 setup.py build_ext --inplace)')
+    import bench_dynamics
+    from body.body import Body, bodies_to_arrays
+    system = bench_dynamics.boomerang_system(6, 'python')
+    bodies = list(system.bodies) + [Body([20.0 + 3 * k, 0.0, 2.0], [1, 0, 0, 0], np.zeros((1, 3)), 0.25)
+                                    for k in range(3)]
+    arrays = bodies_to_arrays(bodies)
+    import mobility
+    pc = body_solver.BlockDiagonalPreconditioner(arrays, arrays.configuration,
+                                                 mobility.blob_mobility_matrix('python'), 1.0, 0.25)
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=3 * arrays.num_blobs + 6 * arrays.num_bodies)
+    v = rng.normal(size=3 * arrays.num_blobs)
+    compiled = [pc.apply(x), pc.L_dot(v), pc.L_inv_dot(v), pc.L_inv_T_dot(v)]
+    saved, body_solver._preconditioner_cpp = body_solver._preconditioner_cpp, None
+    try:
+        plain = [pc.apply(x), pc.L_dot(v), pc.L_inv_dot(v), pc.L_inv_T_dot(v)]
+    finally:
+        body_solver._preconditioner_cpp = saved
+    for got, expected in zip(compiled, plain):
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(pc.L_inv_dot(pc.L_dot(v)), v, rtol=0, atol=1e-10)
+
+
+def test_fresh_noise_solve_from_zero_gives_the_warm_started_step_with_fewer_products():
+    """The Slip_Trapz predictor, whose right-hand side holds this step's noise, starts from zero instead of the
+    last solution: the same step to the solver tolerance, and one residual product fewer per step."""
+    import bench_dynamics
+    from quaternion_integrator import stochastic_schemes
+    results = {}
+    for cold in (False, True):
+        system = bench_dynamics.boomerang_system(9, 'C++')
+        counter = bench_dynamics.count_products(system)
+        scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options(None))
+        scheme.cold_start_fresh_noise = cold
+        rng = np.random.default_rng(5)
+        configuration = system.configuration
+        for step in range(3):
+            configuration, velocities = scheme.advance(system, configuration, step, rng)
+        results[cold] = (velocities, counter.counts['residual'])
+    assert stochastic_schemes.StochasticScheme.cold_start_fresh_noise
+    (warm, warm_residuals), (cold, cold_residuals) = results[False], results[True]
+    np.testing.assert_allclose(cold, warm, rtol=0, atol=1e-6 * np.abs(warm).max())
+    assert cold_residuals <= warm_residuals - 2  # at least one each in steps 1 and 2 (step 0 has no earlier solution)

@@ -38,8 +38,14 @@ import numpy as np
 import scipy.linalg.lapack as _lapack
 import scipy.sparse.linalg as spla
 
-from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions
-from stochastic_forcing import compat
+from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions, saddle_point_product
+
+from . import krylov
+
+try:  # the per-body block products in C++ (multi_bodies/solver/cpp/preconditioner_module.cpp); NumPy without it
+    from . import _preconditioner_cpp
+except ImportError:  # pragma: no cover - a build without a C++ compiler
+    _preconditioner_cpp = None
 
 GMRES_RESTART = 60
 GMRES_MAXITER = 1000
@@ -197,9 +203,9 @@ class MobilityProblem:
         x = np.asarray(x, dtype=float).reshape(-1)
         n3 = 3 * self.num_blobs
         lambda_blobs, velocities = x[:n3], x[n3:]
-        slip_part = self.M_dot(lambda_blobs) - self.K_dot(velocities).reshape(-1)
-        force_part = -self.KT_dot(lambda_blobs).reshape(-1)
-        return np.concatenate((slip_part, force_part))
+        return saddle_point_product(self.r_vectors, self.locations, self.body_arrays.blob_offsets,
+                                    self.body_arrays.blob_body_index, self.M_dot(lambda_blobs), lambda_blobs,
+                                    velocities)
 
     def rhs(self, slip=None, force_torque=None, noise_slip=None, noise_force=None):
         """``[slip - noise_slip; -(F + noise_force)]`` (3N + 6Nb,); each argument None for zero.
@@ -298,7 +304,8 @@ class BlockDiagonalPreconditioner:
                                      for k, r_body in enumerate(r_type)])
             try:
                 L = np.linalg.cholesky(M_blocks)
-                L_inv = np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape))
+                # L^{-1} is lower triangular; tril clears the rounding the general solve leaves above the diagonal
+                L_inv = np.tril(np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape)))
                 M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
             except np.linalg.LinAlgError:
                 L = L_inv = None
@@ -320,34 +327,50 @@ class BlockDiagonalPreconditioner:
     def locations(self):
         return self.configuration.locations
 
-    def _blockwise(self, vector, factors):
-        """Apply per-body dense blocks ``factors`` (list per type, (nb, 3n, 3n) or None = identity) to (3N,)."""
-        vector = np.asarray(vector, dtype=float).reshape(-1, 3)
+    def _blockwise(self, vector, factors, transpose=False, lower=False):
+        """Apply per-body dense blocks ``factors`` (list per type, (nb, 3n, 3n) or None = identity) to (3N,).
+
+        ``transpose``: the blocks' transposes; ``lower``: the blocks are lower triangular (the compiled
+        product then reads only their lower halves).
+        """
+        vector = np.ascontiguousarray(vector, dtype=float).reshape(-1)
         out = vector.copy()
         for (bodies, blobs), F in zip(self.body_arrays.type_slices, factors):
             if F is None:
                 continue
+            if _preconditioner_cpp is not None:
+                _preconditioner_cpp.block_product(F, vector, out, 3 * blobs.start, transpose, lower)
+                continue
             nb = bodies.stop - bodies.start
-            out[blobs] = np.matmul(F, vector[blobs].reshape(nb, -1, 1)).reshape(-1, 3)
-        return out.reshape(-1)
+            block = np.swapaxes(F, 1, 2) if transpose else F
+            out[3 * blobs.start:3 * blobs.stop] = np.matmul(block, vector[3 * blobs.start:3 * blobs.stop].reshape(
+                nb, -1, 1)).reshape(-1)
+        return out
 
     def L_dot(self, vector):
         """``L v`` with the block lower Cholesky factors ``M_k = L_k L_k^T``; vector (3N,)."""
-        return self._blockwise(vector, self.cholesky_factors)
+        return self._blockwise(vector, self.cholesky_factors, lower=True)
 
     def L_inv_dot(self, vector):
         """``L^{-1} v``; vector (3N,)."""
-        return self._blockwise(vector, self.inverse_cholesky_factors)
+        return self._blockwise(vector, self.inverse_cholesky_factors, lower=True)
 
     def L_inv_T_dot(self, vector):
         """``L^{-T} v``; vector (3N,)."""
-        return self._blockwise(vector, [None if F is None else np.swapaxes(F, 1, 2)
-                                        for F in self.inverse_cholesky_factors])
+        return self._blockwise(vector, self.inverse_cholesky_factors, transpose=True, lower=True)
 
     def apply(self, x):
         """Apply the preconditioner to ``x = [s (3N); f (6 Nb)]``; returns the same layout."""
-        x = np.asarray(x, dtype=float).reshape(-1)
+        x = np.ascontiguousarray(x, dtype=float).reshape(-1)
         n_blob_unknowns = 3 * self.body_arrays.num_blobs
+        if _preconditioner_cpp is not None:
+            out = np.empty_like(x)
+            for (bodies, blobs), M_inv, M_inv_K, K, N in zip(
+                    self.body_arrays.type_slices, self.inverse_mobilities, self.inverse_mobility_times_K,
+                    self.K, self.body_mobilities):
+                _preconditioner_cpp.saddle_block_inverse(M_inv, M_inv_K, K, N, x, out, 3 * blobs.start,
+                                                         n_blob_unknowns + 6 * bodies.start)
+            return out
         slip = x[:n_blob_unknowns].reshape(-1, 3)
         force = x[n_blob_unknowns:].reshape(-1, 6)
         lambda_out = np.empty_like(slip)
@@ -368,57 +391,26 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
                 maxiter=GMRES_MAXITER, print_residual=False):
     """GMRES on ``operator x = rhs`` (relative tolerance, ``atol = 0``): the one GMRES call of the package.
 
-    operator : LinearOperator or object with ``matvec``; rhs (n,); preconditioner : LinearOperator or None;
-    x0 (n,) or None (zeros).  Returns :data:`GmresResult` with the true relative residual
-    ``|rhs - A x| / |rhs|`` (SciPy's own last
-    product at ``x`` when it made one, else one more product).  A zero right-hand side gives ``x = 0`` at once.
+    operator : LinearOperator or object with ``matvec``; rhs (n,); preconditioner : LinearOperator, object
+    with ``matvec`` or None; x0 (n,) or None (zeros).  :func:`krylov.gmres` (SciPy's rules, no product
+    beyond the Krylov ones and the warm start's residual).  Returns :data:`GmresResult` with the true
+    relative residual ``|rhs - A x| / |rhs|`` (from the Arnoldi products, equal to rounding).  A zero
+    right-hand side gives ``x = 0`` at once.
     """
     rhs = np.asarray(rhs, dtype=float).reshape(-1)
     rhs_norm = float(np.linalg.norm(rhs))
     if rhs_norm == 0.0:
         return GmresResult(np.zeros_like(rhs), 0, True, 0.0)
-    iterations = [0]
 
-    def count(residual_norm):
-        iterations[0] += 1
-        if print_residual:
-            print('gmres = %d %s' % (iterations[0], residual_norm))
+    def report(residual_norm, count=[0]):
+        count[0] += 1
+        print('gmres = %d %s' % (count[0], residual_norm))
 
-    remembered = _LastProduct(operator, rhs.size)
-    solution, info = compat.gmres(remembered, rhs, tolerance, x0=x0, atol=0.0, restart=restart, maxiter=maxiter,
-                                  M=preconditioner, callback=count, callback_type='legacy')
-    product = remembered.product_of(solution)
-    if product is None:  # SciPy's last product was not at the solution: one more
-        product = np.asarray(operator.matvec(solution)).reshape(-1)
-    residual = float(np.linalg.norm(rhs - product) / rhs_norm)
-    return GmresResult(solution, iterations[0], info == 0, residual)
-
-
-class _LastProduct(spla.LinearOperator):
-    """``operator`` that remembers its last input and output (n,), so the true residual costs no product.
-
-    SciPy's GMRES ends every restart cycle with the true residual ``b - A x``
-    of the iterate it returns; :func:`gmres_solve` reuses that product
-    instead of computing it again (one product of ``M f`` fewer per solve,
-    the same numbers).
-    """
-
-    def __init__(self, operator, size):
-        self._operator = operator
-        self._last = None
-        super().__init__(dtype=float, shape=(size, size))
-
-    def _matvec(self, x):
-        x = np.asarray(x, dtype=float).reshape(-1)
-        y = np.asarray(self._operator.matvec(x), dtype=float).reshape(-1)
-        self._last = (x.copy(), y)
-        return y
-
-    def product_of(self, x):
-        """``A x`` if ``x`` was the last input (bitwise), else None."""
-        if self._last is None or not np.array_equal(self._last[0], np.asarray(x).reshape(-1)):
-            return None
-        return self._last[1]
+    psolve = None if preconditioner is None else preconditioner.matvec
+    solution, info, iterations, residual = krylov.gmres(
+        operator.matvec, rhs, tolerance, psolve=psolve, x0=x0, restart=restart, maxiter=maxiter,
+        callback=report if print_residual else None)
+    return GmresResult(solution, iterations, info == 0, float(np.linalg.norm(residual) / rhs_norm))
 
 
 def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
