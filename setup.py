@@ -43,7 +43,8 @@ if sys.platform != 'win32':
     else:
         print('setup.py: the compiler does not accept -fopenmp; building the kernels single-threaded')
 
-HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobility/cpp/openmp_threads.h']
+HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobility/cpp/openmp_threads.h',
+           'mobility/cpp/fast_exp.h']
 extensions = [
     Pybind11Extension(
         'mobility._mobility_cpp',
