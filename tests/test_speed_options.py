@@ -103,10 +103,12 @@ def saddle_like_system(n=240, seed=3):
 
 @pytest.mark.parametrize('restart, warm, tolerance', [(60, False, 1e-8), (60, True, 1e-12), (4, False, 1e-10),
                                                       (60, False, 1e-14)])
-def test_gmres_follows_scipy_with_fewer_products(restart, warm, tolerance):
-    """krylov.gmres keeps SciPy's rules (left preconditioning, true residual <= rtol |b|, SciPy's inner
-    tolerance control): the same iteration count and the same solution to rounding, with one product
-    fewer (the converged cycle's residual) above the rounding guard, the same number below it."""
+def test_gmres_meets_scipys_rule_with_fewer_products(restart, warm, tolerance):
+    """krylov.gmres keeps SciPy's rules (left preconditioning, converged when the true residual is at most
+    rtol |b|, SciPy's inner tolerance control) and SciPy's answer to within the tolerance, in no more
+    iterations.  Above the rounding guard a solve makes no product beyond its Krylov ones and a warm start's
+    residual (SciPy makes one per cycle, and restarts when its inner estimate passes before the true
+    residual does); below it, SciPy's products exactly."""
     import scipy.sparse.linalg as spla
     from multi_bodies.solver import krylov
     from stochastic_forcing import compat
@@ -121,19 +123,29 @@ def test_gmres_follows_scipy_with_fewer_products(restart, warm, tolerance):
         return matvec
     iterations = [0]
     expected, info = compat.gmres(spla.LinearOperator(A.shape, matvec=counted('scipy'), dtype=float), b,
-                                  tolerance, x0=x0,
-                                  atol=0.0, restart=restart, maxiter=1000, M=spla.aslinearoperator(P),
+                                  tolerance, x0=x0, atol=0.0, restart=restart, maxiter=1000,
+                                  M=spla.aslinearoperator(P),
                                   callback=lambda _: iterations.__setitem__(0, iterations[0] + 1),
                                   callback_type='legacy')
     x, our_info, our_iterations, residual = krylov.gmres(counted('ours'), b, tolerance, psolve=lambda v: P @ v,
                                                          x0=x0, restart=restart)
-    assert (our_info, our_iterations) == (info, iterations[0])
-    np.testing.assert_allclose(x, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert info == our_info == 0
+    assert our_iterations <= iterations[0]
     true = b - A @ x
+    assert np.linalg.norm(true) <= tolerance * np.linalg.norm(b)
     np.testing.assert_allclose(residual, true, rtol=0, atol=1e-13 * np.linalg.norm(b))
-    assert np.linalg.norm(true) <= tolerance * np.linalg.norm(b) * (1 + 1e-6)
+    # both answers are as close to the exact one as their residuals allow: |x - x*| <= |A^-1| |b - A x|
+    exact = np.linalg.solve(A, b)
+    bound = np.linalg.norm(np.linalg.inv(A), 2) * tolerance * np.linalg.norm(b)
+    for answer in (x, expected):
+        assert np.linalg.norm(answer - exact) <= bound + 1e-14 * np.linalg.norm(exact)
     above_rounding = tolerance >= krylov.ROUNDING_GUARD * np.finfo(float).eps
-    assert counts['ours'] == counts['scipy'] - (1 if above_rounding else 0), counts
+    if above_rounding and our_iterations <= restart:
+        assert counts['ours'] == our_iterations + (1 if warm else 0), counts
+    if above_rounding:
+        assert counts['ours'] < counts['scipy'], counts
+    else:
+        assert (counts['ours'], our_iterations) == (counts['scipy'], iterations[0]), counts
 
 
 def test_gmres_below_rounding_reports_failure_not_a_false_convergence():
