@@ -30,6 +30,7 @@ same unit system.
 from . import threads as _threads
 
 _threads.apply_wait_policy()  # before any OpenMP kernel loads (mobility.threads: passive waiting threads)
+_threads.apply_blas_policy()  # one BLAS thread: its spinning workers slowed the kernels (mobility.threads)
 
 from . import python_backend as _python  # noqa: E402
 from .product_names import PRODUCT_KINDS  # noqa: E402
