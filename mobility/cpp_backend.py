@@ -55,6 +55,9 @@ def _dense(r_vectors, eta, a, periodic_length, wall):
     r = np.asarray(r_vectors, dtype=np.float64)
     radius = np.asarray(a, dtype=np.float64)
     if r.ndim == 3 and r.shape[2] == 3:  # a stack of bodies: one block each
+        if radius.size == 1 and domain in ('single_wall', 'no_wall') and hasattr(_ext, 'dense_trans_trans_stack'):
+            return _ext.dense_trans_trans_stack(r.reshape(-1, 3), r.shape[0], float(eta), float(radius.reshape(-1)[0]),
+                                                _L(periodic_length), domain == 'single_wall')
         radii = np.broadcast_to(radius, r.shape[:2]) if radius.size > 1 else [radius] * r.shape[0]
         return np.stack([_dense(body, eta, rad, periodic_length, domain) for body, rad in zip(r, radii)])
     if radius.size > 1 and not np.all(radius == radius.reshape(-1)[0]):

@@ -250,3 +250,25 @@ def test_fresh_noise_solve_from_zero_gives_the_warm_started_step_with_fewer_prod
     (warm, warm_residuals), (cold, cold_residuals) = results[False], results[True]
     np.testing.assert_allclose(cold, warm, rtol=0, atol=1e-6 * np.abs(warm).max())
     assert cold_residuals <= warm_residuals - 2  # at least one each in steps 1 and 2 (step 0 has no earlier solution)
+
+
+def test_compiled_triangular_inverse_and_stacked_blocks():
+    """The compiled L^-1 of Cholesky factors equals the general solve against the identity, and the stacked dense
+    blocks of many bodies equal the blocks of each body alone (wall, blobs below a, and free space)."""
+    from multi_bodies.solver import body_solver
+    cpp = pytest.importorskip('mobility.cpp_backend')
+    if body_solver._preconditioner_cpp is None or not hasattr(cpp._ext, 'dense_trans_trans_stack'):
+        pytest.skip('the extensions were built before these functions (python3 setup.py build_ext --inplace)')
+    rng = np.random.default_rng(6)
+    r = rng.random((7, 12, 3)) * [4.0, 4.0, 2.0]  # some blobs below the radius 0.5 (the wall regularisation)
+    for wall in (True, False):
+        stack = cpp._ext.dense_trans_trans_stack(r.reshape(-1, 3), 7, 1.1, 0.5, np.zeros(3), wall)
+        each = np.stack([cpp._ext.dense_trans_trans(body, 1.1, 0.5, np.zeros(3), wall) for body in r])
+        np.testing.assert_array_equal(stack, each)
+    L = np.linalg.cholesky(stack)
+    L_inv = body_solver._preconditioner_cpp.lower_triangular_inverse(L)
+    expected = np.linalg.solve(L, np.broadcast_to(np.eye(36), L.shape))
+    np.testing.assert_allclose(L_inv, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert np.all(np.triu(L_inv, 1) == 0.0)
+    with pytest.raises(ValueError, match='not positive'):
+        body_solver._preconditioner_cpp.lower_triangular_inverse(-L)

@@ -622,6 +622,39 @@ Array dense_trans_trans(const Array &r, double eta, double a, const Array &perio
   return M;
 }
 
+// Dense trans-trans blocks of nb bodies of n blobs each (the preconditioner's blocks): r (nb n, 3), bodies
+// one after the other -> (nb, 3n, 3n), each block as dense_trans_trans of that body alone.  The bodies
+// are split between the threads (one block is too small to share).
+Array dense_trans_trans_stack(const Array &r, long bodies, double eta, double a, const Array &periodic_length,
+                              bool wall) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t total = count_rows(r, "r_vectors");
+  if (bodies <= 0 || total % static_cast<std::size_t>(bodies) != 0)
+    throw std::invalid_argument("r_vectors must hold the same number of blobs for every body");
+  const std::size_t nb = static_cast<std::size_t>(bodies), n = total / nb;
+  const Blobs all = make_blobs(r, nullptr, std::vector<double>(total, a), a, wall, "r_vectors");
+  const std::vector<double> L = periodic_lengths(periodic_length, a, wall);
+  Array M({static_cast<py::ssize_t>(nb), static_cast<py::ssize_t>(3 * n), static_cast<py::ssize_t>(3 * n)});
+  double *m = M.mutable_data();
+  const double factor = 1.0 / (8.0 * M_PI * eta * a);
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static) if (worth_threads(nb, 9 * n * n))
+    for (std::size_t k = 0; k < nb; ++k) {
+      Blobs b;
+      b.n = n;
+      const std::size_t first = k * n, last = first + n;
+      b.x.assign(all.x.begin() + first, all.x.begin() + last);
+      b.y.assign(all.y.begin() + first, all.y.begin() + last);
+      b.z.assign(all.z.begin() + first, all.z.begin() + last);
+      b.damping.assign(all.damping.begin() + first, all.damping.begin() + last);
+      b.radius.assign(all.radius.begin() + first, all.radius.begin() + last);
+      wall ? fill_dense<true>(b, L, factor, m + k * 9 * n * n) : fill_dense<false>(b, L, factor, m + k * 9 * n * n);
+    }
+  }
+  return M;
+}
+
 // Dense (3N, 3N) matrix of a product whose pair formula is `pair(i, j, shift, e, u)` (u += B_ij e): each
 // 3x3 block from the pair formula applied to the three unit vectors, so that the matrix and the product
 // share one formula.  Periodic images are summed as in the products.
@@ -708,6 +741,9 @@ PYBIND11_MODULE(_mobility_cpp, m) {
   m.def("source_target", &source_target, py::arg("source"), py::arg("target"), py::arg("force"),
         py::arg("radius_source"), py::arg("radius_target"), py::arg("eta"), py::arg("periodic_length"),
         py::arg("wall"), "Velocity (3Nt,) at targets from forces on sources of given radii.");
+  m.def("dense_trans_trans_stack", &dense_trans_trans_stack, py::arg("r_vectors"), py::arg("bodies"),
+        py::arg("eta"), py::arg("a"), py::arg("periodic_length"), py::arg("wall"),
+        "Dense trans-trans blocks (nb, 3n, 3n) of nb bodies of n blobs each, r (nb n, 3)");
   m.def("dense_trans_trans", &dense_trans_trans, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
         py::arg("periodic_length"), py::arg("wall"), "Dense (3N, 3N) blob mobility.");
   m.def("source_target_domain", &source_target_domain, py::arg("source"), py::arg("target"), py::arg("force"),

@@ -252,6 +252,17 @@ def full_rank_types(body_arrays):
     return result
 
 
+def lower_triangular_inverse(L):
+    """``L^{-1}`` (nb, m, m) of lower Cholesky factors (nb, m, m): lower triangular, zeros above the diagonal.
+
+    The compiled forward substitution when built (a third of the work of a general solve), else
+    ``np.linalg.solve`` against the identity (``tril`` clears the rounding it leaves above the diagonal).
+    """
+    if _preconditioner_cpp is not None:
+        return _preconditioner_cpp.lower_triangular_inverse(L)
+    return np.tril(np.linalg.solve(L, np.broadcast_to(np.eye(L.shape[-1]), L.shape)))
+
+
 class BlockDiagonalPreconditioner:
     """Exact inverse of the saddle-point system of each body alone, at one configuration.
 
@@ -304,8 +315,7 @@ class BlockDiagonalPreconditioner:
                                      for k, r_body in enumerate(r_type)])
             try:
                 L = np.linalg.cholesky(M_blocks)
-                # L^{-1} is lower triangular; tril clears the rounding the general solve leaves above the diagonal
-                L_inv = np.tril(np.linalg.solve(L, np.broadcast_to(np.eye(3 * n_blobs), L.shape)))
+                L_inv = lower_triangular_inverse(L)
                 M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
             except np.linalg.LinAlgError:
                 L = L_inv = None

@@ -16,6 +16,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -128,6 +129,41 @@ void saddle_block_inverse(const Array &M_inv, const Array &M_inv_K, const Array 
   }
 }
 
+// L^{-1} of each lower-triangular block L_k with a positive diagonal (Cholesky factors), by forward
+// substitution column by column: (nb, m, m) -> (nb, m, m), lower triangular with exact zeros above the
+// diagonal.  m^3 / 6 multiply-adds per block, a third of a general solve against the identity.
+Array lower_triangular_inverse(const Array &blocks) {
+  if (blocks.ndim() != 3 || blocks.shape(1) != blocks.shape(2))
+    throw std::invalid_argument("blocks must have shape (nb, m, m)");
+  const long nb = blocks.shape(0), m = blocks.shape(1);
+  Array result({static_cast<py::ssize_t>(nb), static_cast<py::ssize_t>(m), static_cast<py::ssize_t>(m)});
+  const double *L = blocks.data();
+  double *X = result.mutable_data();
+  for (long k = 0; k < nb; ++k)
+    for (long i = 0; i < m; ++i)
+      if (!(L[k * m * m + i * m + i] > 0.0))
+        throw std::invalid_argument("block " + std::to_string(k) + " has a diagonal entry that is not positive");
+  py::gil_scoped_release release;
+  std::vector<double> column(static_cast<std::size_t>(m));
+  for (long k = 0; k < nb; ++k) {
+    const double *Lk = L + k * m * m;
+    double *Xk = X + k * m * m;
+    for (long e = 0; e < m * m; ++e) Xk[e] = 0.0;
+    for (long j = 0; j < m; ++j) {  // column j of L^{-1}: L x = e_j, x_i = 0 for i < j
+      column[j] = 1.0 / Lk[j * m + j];
+      for (long i = j + 1; i < m; ++i) {
+        const double *row = Lk + i * m;
+        double s = 0.0;
+#pragma omp simd reduction(+ : s)
+        for (long c = j; c < i; ++c) s += row[c] * column[c];
+        column[i] = -s / row[i];
+      }
+      for (long i = j; i < m; ++i) Xk[i * m + j] = column[i];
+    }
+  }
+  return result;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_preconditioner_cpp, m) {
@@ -138,4 +174,6 @@ PYBIND11_MODULE(_preconditioner_cpp, m) {
   m.def("saddle_block_inverse", &saddle_block_inverse, py::arg("M_inv"), py::arg("M_inv_K"), py::arg("K"),
         py::arg("N"), py::arg("x"), py::arg("out"), py::arg("blob_start"), py::arg("body_start"),
         "Each body's exact saddle-point inverse applied to [s; f] of x, written into out");
+  m.def("lower_triangular_inverse", &lower_triangular_inverse, py::arg("blocks"),
+        "L^{-1} (nb, m, m) of lower-triangular blocks with a positive diagonal");
 }
