@@ -28,7 +28,8 @@ import numpy as np
 
 from quaternion_integrator.scheme_base import (InvalidConfiguration, Scheme, euler_update,  # noqa: F401
                                                rotate_quaternions)
-from quaternion_integrator.stochastic_schemes import STOCHASTIC_SCHEME_CLASSES
+from quaternion_integrator.stochastic_schemes import RIGID_STOCHASTIC_SCHEME_CLASSES
+from quaternion_integrator.roller_schemes import ROLLER_SCHEME_CLASSES
 from quaternion_integrator.articulated_schemes import ARTICULATED_SCHEME_CLASSES
 from utils import UserInputError
 
@@ -125,7 +126,7 @@ SCHEMES.update({cls.name: cls for cls in ARTICULATED_SCHEME_CLASSES})  # joints:
 
 def _all_schemes():
     schemes = dict(SCHEMES)
-    schemes.update({cls.name: cls for cls in STOCHASTIC_SCHEME_CLASSES})
+    schemes.update({cls.name: cls for cls in RIGID_STOCHASTIC_SCHEME_CLASSES + ROLLER_SCHEME_CLASSES})
     return schemes
 
 
