@@ -49,3 +49,11 @@ def test_one_blas_thread_by_default_and_the_users_choice_kept():
     assert blas_probe(OPENBLAS_NUM_THREADS='2') == '[2]'
     left_alone = blas_probe(RMB_BLAS_THREADS='0', OMP_NUM_THREADS='2')
     assert left_alone != '[1]' or os.cpu_count() == 1, left_alone
+
+
+def test_ensemble_workers_get_openmp_threads_and_one_blas_thread():
+    from multi_bodies.ensembles.ensemble_runner import thread_environment
+    assert thread_environment(3, environ={}) == {'OMP_NUM_THREADS': '3', 'OPENBLAS_NUM_THREADS': '1',
+                                                 'MKL_NUM_THREADS': '1'}
+    assert thread_environment(3, environ={'RMB_BLAS_THREADS': '2'})['OPENBLAS_NUM_THREADS'] == '2'
+    assert thread_environment(3, environ={'RMB_BLAS_THREADS': '0'})['MKL_NUM_THREADS'] == '3'

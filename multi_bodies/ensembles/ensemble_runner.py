@@ -346,10 +346,16 @@ def _running(client, pending):
     return min(threads, sum(1 for tasks in processing.values() for key in tasks if key in keys))
 
 
-def thread_environment(threads):
-    """Variables that give each worker process ``threads`` OpenMP/BLAS threads."""
+def thread_environment(threads, environ=os.environ):
+    """Variables that give each worker process ``threads`` OpenMP threads and the package's BLAS policy.
+
+    BLAS gets one thread (``mobility.threads``: OpenBLAS's spinning workers slowed the kernels), or
+    ``RMB_BLAS_THREADS`` threads when that is set (``0``: as many as OpenMP).
+    """
     value = str(int(threads))
-    return {'OMP_NUM_THREADS': value, 'OPENBLAS_NUM_THREADS': value, 'MKL_NUM_THREADS': value}
+    blas = environ.get('RMB_BLAS_THREADS', '1').strip()
+    blas = value if blas == '0' else blas
+    return {'OMP_NUM_THREADS': value, 'OPENBLAS_NUM_THREADS': blas, 'MKL_NUM_THREADS': blas}
 
 
 SCRATCH_NAME = 'dask-scratch'
