@@ -489,10 +489,16 @@ class StochasticSlipMid(StochasticScheme):
         W3 = rng.standard_normal(n3)
         problem = system.mobility_problem(old)
         pc = self.preconditioner(system, step_index, problem)
-        n1 = self.lanczos_noise(system, problem, W1, np.sqrt(4.0 * self.kT / self.dt), pc)
-        n_c = self.lanczos_noise(system, problem, W1 + W3, np.sqrt(self.kT / self.dt), pc)
+
+        def second_noise_and_rfd(shared):  # beside the first Lanczos call: the second one, W_R and M W_s at q
+            return (self.lanczos_noise(system, shared, W1 + W3, np.sqrt(self.kT / self.dt), pc),
+                    self.slip_rfd_solve(system, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s))
+        n1, (n_c, W_R, at_q) = self.side_by_side(
+            system, problem, lambda shared: self.lanczos_noise(system, shared, W1, np.sqrt(4.0 * self.kT / self.dt), pc),
+            second_noise_and_rfd)
         U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1, fresh_noise=True)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta)
+        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta, W_R=W_R,
+                                                at_configuration=at_q)
         U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
         return self.move(old, U, self.dt), U
 

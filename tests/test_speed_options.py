@@ -57,7 +57,7 @@ def test_paired_products_give_the_products_of_the_single_kernel():
 
 
 @pytest.mark.parametrize('scheme_name', ['stochastic_Slip_Trapz', 'stochastic_adams_bashforth',
-                                         'stochastic_traction_EM', 'stochastic_traction_AB'])
+                                         'stochastic_traction_EM', 'stochastic_traction_AB', 'stochastic_Slip_Mid'])
 def test_paired_step_equals_the_unpaired_step(scheme_name):
     """The Lanczos call and an independent solve at the same configuration sharing passes over the pairs
     (side by side in two threads) give the step of the same random numbers computed one after the other,
