@@ -114,6 +114,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
         cosines, sines = [], []
         R[:] = 0.0
         breakdown = False
+        accepted = None
         for j in range(restart):
             AV[j] = np.asarray(matvec(V[j]), dtype=float).reshape(-1)
             w = np.asarray(psolve(AV[j]), dtype=float).reshape(-1)
@@ -160,17 +161,22 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
                 # SciPy's cycle would end here and restart if the true residual failed; this one looks at the
                 # residual r - (A V) y first (no product) and, if it fails, goes on with SciPy's tighter
                 # inner tolerance in the same Krylov space instead of a new one.
-                trial = r - least_squares_solution(R, g, j + 1) @ AV[:j + 1]
+                y = least_squares_solution(R, g, j + 1)
+                trial = r - y @ AV[:j + 1]
                 trial_norm = float(np.linalg.norm(trial))
                 if trial_norm <= atol:
+                    accepted = (y, trial, trial_norm)  # the cycle's answer: not computed again below
                     break
                 ptol_max_factor = max(eps, 0.25 * ptol_max_factor)
                 ptol = presid * min(ptol_max_factor, atol / trial_norm)
         k = j + 1
-        y = least_squares_solution(R, g, k)
+        if accepted is not None:
+            y, r, rnorm = accepted
+        else:
+            y = least_squares_solution(R, g, k)
+            r -= y @ AV[:k]
+            rnorm = float(np.linalg.norm(r))
         x += y @ V[:k]
-        r -= y @ AV[:k]
-        rnorm = float(np.linalg.norm(r))
         if rnorm > atol or breakdown or inner == maxiter or not trust_update:
             # The true residual by a product, as SciPy takes it after every cycle: before a restart (which
             # starts from it), for the verdict after a breakdown or the last iteration, and whenever the
