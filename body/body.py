@@ -33,7 +33,7 @@ try:  # the compiled K and K^T (body/cpp/rigid_module.cpp); NumPy below when it 
 except ImportError:  # pragma: no cover - a build without a C++ compiler
     _rigid_cpp = None
 
-from quaternion_integrator.quaternion import Quaternion, rotation_matrices
+from body.geometry import Quaternion, rotation_matrices
 
 
 class Body:

@@ -21,7 +21,7 @@ utils.prepare_script_path(__file__)
 import numpy as np  # noqa: E402
 
 from boomerang.boomerang_model import BoomerangModel  # noqa: E402
-from quaternion_integrator.quaternion import rotation_matrices  # noqa: E402
+from body.geometry import rotation_matrices  # noqa: E402
 
 
 def main(argv=None):

@@ -39,7 +39,7 @@ import os
 import numpy as np
 
 from body.body import blob_positions
-from quaternion_integrator import quaternion as _quaternion
+from body import geometry as _quaternion
 from mobility.periodic import minimum_image
 from multi_bodies.solver.physics import blob_blob_potential, blob_external_potential, body_body_potential
 from multi_bodies.solver.user_hooks import import_module_file
@@ -209,7 +209,7 @@ def cpp_available():
 
 
 # ---------------------------------------------------------------------------------------------- quaternions
-# The quaternion step and rotation matrix are the package's one copy (quaternion_integrator.quaternion);
+# The quaternion step and rotation matrix are the package's one copy (body.geometry);
 # the names stay here for the sampler and for published Monte Carlo override files.
 quaternions_from_rotations = _quaternion.quaternions_from_rotations
 quaternion_products = _quaternion.quaternion_products

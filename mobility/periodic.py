@@ -1,43 +1,17 @@
-"""Geometry shared by every Python room: the minimum image and the wall regularisation.
+"""The minimum image (re-exported from the ground floor, ``body.geometry``) and the wall regularisation.
 
 One Python source of each formula (the compiled backends use their twin in
 ``mobility/cpp/pair_laws.h``):
 
-* :func:`minimum_image` (and its one-axis form :func:`wrap_axis`): pseudo-periodic
-  boxes, ``d -= trunc(d/L + sign(d)/2) L`` (round half away from zero) on
-  every axis with ``L > 0``; ``L <= 0`` is not periodic (SPEC section 8).
-  ``multi_bodies.solver.physics`` re-exports it under the same name.
+* :func:`minimum_image` (and its one-axis form :func:`wrap_axis`), defined in
+  :mod:`body.geometry`; ``multi_bodies.solver.physics`` re-exports it too.
 * :func:`wall_regularisation`: blobs closer to the wall than their radius
   are raised to ``z_eff = radius`` and damped by ``z / radius`` (Balboa,
   Delmotte and Donev 2017); works on NumPy or CuPy arrays (``xp``).
 """
 import numpy as np
 
-
-def wrap_axis(d, L):
-    """Minimum image of displacement components ``d`` (array, any shape) on one axis of length ``L``.
-
-    In place when ``d`` is an array of floats and ``L > 0``; returns ``d``.
-    ``L <= 0``: not periodic, ``d`` unchanged.
-    """
-    if L > 0:
-        d -= np.trunc(d / L + 0.5 * np.sign(d)) * L
-    return d
-
-
-def minimum_image(displacements, periodic_length):
-    """Minimum-image convention on periodic axes: displacements (..., 3), box (3,) -> (..., 3).
-
-    Returns a new array when some axis is periodic (``displacements`` unchanged),
-    else ``displacements`` itself.
-    """
-    L = np.asarray(periodic_length, dtype=float).reshape(3)
-    if not np.any(L > 0):
-        return displacements
-    r = np.array(displacements, dtype=float, copy=True)
-    for axis in np.nonzero(L > 0)[0]:
-        wrap_axis(r[..., axis], L[axis])
-    return r
+from body.geometry import minimum_image, wrap_axis  # noqa: F401  (their one source: the ground floor)
 
 
 def wall_regularisation(z, radius, xp=np):

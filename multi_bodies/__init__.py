@@ -23,7 +23,7 @@ The library, one job a subpackage::
 Floors (a module imports only from its own floor or below; ``tests/test_layout.py``
 checks this from the import graph)::
 
-    1  utils, quaternion_integrator.quaternion, mobility
+    1  utils, body.geometry (quaternions, minimum image), mobility
     2  body, stochastic_forcing
     3  multi_bodies.files
     4  multi_bodies.solver

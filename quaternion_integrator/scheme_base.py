@@ -20,7 +20,7 @@ renormalised (SPEC section 3).
 import numpy as np
 
 from body.body import Configuration
-from quaternion_integrator.quaternion import rotate_quaternions as _rotate_quaternions
+from body.geometry import rotate_quaternions as _rotate_quaternions
 from utils import SimulationStopped, UserInputError
 
 

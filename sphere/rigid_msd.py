@@ -11,7 +11,7 @@ spread of the per-trajectory MSDs over independent trajectories.
 """
 import numpy as np
 
-from quaternion_integrator.quaternion import rotation_matrices
+from body.geometry import rotation_matrices
 
 
 def rotational_displacements(R0, R1):

@@ -47,7 +47,7 @@ functions of ``locations (nb, 3)`` and ``orientations (nb, 4)``:
 """
 import numpy as np
 
-from quaternion_integrator.quaternion import quaternion_products, quaternions_from_rotations  # noqa: F401
+from body.geometry import quaternion_products, quaternions_from_rotations  # noqa: F401
 from stochastic_forcing import rfd
 from utils import SimulationStopped
 

@@ -46,7 +46,7 @@ import os
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from quaternion_integrator.quaternion import rotation_matrices
+from body.geometry import rotation_matrices
 
 ETA = 1.0          # viscosity
 A = 0.5            # sphere radius

@@ -46,7 +46,7 @@ utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
-from quaternion_integrator.quaternion import rotation_matrices  # noqa: E402
+from body.geometry import rotation_matrices  # noqa: E402
 from stochastic_forcing import compat  # noqa: E402
 
 from sphere import sphere as sph  # noqa: E402

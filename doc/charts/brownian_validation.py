@@ -41,7 +41,7 @@ from body.body import Body, bodies_to_arrays  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files import structure_generators as gen  # noqa: E402
 from multi_bodies.solver.system import System  # noqa: E402
-from quaternion_integrator.quaternion import rotation_matrices  # noqa: E402
+from body.geometry import rotation_matrices  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 A, ETA, KT, G, EPS_WALL = 1.0, 1.0 / (6.0 * np.pi), 1.0, 2.0, 2.0

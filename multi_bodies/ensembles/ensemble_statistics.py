@@ -32,7 +32,7 @@ import os
 
 import numpy as np
 
-from quaternion_integrator.quaternion import rotation_matrices as _rotation_matrices
+from body.geometry import rotation_matrices as _rotation_matrices
 from multi_bodies.ensembles import ensemble_runner
 from multi_bodies.files import snapshots
 from multi_bodies.run import run_output

@@ -49,7 +49,7 @@ from multi_bodies.run.run_setup import read_bodies
 from multi_bodies.run import run_output
 from multi_bodies.files import snapshots as snapshot_files
 from multi_bodies.files.structure_files import read_body_table
-from quaternion_integrator.quaternion import rotation_matrices
+from body.geometry import rotation_matrices
 
 BLOBS = 'blobs'
 BODIES = 'bodies'

@@ -54,7 +54,7 @@ import scipy.sparse as scsp
 import scipy.sparse.linalg as spla
 
 from body.body import as_configuration
-from quaternion_integrator.quaternion import rotation_matrices
+from body.geometry import rotation_matrices
 from utils import UserInputError
 
 # ---------------------------------------------------------------------------------------------- files
@@ -387,7 +387,7 @@ class ArticulatedSet:
         dq = dq - dq.mean(axis=0)
         theta = x[3 * nb:].reshape(nb, 4)
         theta = theta / np.linalg.norm(theta, axis=1)[:, None]
-        from quaternion_integrator.quaternion import quaternion_products
+        from body.geometry import quaternion_products
         locations[group.body_indices] += dq
         orientations[group.body_indices] = quaternion_products(theta, orientations[group.body_indices])
 

@@ -36,7 +36,7 @@ from functools import partial  # noqa: F401  (published override files use it th
 import numpy as np
 
 from mobility.periodic import minimum_image  # noqa: F401  (published name of this module; one source in mobility)
-from quaternion_integrator.quaternion import Quaternion  # noqa: F401  (star-imported by published override files)
+from body.geometry import Quaternion  # noqa: F401  (star-imported by published override files)
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 262144  # pairs per chunk in the all-pairs sums (bounded memory, cache friendly)

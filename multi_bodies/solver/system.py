@@ -38,7 +38,7 @@ from multi_bodies.solver import body_solver
 from multi_bodies.solver import obstacles
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import user_hooks
-from quaternion_integrator.quaternion import Quaternion
+from body.geometry import Quaternion
 from stochastic_forcing import displace_positions, lanczos_square_root, rfd
 from utils import SimulationStopped, UserInputError
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from mobility.periodic import minimum_image
 from multi_bodies.solver import physics as mbf
-from quaternion_integrator.quaternion import Quaternion
+from body.geometry import Quaternion
 from utils import SimulationStopped, UserInputError
 
 
