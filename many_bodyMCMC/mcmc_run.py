@@ -21,6 +21,7 @@ from many_bodyMCMC import mcmc_energy
 from many_bodyMCMC.sampler import MetropolisSampler
 from multi_bodies.solver import physics as multi_bodies_functions
 from multi_bodies.run import run_output
+from multi_bodies.run.output_lock import output_lock
 from multi_bodies.files.input_options import check_options, unused_options
 from multi_bodies.run.run_setup import prepare, start_output, write_run_start
 
@@ -216,7 +217,10 @@ class MCMCRun:
 
 
 def run_mcmc(options, directory=None, log=print):
-    """Set up and run the Monte Carlo chain of validated ``options``; returns the exit status."""
-    return MCMCRun(options, directory=directory, log=log).run()
+    """Set up and run the Monte Carlo chain of validated ``options``; returns the exit status.
+
+    ``output_name.lock`` is held from before the restart record is read until the chain ends."""
+    with output_lock(options, log):
+        return MCMCRun(options, directory=directory, log=log).run()
 
 

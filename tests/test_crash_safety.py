@@ -574,3 +574,59 @@ def test_ctrl_c_while_the_script_imports_is_one_line(tmp_path):
     out, err = process.communicate(timeout=60)
     assert 'Traceback' not in err, err
     assert process.returncode in (130, 0, 2), err  # 0: it finished first on a fast machine
+
+
+# ------------------------------------------------------------------ one writer per output name (issue 27)
+def wait_for_lock(process, folder, timeout=60.0):
+    lock = Path(folder) / 'data' / 'run.lock'
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and process.poll() is None:
+        if lock.exists() and lock.read_text():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.mark.parametrize('second', ['new run', 'restart'])
+def test_a_second_run_into_a_live_output_name_is_refused(tmp_path, second):
+    """The same input started twice: the second is refused in one line naming the first run's process; the first
+    run's files are exactly those of a run alone (law: a deterministic program with the same input gives the same
+    bytes)."""
+    alone = dynamic_scene(tmp_path / 'alone', n_steps=120, n_save=10)
+    assert run(DYNAMIC, alone)[0] == 0
+    folder = dynamic_scene(tmp_path / 'run', n_steps=120, n_save=10)
+    first = start(DYNAMIC, folder)
+    assert wait_for_lock(first, folder) and wait_for_record(first, folder, 10)
+    twin = dynamic_scene(tmp_path / 'twin', n_steps=120, n_save=10)
+    text = (twin / 'input.dat').read_text().replace('data/run', str(folder / 'data' / 'run'))
+    (twin / 'input.dat').write_text(text if second == 'new run' else set_options(text, initial_step=10))
+    first.send_signal(signal.SIGSTOP)  # the first run lives (paused) while the second one starts
+    try:
+        status, _, err = run(DYNAMIC, twin)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    assert first.wait(timeout=120) == 0
+    assert status == 2 and 'Traceback' not in err and len(err.strip().splitlines()) == 1, err
+    assert 'is in use by another run (pid %d' % first.pid in err, err
+    assert outputs(folder) == outputs(alone)
+    assert not (folder / 'data' / 'run.set_aside').exists() and not (folder / 'data' / 'run.lock').exists()
+
+
+def test_a_stale_run_lock_is_taken_over_and_logged(tmp_path):
+    import json
+    import socket
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2)
+    (folder / 'data').mkdir()
+    gone = subprocess.run([sys.executable, '-c', 'import os; print(os.getpid())'], capture_output=True, text=True)
+    (folder / 'data' / 'run.lock').write_text(json.dumps({'host': socket.gethostname(), 'pid': int(gone.stdout)}))
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0, err
+    assert 'pid %d on %s' % (int(gone.stdout), socket.gethostname()) in out and 'taken over' in out, out
+    assert not (folder / 'data' / 'run.lock').exists()
+
+
+def test_a_refused_run_leaves_no_folder_for_its_lock(tmp_path):
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2, dt=-1)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'dt' in err
+    assert not (folder / 'data').exists()

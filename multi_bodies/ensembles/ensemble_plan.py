@@ -13,13 +13,13 @@ import itertools
 import json
 import os
 import re
-import socket
 import sys
 import time
 
 import numpy as np
 
 from utils import UserInputError
+from multi_bodies.run.output_lock import hold_lock
 
 MANIFEST_NAME = 'ensemble.json'
 REPLICA_INPUT_NAME = 'input.dat'
@@ -304,69 +304,27 @@ LOCK_NAME = 'ensemble.lock'
 
 
 @contextlib.contextmanager
-def ensemble_lock(output_dir):
+def ensemble_lock(output_dir, log=print):
     """Hold ``output_dir/ensemble.lock`` while an ensemble runs there, so that two drivers never share a folder.
 
-    The lock file names the host and process.  One left by a process of this
-    host that no longer runs is taken over; one held by a live process, or
-    by a process of another host, raises UserInputError.
+    The lock of the runs (:func:`multi_bodies.run.output_lock.hold_lock`): the file names the host and
+    process; one left by a process that no longer runs is taken over (logged); one held by a live process,
+    or naming a process of another host, raises UserInputError.
     """
     try:
         os.makedirs(output_dir, exist_ok=True)
     except OSError as err:
         raise UserInputError('--output-dir %s: cannot create it (%s)' % (output_dir, err.strerror or err))
     path = os.path.join(output_dir, LOCK_NAME)
-    host, pid = socket.gethostname(), os.getpid()
-    for _ in range(2):
-        try:
-            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                with open(path) as f:
-                    holder = json.load(f)
-            except (OSError, ValueError):
-                holder = {}
-            if holder.get('host') == host and isinstance(holder.get('pid'), int) and not _alive(holder['pid']):
-                os.remove(path)  # stale: its process has gone
-                continue
-            if not holder and _age(path) > LOCK_WRITE_SECONDS:
-                # empty or unreadable: a driver killed between creating the lock and writing its name in it
-                os.remove(path)
-                continue
-            raise UserInputError('%s: another ensemble.py (pid %s on %s, started %s) is running in this folder; '
-                                 'wait for it or stop it (if it no longer runs, remove %s)'
-                                 % (output_dir, holder.get('pid', '?'), holder.get('host', '?'),
-                                    holder.get('started', '?'), path))
-        with os.fdopen(descriptor, 'w') as f:
-            json.dump({'host': host, 'pid': pid, 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}, f)
-        break
-    try:
+
+    def refusal(holder):
+        return UserInputError('%s: another ensemble.py (%s) is running in this folder; wait for it or stop it '
+                              '(if it no longer runs, remove %s)' % (output_dir, holder, path))
+    with hold_lock(path, refusal, log):
         yield path
-    finally:
-        try:
-            os.remove(path)
-        except FileNotFoundError:
-            pass
 
 
-LOCK_WRITE_SECONDS = 5.0  # a live driver writes its name into the lock at once; an empty older one is stale
-
-
-def _age(path):
-    try:
-        return time.time() - os.path.getmtime(path)
-    except OSError:
-        return 0.0
-
-
-def _alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+LOCK_WRITE_SECONDS = 5.0  # kept for callers of earlier versions: the flock of hold_lock needs no age rule
 
 
 def replica_specs(plan):

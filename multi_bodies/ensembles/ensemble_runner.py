@@ -45,7 +45,7 @@ from multi_bodies.ensembles.ensemble_plan import (MANIFEST_NAME, REPLICA_INPUT_N
                                                   point_name, parameter_points, replica_seeds, replica_input_text,
                                                   _sha256, build_plan, _atomic_write_text, read_manifest,
                                                   _check_inside, write_plan, existing_master_seed, ensemble_lock,
-                                                  _age, _alive, replica_specs, read_status,
+                                                  replica_specs, read_status,
                                                   is_finished)  # noqa: F401
 
 INSTALL_HINT = "pip install -e '.[ensemble]' (or: pip install 'dask[distributed]' dask-jobqueue)"

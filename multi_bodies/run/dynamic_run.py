@@ -21,6 +21,7 @@ import numpy as np
 import utils
 from multi_bodies.files.input_options import check_options
 from multi_bodies.run import run_output
+from multi_bodies.run.output_lock import output_lock
 from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies, write_run_start
 from quaternion_integrator.schemes import make_scheme
 
@@ -209,5 +210,9 @@ class DynamicRun:
 
 
 def run_dynamics(options, print_residual=False, log=print):
-    """Set up and run the dynamics of validated ``options``; returns the exit status."""
-    return DynamicRun(options, print_residual=print_residual, log=log).run()
+    """Set up and run the dynamics of validated ``options``; returns the exit status.
+
+    ``output_name.lock`` is held from before the restart record is read until the run ends (one writer per
+    output name, ``multi_bodies.run.output_lock``)."""
+    with output_lock(options, log):
+        return DynamicRun(options, print_residual=print_residual, log=log).run()
