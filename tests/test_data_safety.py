@@ -309,3 +309,93 @@ def test_local_dashboard_on_localhost_and_scratch_in_the_run_folder(tmp_path):
             assert os.path.isdir(scratch) and os.listdir(scratch)  # the workers' space is there
     finally:
         cluster.close()
+
+
+@pytest.mark.parametrize('basename', ['/tmp/planted', '../../..', '../r0000/run', '..', 'a/b', 7])
+def test_aggregate_refuses_an_output_basename_outside_the_replica_folder(tmp_path, basename):
+    """Issue 27: a replica's output_basename edited to an absolute path or ``..`` is refused, nothing read."""
+    from multi_bodies.ensembles import ensemble_statistics
+    plan = small_plan(tmp_path)
+    manifest_path = Path(plan['output_dir']) / runner.MANIFEST_NAME
+    manifest = json.loads(manifest_path.read_text())
+    manifest['replicas'][0]['output_basename'] = basename
+    manifest_path.write_text(json.dumps(manifest))
+    with pytest.raises(utils.UserInputError, match='output_basename .* is not a file name inside the replica'):
+        ensemble_statistics.aggregate(plan['output_dir'], charts=False, log=lambda *a: None)
+    assert not (Path(plan['output_dir']) / 'statistics.csv').exists()
+
+
+# ------------------------------------------------------------------ bounded published pickles (issue 27)
+HOSTILE_PICKLES = [
+    b'\x80\x02cnumpy\nndarray\nJ\x80\xb2\xe6\x0e\x85cnumpy\ndtype\nX\x02\x00\x00\x00O8\x85R\x86R.',  # 2.5e8 objects
+    b'\x80\x02cnumpy\nndarray\nJ\x00\xca\x9a;\x85R.',                                               # 1e9 doubles
+    b'\x80\x02cnumpy.core.multiarray\n_reconstruct\ncnumpy\nndarray\nK\x00\x85C\x01b\x87R'             # BUILD 2**30
+    b'(K\x01J\x00\x00\x00@\x85cnumpy\ndtype\nX\x02\x00\x00\x00f8\x85R\x89C\x00tb.',
+    b'\x80\x02N\x94r\xff\xff\xff\x07.',                                                             # memo 2**27
+    b'\x80\x02Np99999999\n.',                                                                       # memo 1e8
+    b'\x80\x02cnumpy.core.numeric\n_frombuffer\nC\x00cnumpy\ndtype\nX\x02\x00\x00\x00f8\x85R'
+    b'J\x00\xca\x9a;\x85X\x01\x00\x00\x00C\x94R.',                                                  # frombuffer 1e9
+    b'\x80\x02cnumpy\ndtype\nX\x0b\x00\x00\x00V1000000000\x85R.',                                   # 1 GB void dtype
+    b'\x80\x02X\xff\xff\xff\x7fabc.',                                                               # 2 GB string
+    b'\x80\x04\x95\xff\xff\xff\xff\xff\xff\x00\x00N.',                                              # 2**48 frame
+    b'(' * 900 + b'.',
+]
+
+MEMORY_PROBE = '''
+import random, resource, sys
+sys.path.insert(0, sys.argv[1])
+import numpy as np, pickle
+from multi_bodies.run.run_state import read_published_state
+cases = eval(sys.argv[2])
+rng = random.Random(27)
+valid = [pickle.dumps(np.random.RandomState(1).get_state(), protocol=p)[:1000] for p in range(6)]
+for _ in range(3000):  # byte mutations of the hostile and of cut valid pickles, all under 1 kB
+    data = bytearray(rng.choice(cases + valid))
+    for _ in range(rng.randint(1, 6)):
+        data[rng.randrange(len(data))] = rng.randrange(256)
+    cases.append(bytes(data))
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+accepted = 0
+for data in cases:
+    assert len(data) < 1024
+    try:
+        read_published_state(data)
+        accepted += 1
+    except Exception:
+        pass
+print(len(cases), accepted, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024.0)
+'''
+
+
+def test_published_pickle_reader_stays_under_100_MB_on_hostile_inputs_under_1_kB():
+    """Issue 27: shapes, dtypes, memo indices and sizes beyond a published state are refused before any allocation
+    (the 42-byte pickle of 2.5e8 objects once took 2 GB).  Measured: peak resident growth of a child process."""
+    import subprocess
+    result = subprocess.run([sys.executable, '-c', MEMORY_PROBE, str(REPO_ROOT), repr(HOSTILE_PICKLES)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    count, accepted, growth_mib = result.stdout.split()
+    assert int(count) > 3000 and int(accepted) == 0 and float(growth_mib) < 100, result.stdout
+
+
+@pytest.mark.parametrize('data', HOSTILE_PICKLES)
+def test_hostile_published_pickles_are_one_line_refusals(tmp_path, data):
+    path = tmp_path / 'hostile.random_state'
+    path.write_bytes(data)
+    with pytest.raises(utils.UserInputError, match='nothing in it was run or used'):
+        run_output.read_random_state(str(path))
+
+
+@pytest.mark.parametrize('change, words', [
+    (lambda s: (s[0], np.zeros(624, np.uint32)) + s[2:], 'every MT19937 key is 0'),
+    (lambda s: (s[0], np.full(624, 2 ** 40, np.int64)) + s[2:], 'outside 0 .. 2**32 - 1'),
+    (lambda s: s[:3] + (1, float('nan')), 'cached Gaussian'),
+    (lambda s: s[:3] + (2, 0.0), 'has_gauss'),
+    (lambda s: s[:2] + (625,) + s[3:], 'position'),
+])
+def test_degenerate_published_states_are_refused(tmp_path, change, words):
+    """A generator whose every draw is 0.0 (all-zero key, keys cast to zeros) or a NaN cached Gaussian is refused."""
+    path = tmp_path / 'degenerate.random_state'
+    path.write_bytes(pickle.dumps(change(np.random.RandomState(3).get_state()), protocol=2))
+    with pytest.raises(utils.UserInputError, match=words.replace('*', r'\*')):
+        run_output.read_random_state(str(path))

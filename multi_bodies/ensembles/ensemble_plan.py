@@ -236,20 +236,40 @@ def read_manifest(output_dir):
     for point in manifest.get('points') or []:
         _check_inside(manifest['output_dir'], point.get('name') if isinstance(point, dict) else None,
                       'point name', path)
+    if not isinstance(manifest['replicas'], list):
+        raise UserInputError('%s is not an ensemble manifest (the replica list is not a list)' % path)
     for replica in manifest['replicas']:
-        _check_inside(manifest['output_dir'], replica.get('folder') if isinstance(replica, dict) else None,
-                      'replica folder', path)
+        folder = replica.get('folder') if isinstance(replica, dict) else None
+        _check_inside(manifest['output_dir'], folder, 'replica folder', path)
+        _check_basename(os.path.join(manifest['output_dir'], folder), replica.get('output_basename'), path)
     return manifest
 
 
+def _check_basename(folder, basename, manifest_path):
+    """Refuse an ``output_basename`` that is not a plain file name of the replica's ``folder`` (None: absent)."""
+    if basename is None:
+        return
+    ok = isinstance(basename, str) and basename not in ('', '.', '..') and '/' not in basename \
+        and '\\' not in basename and not os.path.isabs(basename)
+    if ok:
+        target = os.path.realpath(os.path.join(folder, basename))
+        ok = os.path.commonpath([os.path.realpath(folder), target]) == os.path.realpath(folder)
+    if not ok:
+        raise UserInputError('%s: the output_basename %r is not a file name inside the replica folder %s; the '
+                             'manifest was changed by hand or is not this ensemble\'s, so nothing is read'
+                             % (manifest_path, basename, folder))
+
+
 def _check_inside(output_dir, name, what, manifest_path):
-    """Refuse a ``name`` from the manifest that is not a relative path inside ``output_dir`` (``../..``, ``/x``).
+    """Refuse a ``name`` from the manifest that is not a relative path inside ``output_dir`` (``../..``, ``/x``,
+    any ``..`` component even when it leads back inside).
 
     The manifest is data: a name that would make the runner or ``--aggregate``
     read or write outside the ensemble folder is a UserInputError.
     """
     root = os.path.realpath(output_dir)
-    ok = isinstance(name, str) and name and not os.path.isabs(name)
+    ok = isinstance(name, str) and name and not os.path.isabs(name) and \
+        '..' not in name.replace('\\', '/').split('/')
     if ok:
         target = os.path.realpath(os.path.join(root, name))
         ok = target != root and os.path.commonpath([root, target]) == root

@@ -101,31 +101,127 @@ def state_from_bytes(data):
 
 
 # ------------------------------------------------------------------ random generator
+# What a published state holds at most: 624 key words of 8 bytes (int64 on some platforms), a few scalars.
+PUBLISHED_STATE_WORDS = 624
+PUBLISHED_STATE_BYTES = 64 * 1024      # a pickle of protocol 0 writes the 2,496 key bytes as text: a few KiB
+PUBLISHED_MEMO_ENTRIES = 64            # the state pickle memoises a handful of objects
+_SAFE_KINDS = 'uifb'                   # array dtypes of a state: integers, floats, booleans (never objects)
+
+
+def _check_pickle_opcodes(data):
+    """Read the opcodes of ``data`` without running any: refuse sizes a published state never has.
+
+    The memo index of PUT/BINPUT/LONG_BINPUT sizes a table the unpickler allocates, so it is bounded here,
+    before the unpickler sees the bytes.
+    """
+    import pickletools
+    if len(data) > PUBLISHED_STATE_BYTES:
+        raise ValueError('%d bytes, more than a published random state pickle holds (at most %d)'
+                         % (len(data), PUBLISHED_STATE_BYTES))
+    for opcode, argument, _ in pickletools.genops(data):
+        if opcode.name in ('PUT', 'BINPUT', 'LONG_BINPUT', 'GET', 'BINGET', 'LONG_BINGET') and \
+                not (isinstance(argument, int) and 0 <= argument < PUBLISHED_MEMO_ENTRIES):
+            raise ValueError('memo index %r, beyond what a random state pickle uses' % (argument,))
+        if opcode.name in ('PERSID', 'BINPERSID', 'EXT1', 'EXT2', 'EXT4', 'INST', 'OBJ', 'NEWOBJ', 'NEWOBJ_EX'):
+            raise ValueError('opcode %s is not part of a numpy random state' % opcode.name)
+
+
+def _checked_dtype(dtype):
+    """``dtype`` when an array of a random state may have it: integers, floats or booleans of at most 8 bytes."""
+    dtype = np.dtype(dtype)
+    if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None or dtype.kind not in _SAFE_KINDS \
+            or dtype.itemsize > 8:
+        raise pickle.UnpicklingError('an array of dtype %s is not part of a numpy random state' % dtype)
+    return dtype
+
+
+def _checked_shape(shape):
+    """``shape`` (a tuple of non-negative ints) when it holds at most PUBLISHED_STATE_WORDS values."""
+    shape = (shape,) if isinstance(shape, (int, np.integer)) else shape
+    if not (isinstance(shape, tuple) and len(shape) <= 1 and
+            all(isinstance(n, (int, np.integer)) and 0 <= n <= PUBLISHED_STATE_WORDS for n in shape)):
+        raise pickle.UnpicklingError('an array of shape %r is not part of a numpy random state' % (shape,))
+    return tuple(int(n) for n in shape)
+
+
+class _StateArray(np.ndarray):
+    """The array the restricted unpickler builds: its pickled state is checked before numpy allocates."""
+
+    def __setstate__(self, state):
+        if not (isinstance(state, tuple) and len(state) == 5):
+            raise pickle.UnpicklingError('malformed array state in a random state pickle')
+        version, shape, dtype, fortran, data = state
+        shape, dtype = _checked_shape(shape), _checked_dtype(dtype)
+        count = int(np.prod(shape)) if shape else 1
+        if isinstance(data, str):  # a Python 2 pickle read with encoding latin1
+            data = data.encode('latin1') if len(data) <= count * dtype.itemsize else None
+        if not isinstance(data, (bytes, bytearray)) or len(data) != count * dtype.itemsize \
+                or not isinstance(version, int):
+            raise pickle.UnpicklingError('the array data of a random state pickle does not match its shape')
+        super().__setstate__((version, shape, dtype, bool(fortran), bytes(data)))
+
+
+def _reconstruct(cls, shape, dtype):
+    """numpy's ``_reconstruct`` for an ndarray of a random state (any other class, shape or dtype refused)."""
+    if cls not in (np.ndarray, _StateArray, _ndarray):
+        raise pickle.UnpicklingError('%r is not part of a numpy random state' % (cls,))
+    return _StateArray(_checked_shape(shape), _checked_dtype(dtype) if not isinstance(dtype, bytes) else 'b')
+
+
+def _frombuffer(buffer, dtype, shape, order):
+    """numpy's ``_frombuffer`` (protocol 5) for the bytes of one random-state array, checked first."""
+    shape, dtype = _checked_shape(shape), _checked_dtype(dtype)
+    count = int(np.prod(shape)) if shape else 1
+    data = bytes(memoryview(buffer)) if isinstance(buffer, (bytes, bytearray, memoryview, pickle.PickleBuffer)) \
+        else None
+    if data is None or len(data) != count * dtype.itemsize:
+        raise pickle.UnpicklingError('the array data of a random state pickle does not match its shape')
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order='F' if order == 'F' else 'C').copy()
+
+
+def _ndarray(shape, dtype=float, *args, **kwargs):
+    """``numpy.ndarray(shape, dtype)`` as a pickle may call it, bounded (no buffer, no object dtype)."""
+    if args or kwargs:
+        raise pickle.UnpicklingError('numpy.ndarray with a buffer is not part of a numpy random state')
+    return _StateArray(_checked_shape(shape), _checked_dtype(dtype))
+
+
+def _dtype(name, align=False, copy=False):
+    """``numpy.dtype`` as a pickle calls it; only integer, float and boolean dtypes."""
+    if not isinstance(name, str) or not isinstance(align, bool) or not isinstance(copy, bool):
+        raise pickle.UnpicklingError('numpy.dtype(%r) is not part of a numpy random state' % (name,))
+    return _checked_dtype(name)
+
+
 class _PublishedStateUnpickler(pickle.Unpickler):
     """Unpickler for the published ``numpy.random.RandomState().get_state()`` pickle, and nothing else.
 
     ``find_class`` admits only numpy's array reconstruction (``_reconstruct``,
     ``_frombuffer``, ``ndarray``), ``dtype`` and the latin-1 bytes of Python 3
-    pickles: a pickle that names any other callable (the way a pickle runs
-    code) is refused before anything is called.
+    pickles, each replaced by a bounded version: a pickle that names any
+    other callable (the way a pickle runs code) is refused before anything is
+    called, and arrays of more than 624 values, of object or structured dtype,
+    or whose data does not match their shape are refused before numpy
+    allocates them.  ``read_published_state`` checks the opcodes (memo
+    indices, total size) before this class reads them.
     """
-
-    _RECONSTRUCT = np.zeros(1).__reduce__()[0]        # numpy's _reconstruct (protocols 0 to 4)
-    _FROMBUFFER = np.zeros(1).__reduce_ex__(5)[0]     # numpy's _frombuffer (protocol 5)
 
     @staticmethod
     def _latin1_bytes(text, encoding):
         """``_codecs.encode`` as Python 3 pickles (protocols 0-2) use it for bytes: latin-1 only."""
         if encoding not in ('latin1', 'latin-1') or not isinstance(text, str):
             raise pickle.UnpicklingError('_codecs.encode with %r is not part of a numpy random state' % encoding)
+        if len(text) > PUBLISHED_STATE_WORDS * 8:
+            raise pickle.UnpicklingError('a byte string of %d characters is not part of a numpy random state'
+                                         % len(text))
         return text.encode('latin1')
 
-    ALLOWED = {('numpy.core.multiarray', '_reconstruct'): _RECONSTRUCT,
-               ('numpy._core.multiarray', '_reconstruct'): _RECONSTRUCT,
-               ('numpy.core.numeric', '_frombuffer'): _FROMBUFFER,
-               ('numpy._core.numeric', '_frombuffer'): _FROMBUFFER,
-               ('numpy', 'ndarray'): np.ndarray,
-               ('numpy', 'dtype'): np.dtype,
+    ALLOWED = {('numpy.core.multiarray', '_reconstruct'): _reconstruct,
+               ('numpy._core.multiarray', '_reconstruct'): _reconstruct,
+               ('numpy.core.numeric', '_frombuffer'): _frombuffer,
+               ('numpy._core.numeric', '_frombuffer'): _frombuffer,
+               ('numpy', 'ndarray'): _ndarray,
+               ('numpy', 'dtype'): _dtype,
                ('_codecs', 'encode'): _latin1_bytes}
 
     def find_class(self, module, name):
@@ -135,23 +231,40 @@ class _PublishedStateUnpickler(pickle.Unpickler):
             raise pickle.UnpicklingError('%s.%s is not part of a numpy random state' % (module, name))
 
 
+def _plain(value):
+    """A state entry as a plain value: a 0-d or one-element array becomes its number."""
+    if isinstance(value, np.ndarray) and value.size == 1 and value.ndim <= 1:
+        return value.reshape(()).item()
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def read_published_state(data):
     """The published legacy state from pickle bytes: ('MT19937', keys uint32 (624,), pos, has_gauss, gauss).
 
     Raises ValueError when ``data`` is not exactly such a tuple (or names
-    anything but numpy arrays and dtypes).
+    anything but numpy arrays and dtypes), and for a degenerate state: keys
+    all zero or outside 0 .. 2**32 - 1, ``pos`` outside 0 .. 624,
+    ``has_gauss`` not 0 or 1, a cached Gaussian that is not finite.
     """
+    _check_pickle_opcodes(data)
     state = _PublishedStateUnpickler(io.BytesIO(data), encoding='latin1').load()
     if not (isinstance(state, tuple) and len(state) == 5 and state[0] in ('MT19937', b'MT19937')):
         raise ValueError('not a numpy RandomState state (MT19937, keys, pos, has_gauss, cached_gaussian)')
     keys = state[1]
-    if not (isinstance(keys, np.ndarray) and keys.shape == (624,) and keys.dtype.kind in 'ui'):
+    if not (isinstance(keys, np.ndarray) and keys.shape == (PUBLISHED_STATE_WORDS,) and keys.dtype.kind in 'ui'):
         raise ValueError('the MT19937 keys are not 624 unsigned 32-bit integers')
-    pos, has_gauss, gauss = state[2], state[3], state[4]
-    if not (isinstance(pos, (int, np.integer)) and 0 <= int(pos) <= 624 and isinstance(has_gauss, (int, np.integer))
-            and isinstance(gauss, (float, int, np.floating))):
-        raise ValueError('pos, has_gauss or cached_gaussian of the MT19937 state is not a number in range')
-    return ('MT19937', keys.astype(np.uint32), int(pos), int(has_gauss), float(gauss))
+    if keys.min() < 0 or keys.max() > 0xFFFFFFFF:
+        raise ValueError('an MT19937 key is outside 0 .. 2**32 - 1')
+    if not keys.any():
+        raise ValueError('every MT19937 key is 0 (a generator that draws only zeros)')
+    pos, has_gauss, gauss = (_plain(v) for v in state[2:])
+    if not (isinstance(pos, int) and not isinstance(pos, bool) and 0 <= pos <= PUBLISHED_STATE_WORDS):
+        raise ValueError('the position of the MT19937 state is not an integer between 0 and 624')
+    if not (isinstance(has_gauss, int) and has_gauss in (0, 1)):
+        raise ValueError('has_gauss of the MT19937 state is not 0 or 1')
+    if not (isinstance(gauss, (float, int)) and np.isfinite(gauss)):
+        raise ValueError('the cached Gaussian of the MT19937 state is not a finite number')
+    return ('MT19937', np.array(keys, dtype=np.uint32), int(pos), int(has_gauss), float(gauss))
 
 
 def read_random_state(path, where='random_state'):
