@@ -399,3 +399,71 @@ def test_degenerate_published_states_are_refused(tmp_path, change, words):
     path.write_bytes(pickle.dumps(change(np.random.RandomState(3).get_state()), protocol=2))
     with pytest.raises(utils.UserInputError, match=words.replace('*', r'\*')):
         run_output.read_random_state(str(path))
+
+
+# ------------------------------------------------------------------ scenes that read every kind of file (issue 27)
+COMMON = dict(dt=0.01, n_steps=6, n_save=3, eta=1.0, blob_radius=0.25, g=1.0, solver_tolerance=1e-10,
+              mobility_blobs_implementation='python', mobility_vector_prod_implementation='python',
+              blob_blob_force_implementation='python', repulsion_strength_wall=1.0, debye_length_wall=0.2,
+              output_name='data/run')
+
+
+def articulated_scene(folder, **options):
+    """Two one-blob bodies joined by one active joint (a .const with expressions of t), above the wall."""
+    from run_scenes import set_options
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / 'blob.vertex').write_text('1\n0 0 0\n')
+    (folder / 'chain.list_vertex').write_text('blob.vertex\nblob.vertex\n')
+    (folder / 'chain.const').write_text('2\n1\n0 1 0.5 0 0 -0.5 0 0 0.5 0 0 -0.5 0 0.1*sin(t) 0 0 0 0 0 0.1*cos(t)\n')
+    (folder / 'chain.clones').write_text('2\n0 0 3 1 0 0 0\n1 0 3 1 0 0 0\n')
+    values = dict(COMMON, scheme='articulated_deterministic_forward_euler')
+    values.update(options)
+    (folder / 'input.dat').write_text(set_options('articulated chain.list_vertex chain.clones chain.const', **values))
+    return folder
+
+
+def driven_scene(folder, **options):
+    """A free one-blob body with an active slip, a body of prescribed velocity, Brownian: slip and velocity files."""
+    from run_scenes import set_options
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / 'blob.vertex').write_text('1\n0 0 0\n')
+    (folder / 'a.slip').write_text('1\n0.1 0 0\n')
+    (folder / 'a.clones').write_text('1\n0 0 2.0 1 0 0 0\n')
+    (folder / 'b.clones').write_text('1\n2.5 0 2.5 1 0 0 0\n')
+    (folder / 'b.velocity').write_text('0.2 0 0 0 0 0\n')
+    values = dict(COMMON, scheme='stochastic_Slip_Trapz', kT=1.0, seed=3)
+    values.update(options)
+    (folder / 'input.dat').write_text(set_options('structure blob.vertex a.clones a.slip\n'
+                                                  'structure blob.vertex b.clones None b.velocity', **values))
+    return folder
+
+
+def run_dynamic(folder):
+    from run_scenes import run_in_process
+    return run_in_process('dynamic', folder, 'input.dat')
+
+
+@pytest.mark.parametrize('scene, name', [(articulated_scene, 'chain.const'), (articulated_scene, 'chain.list_vertex'),
+                                         (articulated_scene, 'blob.vertex'), (articulated_scene, 'chain.clones'),
+                                         (driven_scene, 'a.slip'), (driven_scene, 'b.velocity'),
+                                         (driven_scene, 'a.clones'), (driven_scene, 'input.dat')])
+def test_a_non_utf8_byte_in_any_text_file_is_the_same_one_line_refusal(tmp_path, scene, name):
+    folder = scene(tmp_path / 'run')
+    path = folder / name
+    path.write_bytes(path.read_bytes().replace(b'\n', b' \xe9\n', 1))  # a Latin-1 e at the end of line 1
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in err + out and len(err.strip().splitlines()) == 1, err
+    assert "%s', line 1: byte 0xe9 is not UTF-8 text; save the file as plain UTF-8 (or ASCII) text" % name in err, err
+
+
+@pytest.mark.parametrize('expression, words', [('t+' * 200000 + 't', 'an expression of 400001 characters'),
+                                               ('+'.join(['t'] * 80), 'nested more than 50 levels deep'),
+                                               ('-' * 900 + 't', 'nested more than 50 levels deep')])
+def test_const_expressions_have_a_size_and_depth_limit(tmp_path, expression, words):
+    folder = articulated_scene(tmp_path / 'run')
+    (folder / 'chain.const').write_text('2\n1\n0 1 0.5 0 0 -0.5 0 0 %s 0 0 -0.5 0 0 0 0 0 0 0 0\n' % expression)
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in err + out and len(err.strip().splitlines()) == 1, err
+    assert 'chain.const, line 3: ' in err and words in err, err

@@ -55,7 +55,8 @@ import scipy.sparse.linalg as spla
 
 from body.body import as_configuration
 from body.geometry import rotation_matrices
-from utils import UserInputError
+from multi_bodies.files.expressions import parse_expression
+from utils import UserInputError, read_text_file
 
 # ---------------------------------------------------------------------------------------------- files
 _FUNCTIONS = {name: getattr(np, name) for name in ('sin', 'cos', 'tan', 'exp', 'log', 'sqrt', 'abs', 'arcsin',
@@ -66,11 +67,7 @@ _BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div
 
 def compile_expression(text, where):
     """A function ``f(t) -> float`` of the expression ``text`` in ``t`` (the safe subset, see module doc)."""
-    try:
-        tree = ast.parse(text.strip(), mode='eval')
-    except SyntaxError as err:
-        raise UserInputError("%s: cannot read the expression '%s' (%s); write an expression of t such as "
-                             "'cos(-100*t)'" % (where, text, err.msg))
+    tree = parse_expression(text, where)  # size and depth limited: one line, never a RecursionError
 
     def build(node):
         if isinstance(node, ast.Expression):
@@ -107,13 +104,17 @@ body-frame vectors ``[l_p, l_q]`` (length units); ``expressions``: per joint Non
 (``l_p, l_q, dl_p/dt, dl_q/dt``); ``path``."""
 
 
+def _text_lines(path, what):
+    """Lines of the UTF-8 file ``path`` (one-line UserInputError for other bytes, as every text file)."""
+    return read_text_file(path, what, 'give the path relative to the run directory').splitlines()
+
+
 def read_list_vertex_file(path, where):
     """The vertex file names of a ``.list_vertex`` file (one per line, ``#`` comments), as written."""
     if not os.path.isfile(path):
         raise UserInputError('%s: the list_vertex file %s does not exist; give the path relative to the run '
                              'directory' % (where, path))
-    with open(path) as f:
-        names = [line.split('#', 1)[0].strip() for line in f]
+    names = [line.split('#', 1)[0].strip() for line in _text_lines(path, 'list_vertex file')]
     names = [n for n in names if n]
     if not names:
         raise UserInputError('%s: the list_vertex file %s names no vertex file; write one vertex file per line'
@@ -126,8 +127,7 @@ def read_const_file(path, where):
     if not os.path.isfile(path):
         raise UserInputError('%s: the const file %s does not exist; give the path relative to the run directory'
                              % (where, path))
-    with open(path) as f:
-        lines = [(k, line.split('#', 1)[0].split()) for k, line in enumerate(f, start=1)]
+    lines = [(k, line.split('#', 1)[0].split()) for k, line in enumerate(_text_lines(path, 'const file'), start=1)]
     lines = [(k, words) for k, words in lines if words]
     try:
         num_bodies, num_constraints = int(lines[0][1][0]), int(lines[1][1][0])
