@@ -27,7 +27,7 @@ SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', '
            'multi_bodies.clones_to_vtk', 'multi_bodies.ensemble', 'multi_bodies.render',
            'many_bodyMCMC.many_body_MCMC', 'boomerang.boomerang', 'boomerang.calculate_boomerang_msd_from_trajectories',
            'boomerang.plot_boomerang_msd', 'boomerang.plot_boomerang_trajectory', 'sphere.sphere_rotational_msd',
-           'sphere.make_mobility_table'}
+           'sphere.make_mobility_table', 'multi_bodies.analyse'}
 # The published import paths that users' files and drivers import: thin faces over the package, on the top
 # floor of their room (floor 8), never imported by the package itself.
 PUBLISHED_FACES = {'quaternion_integrator.quaternion'}
@@ -45,7 +45,7 @@ def floor(module):
              ('body', 2), ('stochastic_forcing', 2),
              ('multi_bodies.files', 3), ('multi_bodies.solver', 4),
              ('quaternion_integrator', 5), ('sphere', 5),
-             ('multi_bodies.run', 6), ('many_bodyMCMC', 6), ('boomerang', 6),
+             ('multi_bodies.run', 6), ('multi_bodies.analysis', 6), ('many_bodyMCMC', 6), ('boomerang', 6),
              ('multi_bodies.advice', 7), ('multi_bodies.ensembles', 7), ('multi_bodies', 7)]
     for prefix, level in rules:
         if module == prefix or module.startswith(prefix + '.'):
