@@ -122,19 +122,24 @@ class Choice:
                                                             ' (%s)' % self.fix if self.fix else '')
 
 
-class Option(namedtuple('Option', ['kind', 'default', 'rule', 'used_by', 'program_rules'])):
+class Option(namedtuple('Option', ['kind', 'default', 'rule', 'used_by', 'program_rules', 'dynamics'],
+                        defaults=(True,))):
     """One row of OPTION_TABLE.
 
-    kind : str, int, float, floats3, grid9, bool, optional_str, optional_int
+    kind : str, int, float, floats3, ints2, grid9, bool, optional_str, optional_int
     default : the value when the file does not set the option
     rule : Range, Choice or None, checked whatever the program
     used_by : tuple of usage tags (see above); () = no effect
     program_rules : {program: rule}, a stricter rule for one program (e.g. dt > 0 for a dynamic run)
+    dynamics : True (the default) when the value can change a trajectory, or where a restart reads it from: a
+        restart must keep it (the restart fingerprint holds it, ``restart_records.run_fingerprint``); False when
+        it cannot change the numbers (n_steps, n_save, outputs, seed once a record holds the generator): a
+        restart may change it and still continues exactly
     """
 
 
-def _option(kind, default, used_by, rule=None, **program_rules):
-    return Option(kind, default, rule, tuple(used_by), program_rules)
+def _option(kind, default, used_by, rule=None, dynamics=True, **program_rules):
+    return Option(kind, default, rule, tuple(used_by), program_rules, dynamics)
 
 
 SDM = ('static', 'dynamic', 'mcmc')
@@ -154,23 +159,24 @@ OPTION_TABLE = {
                                     fix='it is not a static problem: the dynamic schemes run with multi_bodies.py'),
                       dynamic=Choice(DYNAMIC_SCHEMES,
                                      fix='it is a static problem: run it with multi_bodies_utilities.py')),
-    'n_steps': _option('int', 0, DM, Range(0, fix='the index of the last step')),
-    'initial_step': _option('int', 0, DM, Range(0, fix='0 starts a new run, k > 0 restarts from saved step k')),
-    'n_save': _option('int', 1, DM, Range(1, fix='save every n_save steps')),
-    'restart_inexact': _option('bool', False, DM),
-    'n_relaxation': _option('int', 0, ()),
+    'n_steps': _option('int', 0, DM, Range(0, fix='the index of the last step'), dynamics=False),
+    'initial_step': _option('int', 0, DM, Range(0, fix='0 starts a new run, k > 0 restarts from saved step k'),
+                            dynamics=False),
+    'n_save': _option('int', 1, DM, Range(1, fix='save every n_save steps'), dynamics=False),
+    'restart_inexact': _option('bool', False, DM, dynamics=False),
+    'n_relaxation': _option('int', 0, (), dynamics=False),
     'dt': _option('float', 0.0, ('dynamic',), Range(0, fix='the time step'),
                   dynamic=Range(0, low_open=True, fix='the time step of a dynamic run')),
     'eta': _option('float', 1.0, SD, _SCALE),
     'g': _option('float', 1.0, SDM),
     'blob_radius': _option('float', 1.0, SDM, _SCALE),
-    'tracer_radius': _option('float', 0.0, ('static',), Range(0, fix='0 gives the point velocity')),
+    'tracer_radius': _option('float', 0.0, ('static',), Range(0, fix='0 gives the point velocity'), dynamics=False),
     'kT': _option('float', 1.0, ('stochastic', 'mcmc'), Range(0, fix='the thermal energy'),
                   mcmc=Range(0, low_open=True, fix='the sampler weighs by exp(-U/kT)')),
-    'output_name': _option('str', 'run', SDM),
-    'random_state': _option('optional_str', None, DM),
-    'seed': _option('optional_int', None, DM, Range(0, text='a non-negative integer')),
-    'random_generator': _option('str', 'auto', DM, Choice(('auto', 'default', 'published'))),
+    'output_name': _option('str', 'run', SDM, dynamics=False),
+    'random_state': _option('optional_str', None, DM, dynamics=False),
+    'seed': _option('optional_int', None, DM, Range(0, text='a non-negative integer'), dynamics=False),
+    'random_generator': _option('str', 'auto', DM, Choice(('auto', 'default', 'published')), dynamics=False),
     'repulsion_strength_wall': _option('float', 1.0, SDM),
     'debye_length_wall': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
     'repulsion_strength': _option('float', 1.0, SDM),
@@ -193,15 +199,21 @@ OPTION_TABLE = {
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),
                                       Range(0, 1, True, True, fix='leave it out to use solver_tolerance')),
-    'plot_velocity_field': _option('grid9', None, ('static',)),
-    'force_file': _option('optional_str', None, ('static',)),
-    'velocity_file': _option('optional_str', None, ('static',)),
-    'save_body_mobility': _option('bool', False, ('dynamic',)),
-    'save_blobs_mobility': _option('bool', False, ('dynamic',)),
-    'save_velocities': _option('bool', False, ()),
-    'save_vtk': _option('bool', False, ('dynamic',)),
-    'slip_file': _option('optional_str', None, ()),
-    'structure_names': _option('optional_str', None, ()),
+    'plot_velocity_field': _option('grid9', None, ('static',), dynamics=False),
+    'force_file': _option('optional_str', None, ('static',), dynamics=False),
+    'velocity_file': _option('optional_str', None, ('static',), dynamics=False),
+    'save_body_mobility': _option('bool', False, ('dynamic',), dynamics=False),
+    'save_blobs_mobility': _option('bool', False, ('dynamic',), dynamics=False),
+    'save_velocities': _option('bool', False, (), dynamics=False),
+    'save_vtk': _option('bool', False, ('dynamic',), dynamics=False),
+    # the published HydroGrid options, computed by the package (multi_bodies/analysis/hydrogrid.py, doc/analysis.md)
+    'call_HydroGrid': _option('bool', False, ('dynamic',)),
+    'sample_HydroGrid': _option('int', 1, ('dynamic',), Range(1, fix='sample every sample_HydroGrid steps')),
+    'save_HydroGrid': _option('int', 0, ('dynamic',), Range(0, fix='0 averages over the whole run')),
+    'cells': _option('ints2', (1, 1), ('dynamic',)),  # two ints >= 1, checked by analysis.hydrogrid
+    'green_particles': _option('ints2', (0, 0), ('dynamic',)),  # 0 <= i0 <= i1, checked by analysis.hydrogrid
+    'slip_file': _option('optional_str', None, (), dynamics=False),
+    'structure_names': _option('optional_str', None, (), dynamics=False),
     # Monte Carlo sampler only (many_bodyMCMC, doc/mcmc.md); 0 step sizes select the published defaults
     'mcmc_move': _option('str', 'all_bodies', ('mcmc',), Choice(MCMC_MOVES)),
     'mcmc_energy_implementation': _option('str', 'auto', ('mcmc',), Choice(MCMC_ENERGY_IMPLEMENTATIONS)),
@@ -214,8 +226,7 @@ OPTION_TABLE = {
 # Options of later versions of the published code that this package does not implement, with the feature
 # they belong to (named in the refusal, so a user knows what is missing rather than only that a line is wrong).
 UNSUPPORTED_FEATURES = {
-    'the HydroGrid interface (structure factors)': ('call_HydroGrid', 'sample_HydroGrid', 'save_HydroGrid',
-                                                    'save_HydroGrid_cells', 'green_particles', 'cells'),
+    "HydroGrid's snapshots of the concentration cells": ('save_HydroGrid_cells',),
     'lubrication corrections (the Lubrication solver)': ('repulsion_strength_firm', 'firm_delta', 'Lub_Cut',
                                                          'domType', 'tilt_angle', 'stiffness_wall', 'mu',
                                                          'vacf', 'zmin', 'zmax'),
@@ -297,6 +308,19 @@ class Options:
         return {name: getattr(self, name) for name in OPTION_TABLE}
 
 
+def options_with(**values):
+    """Options of the table's defaults with ``values`` (name -> typed value) set, for schemes and models made
+    directly (tests, charts, benchmarks); each value is checked against the table's rule."""
+    unknown = [name for name in values if name not in OPTION_TABLE]
+    if unknown:
+        raise KeyError('not an option of the table: %s' % ', '.join(unknown))
+    options = Options('<options_with>', values, {}, [])
+    for name, value in values.items():
+        if value is not None:
+            check_value(name, value, '<options_with>: %s' % name)
+    return options
+
+
 def _convert(kind, name, value, where):
     """Convert the text ``value`` of option ``name`` to its type or raise UserInputError."""
     words = value.split()
@@ -346,6 +370,14 @@ def _convert(kind, name, value, where):
             fail('three numbers')
         if len(numbers) != 3:
             fail('three numbers')
+        return numbers
+    if kind == 'ints2':
+        try:
+            numbers = tuple(int(w) for w in words)
+        except ValueError:
+            fail('two integers')
+        if len(numbers) != 2:
+            fail('two integers')
         return numbers
     if kind == 'grid9':
         expected = ('nine values x0 x1 Nx y0 y1 Ny z0 z1 Nz (Nx, Ny, Nz positive integers, x0 < x1, ...; '

@@ -19,7 +19,9 @@ import time
 import numpy as np
 
 import utils
+from body.body import Configuration
 from multi_bodies.files.input_options import check_options
+from multi_bodies.solver.counters import Counters
 from multi_bodies.run import run_output
 from multi_bodies.run.output_lock import output_lock
 from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies, write_run_start
@@ -65,53 +67,53 @@ class DynamicRun:
                                                   report=self.log_error)
         self.rng = run_output.make_generator(options)
         self.rng_from_restart = False
+        model = self.system
+        start = self.scheme.init(model, model.start_configuration, step=options.initial_step)
         if self.restart is not None and self.restart.get('state') and use_record:
             state = self.restart['state']
             if state.get('rng') is not None:
                 self.rng.bit_generator.state = state['rng']
                 self.rng_from_restart = True
-            self.scheme.set_history(state.get('scheme'))
-            self.system.set_counters(state.get('counters') or {})
-            if getattr(self.system, 'articulated', None) is not None:
-                self.system.articulated.nonlinear_iterations = int(
-                    (state.get('counters') or {}).get('nonlinear_iterations_count', 0))
+            configuration = model.start_configuration
             saved = state.get('locations'), state.get('orientations')
             # The snapshot files hold the same numbers, but their quaternions are renormalised when read
             # (SPEC 1.3); the record keeps them exactly as the uninterrupted run has them.
-            current = self.system.configuration.locations
+            current = configuration.locations
             if saved[0] is not None and np.shape(saved[0]) == current.shape and \
                     np.allclose(saved[0], current, rtol=0, atol=1e-12 * (1 + np.max(np.abs(saved[0])))):
-                self.system.set_state(saved[0], saved[1])
+                configuration = Configuration(saved[0], saved[1])
+            start = self.scheme.init(model, configuration, step=options.initial_step, history=state.get('scheme'),
+                                     counters=Counters.from_info(state.get('counters')))
         elif options.initial_step > 0:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
                 % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
-        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
+        self.start_state = start  # the run state before the first step (RunState, a value)
+        run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state(start))),
                                         self.log)
         start_output(options)
 
     # -------------------------------------------------------------- output helpers
-    def restart_state(self):
-        locations, orientations = self.system.configuration.copy_arrays()
+    def restart_state(self, state):
+        """The restart record's state of RunState ``state`` (configuration, generator, history, counters)."""
+        locations, orientations = state.configuration.copy_arrays()
         return {'locations': locations, 'orientations': orientations,
-                'rng': self.rng.bit_generator.state, 'scheme': self.scheme.get_history(),
-                'counters': self.counters()}
+                'rng': self.rng.bit_generator.state, 'scheme': state.history(),
+                'counters': self.counters(state)}
 
-    def counters(self):
+    def counters(self, state):
         """The run's counters for ``.info`` and the restart records (articulated: the nonlinear count too)."""
-        counters = self.system.counters(self.scheme)
-        if getattr(self.system, 'articulated', None) is not None:  # the published count of the nonlinear solver
-            counters['nonlinear_iterations_count'] = self.system.articulated.nonlinear_iterations
-        return counters
+        return state.counters.info(articulated=self.system.articulated is not None)
 
-    def write_info(self, extra_lines=()):
-        run_output.write_info(self.options.output_name + '.info', self.counters(), extra_lines)
+    def write_info(self, state, extra_lines=()):
+        run_output.write_info(self.options.output_name + '.info', self.counters(state), extra_lines)
 
     def run(self):
         """The time loop; returns the exit status."""
-        options, system, scheme = self.options, self.system, self.scheme
+        options, model, scheme = self.options, self.system, self.scheme
+        state = self.start_state
         restart = options.initial_step > 0
-        write_run_start(options, self.types, system.num_blobs, self.rng, restart=restart)
+        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart)
         write_articulated_copies(options)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
@@ -120,24 +122,27 @@ class DynamicRun:
         self.writer = writer
         if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
             from multi_bodies.run.vtk_output import AlsoWriteVtk
-            writer = AlsoWriteVtk(writer, options, self.types, system)
+            writer = AlsoWriteVtk(writer, options, self.types, model)
+        if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
+            from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
+            writer = AlsoSampleStructureFactors(writer, options, log=self.log)
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)
         status, stopped_line = 0, None
         start = time.perf_counter()
 
         def save(index):
-            writer.save(index, system.configuration.locations, system.configuration.orientations,
-                        self.restart_state())
+            writer.save(index, state.configuration.locations, state.configuration.orientations,
+                        self.restart_state(state))
             if options.save_blobs_mobility or options.save_body_mobility:
-                self.save_mobilities(index)
-            self.write_info()
-            progress.at_save(index, scheme.invalid_configurations)
+                self.save_mobilities(index, state.configuration)
+            self.write_info(state)
+            progress.at_save(index, state.counters.invalid_configurations)
 
         def save_stop(index):  # a signal stopped the run off the n_save grid: keep the step just finished
-            self.writer.save(index, system.configuration.locations, system.configuration.orientations,
-                             self.restart_state(), stop=True)
-            self.write_info()
+            self.writer.save(index, state.configuration.locations, state.configuration.orientations,
+                             self.restart_state(state), stop=True)
+            self.write_info(state)
             self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
                      '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
                                                          options.output_name, run_output.RESTART_SUFFIX, index))
@@ -145,8 +150,15 @@ class DynamicRun:
         loop = run_output.TimeLoop(first, last, options.n_save)
 
         def advance(step):
-            scheme.step(system, step, self.rng)
-            progress.after_step(step, system.last_iterations, scheme.invalid_configurations)
+            nonlocal state
+            assert state.step == step, 'the run state is at step %d, the loop at %d' % (state.step, step)
+            try:
+                state = scheme.step(model, state, self.rng)
+            except utils.SimulationStopped as err:  # the counts of the stopped step reach .info
+                if err.state is not None:
+                    state = err.state
+                raise
+            progress.after_step(step, state.last_iterations, state.counters.invalid_configurations)
 
         with run_output.StopRequest() as stop:
             try:
@@ -179,7 +191,8 @@ class DynamicRun:
             finally:
                 progress.close()
                 if not run_output.finish_run(options.output_name, start, first, loop.step, restart,
-                                             self.write_info, stopped_line) and status == 0:
+                                             lambda *lines: self.write_info(state, *lines),
+                                             stopped_line) and status == 0:
                     status = 1
         if stopped_line and status != 1:
             if loop.stop_saved is not None:
@@ -190,17 +203,18 @@ class DynamicRun:
                                % (stopped_line, loop.last_saved, loop.last_saved))
         return status
 
-    def save_mobilities(self, step):
-        """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities of the saved step (SPEC 2.1)."""
+    def save_mobilities(self, step, configuration):
+        """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities at the saved step's ``configuration``
+        (SPEC 2.1)."""
         system = self.system
         stem = '%s.%%s.%s.dat' % (self.options.output_name, str(step).zfill(8))
-        M, M_inv, _, N = system.dense_matrices(system.configuration, inverse=self.options.save_body_mobility)
+        M, M_inv, _, N = system.dense_matrices(configuration, inverse=self.options.save_body_mobility)
         if self.options.save_blobs_mobility:
             np.savetxt(stem % 'blobs_mobility', M, delimiter='  ')
         if self.options.save_body_mobility:
             if system.has_fixed_bodies:  # obstacles: the free bodies' mobility with the prescribed ones held
                 from multi_bodies.solver.obstacles import dense_mixed_body_mobility
-                N = dense_mixed_body_mobility(M_inv, system.dense_matrices(system.configuration, inverse=False)[2],
+                N = dense_mixed_body_mobility(M_inv, system.dense_matrices(configuration, inverse=False)[2],
                                               system.fixed_bodies)[0]
             np.savetxt(stem % 'body_mobility', N, delimiter='  ')
 
