@@ -83,7 +83,7 @@ class MCMCRun:
         self.sampler = MetropolisSampler(self.energy, arrays.locations, arrays.orientations, options.kT,
                                          max_translation, max_angle_shift, options.mcmc_move, options.n_burn_in,
                                          options.target_acceptance)
-        self.fingerprint = run_output.run_fingerprint(options, self.types, bodies)
+        self.fingerprint = run_output.run_fingerprint(options, self.types, bodies, directory)
         use_record = True
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
             use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,

@@ -7,8 +7,10 @@ reading the headers only; a record cut by a hard stop or with flipped bits
 is skipped or refused with a message.  A record carries the run's
 identifier, the checksum of each snapshot it belongs to and a fingerprint
 of what the dynamics depends on (structures in order, blobs, radii, slips,
-options), so a restart is exact or refused with a message naming what
-changed (``restart_inexact True`` forces it).
+the options of the table's ``dynamics`` column, the content of every file a
+restart reads), so a restart is exact or refused with a message naming what
+changed (``restart_inexact True`` forces it).  Every field of a record is
+checked (``record_checks``) before anything in it is used.
 """
 import hashlib
 import json
@@ -20,8 +22,11 @@ import uuid
 import numpy as np
 
 from utils import UserInputError, warn_user
+from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.files.run_inputs import file_digest, restart_inputs
 from multi_bodies.files.snapshots import clones_name, config_name
 
+from multi_bodies.run.record_checks import generator_problem, record_problem, run_problem
 from multi_bodies.run.run_state import RESTART_SUFFIX, RUN_SUFFIX, STATE_FORMAT, atomic_write, state_from_bytes
 
 
@@ -84,8 +89,13 @@ def restart_index(path, report=warn_user):
     return entries
 
 
-def read_restart_entry(path, entry):
-    """The record of ``entry`` (from ``restart_index``) as a dict, or None when its checksum does not match."""
+def read_restart_entry(path, entry, problems=None):
+    """The record of ``entry`` (from ``restart_index``) as a dict, or None when it cannot be used.
+
+    None when its checksum does not match (damage) or when a field is not what a record holds (an edit with the
+    checksum recomputed: ``record_checks.record_problem``); then ``problems`` (a list, when given) gets the
+    line saying which field.  Nothing of a record is used before every field passed.
+    """
     step, start, end = entry
     with open(path, 'rb') as f:
         f.seek(start - RECORD_HEADER.size)
@@ -93,10 +103,24 @@ def read_restart_entry(path, entry):
         payload = f.read(end - start)
     if hashlib.sha256(payload).digest() != digest:
         return None
-    record = state_from_bytes(payload)
-    if not (isinstance(record, dict) and record.get('step') == step):
+    try:
+        record = state_from_bytes(payload)
+        problem = record_problem(record, step)
+    except (ValueError, TypeError, KeyError, AttributeError, RecursionError, MemoryError) as err:
+        record, problem = None, 'the payload is not the data of a record (%s)' % type(err).__name__
+    if problem is not None:
+        if problems is not None:
+            problems.append(problem)
         return None
     return record
+
+
+def _unusable(path, step, problems):
+    """Why the record of ``step`` is not used: its field (``problems``) or its checksum."""
+    if problems:
+        return ('%s: the record of step %d is not a valid record (%s: edited, or not written by this package)'
+                % (path, step, problems[-1]))
+    return '%s: the record of step %d fails its checksum (damaged)' % (path, step)
 
 
 def last_valid_restart_record(path, report=warn_user):
@@ -106,24 +130,20 @@ def last_valid_restart_record(path, report=warn_user):
     """
     entries = restart_index(path, report)
     for entry in reversed(entries):
-        record = read_restart_entry(path, entry)
+        problems = []
+        record = read_restart_entry(path, entry, problems)
         if record is not None:
             return record, entry[2]
-        report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+        report('%s; it is skipped' % _unusable(path, entry[0], problems))
     return None, len(RESTART_MAGIC)
 
 
 # ------------------------------------------------------------------ what a record depends on
-# Options whose change makes a continuation differ from the uninterrupted run
-# (the record's fingerprint holds their values; a restart with another value
-# is refused unless restart_inexact is set).
-DYNAMICS_OPTIONS = ('scheme', 'dt', 'eta', 'g', 'kT', 'blob_radius', 'repulsion_strength_wall', 'debye_length_wall',
-                    'repulsion_strength', 'debye_length', 'periodic_length', 'domain', 'omega_one_roller',
-                    'free_kinematics', 'update_PC', 'rf_delta', 'solver_tolerance',
-                    'mobility_blobs_implementation', 'mobility_vector_prod_implementation',
-                    'blob_blob_force_implementation', 'body_body_force_torque_implementation',
-                    'mcmc_move', 'mcmc_energy_implementation', 'max_translation', 'max_angle_shift', 'n_burn_in',
-                    'target_acceptance')
+# Options whose change makes a continuation differ from the uninterrupted run: the rows of the option table whose
+# ``dynamics`` column is True (the record's fingerprint holds their values; a restart with another value is
+# refused unless restart_inexact is set).  The others (n_steps, n_save, outputs, seed, ...) may change.
+DYNAMICS_OPTIONS = tuple(name for name, option in OPTION_TABLE.items() if option.dynamics)
+FINGERPRINT_VERSION = 'the options of the table and the content of the input files (2)'
 FORCE_OPTION = 'restart_inexact'
 FORCE_HINT = ('set "%s True" in the input file to continue anyway (the continuation then differs from an '
               'uninterrupted run)' % FORCE_OPTION)
@@ -134,31 +154,41 @@ def _digest(data):
     return hashlib.sha256(data).hexdigest()
 
 
-def run_fingerprint(options, types, bodies):
-    """What a restart record depends on, as {name: text}: structures in order, their blobs, radii, slips, options.
+def run_fingerprint(options, types, bodies, directory=None):
+    """What a restart record depends on, as {name: text}: structures in order, their blobs, radii, slips, the
+    options of the table that change the dynamics, the content of every file a restart reads.
 
     types: list of (structure ID, number of bodies) in body order; bodies: the Body list (``reference_configuration``
-    (n, 3), ``blob_radius``, ``slip_reference`` (n, 3) or None).  Two runs with equal fingerprints compute the same
-    trajectory from the same snapshot, generator and scheme history.
+    (n, 3), ``blob_radius``, ``slip_reference`` (n, 3) or None); directory: the run directory (default the current
+    one), whose override sources are covered.  Two runs with equal fingerprints compute the same trajectory from
+    the same snapshot, generator and scheme history.
     """
-    found = {'structures': ', '.join('%s x %d' % (name, count) for name, count in types)}
+    found = {'fingerprint': FINGERPRINT_VERSION,
+             'structures': ', '.join('%s x %d' % (name, count) for name, count in types)}
     start = 0
     for name, count in types:
         if count:
-            body = bodies[start]
-            blobs = np.ascontiguousarray(body.reference_configuration, dtype=float)
-            found['blobs of %s' % name] = '%d blobs, sha256 %s' % (blobs.shape[0], _digest(blobs.tobytes())[:16])
-            radii = np.ascontiguousarray(getattr(body, 'blob_radii', body.blob_radius), dtype=float)
-            found['blob radius of %s' % name] = ('%r' % float(radii) if radii.ndim == 0 else
-                                                 'sha256 %s' % _digest(radii.tobytes())[:16])
-            slip = getattr(body, 'slip_reference', None)
-            if slip is not None:
-                found['slip of %s' % name] = 'sha256 %s' % _digest(np.ascontiguousarray(slip, float).tobytes())[:16]
+            found.update(_body_fingerprint(name, bodies[start]))
         start += count
     for name in DYNAMICS_OPTIONS:
-        if hasattr(options, name):
-            value = getattr(options, name)
-            found[name] = repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
+        value = getattr(options, name, None)
+        found[name] = repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
+    for kind, name, path in restart_inputs(options, os.getcwd() if directory is None else directory):
+        found['%s file %s' % (kind, name)] = file_digest(path)
+    return found
+
+
+def _body_fingerprint(name, body):
+    """Blobs, radii and slip of the first body of structure ``name``."""
+    found = {}
+    blobs = np.ascontiguousarray(body.reference_configuration, dtype=float)
+    found['blobs of %s' % name] = '%d blobs, sha256 %s' % (blobs.shape[0], _digest(blobs.tobytes())[:16])
+    radii = np.ascontiguousarray(getattr(body, 'blob_radii', body.blob_radius), dtype=float)
+    found['blob radius of %s' % name] = ('%r' % float(radii) if radii.ndim == 0 else
+                                         'sha256 %s' % _digest(radii.tobytes())[:16])
+    slip = getattr(body, 'slip_reference', None)
+    if slip is not None:
+        found['slip of %s' % name] = 'sha256 %s' % _digest(np.ascontiguousarray(slip, float).tobytes())[:16]
     return found
 
 
@@ -225,9 +255,12 @@ def snapshot_bytes(output_name, save_clones, structure_id, record):
         path = config_name(output_name, structure_id)
         length = ((record.get('snapshots') or {}).get(structure_id) or [None, None])[1]
         try:
+            offset = int(offsets[structure_id])
+            if length is None or offset + int(length) > os.path.getsize(path):  # beyond the file: not its snapshot
+                return None
             with open(path, 'rb') as f:
-                f.seek(int(offsets[structure_id]))
-                return f.read(length) if length is not None else None
+                f.seek(offset)
+                return f.read(int(length))
         except OSError:
             return None
     else:
@@ -264,9 +297,10 @@ def last_complete_pair(output_name, save_clones, types, report=warn_user):
     if not os.path.isfile(path):
         return None, None
     for entry in reversed(restart_index(path, report)):
-        record = read_restart_entry(path, entry)
+        problems = []
+        record = read_restart_entry(path, entry, problems)
         if record is None:
-            report('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+            report('%s; it is skipped' % _unusable(path, entry[0], problems))
             continue
         bad = snapshot_mismatches(output_name, save_clones, types, record)
         if bad:
@@ -302,6 +336,10 @@ def check_restart(options, record, types, fingerprint, report=warn_user):
         if bad:
             problems.append('the snapshot of step %d of %s differs from the one its record in %s was written with '
                             '(the file was edited or replaced)' % (k, ', '.join(bad), path))
+            use_record = False
+        unfit = run_problem(record, types) or generator_problem(options, (record.get('state') or {}).get('rng'))
+        if unfit:
+            problems.append('the record of step %d in %s does not fit this run: %s' % (k, path, unfit))
             use_record = False
         recorded = record.get('fingerprint')
         if recorded:
@@ -359,11 +397,11 @@ def find_restart_record(output_name, step):
     entries = [entry for entry in restart_index(path) if entry[0] == step]
     if not entries:
         return None, None
-    record = read_restart_entry(path, entries[-1])
+    problems = []
+    record = read_restart_entry(path, entries[-1], problems)
     if record is None:
-        raise UserInputError('%s: the record of step %d fails its checksum (the file is damaged); restart from '
-                             'another saved step, or remove the file to restart from the snapshot alone'
-                             % (path, step))
+        raise UserInputError('%s; restart from another saved step, or remove the file to restart from the snapshot '
+                             'alone' % _unusable(path, step, problems))
     return record, entries[-1][2]
 
 
@@ -377,9 +415,10 @@ def read_restart_records(output_name):
         return []
     records = []
     for entry in restart_index(path):
-        record = read_restart_entry(path, entry)
+        problems = []
+        record = read_restart_entry(path, entry, problems)
         if record is None:
-            warn_user('%s: the record of step %d fails its checksum (damaged); it is skipped' % (path, entry[0]))
+            warn_user('%s; it is skipped' % _unusable(path, entry[0], problems))
         else:
             records.append(record)
     return records

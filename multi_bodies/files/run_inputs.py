@@ -1,0 +1,83 @@
+"""The files a run reads besides its input file, by kind, and the digest of their content (floor 3).
+
+A restart is exact only when everything the trajectory depends on is what
+it was when the record was written: the options (``OPTION_TABLE``'s
+``dynamics`` column) and the content of every file the run reads at a
+restart.  :func:`restart_inputs` lists those files from the options, so the
+restart fingerprint (``multi_bodies.run.restart_records.run_fingerprint``)
+covers each of them; ``FILE_KINDS`` says, for every kind of file a program
+reads, whether a restart depends on it and why not when it does not.
+"""
+import hashlib
+import os
+
+from utils import UserInputError, read_text_file
+
+# The override sources a run imports from its run directory (multi_bodies.solver.physics.USER_FILE and
+# USER_PYCUDA_FILE, many_bodyMCMC.mcmc_energy.USER_POTENTIAL_FILE and GPU_POTENTIAL_FILE; a test checks that the
+# names agree, this floor cannot import theirs).
+OVERRIDE_FILES = ('user_defined_functions.py', 'forces_pycuda_user_defined.py', 'user_defined_potentials.py',
+                  'potential_pycuda_user_defined.py')
+
+# kind -> True when a restart reads it (its content is in the fingerprint), else why a change cannot alter the
+# continuation.
+FILE_KINDS = {
+    'vertex': True,         # blob positions (and radii) of a structure, obstacle or articulated body
+    'slip': True,           # active slip of the blobs of a structure line
+    'velocity': True,       # prescribed velocities of the bodies of a structure line
+    'list_vertex': True,    # vertex files of the bodies of an articulated line
+    'const': True,          # joints of an articulated line (and their expressions of t)
+    'override': True,       # user_defined_functions.py and the other override sources of the run directory
+    'clones': 'read at step 0 only: a restart reads the saved snapshot instead (checked against its record)',
+    'force': 'read by the static problems only (force_file of scheme mobility), never by a run that restarts',
+    'random_state': 'read at step 0 only: a restart continues the generator state of its record',
+}
+
+
+def file_digest(path):
+    """'sha256 <first 16 hex digits>' of the bytes of ``path``, or 'missing'."""
+    try:
+        with open(path, 'rb') as f:
+            return 'sha256 %s' % hashlib.sha256(f.read()).hexdigest()[:16]
+    except OSError:
+        return 'missing'
+
+
+def _list_vertex_names(path):
+    """The vertex files a ``.list_vertex`` file names (one per line, ``#`` comments); [] when unreadable."""
+    try:
+        text = read_text_file(path, 'list_vertex file', 'give the path relative to the run directory')
+    except UserInputError:
+        return []
+    return [name for name in (line.split('#', 1)[0].strip() for line in text.splitlines()) if name]
+
+
+def restart_inputs(options, directory):
+    """(kind, name, path) of every file whose content a restart of ``options`` depends on, in a fixed order.
+
+    ``name`` is the file as the input names it (an override source: its file name), ``path`` where it is read;
+    ``directory``: the run directory (where the override sources are imported from).  Each file appears once.
+    """
+    found = []
+    specs = list(options.structures) + list(getattr(options, 'obstacles', None) or [])
+    for spec in specs:
+        found.append(('vertex', spec.vertex_file))
+        if spec.slip_file is not None:
+            found.append(('slip', spec.slip_file))
+        if getattr(spec, 'velocity_file', None) is not None:
+            found.append(('velocity', spec.velocity_file))
+    for spec in getattr(options, 'articulated', None) or []:
+        found.append(('list_vertex', spec.list_vertex_file))
+        found.append(('const', spec.const_file))
+        found.extend(('vertex', name) for name in _list_vertex_names(spec.list_vertex_file))
+    for name in OVERRIDE_FILES:
+        path = os.path.join(directory, name)
+        if os.path.isfile(path):
+            found.append(('override', name, path))
+    unique, seen = [], set()
+    for entry in found:
+        kind, name, path = entry if len(entry) == 3 else (entry[0], entry[1], entry[1])
+        if name not in seen:
+            seen.add(name)
+            unique.append((kind, name, path))
+    return unique

@@ -1,0 +1,195 @@
+"""Every field of a restart record checked before it is used (floor 6).
+
+A record's checksum catches damage, not an edit: a record rewritten with
+its checksum recomputed must still not make a restart allocate, seek or
+crash.  :func:`record_problem` checks each field of a decoded record for
+type, sign and range (offsets and lengths non-negative integers, the
+snapshot table a table of checksums and lengths, the generator state a
+state of a numpy bit generator, arrays numeric, finite and of the run's
+shape); :func:`run_problem` checks it against the run it is to continue
+(the structures, the number of bodies).  Each returns None or one line
+naming the field, which the caller turns into a refusal naming the record.
+"""
+import numbers
+
+import numpy as np
+
+MAX_NESTING = 6        # scheme histories are dicts of arrays and numbers: a few levels at most
+MAX_NAME_LENGTH = 4096
+
+
+class _Bad(Exception):
+    """One field of a record is not what a record of this package holds."""
+
+
+def _require(condition, text):
+    if not condition:
+        raise _Bad(text)
+
+
+def _is_int(value, low=0):
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool) and int(value) >= low
+
+
+def _is_name(value):
+    return isinstance(value, str) and 0 < len(value) <= MAX_NAME_LENGTH
+
+
+def _table(record, key, check_value, what):
+    """Check ``record[key]`` (absent or None allowed): a dict of names to values passing ``check_value``."""
+    table = record.get(key)
+    if table is None:
+        return
+    _require(isinstance(table, dict), '%s is a %s, not a table of structures' % (key, type(table).__name__))
+    for name, value in table.items():
+        _require(_is_name(name), '%s has the key %r, not a structure name' % (key, name))
+        _require(check_value(value), '%s of %s is %s, not %s' % (key, name, _short(value), what))
+
+
+def _short(value):
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + '...'
+
+
+def _is_checksum_entry(value):
+    """[SHA-256 hex digest, length in bytes]."""
+    return (isinstance(value, (list, tuple)) and len(value) == 2 and isinstance(value[0], str)
+            and len(value[0]) == 64 and all(c in '0123456789abcdef' for c in value[0]) and _is_int(value[1]))
+
+
+def _check_array(value, where, columns=None):
+    _require(isinstance(value, np.ndarray) and value.dtype.kind in 'fiub',
+             '%s is %s, not an array of numbers' % (where, type(value).__name__))
+    _require(value.dtype.kind != 'f' or bool(np.all(np.isfinite(value))), '%s holds NaN or infinite values' % where)
+    if columns is not None:
+        _require(value.ndim == 2 and value.shape[1] == columns, '%s has shape %s, not (bodies, %d)'
+                 % (where, value.shape, columns))
+
+
+def _check_data(value, where, depth=0):
+    """Scheme history and sampler state: None, numbers, words, numeric arrays, and lists/dicts of them."""
+    _require(depth <= MAX_NESTING, '%s is nested more than %d levels deep' % (where, MAX_NESTING))
+    if value is None or isinstance(value, (bool, str)):
+        return
+    if isinstance(value, numbers.Number):
+        _require(isinstance(value, numbers.Integral) or np.isfinite(value), '%s is %r' % (where, value))
+        return
+    if isinstance(value, (np.ndarray, np.generic)):
+        _check_array(np.asarray(value), where)
+        return
+    if isinstance(value, (list, tuple)):
+        for k, item in enumerate(value):
+            _check_data(item, '%s[%d]' % (where, k), depth + 1)
+        return
+    _require(isinstance(value, dict), '%s is a %s' % (where, type(value).__name__))
+    for key, item in value.items():
+        _check_data(item, '%s.%s' % (where, key), depth + 1)
+
+
+def _check_generator(state):
+    """``bit_generator.state`` of a numpy bit generator (or of the published generator: MT19937 plus the
+    cached Gaussian)."""
+    _require(isinstance(state, dict), 'state.rng is a %s, not a generator state' % type(state).__name__)
+    name = state.get('bit_generator')
+    _require(isinstance(name, str) and isinstance(getattr(np.random, name, None), type)
+             and issubclass(getattr(np.random, name), np.random.BitGenerator),
+             'state.rng names the bit generator %s, not one of numpy' % _short(name))
+    _require(isinstance(state.get('state'), dict), 'state.rng of %s holds no state table' % name)
+    if 'has_gauss' in state:
+        _require(state['has_gauss'] in (0, 1) and isinstance(state.get('gauss'), numbers.Real)
+                 and np.isfinite(state['gauss']), 'state.rng has a cached Gaussian that is not a finite number')
+    if name == 'MT19937':
+        key = state['state'].get('key')
+        _require(isinstance(key, np.ndarray) and key.shape == (624,) and key.dtype.kind in 'ui'
+                 and key.any() and 0 <= int(key.min()) and int(key.max()) <= 0xFFFFFFFF,
+                 'state.rng of MT19937 does not hold 624 keys between 0 and 2**32 - 1, not all 0')
+        _require(_is_int(state['state'].get('pos')) and state['state']['pos'] <= 624,
+                 'state.rng of MT19937 has a position outside 0 .. 624')
+    _check_data(state, 'state.rng')
+
+
+def _check_state(state):
+    if state is None:
+        return
+    _require(isinstance(state, dict), 'state is a %s, not a table' % type(state).__name__)
+    if state.get('rng') is not None:
+        _check_generator(state['rng'])
+    counters = state.get('counters')
+    _require(counters is None or (isinstance(counters, dict) and all(_is_int(v) for v in counters.values())),
+             'state.counters is not a table of non-negative integers')
+    for key, columns in (('locations', 3), ('orientations', 4)):
+        if state.get(key) is not None:
+            _check_array(state[key], 'state.' + key, columns)
+    for key in ('scheme', 'sampler'):
+        _check_data(state.get(key), 'state.' + key)
+
+
+def record_problem(record, step):
+    """None when every field of the decoded ``record`` (of header step ``step``) is of the right kind; else one
+    line naming the first field that is not."""
+    try:
+        _require(isinstance(record, dict), 'the record is a %s, not a table' % type(record).__name__)
+        _require(_is_int(record.get('step')) and record['step'] == step,
+                 'step is %s, the header says %d' % (_short(record.get('step')), step))
+        _require(record.get('run_id') is None or _is_name(record['run_id']), 'run_id is not a word')
+        _table(record, 'config_offsets', _is_int, 'a byte offset (an integer >= 0)')
+        _table(record, 'config_ends', _is_int, 'a byte offset (an integer >= 0)')
+        _table(record, 'snapshots', _is_checksum_entry, '[SHA-256 digest, length >= 0]')
+        _table(record, 'stop_files', _is_name, 'a file name')
+        _require(isinstance(record.get('stop', False), bool), 'stop is not True or False')
+        fingerprint = record.get('fingerprint')
+        _require(fingerprint is None or (isinstance(fingerprint, dict) and
+                                         all(isinstance(k, str) and isinstance(v, str) for k, v in fingerprint.items())),
+                 'fingerprint is not a table of words')
+        _check_state(record.get('state'))
+    except _Bad as bad:
+        return str(bad)
+    return None
+
+
+def run_problem(record, types):
+    """None when ``record`` (already passed by :func:`record_problem`) fits a run of ``types`` ((ID, bodies) per
+    structure); else one line naming the field."""
+    names = {name for name, _ in types}
+    bodies = sum(count for _, count in types)
+    for key in ('config_offsets', 'snapshots', 'stop_files'):
+        unknown = sorted(set(record.get(key) or {}) - names)
+        if unknown:
+            return '%s names %s, not a structure of this run' % (key, ', '.join(unknown))
+    state = record.get('state') or {}
+    for key in ('locations', 'orientations'):
+        value = state.get(key)
+        if value is not None and value.shape[0] != bodies:
+            return 'state.%s holds %d bodies, this run has %d' % (key, value.shape[0], bodies)
+    return None
+
+
+def _kind(state_or_rng):
+    """'published' or 'default (<bit generator>)' of a generator state (dict) or of a generator."""
+    from stochastic_forcing import generators
+    if isinstance(state_or_rng, dict):
+        if generators.is_legacy_state(state_or_rng):
+            return 'published'
+        return 'default (%s)' % state_or_rng.get('bit_generator')
+    if isinstance(state_or_rng, generators.PublishedGenerator):
+        return 'published'
+    return 'default (%s)' % type(state_or_rng.bit_generator).__name__
+
+
+def generator_problem(options, rng_state):
+    """None when the generator this run makes (``random_generator``, ``seed``, ``random_state``) takes the
+    record's generator state ``rng_state``; else one line saying which generator each holds."""
+    if rng_state is None:
+        return None
+    from multi_bodies.run.run_state import make_generator
+    rng = make_generator(options)
+    recorded, current = _kind(rng_state), _kind(rng)
+    if recorded != current:
+        return ('state.rng is the state of the %s generator, but this run makes the %s generator (random_generator '
+                '%s); give random_generator the value the run that wrote the record had'
+                % (recorded, current, options.random_generator))
+    try:
+        rng.bit_generator.state = rng_state
+    except Exception as err:  # a state numpy refuses: one line, not its traceback
+        return 'state.rng does not fit the %s generator (%s)' % (current, err)
+    return None
