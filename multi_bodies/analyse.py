@@ -81,6 +81,8 @@ def parse_arguments(argv):
     parser.add_argument('--discard', type=int, default=0, help='frames left out at the start (default 0)')
     parser.add_argument('--stride', type=int, default=1, help='use every stride-th frame (default 1)')
     parser.add_argument('--blocks', type=int, default=10, help='blocks of frames for the error bars of one run')
+    parser.add_argument('--origin-every', type=int, help='F(k,t)/MSD: frames between time origins (default 1, or '
+                        'the smallest spacing that keeps the buffer under 1 GiB)')
     parser.add_argument('--unwrap', action='store_true', help='undo periodic jumps (trajectories saved in the box)')
     parser.add_argument('--no-charts', action='store_true', help='write the tables only')
     return parser.parse_args(argv)
@@ -168,7 +170,7 @@ def main(argv=None):
             wavevectors, groups, shell_k, collective = shell_wavevectors(box, k_values, args.dimension)
         accumulators['time'] = TimeCorrelations(interval * args.stride, lag_list(max_lag), box, wavevectors,
                                                 groups, args.dimension, collective=collective, msd=args.msd,
-                                                unwrap=args.unwrap)
+                                                unwrap=args.unwrap, origin_every=args.origin_every)
     if accumulators:
         analyse(sources, list(accumulators.values()), blocks=args.blocks, discard=args.discard, stride=args.stride,
                 log=print)

@@ -63,7 +63,8 @@ def write_structure_factor(path, radial_path, result):
 
 
 def write_msd(path, result):
-    header = _describe(result, ['mean-square displacements (lengths squared) against the lag time'])
+    header = _describe(result, ['mean-square displacements (lengths squared) against the lag time; a time origin '
+                                'every %d frames' % result['origin_every']])
     return write_table(path, header, ['lag', 'time', 'msd_xy', 'msd_xy_error', 'msd_z', 'msd_z_error'],
                        [result['lag'], result['time'], result['msd_xy'], result['msd_xy_error'], result['msd_z'],
                         result['msd_z_error']])
@@ -78,9 +79,10 @@ def write_fkt(path, result, shell_k, shell_labels=None):
         if 'F' in result:
             names += ['F_k%d' % shell, 'F_k%d_error' % shell]
             columns += [result['F'][:, shell], result['F_error'][:, shell]]
-    header = _describe(result, ['F(k,t): Fs = self part, F = collective (F(k,0) = S(k)); shells: %s'
-                                % ', '.join('k%d = %.8g%s' % (i, k, ' (%s)' % shell_labels[i] if shell_labels
-                                                                 else '') for i, k in enumerate(shell_k))])
+    header = _describe(result, ['F(k,t): Fs = self part, F = collective (F(k,0) = S(k)); a time origin every %d '
+                                'frames; shells: %s' % (result['origin_every'], ', '.join(
+                                    'k%d = %.8g%s' % (i, k, ' (%s)' % shell_labels[i] if shell_labels else '')
+                                    for i, k in enumerate(shell_k)))])
     return write_table(path, header, names, columns)
 
 

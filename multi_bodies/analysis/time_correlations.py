@@ -15,11 +15,13 @@ unwrapped: a body that leaves the periodic box keeps its coordinate); set
 ``unwrap`` for trajectories written inside the box, which undoes jumps of more
 than half a box length between consecutive frames.
 
-Streaming: the last ``max_lag + 1`` frames (positions and the per-particle
-phases ``exp(i k . r_j)``) are kept in a ring buffer and each new frame is
-correlated with its origins at the chosen lags; the memory is
-``(max_lag + 1) N (3 + 2 n_k) * 8`` bytes whatever the number of frames.  Each
-pair of frames counts in the block (replica) of its origin.
+Streaming: the time origins of the last ``max_lag + 1`` frames (positions and
+the per-particle phases ``exp(i k . r_j)``) are kept in a buffer and each new
+frame is correlated with its origins at the chosen lags.  Every
+``origin_every``-th frame is an origin (default: every frame, or the smallest
+spacing that keeps the buffer under ``BUFFER_BYTES``, 1 GiB), so the memory is
+about ``(max_lag / origin_every + 1) N (3 + 2 n_k) * 8`` bytes whatever the number
+of frames.  Each pair of frames counts in the block (replica) of its origin.
 """
 import numpy as np
 
@@ -40,7 +42,7 @@ def lag_list(max_lag, count=48):
     return np.unique(np.concatenate([[0], np.round(np.logspace(0, np.log10(max_lag), count)).astype(int)]))
 
 
-def shell_wavevectors(periodic_length, k_values, dimension=2, per_shell=24):
+def shell_wavevectors(periodic_length, k_values, dimension=2, per_shell=12):
     """Wavevectors (n_k, d) and their shell index (n_k,) for each target wavenumber of ``k_values``.
 
     Periodic box (x, y in the plane; x, y, z in 3-d): the half-space box wavevectors with
@@ -80,11 +82,12 @@ class TimeCorrelations:
     time_step : time between the frames used; lags : lags in frames (int array, from :func:`lag_list`);
     periodic_length : (3,); wavevectors : (n_k, d) or None (no F); groups : (n_k,) shell of each;
     dimension : 2 (F from x, y) or 3; collective : also the collective F (needs the box wavevectors);
-    msd : compute the MSDs; unwrap : undo periodic jumps between frames.
+    msd : compute the MSDs; unwrap : undo periodic jumps between frames;
+    origin_every : frames between time origins (None: 1, or larger when the buffer would pass BUFFER_BYTES).
     """
 
     def __init__(self, time_step, lags, periodic_length, wavevectors=None, groups=None, dimension=2,
-                 collective=True, msd=True, unwrap=False):
+                 collective=True, msd=True, unwrap=False, origin_every=None):
         self.time_step, self.lags = float(time_step), np.asarray(lags, dtype=int)
         self.box = np.asarray(periodic_length, dtype=float).reshape(3)
         self.wavevectors = None if wavevectors is None else np.asarray(wavevectors, dtype=float)
@@ -95,17 +98,23 @@ class TimeCorrelations:
         self.self_sums = BlockSums((len(self.lags), n_k))
         self.collective_sums = BlockSums((len(self.lags), n_k))
         self.n_particles, self.buffer, self.previous, self.frames = None, {}, None, 0
+        self.origin_every = origin_every
 
     def start_source(self):
         self.buffer, self.previous = {}, None
 
     def _check_memory(self, n_particles):
         n_k = 0 if self.wavevectors is None else len(self.wavevectors)
-        need = (self.lags.max() + 1) * n_particles * (3 + 2 * n_k) * 8
-        if need > BUFFER_BYTES:
-            raise UserInputError('F(k,t)/MSD: %d lags of %d particles and %d wavevectors need %.1f GiB of buffer; '
-                                 'give a smaller --max-lag or fewer --k-values (limit %.1f GiB)'
-                                 % (self.lags.max(), n_particles, n_k, need / 1024 ** 3, BUFFER_BYTES / 1024 ** 3))
+        per_frame = n_particles * (3 + 2 * n_k) * 8
+        if self.origin_every is None:
+            self.origin_every = 1
+            while (self.lags.max() // self.origin_every + 1) * per_frame > BUFFER_BYTES:
+                self.origin_every += 1
+        self.origin_every = int(self.origin_every)
+        if self.origin_every < 1 or per_frame > BUFFER_BYTES:
+            raise UserInputError('F(k,t)/MSD: one frame of %d particles and %d wavevectors needs more than the %.1f '
+                                 'GiB buffer (or origin_every < 1); give fewer --k-values'
+                                 % (n_particles, n_k, BUFFER_BYTES / 1024 ** 3))
 
     def add(self, positions, frames, blocks):
         positions = np.asarray(positions, dtype=float)
@@ -122,9 +131,11 @@ class TimeCorrelations:
             self.frames += 1
             phases = rho = None
             if self.wavevectors is not None:
-                phases = np.exp(1j * frame_positions[:, :self.dimension] @ self.wavevectors.T)  # (N, n_k)
+                angles = frame_positions[:, :self.dimension] @ self.wavevectors.T  # (N, n_k)
+                phases = np.concatenate([np.cos(angles), np.sin(angles)], axis=1)  # (N, 2 n_k): Re, Im of exp(i k.r)
                 rho = phases.sum(axis=0)
-            self.buffer[int(frame)] = (frame_positions, phases, rho, int(block))
+            if int(frame) % self.origin_every == 0:
+                self.buffer[int(frame)] = (frame_positions, phases, rho, int(block))
             self.buffer.pop(int(frame) - int(self.lags.max()) - 1, None)
             for row, lag in enumerate(self.lags):
                 origin = self.buffer.get(int(frame) - int(lag))
@@ -133,14 +144,18 @@ class TimeCorrelations:
                 origin_positions, origin_phases, origin_rho, origin_block = origin
                 if self.msd:
                     step = frame_positions - origin_positions
-                    values = [np.mean(step[:, 0] ** 2 + step[:, 1] ** 2), np.mean(step[:, 2] ** 2)]
+                    squares = np.einsum('ja,ja->a', step, step) / len(step)
+                    values = [squares[0] + squares[1], squares[2]]
                     self.msd_sums.add(origin_block, values, 1.0, index=row)
                 if phases is not None:
-                    self_part = np.mean((phases * np.conj(origin_phases)).real, axis=0)
+                    n_k = phases.shape[1] // 2  # Re(e_t e_o^*) = cos cos' + sin sin'
+                    products = np.einsum('jk,jk->k', phases, origin_phases) / len(phases)
+                    self_part = products[:n_k] + products[n_k:]
                     self.self_sums.add(origin_block, self_part, 1.0, index=row)
                     if self.collective:
-                        self.collective_sums.add(origin_block, (rho * np.conj(origin_rho)).real / len(phases), 1.0,
-                                                 index=row)
+                        n_k = len(rho) // 2
+                        collective = (rho[:n_k] * origin_rho[:n_k] + rho[n_k:] * origin_rho[n_k:]) / len(phases)
+                        self.collective_sums.add(origin_block, collective, 1.0, index=row)
 
     def _by_shell(self, sums):
         """Average over the wavevectors of each shell, per block: (B, lags, shells)."""
@@ -157,7 +172,7 @@ class TimeCorrelations:
         if self.n_particles is None:
             raise UserInputError('F(k,t)/MSD: no frame was analysed')
         out = {'lag': self.lags, 'time': self.lags * self.time_step, 'particles': self.n_particles,
-               'frames': self.frames,
+               'frames': self.frames, 'origin_every': self.origin_every,
                'blocks': int((self.msd_sums.weights[:, 0, 0] > 0).sum() if self.msd else
                              (self.self_sums.weights[:, 0, 0] > 0).sum()),
                'origins': (self.msd_sums.weights if self.msd else self.self_sums.weights)[:, :, 0].sum(axis=0)}
