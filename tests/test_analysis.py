@@ -407,3 +407,55 @@ def test_script_writes_the_tables_and_refuses_bad_input_in_one_line(tmp_path):
         assert failed.returncode == 2, (arguments, failed.stderr)
         assert fragment in failed.stderr and 'Traceback' not in failed.stderr, failed.stderr
         assert len(failed.stderr.strip().splitlines()) == 1, failed.stderr
+
+
+def test_radial_dist_test_configuration_has_the_published_monte_carlo_pair_correlation(reference_dir):
+    """The published Radial_Dist_Test: g(r) of its 1,875 rollers (the shipped start configuration, an
+    equilibrium sample) against the shipped Monte Carlo g(r) (MCMC_G_of_R_data.dat: r, g, pair count).
+
+    Bins of 4 published bins (0.40275); standard error of a one-frame g: Poisson, sqrt(g / (M p)) (the
+    chi-square of the right box, 95 over 90 bins, says it is the right size).  r from 3.5 (contact) to 40.
+    Negative control: the box 10 % longer along x (chi-square 530).
+    """
+    folder = reference_dir / 'published_2025' / 'multi_bodies' / 'examples' / 'Radial_Dist_Test'
+    locations = snapshots.read_clones_file(str(folder / 'G_of_R.clones'))[0]
+    published = np.loadtxt(folder / 'MCMC_G_of_R_data.dat')
+    width, merge = published[1, 0] - published[0, 0], 4
+    bins = int(80.6 // (width * merge))  # up to half the shorter side, 161.25 / 2
+    radii = published[:bins * merge, 0].reshape(bins, merge)
+    g_published = (published[:bins * merge, 1].reshape(bins, merge) * radii).sum(1) / radii.sum(1)  # area weights
+    chi2 = {}
+    for name, Lx in (('right', 402.75), ('wrong', 1.1 * 402.75)):
+        box = (Lx, 161.25, 0)
+        result = pair_correlation(locations[None], box, bins * width * merge, bins, 2, blocks=1)
+        assert np.allclose(result['r'], radii.mean(1), atol=1e-5)
+        se = np.sqrt(np.maximum(g_published, 1e-3) / result['pairs_per_frame_ideal'])
+        used = (result['r'] > 3.5) & (result['r'] < 40)
+        chi2[name] = np.sum((((result['g'] - g_published) / se)[used]) ** 2)
+    n = int(used.sum())
+    assert chi2['right'] < chi_square_bound(n), chi2
+    assert chi2['wrong'] > chi_square_bound(n), chi2
+
+
+def test_ensemble_replicas_are_read_by_the_script_and_give_the_error_bars(tmp_path):
+    """A folder laid out as multi_bodies/ensemble.py leaves it: the finished replicas are the blocks."""
+    import json
+    D, L = 0.2, 10.0
+    replicas = []
+    for index in range(3):
+        folder = tmp_path / 'ens' / 'base' / ('r%04d' % index)
+        folder.mkdir(parents=True)
+        write_run(folder, brownian(30, 20, (L, L, 3), D, 1.0, seed=80 + index), one_file=True)
+        (folder / 'input.dat').write_text('scheme stochastic_first_order_RFD\ndt 0.2\nn_save 5\nperiodic_length '
+                                          '10 10 0\noutput_name /elsewhere/run\nsave_clones one_file\n'
+                                          'structure b.vertex blobs.clones\n')
+        status = 'done' if index < 2 else 'failed'
+        (folder / 'status.json').write_text(json.dumps({'status': status}))
+        replicas.append({'folder': 'base/r%04d' % index, 'point': 0, 'seed': index})
+    (tmp_path / 'ens' / 'ensemble.json').write_text(json.dumps({'points': [{'name': 'base'}],
+                                                                'replicas': replicas}))
+    done = run_script(tmp_path, '--ensemble', 'ens', '--msd', '--max-lag', '5', '--no-charts')
+    assert done.returncode == 0, done.stderr
+    table = np.loadtxt(tmp_path / 'ens' / 'analysis.msd.dat')
+    assert 'blocks 2' in (tmp_path / 'ens' / 'analysis.msd.dat').read_text()  # the failed replica is left out
+    assert np.isclose(table[1, 1], 1.0) and np.all(np.isfinite(table[1:, 3]))
