@@ -459,3 +459,18 @@ def test_ensemble_replicas_are_read_by_the_script_and_give_the_error_bars(tmp_pa
     table = np.loadtxt(tmp_path / 'ens' / 'analysis.msd.dat')
     assert 'blocks 2' in (tmp_path / 'ens' / 'analysis.msd.dat').read_text()  # the failed replica is left out
     assert np.isclose(table[1, 1], 1.0) and np.all(np.isfinite(table[1:, 3]))
+
+
+@pytest.mark.parametrize('change, fragment', [('periodic_length 30 0 0', 'needs a periodic box in the xy plane'),
+                                              ('cells 0 8', 'cells must be two integers >= 1'),
+                                              ('green_particles 5 2', 'needs 0 <= i0 <= i1'),
+                                              ('cells 8', "'cells' expects two integers"),
+                                              ('save_HydroGrid_cells True', 'unsupported')])
+def test_hydrogrid_options_are_checked_before_the_run_with_their_line(change, fragment):
+    from utils import UserInputError
+    text = INPUT.format(steps=2)
+    accepted = parse_input_text(text, 'in.dat', 'dynamic')  # control: the published options as given
+    assert accepted.call_HydroGrid and accepted.cells == (8, 8) and accepted.green_particles == (0, 4)
+    with pytest.raises(UserInputError) as err:
+        parse_input_text(text + change + '\n', 'in.dat', 'dynamic')
+    assert fragment in str(err.value) and str(err.value).startswith('in.dat, line'), str(err.value)

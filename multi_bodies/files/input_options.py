@@ -459,6 +459,7 @@ def parse_input_text(text, input_file='<input>', program=None):
     check_articulated(options)
     check_options(options, program)
     check_periodic_box(options)
+    check_hydrogrid(options, program)
     options.warnings = repeated + unused_option_warnings(options, program)
     return options
 
@@ -566,6 +567,19 @@ def check_articulated(options):
         raise UserInputError("%s: scheme '%s' moves articulated bodies, but the file has no 'articulated "
                              "<file.list_vertex> <file.clones> <file.const>' line" % (options.where('scheme'),
                                                                                       options.scheme))
+
+
+def check_hydrogrid(options, program=None):
+    """call_HydroGrid (doc/analysis.md): a periodic xy box, cells >= 1, 0 <= i0 <= i1 in green_particles."""
+    if not options.call_HydroGrid or program not in (None, 'dynamic'):
+        return
+    if min(options.periodic_length[:2]) <= 0:
+        raise UserInputError('%s: call_HydroGrid needs a periodic box in the xy plane (periodic_length Lx Ly 0 with '
+                             'Lx, Ly > 0)' % options.where('periodic_length'))
+    if min(options.cells) < 1:
+        raise UserInputError('%s: cells must be two integers >= 1' % options.where('cells'))
+    if not 0 <= options.green_particles[0] <= options.green_particles[1]:
+        raise UserInputError('%s: green_particles i0 i1 needs 0 <= i0 <= i1' % options.where('green_particles'))
 
 
 def check_periodic_box(options):
