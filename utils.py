@@ -23,8 +23,10 @@ class SimulationStopped(RuntimeError):
 
     The scripts catch it after the files written so far are complete, print
     the message (which names the step and what to change) and exit with
-    status 1.
+    status 1.  ``state``: the run state reached when a scheme's step stopped
+    (its counts included; set by ``Scheme.step``), else None.
     """
+    state = None
 
 
 def _interrupted_while_starting(signal_number, frame):

@@ -83,13 +83,14 @@ def time_scheme(folder, scheme_name, bodies_line, repeats):
     setup = prepare(options, 'dynamics', log=lambda *a: None)
     system = setup.system
     scheme = make_scheme(scheme_name, options.dt, options)
+    state = scheme.init(system, system.start_configuration)
     times, iterations = [], []
-    for step in range(repeats + 1):
-        before = system.gmres_iterations
+    for _ in range(repeats + 1):
+        before = state.counters.gmres_iterations
         start = time.perf_counter()
-        scheme.step(system, step)
+        state = scheme.step(system, state)
         times.append(time.perf_counter() - start)
-        iterations.append(system.gmres_iterations - before)
+        iterations.append(state.counters.gmres_iterations - before)
     return float(np.median(times[1:])), float(np.mean(iterations[1:])), system.num_blobs
 
 

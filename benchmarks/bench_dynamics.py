@@ -32,7 +32,6 @@ import multiprocessing
 import os
 import sys
 import time
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -41,7 +40,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from body.body import Body, bodies_to_arrays  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
-from multi_bodies.solver.system import System  # noqa: E402
+from multi_bodies.solver.model import Model  # noqa: E402
+from multi_bodies.files.input_options import options_with  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 PYTHON_LIMIT = 100  # bodies; above this the dense-chunked python M f takes minutes per step
@@ -66,7 +66,7 @@ def boomerang_system(num_bodies, backend, seed=1):
         bodies.append(body)
     physics = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, repulsion_strength=1.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=0.25, blob_mass=1.0)
-    return System(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.25, 1e-8,
+    return Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.25, 1e-8,
                   vector_product_name=backend, blobs_name=backend, blob_blob_name=backend)
 
 
@@ -117,13 +117,12 @@ class ProductCounter:
         return dict(self.counts, pc=self.preconditioner, kernel_seconds=self.seconds)
 
 
-def count_products(system):
-    """Install a ProductCounter on ``system`` (its M f product and its preconditioners); returns it."""
+def count_products(model):
+    """(a Model like ``model`` whose M f products and preconditioners are counted, its ProductCounter)."""
     counter = ProductCounter()
-    system.mobility_product = counter.wrap(system.mobility_product)
-    if getattr(system, 'paired_mobility_product', None) is not None:
-        paired = system.paired_mobility_product
-
+    paired = model.paired_mobility_product
+    counted_pair = None
+    if paired is not None:
         def counted_pair(*args):
             counter.counts['paired'] += 1
             start = time.perf_counter()
@@ -131,23 +130,24 @@ def count_products(system):
                 return paired(*args)
             finally:
                 counter.seconds += time.perf_counter() - start
-        system.paired_mobility_product = counted_pair
-    roller_product = system.roller_product
-    system.roller_product = lambda kind: counter.wrap(roller_product(kind))
-    build = system.build_preconditioner
 
-    def counted_build(configuration):
-        pc = build(configuration)
-        apply = pc.apply
+    class CountedModel(Model):
+        def roller_product(self, kind):
+            return counter.wrap(Model.roller_product(self, kind))
 
-        def counted_apply(x):
-            counter.preconditioner += 1
-            return apply(x)
-        pc.apply = counted_apply
-        pc.operator = type(pc.operator)(pc.operator.shape, matvec=counted_apply, dtype=float)
-        return pc
-    system.build_preconditioner = counted_build
-    return counter
+        def build_preconditioner(self, configuration):
+            pc = Model.build_preconditioner(self, configuration)
+            apply = pc.apply
+
+            def counted_apply(x):
+                counter.preconditioner += 1
+                return apply(x)
+            pc.apply = counted_apply
+            pc.operator = type(pc.operator)(pc.operator.shape, matvec=counted_apply, dtype=float)
+            return pc
+    arguments = dict(model.arguments, mobility_product=counter.wrap(model.mobility_product),
+                     paired_mobility_product=counted_pair)
+    return CountedModel(**arguments), counter
 
 
 def busy_loop():  # pragma: no cover - runs in the background process of --loaded
@@ -156,15 +156,17 @@ def busy_loop():  # pragma: no cover - runs in the background process of --loade
 
 
 def boomerang_run(num_bodies, backend, scheme_name, noise_tolerance=None, counted=False):
-    """A fresh (system, scheme, rng, counter or None) for ``scheme_name`` on ``num_bodies`` boomerangs."""
-    system = boomerang_system(num_bodies, backend)
-    counter = count_products(system) if counted else None
-    options = SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=noise_tolerance)
-    return system, make_scheme(scheme_name, 0.01, options), np.random.default_rng(3), counter
+    """A fresh (model, scheme, state, rng, counter or None) for ``scheme_name`` on ``num_bodies`` boomerangs."""
+    model, counter = boomerang_system(num_bodies, backend), None
+    if counted:
+        model, counter = count_products(model)
+    scheme = make_scheme(scheme_name, 0.01, options_with(kT=1.0, rf_delta=1e-3, update_PC=1,
+                                                         noise_solver_tolerance=noise_tolerance))
+    return model, scheme, scheme.init(model, model.start_configuration), np.random.default_rng(3), counter
 
 
 def roller_run(num_rollers, counted=False):
-    """A fresh (system, scheme, rng, counter or None): stochastic_adams_bashforth_rollers, rollers on a grid."""
+    """A fresh (model, scheme, state, rng, counter or None): stochastic_adams_bashforth_rollers, rollers on a grid."""
     rng = np.random.default_rng(2)
     side = int(np.ceil(np.sqrt(num_rollers)))
     bodies = []
@@ -176,30 +178,33 @@ def roller_run(num_rollers, counted=False):
         bodies.append(body)
     physics = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=0.1, repulsion_strength=1.0,
                    debye_length=0.1, periodic_length=np.zeros(3), blob_radius=0.5, blob_mass=1.0)
-    system = System(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.5,
-                    1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='C++',
-                    omega_one_roller=np.array([0.0, 1.0, 0.0]), free_kinematics=False)
-    counter = count_products(system) if counted else None
-    scheme = make_scheme('stochastic_adams_bashforth_rollers', 0.01, SimpleNamespace(kT=1.0, rf_delta=1e-3,
-                                                                                      update_PC=1))
-    return system, scheme, rng, counter
+    model = Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.5,
+                  1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='C++',
+                  omega_one_roller=np.array([0.0, 1.0, 0.0]), free_kinematics=False)
+    counter = None
+    if counted:
+        model, counter = count_products(model)
+    scheme = make_scheme('stochastic_adams_bashforth_rollers', 0.01, options_with(kT=1.0, rf_delta=1e-3, update_PC=1))
+    return model, scheme, scheme.init(model, model.start_configuration), rng, counter
 
 
 def interleaved_seconds(makers, repeats):
     """Median seconds per step of each run, the runs' steps taken in turn (one step of each per round).
 
-    ``makers``: callables returning (system, scheme, rng, None), uninstrumented.  Every run first takes one
-    warm-up step (the Euler start of the multistep schemes).  Taking the steps in turn puts every run under
-    the same machine conditions, so the ratios of one call are fair even when the machine's speed drifts.
+    ``makers``: callables returning (model, scheme, state, rng, None), uninstrumented.  Every run first takes
+    one warm-up step (the Euler start of the multistep schemes).  Taking the steps in turn puts every run
+    under the same machine conditions, so the ratios of one call are fair even when the machine's speed drifts.
     """
-    runs = [maker() for maker in makers]
-    for system, scheme, rng, _ in runs:
-        scheme.step(system, 0, rng)
+    runs = [list(maker()) for maker in makers]
+    for run in runs:
+        model, scheme, state, rng, _ = run
+        run[2] = scheme.step(model, state, rng)
     times = [[] for _ in runs]
-    for step in range(1, repeats + 1):
-        for k, (system, scheme, rng, _) in enumerate(runs):
+    for _ in range(repeats):
+        for k, run in enumerate(runs):
+            model, scheme, state, rng, _ = run
             start = time.perf_counter()
-            scheme.step(system, step, rng)
+            run[2] = scheme.step(model, state, rng)
             times[k].append(time.perf_counter() - start)
     return [float(np.median(t)) for t in times]
 
@@ -208,14 +213,14 @@ def counted_steps(maker, repeats):
     """Counters per step over ``repeats`` steps after the warm-up step, and the seconds of those steps, from
     an instrumented run (``maker`` returns a counter); the counting slows a step, so these seconds give only
     the kernel's share."""
-    system, scheme, rng, counter = maker()
-    scheme.step(system, 0, rng)
-    before = dict(system.counters(scheme), **counter.snapshot())
+    model, scheme, state, rng, counter = maker()
+    state = scheme.step(model, state, rng)
+    before = dict(state.counters.info(), **counter.snapshot())
     start = time.perf_counter()
-    for step in range(1, repeats + 1):
-        scheme.step(system, step, rng)
+    for _ in range(repeats):
+        state = scheme.step(model, state, rng)
     seconds = (time.perf_counter() - start) / repeats
-    after = dict(system.counters(scheme), **counter.snapshot())
+    after = dict(state.counters.info(), **counter.snapshot())
     per = {key: (after[key] - before[key]) / repeats for key in after}
     per['kernel_share'] = per['kernel_seconds'] / max(seconds, 1e-300)
     return per

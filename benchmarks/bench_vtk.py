@@ -122,7 +122,7 @@ def main(argv=None):
         import contextlib
         import io
         with contextlib.redirect_stdout(io.StringIO()):
-            bodies, types = read_bodies(options, lambda body, slip: None)
+            bodies, types, _ = read_bodies(options, lambda body, slip: None)
     finally:
         os.chdir(cwd)
     arrays = bodies_to_arrays(bodies, [count for _, count in types])

@@ -257,7 +257,8 @@ class BodyArrays:
     type_blobs : list of int
         Blobs per body of each structure type.
     reference_slip : ndarray, shape (N, 3)
-        Body-frame slip of every blob (zeros where no slip file was given).
+        Body-frame slip of every blob (zeros where no slip file was given): per type, or the
+        ``reference_slip`` (N, 3) argument when given.
     blob_radius : float
         The input file's blob radius (the default of every blob).
     blob_radii : ndarray, shape (N,)
@@ -267,7 +268,7 @@ class BodyArrays:
     """
 
     def __init__(self, locations, orientations, reference_per_type, bodies_per_type,
-                 blob_radius, reference_slip_per_type=None, radii_per_type=None):
+                 blob_radius, reference_slip_per_type=None, radii_per_type=None, reference_slip=None):
         self.configuration = Configuration(locations, orientations)
         self.blob_radius = float(blob_radius)
         reference_per_type = [np.asarray(r, dtype=float).reshape(-1, 3) for r in reference_per_type]
@@ -288,6 +289,8 @@ class BodyArrays:
             slip = np.zeros_like(ref) if slip is None else np.asarray(slip, dtype=float).reshape(-1, 3)
             slips.append(np.tile(slip, (n, 1)))
         self.reference_slip = np.concatenate(slips) if slips else np.zeros((0, 3))
+        if reference_slip is not None:  # per body (bodies of one type with slips of their own)
+            self.reference_slip = np.asarray(reference_slip, dtype=float).reshape(self.reference_blobs.shape)
         if radii_per_type is None:
             radii_per_type = [None] * len(reference_per_type)
         self.radii_given = any(radii is not None for radii in radii_per_type)
@@ -513,8 +516,11 @@ def K_dense(r_vectors, locations, blob_body_index):
     return K.reshape(3 * n, 6 * nb)
 
 
-def bodies_to_arrays(bodies, types_of_bodies=None):
+def bodies_to_arrays(bodies, types_of_bodies=None, per_body_slip=False):
     """Build ``BodyArrays`` from a list of ``Body`` objects.
+
+    ``per_body_slip``: the reference slip of every body is its own ``slip_reference`` (zero where None),
+    not its type's first body's.
 
     Bodies of one structure type must be consecutive and share the same
     reference configuration object (as the input readers create them).
@@ -533,5 +539,11 @@ def bodies_to_arrays(bodies, types_of_bodies=None):
     references = [bodies[s].reference_configuration for s in starts]
     slips = [bodies[s].slip_reference for s in starts]
     radii = [bodies[s].blobs_radius if getattr(bodies[s], 'radii_given', False) else None for s in starts]
+    reference_slip = None
+    if per_body_slip and bodies:
+        reference_slip = np.concatenate([np.zeros((b.Nblobs, 3)) if b.slip_reference is None
+                                         else np.asarray(b.slip_reference, dtype=float).reshape(-1, 3)
+                                         for b in bodies])
     return BodyArrays([b.location for b in bodies], [b.orientation.entries for b in bodies],
-                      references, types_of_bodies, bodies[0].blob_radius if bodies else 1.0, slips, radii)
+                      references, types_of_bodies, bodies[0].blob_radius if bodies else 1.0, slips, radii,
+                      reference_slip=reference_slip)

@@ -97,24 +97,29 @@ def run_mobility(options, system, configuration, force_table=None):
     force_torque, slip = forces_and_slip(options, system, configuration, force_table)
     with utils.Timer() as timer:
         # The same solve as every scheme: body_solver.solve (torques on single blobs and rods projected).
-        problem = system.mobility_problem(configuration)
-        if getattr(system, 'articulated', None) is not None:  # joints: doc/articulated.md (time t = 0)
-            from multi_bodies.solver.articulated import articulated_velocities
-            result = articulated_velocities(system, system.articulated, configuration, 0.0, force_torque, slip)
+        if system.articulated is not None:  # joints: doc/articulated.md (time t = 0)
+            from multi_bodies.solver.articulated import articulated_problem
+            problem, rhs, preconditioner = articulated_problem(system, system.articulated, configuration, 0.0,
+                                                               force_torque, slip)
+            r_vectors = problem.problem.r_vectors
         else:
-            result = body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
-                                       system.build_preconditioner(configuration),
-                                       tolerance=options.solver_tolerance)
+            problem = system.mobility_problem(configuration)
+            rhs = problem.rhs(slip=slip, force_torque=force_torque)
+            preconditioner = system.build_preconditioner(configuration)
+            r_vectors = problem.r_vectors
+        result = body_solver.solve(problem, rhs, preconditioner, tolerance=options.solver_tolerance)
     print('Time to solve mobility problem = %s' % timer.elapsed)
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))
     save_table(options.output_name + '.velocities.dat', result.velocities)
-    if result.constraint_force_torque is not None:  # prescribed bodies: the force-torque that holds them
-        force_torque = np.where(system.fixed_bodies[:, None], result.constraint_force_torque, force_torque)
-    save_table(options.output_name + '.force.dat', force_torque)
-    if getattr(result, 'multipliers', None) is not None:  # joint forces (Nc, 3)
-        save_table(options.output_name + '.joint_forces.dat', result.multipliers)
-    write_velocity_field(options, system, problem.r_vectors, result.lambda_blobs)
+    if system.articulated is not None:  # joint forces (Nc, 3)
+        save_table(options.output_name + '.force.dat', force_torque)
+        save_table(options.output_name + '.joint_forces.dat', result.constraint_force_torque)
+    else:
+        if result.constraint_force_torque is not None:  # prescribed bodies: the force-torque that holds them
+            force_torque = np.where(system.fixed_bodies[:, None], result.constraint_force_torque, force_torque)
+        save_table(options.output_name + '.force.dat', force_torque)
+    write_velocity_field(options, system, r_vectors, result.lambda_blobs)
     if not result.converged:
         print('error: GMRES did not converge to solver_tolerance %g in %d iterations (relative residual '
               '%.3e); the velocities written to %s are not converged'
@@ -199,7 +204,7 @@ def run(options):
     copy = options.output_name + '.inputfile'
     if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
         shutil.copyfile(options.input_file, copy)
-    configuration = system.configuration
+    configuration = system.start_configuration
     write_bodies_info(options.output_name + '.bodies_info', setup.types, system.num_blobs)
     try:
         if options.scheme == 'body_mobility':

@@ -16,13 +16,14 @@ as the published code does.
   (translation and rotation of each blob from the roller mobilities, so the
   joint torques turn the blobs), forward Euler.
 
-The system must carry ``system.articulated`` (an ``ArticulatedSet``, set by
-``run_setup.prepare``) and ``system.nonlinear_tolerance``.  Velocities have
-shape (Nb, 6) ``[v, w]``.
+The model carries the joints (``model.articulated``, an ``ArticulatedSet``
+made by ``run_setup.prepare``) and ``model.nonlinear_tolerance``; the
+restoration's residual evaluations are counted in the run state.
+Velocities have shape (Nb, 6) ``[v, w]``.
 """
 from multi_bodies.solver import articulated as art
 from quaternion_integrator.scheme_base import InvalidConfiguration, Scheme, _check_finite, moved
-from utils import SimulationStopped, UserInputError
+from utils import UserInputError
 
 
 class ArticulatedScheme(Scheme):
@@ -30,43 +31,32 @@ class ArticulatedScheme(Scheme):
     name = None
     single_blobs = False
 
-    def articulated_set(self, system):
-        articulated = getattr(system, 'articulated', None)
-        if articulated is None:
+    def articulated_set(self, work):
+        if work.articulated is None:
             raise UserInputError("scheme %s needs articulated bodies: add an 'articulated <file.list_vertex> "
                                  "<file.clones> <file.const>' line" % self.name)
-        return articulated
+        return work.articulated
 
-    def constrained_velocities(self, system, configuration, t):
+    def constrained_velocities(self, work, configuration, t):
         """Velocities (Nb, 6) with the joints at ``configuration`` and time ``t`` (counted, warm started)."""
-        articulated = self.articulated_set(system)
-        result = art.articulated_velocities(system, articulated, configuration, t, x0=self.first_guess,
-                                            single_blobs=self.single_blobs)
-        U, iterations, converged, residual, guess = result.velocities, result.iterations, result.converged, \
-            result.residual, result.normalised_solution
-        system.gmres_iterations += iterations
-        system.solves['deterministic'] += 1
-        system.last_iterations = iterations
-        if not converged:
-            raise SimulationStopped('GMRES of the articulated mobility problem did not converge to solver_tolerance '
-                                    '%g in %d iterations (relative residual %.3e)'
-                                    % (system.tolerance, iterations, residual))
-        if guess is not None:
-            self.first_guess = guess
-        return U
+        result = art.articulated_velocities(work.model, self.articulated_set(work), configuration, t,
+                                            x0=work.first_guess, single_blobs=self.single_blobs)
+        work.record_solve(result)
+        if result.normalised_solution is not None:
+            work.first_guess = result.normalised_solution
+        return result.velocities
 
-    def half_or_full(self, system, start, velocities, dt, t_end, centres_from):
+    def half_or_full(self, work, start, velocities, dt, t_end, centres_from):
         """``start`` moved with ``velocities`` for ``dt``, joints restored at ``t_end`` around the moved centres."""
-        articulated = system.articulated
+        articulated = work.articulated
         centres = articulated.centres(centres_from) + dt * articulated.mean_velocities(velocities)
-        new = moved(start, velocities, dt)
-        return articulated.restore(new, centres, t_end, system.nonlinear_tolerance, verbose=system.print_residual)
+        return work.restore_joints(moved(start, velocities, dt), centres, t_end)
 
-    def finish(self, system, new, velocities, step_index):
+    def finish(self, work, new, velocities, step_index):
         _check_finite(velocities, step_index, self.name)
-        invalid = system.invalid_bodies(new)
+        invalid = work.invalid_bodies(new)
         if invalid.size:
-            self.invalid_configurations += 1
+            work.count(invalid_configurations=1)
             raise InvalidConfiguration(step_index, invalid, self.name)
         return new, velocities
 
@@ -75,27 +65,27 @@ class ArticulatedForwardEuler(ArticulatedScheme):
     """Forward Euler with the joint constraints (one solve per step)."""
     name = 'articulated_deterministic_forward_euler'
 
-    def advance(self, system, configuration, step_index, rng=None):
+    def advance(self, work, configuration, step_index, rng=None):
         t = step_index * self.dt
-        U = self.constrained_velocities(system, configuration, t)
+        U = self.constrained_velocities(work, configuration, t)
         _check_finite(U, step_index, self.name)
-        new = self.half_or_full(system, configuration, U, self.dt, t + self.dt, configuration)
-        return self.finish(system, new, U, step_index)
+        new = self.half_or_full(work, configuration, U, self.dt, t + self.dt, configuration)
+        return self.finish(work, new, U, step_index)
 
 
 class ArticulatedMidpoint(ArticulatedScheme):
     """Explicit midpoint with the joint constraints (two solves per step)."""
     name = 'articulated_deterministic_midpoint'
 
-    def advance(self, system, configuration, step_index, rng=None):
+    def advance(self, work, configuration, step_index, rng=None):
         t = step_index * self.dt
-        U = self.constrained_velocities(system, configuration, t)
+        U = self.constrained_velocities(work, configuration, t)
         _check_finite(U, step_index, self.name)
-        middle = self.half_or_full(system, configuration, U, 0.5 * self.dt, t + 0.5 * self.dt, configuration)
-        U_middle = self.constrained_velocities(system, middle, t + 0.5 * self.dt)
+        middle = self.half_or_full(work, configuration, U, 0.5 * self.dt, t + 0.5 * self.dt, configuration)
+        U_middle = self.constrained_velocities(work, middle, t + 0.5 * self.dt)
         _check_finite(U_middle, step_index, self.name)
-        new = self.half_or_full(system, configuration, U_middle, self.dt, t + self.dt, configuration)
-        return self.finish(system, new, U_middle, step_index)
+        new = self.half_or_full(work, configuration, U_middle, self.dt, t + self.dt, configuration)
+        return self.finish(work, new, U_middle, step_index)
 
 
 class ArticulatedForwardEulerRollers(ArticulatedForwardEuler):

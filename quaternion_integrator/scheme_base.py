@@ -1,14 +1,14 @@
 """The base of every time-stepping scheme: one step, its retry rules, the Euler update (floor 5).
 
-``Scheme.advance(system, configuration, step_index, rng)`` is a function of
-a configuration (``body.body.Configuration``, a value), the scheme's history
-and the generator: it returns the next configuration and never changes the
-system's current one; ``Scheme.step(system, step_index, rng)`` advances the
-system's configuration by one step with it.  The base holds what every
-scheme shares (forces and velocities from the system, the update of
-locations and quaternions, the validity check, the warm starts of the
-solves, kept in the scheme's history so that restarts are exact); the
-deterministic schemes
+``Scheme.step(model, state, rng) -> state`` is a function of the frozen model
+(``multi_bodies.solver.model.Model``), the run state
+(``quaternion_integrator.scheme_state.RunState``: configuration, history,
+counters) and the generator: it returns the next state and changes neither
+the model nor the state it was given.  ``Scheme.init(model, configuration)``
+makes the first state.  The base holds what every scheme shares (forces and
+velocities from the model, the update of locations and quaternions, the
+validity check, the warm starts of the solves, carried in the state so that
+restarts are exact); the deterministic schemes
 (:mod:`quaternion_integrator.schemes`) and the stochastic ones
 (:mod:`quaternion_integrator.stochastic_schemes`) both build on it, and the
 registry in ``schemes`` imports both, so neither imports the other.
@@ -19,8 +19,10 @@ renormalised (SPEC section 3).
 """
 import numpy as np
 
-from body.body import Configuration
+from body.body import Configuration, as_configuration
 from body.geometry import rotate_quaternions as _rotate_quaternions
+from multi_bodies.solver.counters import Counters
+from quaternion_integrator.scheme_state import RunState, StepWork
 from utils import SimulationStopped, UserInputError
 
 
@@ -81,12 +83,14 @@ def _check_finite(velocities, step, scheme):
 
 
 class Scheme:
-    """Base of all schemes: ``name``, ``dt``, ``invalid_configurations`` (count for ``.info``).
+    """Base of all schemes: the rule of one step, with its parameters ``name``, ``dt`` (and the stochastic
+    schemes' kT, rf_delta, ...); it holds no state.
 
-    History (``get_history``): the invalid-configuration count and the warm
-    starts of the deterministic solves: ``first_guess`` (the normalised
-    solution of the last deterministic mobility solve, SPEC 4.2) and
-    ``roller_torque_guess`` (of the prescribed-spin roller solve).
+    ``init(model, configuration, step)`` makes the first RunState and ``step(model, state, rng)`` the next
+    one; the history the step carries (the warm starts of the deterministic solves, SPEC 4.2, the
+    previous velocities, the preconditioner's step) is in the state (``scheme_state.RunState``).
+    Inside a step the scheme's methods work on a ``StepWork`` (``work``): the model's physics, the
+    step's copy of the history and its counts.
     """
     name = None
     rollers = False
@@ -95,84 +99,79 @@ class Scheme:
         if not dt > 0:
             raise UserInputError('dt must be positive for a dynamic run, got %r' % dt)
         self.dt = float(dt)
-        self.invalid_configurations = 0
-        self.first_guess = None
-        self.roller_torque_guess = None
+
+    # -------------------------------------------------------------- the state
+    def init(self, model, configuration, step=0, history=None, counters=None):
+        """The RunState of a run at ``configuration`` before step ``step`` (continued from a restart record's
+        scheme ``history`` and ``counters`` (Counters) when given)."""
+        state = RunState(as_configuration(configuration), int(step), Counters() if counters is None else counters)
+        return state.with_history(history)
+
+    def step(self, model, state, rng=None):
+        """One step of ``model`` from ``state``: the next RunState (its ``velocities`` are those the step used).
+
+        A step that stops the run (``utils.SimulationStopped``, e.g. InvalidConfiguration) carries the state
+        with the step's counts and the start configuration in the exception's ``state``.
+        """
+        work = StepWork(model, state)
+        try:
+            new, used = self.advance(work, state.configuration, state.step, rng)
+        except SimulationStopped as err:
+            err.state = work.state(state, state.configuration, state.step, None)
+            raise
+        return work.state(state, new, state.step + 1, used)
 
     # -------------------------------------------------------------- velocities with the warm starts
-    def deterministic_solve(self, system, problem, rhs, preconditioner, warm_start=True):
-        """The counted deterministic solve of ``rhs`` at ``problem``, from and into ``first_guess``.
+    def deterministic_solve(self, work, problem, rhs, preconditioner, warm_start=True):
+        """The counted deterministic solve of ``rhs`` at ``problem``, from and into ``work.first_guess``.
 
         ``warm_start=False`` starts from zero (the solution is still kept as the next ``first_guess``).
         """
-        result = system.solve(problem, rhs, preconditioner, x0=self.first_guess if warm_start else None)
+        result = work.solve(problem, rhs, preconditioner, x0=work.first_guess if warm_start else None)
         if result.normalised_solution is not None:
-            self.first_guess = result.normalised_solution
+            work.first_guess = result.normalised_solution
         return result
 
-    def rigid_velocities(self, system, configuration, preconditioner=None):
+    def rigid_velocities(self, work, configuration, preconditioner=None):
         """Velocities (Nb, 6) at ``configuration`` under its forces and slip (iterative, warm started)."""
-        result = system.deterministic_velocities(configuration, preconditioner=preconditioner, x0=self.first_guess)
+        result = work.deterministic_velocities(configuration, preconditioner=preconditioner, x0=work.first_guess)
         if result.normalised_solution is not None:
-            self.first_guess = result.normalised_solution
+            work.first_guess = result.normalised_solution
         return result.velocities
 
-    def roller_velocities(self, system, configuration):
+    def roller_velocities(self, work, configuration):
         """Roller velocities (N, 3) at ``configuration`` (prescribed spin warm started)."""
-        result = system.roller_velocities(configuration, self.roller_torque_guess)
-        self.roller_torque_guess = result.torque_guess
-        return result.velocities
+        return work.roller_velocities(configuration)
 
     def move(self, configuration, velocities, dt):
         """``configuration`` moved with ``velocities`` for ``dt`` (bodies or rollers), a new Configuration."""
         return moved(configuration, velocities, dt, rollers=self.rollers)
 
     # -------------------------------------------------------------- the step
-    def velocities(self, system, configuration):
+    def velocities(self, work, configuration):
         raise NotImplementedError
 
-    def combine(self, velocities):
+    def combine(self, work, velocities):
         """Velocity used for the update (forward Euler: the current one)."""
         return velocities
 
-    def accept(self, velocities):
+    def accept(self, work, velocities):
         """Called when a step is accepted, with the velocities the scheme computed."""
 
-    def get_history(self):
-        """What the scheme carries from step to step (saved with each snapshot for exact restarts)."""
-        return {'invalid_configurations': self.invalid_configurations,
-                'first_guess': None if self.first_guess is None else np.array(self.first_guess, copy=True),
-                'roller_torque_guess': None if self.roller_torque_guess is None
-                else np.array(self.roller_torque_guess, copy=True)}
-
-    def set_history(self, history):
-        """Continue from ``get_history()`` of an earlier run (None: start afresh)."""
-        if history:
-            self.invalid_configurations = int(history.get('invalid_configurations', 0))
-            for name in ('first_guess', 'roller_torque_guess'):
-                value = history.get(name)
-                setattr(self, name, None if value is None else np.array(value, dtype=float, copy=True))
-
-    def advance(self, system, configuration, step_index, rng=None):
+    def advance(self, work, configuration, step_index, rng=None):
         """One step from ``configuration``: returns (the new Configuration, the velocities used).
 
         Velocities (Nb, 6) (rollers: (N, 3)).  Raises InvalidConfiguration (counted) when the step would
-        put a blob centre below the wall; the system's current configuration is never changed here.
+        put a blob centre below the wall.
         """
-        system.preprocess(configuration)
-        velocities = self.velocities(system, configuration)
+        work.preprocess(configuration)
+        velocities = self.velocities(work, configuration)
         _check_finite(velocities, step_index, self.name)
-        used = self.combine(velocities)
-        new = system.postprocess(self.move(configuration, used, self.dt))
-        invalid = system.invalid_bodies(new)
+        used = self.combine(work, velocities)
+        new = work.postprocess(self.move(configuration, used, self.dt))
+        invalid = work.invalid_bodies(new)
         if invalid.size:
-            self.invalid_configurations += 1
+            work.count(invalid_configurations=1)
             raise InvalidConfiguration(step_index, invalid, self.name)
-        self.accept(velocities)
+        self.accept(work, velocities)
         return new, used
-
-    def step(self, system, step_index, rng=None):
-        """Advance the system's configuration by one step; returns the velocities used."""
-        new, used = self.advance(system, system.configuration, step_index, rng)
-        system.set_configuration(new)
-        return used

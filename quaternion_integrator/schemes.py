@@ -1,15 +1,16 @@
 """Time-stepping schemes of the manual, behind one registry keyed by the scheme name.
 
-A scheme object is made once per run by ``make_scheme(name, dt)``;
-``scheme.advance(system, configuration, step_index, rng)`` returns the
-configuration one step of length ``dt`` later and ``scheme.step(system,
-step_index, rng)`` applies it to the system's current configuration.  The
-*system* (``multi_bodies.solver.system.System``) is passed in; schemes only
-use its methods, each of which takes the configuration it is about
+A scheme object (the rule of a step and its parameters, no state) is made
+once per run by ``make_scheme(name, dt)``; ``scheme.init(model,
+configuration)`` makes the run state and ``scheme.step(model, state, rng)``
+returns the state one step of length ``dt`` later
+(``quaternion_integrator.scheme_state.RunState``).  The *model*
+(``multi_bodies.solver.model.Model``, frozen) is passed in; schemes only use
+its methods, each of which takes the configuration it is about
 (``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
 ``forces_and_slip``, ``mobility_problem``, ``solve``, ``preprocess``,
-``postprocess``, ``invalid_bodies``, ``blob_positions``) and never import
-the scripts or any global.  The random generator ``rng`` (anything
+``postprocess``, ``invalid_bodies``, ``blob_positions``), through the
+step's ``StepWork``, and never import the scripts or any global.  The random generator ``rng`` (anything
 with ``standard_normal(n)``: numpy's ``Generator`` or
 ``stochastic_forcing.generators.PublishedGenerator``) is unused by the
 deterministic schemes here but is part of the signature.
@@ -40,43 +41,30 @@ class DeterministicForwardEuler(Scheme):
     """``x += U dt``, ``q = from_rotation(w dt) q`` with U from the iterative mobility solve."""
     name = 'deterministic_forward_euler'
 
-    def velocities(self, system, configuration):
-        return self.rigid_velocities(system, configuration)
+    def velocities(self, work, configuration):
+        return self.rigid_velocities(work, configuration)
 
 
 class DeterministicForwardEulerDenseAlgebra(DeterministicForwardEuler):
     """Forward Euler with the dense solve ``U = N (F - K^T M^{-1} slip)`` (cost O(N^3))."""
     name = 'deterministic_forward_euler_dense_algebra'
 
-    def velocities(self, system, configuration):
-        return system.dense_velocities(configuration)
+    def velocities(self, work, configuration):
+        return work.dense_velocities(configuration)
 
 
 class AdamsBashforthMixin:
-    """Second order: first step forward Euler, then ``1.5 U_n - 0.5 U_{n-1}`` (U_{n-1} stored on acceptance).
-
-    ``previous_velocities`` may be set before the first step to continue a
-    run (None starts with an Euler step, as the published code does).
+    """Second order: first step forward Euler, then ``1.5 U_n - 0.5 U_{n-1}`` (U_{n-1} kept in the run state
+    on acceptance; a state without it starts with an Euler step, as the published code does).
     """
-    previous_velocities = None
 
-    def combine(self, velocities):
-        if self.previous_velocities is None:
+    def combine(self, work, velocities):
+        if work.previous_velocities is None:
             return velocities
-        return 1.5 * velocities - 0.5 * self.previous_velocities
+        return 1.5 * velocities - 0.5 * work.previous_velocities
 
-    def accept(self, velocities):
-        self.previous_velocities = np.array(velocities, copy=True)
-
-    def get_history(self):
-        history = super().get_history()
-        history['previous_velocities'] = None if self.previous_velocities is None else self.previous_velocities.copy()
-        return history
-
-    def set_history(self, history):
-        super().set_history(history)
-        if history and history.get('previous_velocities') is not None:
-            self.previous_velocities = np.array(history['previous_velocities'], copy=True)
+    def accept(self, work, velocities):
+        work.previous_velocities = np.array(velocities, copy=True)
 
 
 class DeterministicAdamsBashforth(AdamsBashforthMixin, DeterministicForwardEuler):
@@ -92,18 +80,14 @@ class DeterministicMidpoint(DeterministicForwardEuler):
     """
     name = 'deterministic_midpoint'
 
-    def velocities(self, system, configuration):
-        U1 = self.rigid_velocities(system, configuration)
+    def velocities(self, work, configuration):
+        U1 = self.rigid_velocities(work, configuration)
         mid = self.move(configuration, U1, 0.5 * self.dt)
-        invalid = system.invalid_bodies(mid)
+        invalid = work.invalid_bodies(mid)
         if invalid.size:
-            self.invalid_configurations += 1
-            raise InvalidConfiguration(getattr(self, '_step_index', -1), invalid, self.name)
-        return self.rigid_velocities(system, mid)
-
-    def advance(self, system, configuration, step_index, rng=None):
-        self._step_index = step_index
-        return super().advance(system, configuration, step_index, rng)
+            work.count(invalid_configurations=1)
+            raise InvalidConfiguration(work.step_index, invalid, self.name)
+        return self.rigid_velocities(work, mid)
 
 
 class DeterministicForwardEulerRollers(Scheme):
@@ -111,8 +95,8 @@ class DeterministicForwardEulerRollers(Scheme):
     name = 'deterministic_forward_euler_rollers'
     rollers = True
 
-    def velocities(self, system, configuration):
-        return self.roller_velocities(system, configuration)
+    def velocities(self, work, configuration):
+        return self.roller_velocities(work, configuration)
 
 
 class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwardEulerRollers):

@@ -15,8 +15,8 @@ produced: by Lanczos on the blob mobility and random finite differences
 ``*_DLA``).
 
 A scheme is made by ``make_scheme(name, dt, options)``;
-``scheme.advance(system, configuration, step_index, rng)`` returns the next
-configuration (``scheme.step`` applies it to the system).  Predictors and
+``scheme.advance(work, configuration, step_index, rng)`` returns the next
+configuration (``scheme.step`` applies it to the work).  Predictors and
 midpoints are configurations of their own (``body.body.Configuration``
 values): forces, slip and solves are evaluated at them without touching the
 step's start.  The random numbers come only from ``rng``, through its
@@ -41,7 +41,7 @@ Shapes: body velocities (Nb, 6) ``[v, w]``; locations (Nb, 3); quaternions
 import numpy as np
 
 from body.body import Configuration
-from multi_bodies.files.input_options import check_value
+from multi_bodies.files.input_options import check_value, options_with
 from quaternion_integrator.scheme_base import Scheme, displace_bodies
 from stochastic_forcing import rfd, symmetric_root_matrix
 from utils import SimulationStopped, UserInputError
@@ -85,87 +85,64 @@ class StochasticScheme(Scheme):
     thermal_drift = True  # False switches every drift term off (a negative control for the tests; wrong physics)
 
     def __init__(self, dt, options=None):
+        """options : the validated input ``Options`` (None: the option table's defaults, ``options_with()``)."""
         super().__init__(dt)
-        self.kT = float(getattr(options, 'kT', 1.0))
-        self.delta = float(getattr(options, 'rf_delta', 1e-3))
-        self.update_PC = int(getattr(options, 'update_PC', 1))
-        where = getattr(options, 'where', lambda name: name)
+        options = options_with() if options is None else options
+        self.kT = float(options.kT)
+        self.delta = float(options.rf_delta)
+        self.update_PC = int(options.update_PC)
         # The ranges are the option table's (declared once); checked here too for schemes made directly.
         for name, value in (('kT', self.kT), ('rf_delta', self.delta), ('update_PC', self.update_PC)):
-            check_value(name, value, where(name))
+            check_value(name, value, options.where(name))
         # relative tolerance of the noise and RFD sub-solves and of Lanczos (None: solver_tolerance); a speed
         # option, off by default (doc/dynamics.md, speed options)
-        self.noise_tolerance = getattr(options, 'noise_solver_tolerance', None)
+        self.noise_tolerance = options.noise_solver_tolerance
         if self.noise_tolerance is not None:
             self.noise_tolerance = float(self.noise_tolerance)
-            check_value('noise_solver_tolerance', self.noise_tolerance, where('noise_solver_tolerance'))
+            check_value('noise_solver_tolerance', self.noise_tolerance, options.where('noise_solver_tolerance'))
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
-        self._preconditioner = None
-        self._preconditioner_step = None
-        self._preconditioner_configuration = None
-        self.previous_velocities = None
-        self.last_velocities = None
-
-    # -------------------------------------------------------------- history (exact restarts)
-    def get_history(self):
-        history = super().get_history()
-        history['previous_velocities'] = None if self.previous_velocities is None else self.previous_velocities.copy()
-        history['preconditioner_step'] = self._preconditioner_step
-        history['preconditioner_configuration'] = None if self._preconditioner_configuration is None \
-            else self._preconditioner_configuration.copy_arrays()
-        return history
-
-    def set_history(self, history):
-        super().set_history(history)
-        if not history:
-            return
-        if history.get('previous_velocities') is not None:
-            self.previous_velocities = np.array(history['previous_velocities'], copy=True)
-        self._preconditioner_step = history.get('preconditioner_step')
-        saved = history.get('preconditioner_configuration')
-        self._preconditioner_configuration = None if saved is None else Configuration(*saved)
-        self._preconditioner = None  # rebuilt at the saved configuration when first needed
 
     # -------------------------------------------------------------- helpers
-    def preconditioner(self, system, step_index, problem):
-        """The block-diagonal preconditioner, rebuilt at ``problem`` every ``update_PC`` steps."""
-        rebuild = self._preconditioner_step is None or (
-            step_index % self.update_PC == 0 and self._preconditioner_step != step_index)
+    def preconditioner(self, work, step_index, problem):
+        """The block-diagonal preconditioner, rebuilt at ``problem`` every ``update_PC`` steps (kept in the
+        run state with the step and configuration it was built at)."""
+        rebuild = work.preconditioner_step is None or (
+            step_index % self.update_PC == 0 and work.preconditioner_step != step_index)
         if rebuild:
-            self._preconditioner = system.build_preconditioner(problem.configuration)
-            self._preconditioner_step = step_index
-            self._preconditioner_configuration = problem.configuration
-        elif self._preconditioner is None:  # after a restart: the configuration it was built at
-            self._preconditioner = system.build_preconditioner(self._preconditioner_configuration)
-        return self._preconditioner
+            work.preconditioner = work.build_preconditioner(problem.configuration)
+            work.preconditioner_step = step_index
+            work.preconditioner_configuration = problem.configuration
+        elif work.preconditioner is None:  # after a restart: the configuration it was built at
+            work.preconditioner = work.build_preconditioner(work.preconditioner_configuration)
+        return work.preconditioner
 
     @staticmethod
-    def body_lengths(system):
-        """The bodies' length scales (Nb,), structure the system holds (``System.body_lengths``)."""
-        return system.body_lengths
+    def body_lengths(work):
+        """The bodies' length scales (Nb,), structure the model holds (``Model.body_lengths``)."""
+        return work.body_lengths
 
-    def check(self, system, configuration):
+    def check(self, work, configuration):
         """Raise _Rejected when ``configuration`` has a blob centre below the wall."""
-        invalid = system.invalid_bodies(configuration)
+        invalid = work.invalid_bodies(configuration)
         if invalid.size:
             raise _Rejected(invalid)
 
-    def noise_solve(self, system, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
+    def noise_solve(self, work, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
         """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
-        result = system.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
+        result = work.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
         split = getattr(problem, 'split_body_unknowns', None)
         if split is not None:  # bodies of prescribed kinematics are not moved by noise or RFD solves
             velocities, _ = split(result.velocities, prescribed_motion=False)
             result = result._replace(velocities=velocities)
         return result
 
-    def lanczos_noise(self, system, problem, z, factor, preconditioner):
-        """``factor M^{1/2} z`` at ``problem`` (System.lanczos_noise) at the scheme's ``noise_tolerance``."""
-        return system.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
+    def lanczos_noise(self, work, problem, z, factor, preconditioner):
+        """``factor M^{1/2} z`` at ``problem`` (Model.lanczos_noise, counted) at the scheme's ``noise_tolerance``."""
+        return work.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
 
-    def rfd_drift(self, system, configuration, W, preconditioner):
+    def rfd_drift(self, work, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
 
         W (Nb, 6) ~ N(0, 1); translations are displaced by ``delta * body_length * W_t``
@@ -174,7 +151,7 @@ class StochasticScheme(Scheme):
         ``b - A+ y-``), so the solver tolerance applies to the drift itself.
         Returns (Nb, 6).
         """
-        lengths = self.body_lengths(system)
+        lengths = self.body_lengths(work)
         W = np.asarray(W, dtype=float).reshape(-1, 6)
         if not self.thermal_drift:
             return np.zeros_like(W)
@@ -182,17 +159,17 @@ class StochasticScheme(Scheme):
         W_tilde[:, :3] /= lengths[:, None]
 
         def difference(q_plus, q_minus):
-            minus, plus = system.mobility_problem(q_minus), system.mobility_problem(q_plus)
-            y_minus = self.noise_solve(system, minus, preconditioner, noise_force=W_tilde)
+            minus, plus = work.mobility_problem(q_minus), work.mobility_problem(q_plus)
+            y_minus = self.noise_solve(work, minus, preconditioner, noise_force=W_tilde)
             x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
             rhs = minus.rhs(force_torque=W_tilde) - plus.matvec(x_minus)
-            return self.noise_solve(system, plus, preconditioner, rhs=rhs).velocities
+            return self.noise_solve(work, plus, preconditioner, rhs=rhs).velocities
 
         def displace(q, scale, direction):
             return displace_bodies(q, scale, direction, lengths)
         return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
 
-    def slip_rfd(self, system, configuration, problem, W_s, preconditioner, factor, W_R=None, at_configuration=None):
+    def slip_rfd(self, work, configuration, problem, W_s, preconditioner, factor, W_R=None, at_configuration=None):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
@@ -204,12 +181,12 @@ class StochasticScheme(Scheme):
         (:meth:`slip_rfd_products_at`).
         """
         if W_R is None:
-            W_R = self.slip_rfd_solve(system, problem, W_s, preconditioner)
+            W_R = self.slip_rfd_solve(work, problem, W_s, preconditioner)
         if at_configuration is None:
             at_configuration = self.slip_rfd_products_at(problem, W_s)
 
         def products(q):
-            moved = system.mobility_problem(q)
+            moved = work.mobility_problem(q)
             return moved.M_dot(W_s), moved.KT_dot(W_s)
         D_M, D_KT = rfd(products, configuration, W_R, self.delta, displace_bodies, centred=False,
                         at_configuration=at_configuration)
@@ -221,25 +198,25 @@ class StochasticScheme(Scheme):
         """``(M W_s (3N,), K^T W_s (Nb, 6))`` at ``problem``: the unmoved end of the slip RFD."""
         return problem.M_dot(W_s), problem.KT_dot(W_s)
 
-    def slip_rfd_solve(self, system, problem, W_s, preconditioner):
+    def slip_rfd_solve(self, work, problem, W_s, preconditioner):
         """``W_R = N K^T M^{-1} W_s`` (Nb, 6) by one noise solve (right-hand side ``[-W_s; 0]``)."""
-        return self.noise_solve(system, problem, preconditioner,
-                                rhs=np.concatenate((-W_s, np.zeros(6 * system.num_bodies)))).velocities
+        return self.noise_solve(work, problem, preconditioner,
+                                rhs=np.concatenate((-W_s, np.zeros(6 * work.num_bodies)))).velocities
 
-    def side_by_side(self, system, problem, first, second):
+    def side_by_side(self, work, problem, first, second):
         """``(first(problem), second(problem))`` for two computations at one configuration that do not
         depend on each other (each a callable of a problem).
 
-        With a paired product (``System.paired_mobility_product``, the C++ backend) they run side by side
+        With a paired product (``Model.paired_mobility_product``, the C++ backend) they run side by side
         in two threads and share each pass over the blob pairs (one product of two vectors instead of
-        two, ``system.PairedProducts``); otherwise one after the other.  The same numbers either way, to
+        two, ``model.PairedProducts``); otherwise one after the other.  The same numbers either way, to
         rounding; ``pair_products = False`` switches the pairing off.
         """
-        paired = getattr(system, 'paired_mobility_product', None) if self.pair_products else None
+        paired = work.paired_mobility_product if self.pair_products else None
         if paired is None or not hasattr(problem, 'with_mobility_product'):
             return first(problem), second(problem)
         from concurrent.futures import ThreadPoolExecutor
-        from multi_bodies.solver.system import PairedProducts
+        from multi_bodies.solver.model import PairedProducts
         pairer = PairedProducts(paired, problem.mobility_product)
         shared = problem.with_mobility_product(pairer.product)
 
@@ -256,7 +233,7 @@ class StochasticScheme(Scheme):
                 pairer.leave()
             return future.result(), result
 
-    def corrector_velocities(self, system, old, velocities, dt, noise_slip, noise_force, preconditioner):
+    def corrector_velocities(self, work, old, velocities, dt, noise_slip, noise_force, preconditioner):
         """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
 
         The solve uses the forces and slip of the moved configuration, the given noise slip (3N,) and
@@ -265,71 +242,72 @@ class StochasticScheme(Scheme):
         Returns velocities (Nb, 6).
         """
         moved = self.move(old, velocities, dt)
-        self.check(system, moved)
-        _, force_torque, slip = system.forces_and_slip(moved)
-        problem = system.mobility_problem(moved)
+        self.check(work, moved)
+        _, force_torque, slip = work.forces_and_slip(moved)
+        problem = work.mobility_problem(moved)
         if preconditioner is None:
-            preconditioner = system.build_preconditioner(moved)
+            preconditioner = work.build_preconditioner(moved)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
-        return self.deterministic_solve(system, problem, rhs, preconditioner).velocities
+        return self.deterministic_solve(work, problem, rhs, preconditioner).velocities
 
     def noise_factor(self, dt_fraction=1.0):
         """``sqrt(2 kT / (dt_fraction dt))``."""
         return np.sqrt(2.0 * self.kT / (dt_fraction * self.dt))
 
     # -------------------------------------------------------------- the step
-    def attempt(self, system, step_index, rng, old):
+    def attempt(self, work, step_index, rng, old):
         """One try of the step from the Configuration ``old``: (new Configuration, velocities used).
 
         Velocities (Nb, 6) (rollers (N, 3)).  Raises _Rejected when a trial configuration is invalid.
         """
         raise NotImplementedError
 
-    def advance(self, system, configuration, step_index, rng=None):
+    def advance(self, work, configuration, step_index, rng=None):
         """One step from ``configuration``, retried with fresh noise while a trial configuration is invalid.
 
-        Returns (the new Configuration, the velocities used); the system's configuration is not changed.
+        Returns (the new Configuration, the velocities used); the work's configuration is not changed.
         """
         if rng is None:
             raise UserInputError('%s needs a random generator' % self.name)
         rejections = 0
         while True:
-            system.preprocess(configuration)
+            work.preprocess(configuration)
             try:
-                new, used = self.attempt(system, step_index, rng, configuration)
+                new, used = self.attempt(work, step_index, rng, configuration)
                 if not np.all(np.isfinite(used)):
                     raise SimulationStopped('step %d of %s: the velocities are not finite (NaN or inf); check the '
                                             'forces (user-defined functions), the time step and the configuration'
                                             % (step_index, self.name))
-                new = system.postprocess(new)
-                self.check(system, new)
+                new = work.postprocess(new)
+                self.check(work, new)
             except _Rejected as rejected:
-                self.invalid_configurations += 1
+                work.count(invalid_configurations=1)
                 rejections += 1
                 print('Invalid configuration number %d (step %d, bodies %s)'
-                      % (self.invalid_configurations, step_index,
+                      % (work.total('invalid_configurations'), step_index,
                          ', '.join(str(int(b)) for b in rejected.bodies[:5])))
                 if rejections >= self.max_consecutive_rejections:
                     raise TooManyRejections(step_index, rejected.bodies, self.name, rejections)
                 continue
-            self.accept_step()
-            self.last_velocities = used
+            self.accept_step(work)
             return new, used
 
-    def accept_step(self):
-        """Called once when a step is accepted (multistep schemes store their history here)."""
-        if getattr(self, '_pending_previous', None) is not None:
-            self.previous_velocities = self._pending_previous
-            self._pending_previous = None
+    @staticmethod
+    def accept_step(work):
+        """Called once when a step is accepted (multistep schemes keep their velocities for the next step)."""
+        if work.pending_previous is not None:
+            work.previous_velocities = work.pending_previous
+            work.pending_previous = None
 
-    def multistep(self, current, noise_part):
+    @staticmethod
+    def multistep(work, current, noise_part):
         """Adams-Bashforth combination: first step ``current + noise``, later ``1.5 current - 0.5 previous + noise``."""
-        self._pending_previous = np.array(current, copy=True)
-        if self.previous_velocities is None:
+        work.pending_previous = np.array(current, copy=True)
+        if work.previous_velocities is None:
             return current + noise_part
-        return 1.5 * current - 0.5 * self.previous_velocities + noise_part
+        return 1.5 * current - 0.5 * work.previous_velocities + noise_part
 
-    def deterministic_part(self, system, problem, old, preconditioner, noise_slip=None, noise_force=None,
+    def deterministic_part(self, work, problem, old, preconditioner, noise_slip=None, noise_force=None,
                            fresh_noise=False):
         """The solve at ``old`` of its forces and slip plus the given noise terms: velocities (Nb, 6).
 
@@ -337,10 +315,10 @@ class StochasticScheme(Scheme):
         this step's Brownian slip, which the last solution knows nothing of): then from zero, see
         :attr:`cold_start_fresh_noise`.
         """
-        _, force_torque, slip = system.forces_and_slip(old)
+        _, force_torque, slip = work.forces_and_slip(old)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
         warm = not (fresh_noise and self.cold_start_fresh_noise)
-        return self.deterministic_solve(system, problem, rhs, preconditioner, warm_start=warm).velocities
+        return self.deterministic_solve(work, problem, rhs, preconditioner, warm_start=warm).velocities
 
 
 # ====================================================================== rigid multiblob, iterative
@@ -351,14 +329,14 @@ class StochasticFirstOrderRFD(StochasticScheme):
     """
     name = 'stochastic_first_order_RFD'
 
-    def attempt(self, system, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * system.num_bodies)
-        z = rng.standard_normal(3 * system.num_blobs)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
-        noise = self.lanczos_noise(system, problem, z, self.noise_factor(), pc)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise, fresh_noise=True)
-        U = U + self.rfd_drift(system, old, W_rfd, pc)
+    def attempt(self, work, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * work.num_bodies)
+        z = rng.standard_normal(3 * work.num_blobs)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
+        noise = self.lanczos_noise(work, problem, z, self.noise_factor(), pc)
+        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise, fresh_noise=True)
+        U = U + self.rfd_drift(work, old, W_rfd, pc)
         return self.move(old, U, self.dt), U
 
 
@@ -369,17 +347,17 @@ class StochasticAdamsBashforth(StochasticScheme):
     """
     name = 'stochastic_adams_bashforth'
 
-    def attempt(self, system, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * system.num_bodies)
-        z = rng.standard_normal(3 * system.num_blobs)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
-        noise, U_d = self.side_by_side(system, problem,
-                                       lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
-                                       lambda shared: self.deterministic_part(system, shared, old, pc))
-        U_s = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
-        U_s = U_s + self.rfd_drift(system, old, W_rfd, pc)
-        U = self.multistep(U_d, U_s)
+    def attempt(self, work, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * work.num_bodies)
+        z = rng.standard_normal(3 * work.num_blobs)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
+        noise, U_d = self.side_by_side(work, problem,
+                                       lambda shared: self.lanczos_noise(work, shared, z, self.noise_factor(), pc),
+                                       lambda shared: self.deterministic_part(work, shared, old, pc))
+        U_s = self.noise_solve(work, problem, pc, noise_slip=noise).velocities
+        U_s = U_s + self.rfd_drift(work, old, W_rfd, pc)
+        U = self.multistep(work, U_d, U_s)
         return self.move(old, U, self.dt), U
 
 
@@ -390,21 +368,21 @@ class StochasticTractionEM(StochasticScheme):
     """
     name = 'stochastic_traction_EM'
 
-    def traction_terms(self, system, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * system.num_bodies).reshape(-1, 6)
-        lengths = self.body_lengths(system)
+    def traction_terms(self, work, step_index, rng, old):
+        W_rfd = rng.standard_normal(6 * work.num_bodies).reshape(-1, 6)
+        lengths = self.body_lengths(work)
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
-        z = rng.standard_normal(3 * system.num_blobs)  # drawn after W_rfd, as before
-        noise, R = self.side_by_side(system, problem,
-                                     lambda shared: self.lanczos_noise(system, shared, z, self.noise_factor(), pc),
-                                     lambda shared: self.noise_solve(system, shared, pc,
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
+        z = rng.standard_normal(3 * work.num_blobs)  # drawn after W_rfd, as before
+        noise, R = self.side_by_side(work, problem,
+                                     lambda shared: self.lanczos_noise(work, shared, z, self.noise_factor(), pc),
+                                     lambda shared: self.noise_solve(work, shared, pc,
                                                                      rhs=shared.rhs(force_torque=W_s)))
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
 
         def products(q):
-            moved = system.mobility_problem(q)
+            moved = work.mobility_problem(q)
             return moved.M_dot(lam), moved.KT_dot(lam), moved.K_dot(U_R).reshape(-1)
 
         def displace(q, scale, direction):
@@ -415,9 +393,9 @@ class StochasticTractionEM(StochasticScheme):
             return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
         return problem, pc, noise, D_M - D_K, -D_KT
 
-    def attempt(self, system, step_index, rng, old):
-        problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force,
+    def attempt(self, work, step_index, rng, old):
+        problem, pc, noise, drift_slip, drift_force = self.traction_terms(work, step_index, rng, old)
+        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force,
                                    fresh_noise=True)
         return self.move(old, U, self.dt), U
 
@@ -434,11 +412,11 @@ class StochasticTractionAB(StochasticTractionEM):
     """
     name = 'stochastic_traction_AB'
 
-    def attempt(self, system, step_index, rng, old):
-        problem, pc, noise, drift_slip, drift_force = self.traction_terms(system, step_index, rng, old)
-        U_new = self.deterministic_part(system, problem, old, pc, noise_slip=drift_slip, noise_force=drift_force)
-        U_n = self.noise_solve(system, problem, pc, noise_slip=noise).velocities
-        U = self.multistep(U_new, U_n)
+    def attempt(self, work, step_index, rng, old):
+        problem, pc, noise, drift_slip, drift_force = self.traction_terms(work, step_index, rng, old)
+        U_new = self.deterministic_part(work, problem, old, pc, noise_slip=drift_slip, noise_force=drift_force)
+        U_n = self.noise_solve(work, problem, pc, noise_slip=noise).velocities
+        U = self.multistep(work, U_new, U_n)
         return self.move(old, U, self.dt), U
 
 
@@ -454,22 +432,22 @@ class StochasticSlipTrapz(StochasticScheme):
     name = 'stochastic_Slip_Trapz'
     reuse_preconditioner = True
 
-    def attempt(self, system, step_index, rng, old):
-        n3 = 3 * system.num_blobs
+    def attempt(self, work, step_index, rng, old):
+        n3 = 3 * work.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
 
         def rfd_solve_and_products(shared):  # W_R and the slip RFD's products at q, beside the Lanczos call
-            return self.slip_rfd_solve(system, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s)
+            return self.slip_rfd_solve(work, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s)
         n1, (W_R, at_q) = self.side_by_side(
-            system, problem, lambda shared: self.lanczos_noise(system, shared, W1, self.noise_factor(), pc),
+            work, problem, lambda shared: self.lanczos_noise(work, shared, W1, self.noise_factor(), pc),
             rfd_solve_and_products)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R,
+        drift_slip, drift_force = self.slip_rfd(work, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R,
                                                 at_configuration=at_q)
-        U1 = self.deterministic_part(system, problem, old, pc, noise_slip=n1, fresh_noise=True)
-        U2 = self.corrector_velocities(system, old, U1, self.dt, n1 + drift_slip, drift_force,
+        U1 = self.deterministic_part(work, problem, old, pc, noise_slip=n1, fresh_noise=True)
+        U2 = self.corrector_velocities(work, old, U1, self.dt, n1 + drift_slip, drift_force,
                                        pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
         return self.move(old, U, self.dt), U
@@ -482,24 +460,24 @@ class StochasticSlipMid(StochasticScheme):
     """
     name = 'stochastic_Slip_Mid'
 
-    def attempt(self, system, step_index, rng, old):
-        n3 = 3 * system.num_blobs
+    def attempt(self, work, step_index, rng, old):
+        n3 = 3 * work.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
 
         def second_noise_and_rfd(shared):  # beside the first Lanczos call: the second one, W_R and M W_s at q
-            return (self.lanczos_noise(system, shared, W1 + W3, np.sqrt(self.kT / self.dt), pc),
-                    self.slip_rfd_solve(system, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s))
+            return (self.lanczos_noise(work, shared, W1 + W3, np.sqrt(self.kT / self.dt), pc),
+                    self.slip_rfd_solve(work, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s))
         n1, (n_c, W_R, at_q) = self.side_by_side(
-            system, problem, lambda shared: self.lanczos_noise(system, shared, W1, np.sqrt(4.0 * self.kT / self.dt), pc),
+            work, problem, lambda shared: self.lanczos_noise(work, shared, W1, np.sqrt(4.0 * self.kT / self.dt), pc),
             second_noise_and_rfd)
-        U_m = self.deterministic_part(system, problem, old, pc, noise_slip=n1, fresh_noise=True)
-        drift_slip, drift_force = self.slip_rfd(system, old, problem, W_s, pc, self.kT / self.delta, W_R=W_R,
+        U_m = self.deterministic_part(work, problem, old, pc, noise_slip=n1, fresh_noise=True)
+        drift_slip, drift_force = self.slip_rfd(work, old, problem, W_s, pc, self.kT / self.delta, W_R=W_R,
                                                 at_configuration=at_q)
-        U = self.corrector_velocities(system, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
+        U = self.corrector_velocities(work, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
         return self.move(old, U, self.dt), U
 
 
@@ -515,27 +493,27 @@ class StochasticEM(StochasticScheme):
     """
     name = 'stochastic_EM'
 
-    def attempt(self, system, step_index, rng, old):
-        W = rng.standard_normal(3 * system.num_blobs)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
-        noise = self.lanczos_noise(system, problem, W, self.noise_factor(), pc)
-        U = self.deterministic_part(system, problem, old, pc, noise_slip=noise, fresh_noise=True)
+    def attempt(self, work, step_index, rng, old):
+        W = rng.standard_normal(3 * work.num_blobs)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
+        noise = self.lanczos_noise(work, problem, W, self.noise_factor(), pc)
+        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise, fresh_noise=True)
         return self.move(old, U, self.dt), U
 
 
-def rigid_projection(system, configuration, blob_velocities):
+def rigid_projection(work, configuration, blob_velocities):
     """The unconstrained solve: ``(K^T K)^+ K^T v`` at ``configuration``, body velocities (Nb, 6).
 
     blob_velocities v (3N,) or (N, 3).  It is the solve of the saddle-point
-    system ``[I -K; -K^T 0] [lambda; U] = [-v; 0]`` (the constrained one with
+    work ``[I -K; -K^T 0] [lambda; U] = [-v; 0]`` (the constrained one with
     the blob mobility replaced by the identity): the least-squares rigid
     motion of the blob velocities.  ``K^T K`` is block diagonal (one 6x6
     block per body, built from six products), so the cost is O(N); the
     pseudo-inverse handles single-blob bodies (no rotational block).
     """
-    arrays = system.arrays
-    nb = system.num_bodies
+    arrays = work.arrays
+    nb = work.num_bodies
     r = arrays.blob_positions(configuration)
     gram = np.empty((nb, 6, 6))
     for k in range(6):
@@ -580,27 +558,27 @@ class StochasticGDCRFD(StochasticScheme):
     """
     name = 'stochastic_GDC_RFD'
 
-    def attempt(self, system, step_index, rng, old):
-        W = rng.standard_normal(3 * system.num_blobs)
-        W_rfd = rng.standard_normal(6 * system.num_bodies).reshape(-1, 6)
-        problem = system.mobility_problem(old)
-        pc = self.preconditioner(system, step_index, problem)
+    def attempt(self, work, step_index, rng, old):
+        W = rng.standard_normal(3 * work.num_blobs)
+        W_rfd = rng.standard_normal(6 * work.num_bodies).reshape(-1, 6)
+        problem = work.mobility_problem(old)
+        pc = self.preconditioner(work, step_index, problem)
         factor = self.noise_factor()
-        U_tilde = rigid_projection(system, old, self.lanczos_noise(system, problem, W, factor, pc))
+        U_tilde = rigid_projection(work, old, self.lanczos_noise(work, problem, W, factor, pc))
         divergence = 0.0
         if self.thermal_drift and self.kT > 0:
-            lengths = self.body_lengths(system)
+            lengths = self.body_lengths(work)
             q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
-            noise_rfd = self.lanczos_noise(system, system.mobility_problem(q_rfd), W, factor, pc)
-            U_rfd = rigid_projection(system, q_rfd, noise_rfd)
+            noise_rfd = self.lanczos_noise(work, work.mobility_problem(q_rfd), W, factor, pc)
+            U_rfd = rigid_projection(work, q_rfd, noise_rfd)
             W_tilde = W_rfd.copy()
             W_tilde[:, :3] /= lengths[:, None]
             divergence = float(np.sum((U_rfd - U_tilde) * W_tilde)) / self.delta
         mid = self.move(old, U_tilde, 0.5 * self.dt)
-        self.check(system, mid)
-        problem_mid = system.mobility_problem(mid)
-        noise_mid = self.lanczos_noise(system, problem_mid, W, factor, pc)
-        U = self.deterministic_part(system, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
+        self.check(work, mid)
+        problem_mid = work.mobility_problem(mid)
+        noise_mid = self.lanczos_noise(work, problem_mid, W, factor, pc)
+        U = self.deterministic_part(work, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
         U = U * (1.0 + 0.5 * self.dt * divergence)
         return self.move(old, U, self.dt), U
 
@@ -611,10 +589,10 @@ class DenseScheme(StochasticScheme):
     dense = True
 
     @staticmethod
-    def dense_velocity(system, configuration, matrices):
+    def dense_velocity(work, configuration, matrices):
         """``N (F - K^T M^{-1} slip)`` at ``configuration`` with the given dense matrices (built there)."""
         M, M_inv, K, N = matrices
-        _, force_torque, slip = system.forces_and_slip(configuration)
+        _, force_torque, slip = work.forces_and_slip(configuration)
         return (N @ (force_torque.reshape(-1) - K.T @ (M_inv @ slip.reshape(-1)))).reshape(-1, 6)
 
 
@@ -625,22 +603,22 @@ class StochasticFirstOrderRFDDense(DenseScheme):
     """
     name = 'stochastic_first_order_RFD_dense_algebra'
 
-    def attempt(self, system, step_index, rng, old):
-        nb6 = 6 * system.num_bodies
+    def attempt(self, work, step_index, rng, old):
+        nb6 = 6 * work.num_bodies
         W_rfd = rng.standard_normal(nb6)
         z = rng.standard_normal(nb6)
-        matrices = system.dense_matrices(old)
+        matrices = work.dense_matrices(old)
         N = matrices[3]
-        U = self.dense_velocity(system, old, matrices).reshape(-1)
+        U = self.dense_velocity(work, old, matrices).reshape(-1)
         U = U + self.noise_factor() * (symmetric_root_matrix(N) @ z)
-        lengths = self.body_lengths(system)
+        lengths = self.body_lengths(work)
         W_tilde = W_rfd.reshape(-1, 6).copy()
         W_tilde[:, :3] /= lengths[:, None]
         W_tilde = W_tilde.reshape(-1)
 
         def displace(q, scale, direction):
             return displace_bodies(q, scale, direction, lengths)
-        drift = rfd(lambda q: system.dense_matrices(q)[3] @ W_tilde, old, W_rfd, self.delta, displace,
+        drift = rfd(lambda q: work.dense_matrices(q)[3] @ W_tilde, old, W_rfd, self.delta, displace,
                     centred=False, at_configuration=N @ W_tilde)
         c = self.kT if self.thermal_drift else 0.0
         U = (U + c * drift).reshape(-1, 6)
@@ -677,20 +655,20 @@ class Fixman(DenseScheme):
     """
     name = 'Fixman'
 
-    def attempt(self, system, step_index, rng, old):
-        nb6 = 6 * system.num_bodies
+    def attempt(self, work, step_index, rng, old):
+        nb6 = 6 * work.num_bodies
         W1 = rng.standard_normal(nb6)
         W2 = rng.standard_normal(nb6)
-        matrices = system.dense_matrices(old)
+        matrices = work.dense_matrices(old)
         N = matrices[3]
         root, inverse_root = root_and_pseudo_inverse_root(N)
-        U_p = self.dense_velocity(system, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
+        U_p = self.dense_velocity(work, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
         corrector = np.sqrt(self.kT / self.dt) * (inverse_root @ (W1 + W2))  # pinv(N) N^{1/2} (W1 + W2)
         mid = self.move(old, U_p, 0.5 * self.dt)
-        self.check(system, mid)
-        matrices_mid = system.dense_matrices(mid)
+        self.check(work, mid)
+        matrices_mid = work.dense_matrices(mid)
         N_corrector = matrices_mid[3] if self.thermal_drift else N
-        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + N_corrector @ corrector
+        U = self.dense_velocity(work, mid, matrices_mid).reshape(-1) + N_corrector @ corrector
         U = U.reshape(-1, 6)
         return self.move(old, U, self.dt), U
 
@@ -702,29 +680,29 @@ class StochasticSlipMidDLA(DenseScheme):
     """
     name = 'stochastic_Slip_Mid_DLA'
 
-    def attempt(self, system, step_index, rng, old):
-        n3 = 3 * system.num_blobs
+    def attempt(self, work, step_index, rng, old):
+        n3 = 3 * work.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        matrices = system.dense_matrices(old)
+        matrices = work.dense_matrices(old)
         M, M_inv, K, N = matrices
-        U_m = self.dense_velocity(system, old, matrices).reshape(-1)
+        U_m = self.dense_velocity(work, old, matrices).reshape(-1)
         W_R = N @ (K.T @ (M_inv @ W_s))
         M_half = symmetric_root_matrix(M)
         U_m = U_m + np.sqrt(4.0 * self.kT / self.dt) * (N @ (K.T @ (M_inv @ (M_half @ W1))))
 
         def products(q):
-            M_q, _, K_q, _ = system.dense_matrices(q, inverse=False)
+            M_q, _, K_q, _ = work.dense_matrices(q, inverse=False)
             return M_q @ W_s, K_q.T @ W_s
         D_M, D_KT = rfd(products, old, W_R.reshape(-1, 6), self.delta, displace_bodies, centred=False,
                         at_configuration=(M @ W_s, K.T @ W_s))
         mid = self.move(old, U_m.reshape(-1, 6), 0.5 * self.dt)
-        self.check(system, mid)
-        matrices_mid = system.dense_matrices(mid)
+        self.check(work, mid)
+        matrices_mid = work.dense_matrices(mid)
         _, M_inv_mid, K_mid, N_mid = matrices_mid
         c = self.kT if self.thermal_drift else 0.0
-        U = self.dense_velocity(system, mid, matrices_mid).reshape(-1) + N_mid @ (
+        U = self.dense_velocity(work, mid, matrices_mid).reshape(-1) + N_mid @ (
             -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
         U = U.reshape(-1, 6)
         return self.move(old, U, self.dt), U

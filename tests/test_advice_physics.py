@@ -74,12 +74,12 @@ def test_refined_sphere_keeps_its_weight_and_moves_as_the_exact_sphere(tmp_path,
     user, recommended = set_up(read_input_file(name)), set_up(options)
     # The law: gravity acts per blob (blob_mass 1), so the body weighs n g; the recommended run keeps 12 g.
     assert blobs * options.g == pytest.approx(12 * 0.05, rel=1e-9)
-    user_force = user.forces_torques(user.configuration)
-    new_force = recommended.forces_torques(recommended.configuration)
+    user_force = user.forces_torques(user.start_configuration)
+    new_force = recommended.forces_torques(recommended.start_configuration)
     assert np.max(np.abs(new_force - user_force)) <= 0.01 * np.max(np.abs(user_force))
     # One mobility problem of the recommended run: the sinking speed of the exact sphere under the user's force
     # (mu_perp / (6 pi eta R) F_z, R = 1), within the target.
-    u = recommended.deterministic_velocities(recommended.configuration).velocities[0]
+    u = recommended.deterministic_velocities(recommended.start_configuration).velocities[0]
     exact = MU_PERP_1_5 / (6 * np.pi) * user_force[0, 2]
     assert u[2] == pytest.approx(exact, rel=0.01)
     assert np.max(np.abs(u[[0, 1, 3, 4, 5]])) <= 1e-6 * abs(exact)  # no sideways motion or spin by symmetry
@@ -121,12 +121,12 @@ def test_rollers_keep_their_drive(tmp_path, monkeypatch):
     assert any('drive' in note for note in result.notes)
     options = applied_options(result, 'inputfile_rollers.dat')
     user, recommended = set_up(read_input_file('inputfile_rollers.dat')), set_up(options)
-    assert recommended.invalid_bodies(recommended.configuration).size == 0
-    v_user = user.roller_velocities(user.configuration).velocities
-    v_new = recommended.roller_velocities(recommended.configuration).velocities
+    assert recommended.invalid_bodies(recommended.start_configuration).size == 0
+    v_user = user.roller_velocities(user.start_configuration).velocities
+    v_new = recommended.roller_velocities(recommended.start_configuration).velocities
     # The drive dominates the motion: without the torque the rollers hardly move sideways.
-    user.omega_one_roller = np.zeros(3)
-    v_undriven = user.roller_velocities(user.configuration).velocities
+    undriven = user.replace(omega_one_roller=np.zeros(3))
+    v_undriven = undriven.roller_velocities(user.start_configuration).velocities
     speed = np.max(np.linalg.norm(v_user, axis=1))
     assert np.max(np.linalg.norm(v_undriven - v_user, axis=1)) > 0.5 * speed
     assert np.max(np.linalg.norm(v_new - v_user, axis=1)) <= 0.01 * speed
@@ -135,7 +135,7 @@ def test_rollers_keep_their_drive(tmp_path, monkeypatch):
     assert options.n_steps * options.dt == pytest.approx(50 * 0.016, rel=1e-9)  # the same simulated time
     assert options.n_steps <= 50
     user_options = read_input_file('inputfile_rollers.dat')
-    start = np.array(set_up(user_options).configuration.locations)
+    start = np.array(set_up(user_options).start_configuration.locations)
     horizon = options.n_steps * options.dt
     reference = run_for(user_options, options.dt / 16, horizon)
     recommended_run = run_for(options, options.dt, horizon)
@@ -148,12 +148,13 @@ def run_for(options, dt, time):
     """Body locations after ``time`` at ``dt`` (the input's scheme), or the SimulationStopped raised."""
     system = set_up(options)
     scheme = make_scheme(options.scheme, dt, options)
+    state = scheme.init(system, system.start_configuration)
     try:
-        for step in range(int(round(time / dt))):
-            scheme.step(system, step, None)
+        for _ in range(int(round(time / dt))):
+            state = scheme.step(system, state, None)
     except utils.SimulationStopped as err:
         return err
-    return np.array(system.configuration.locations)
+    return np.array(state.configuration.locations)
 
 
 def test_dt_of_the_dynamic_example_is_adequate_and_ten_times_it_is_not(tmp_path, monkeypatch):
@@ -166,7 +167,7 @@ def test_dt_of_the_dynamic_example_is_adequate_and_ten_times_it_is_not(tmp_path,
     dt = bound['dt']
     assert bound['binds'] != 'stability' and dt < bound['bounds']['stability']
     options = read_input_file('inputfile_dynamic.dat')
-    start = np.array(set_up(options).configuration.locations)
+    start = np.array(set_up(options).start_configuration.locations)
     horizon = 10 * dt
     reference = run_for(options, dt / 8, horizon)
     assert isinstance(reference, np.ndarray)

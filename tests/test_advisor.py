@@ -203,7 +203,7 @@ def test_near_contact_richardson_is_flagged_as_a_lower_bound(tmp_path, monkeypat
 
 def test_auto_backend_is_the_cheapest_measured():
     from mobility import choose
-    from multi_bodies.solver.system import resolve_implementation
+    from multi_bodies.solver.model import resolve_implementation
     messages = []
     chosen = resolve_implementation('auto', 'vector_product', log=messages.append, num_blobs=1000)
     costs = choose.backend_costs('vector_product', 1000)
@@ -220,7 +220,7 @@ def test_auto_backend_follows_planted_costs(monkeypatch, python_ms, cpp_ms, expe
     cheapest, except that a backend within TIE_MARGIN (20 %) of it and earlier in the preference order
     (pycuda, C++, python) is kept; 100 blobs are below every probe size, so every cost is a cache entry."""
     from mobility import backends, choose
-    from multi_bodies.solver.system import resolve_implementation
+    from multi_bodies.solver.model import resolve_implementation
     if not (backends.is_usable('C++') and backends.is_usable('python')):
         pytest.skip('needs the C++ and python backends')
     planted = {('python', 'vector_product', True, 100): 1e-3 * python_ms,
@@ -236,7 +236,7 @@ def test_auto_backend_follows_planted_costs(monkeypatch, python_ms, cpp_ms, expe
 def test_auto_backend_measures_when_nothing_is_cached(monkeypatch):
     """Without a cache the choice times every usable backend (best of repeats) and follows those times."""
     from mobility import backends, choose
-    from multi_bodies.solver.system import resolve_implementation
+    from multi_bodies.solver.model import resolve_implementation
     monkeypatch.setattr(choose, '_cache', {})
     calls = []
     real_time_call = choose.time_call

@@ -191,10 +191,10 @@ def fused_and_chain_velocities(tmp_path, common, monkeypatch):
     _, chain = setup_system(tmp_path, '\n'.join(['scheme mobility', 'articulated chain.list_vertex chain.clones '
                                                  'chain.const'] + common), monkeypatch)
     system = fused.system
-    problem = system.mobility_problem(system.configuration)
-    reference = body_solver.solve(problem, problem.rhs(force_torque=system.forces_torques(system.configuration)),
-                                  system.build_preconditioner(system.configuration), tolerance=1e-12).velocities[0]
-    result = art.articulated_velocities(chain.system, chain.system.articulated, chain.system.configuration, 0.0)
+    problem = system.mobility_problem(system.start_configuration)
+    reference = body_solver.solve(problem, problem.rhs(force_torque=system.forces_torques(system.start_configuration)),
+                                  system.build_preconditioner(system.start_configuration), tolerance=1e-12).velocities[0]
+    result = art.articulated_velocities(chain.system, chain.system.articulated, chain.system.start_configuration, 0.0)
     return reference, chain, result
 
 
@@ -207,12 +207,12 @@ def test_locked_chain_under_gravity_moves_as_the_fused_rigid_body(tmp_path, monk
     reference, chain, result = fused_and_chain_velocities(tmp_path, common, monkeypatch)
     assert result.converged
     V, W = reference[:3], reference[3:]
-    q = chain.system.configuration.locations
+    q = chain.system.start_configuration.locations
     expected = np.concatenate((V + np.cross(W, q - q[0]), np.tile(W, (3, 1))), axis=1)
     assert np.linalg.norm(W) > 1e-3 * np.linalg.norm(V)  # the wall makes the fused body turn
     assert np.max(np.abs(result.velocities - expected)) < 1e-9 * np.linalg.norm(V)
     # and the joints move together: C U = 0
-    a, _ = chain.system.articulated.lab_links(chain.system.configuration, 0.0)
+    a, _ = chain.system.articulated.lab_links(chain.system.start_configuration, 0.0)
     assert np.max(np.abs(chain.system.articulated.C_dot(a, result.velocities))) < 1e-9 * np.linalg.norm(V)
 
 
@@ -227,7 +227,7 @@ def test_locked_chain_far_from_the_wall_sediments_as_one_body(tmp_path, monkeypa
     text = '\n'.join(['scheme articulated_deterministic_forward_euler', 'output_name run', 'save_clones one_file',
                       'articulated chain.list_vertex chain.clones chain.const'] + common)
     options, setup = setup_system(tmp_path, text, monkeypatch, script='dynamics')
-    result = art.articulated_velocities(setup.system, setup.system.articulated, setup.system.configuration, 0.0)
+    result = art.articulated_velocities(setup.system, setup.system.articulated, setup.system.start_configuration, 0.0)
     U = result.velocities
     assert np.max(np.abs(U - U[1])) < 1e-9 * np.linalg.norm(U[1])
     assert np.linalg.norm(U[1, :3]) > 0 and U[1, 2] < 0
@@ -235,6 +235,48 @@ def test_locked_chain_far_from_the_wall_sediments_as_one_body(tmp_path, monkeypa
     frames = read_frames('run.chain.config')
     displacement = frames[-1, :, :3] - frames[0, :, :3]
     assert np.max(np.abs(displacement - displacement[1])) < 1e-9 * np.linalg.norm(displacement[1])
+
+
+def joint_residuals(frames, const_path):
+    """|q_p + R_p l_p - q_q - R_q l_q| (frames, joints) of saved frames (F, Nb, 7), from the .const file's links.
+
+    Computed here from the file and the quaternions (R(q) = 2 [[p p^T + s^2 - 1/2] + s [p]_x], scalar first),
+    not with the package's joint code, so a change of where the package puts a joint shows up.
+    """
+    lines = open(const_path).read().split('\n')
+    rows = np.array([[float(x) for x in line.split()] for line in lines[2:2 + int(lines[1])]])
+    p, q, lp, lq = rows[:, 0].astype(int), rows[:, 1].astype(int), rows[:, 2:5], rows[:, 5:8]
+    s, v = frames[..., 3], frames[..., 4:7]
+    R = 2 * (v[..., :, None] * v[..., None, :] + (s ** 2 - 0.5)[..., None, None] * np.eye(3))
+    cross = np.zeros(v.shape + (3,))
+    cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    R = R + 2 * s[..., None, None] * (cross - np.swapaxes(cross, -1, -2))
+    ends_p = frames[:, p, :3] + np.einsum('fkij,kj->fki', R[:, p], lp)
+    ends_q = frames[:, q, :3] + np.einsum('fkij,kj->fki', R[:, q], lq)
+    return np.linalg.norm(ends_p - ends_q, axis=2)
+
+
+@pytest.mark.parametrize('scheme', ['articulated_deterministic_forward_euler', 'articulated_deterministic_midpoint'])
+def test_joints_hold_at_every_saved_step(tmp_path, monkeypatch, scheme):
+    """A chain of four bodies with ball joints bends as it sediments near the wall; at every saved step the
+    joints, measured from the .const file (not with the package's joint code), hold to
+    nonlinear_solver_tolerance 1e-10 (and the bodies do move and turn: a scheme that stood still would pass the
+    joint check).  Negative control: the same residual of a joint moved by 1e-3 in the .const file is 1e-3."""
+    common = write_chain(tmp_path, 4, 2.5, 2.0, locked=False, lines=['nonlinear_solver_tolerance 1e-10'])
+    common = [line for line in common if not line.startswith('n_steps')]
+    text = '\n'.join(['scheme ' + scheme, 'output_name run', 'save_clones one_file', 'n_steps 12', 'n_save 1',
+                      'articulated chain.list_vertex chain.clones chain.const'] + common)
+    options, _ = setup_system(tmp_path, text, monkeypatch, script='dynamics')
+    assert run_dynamics(options, log=lambda *a: None) == 0
+    frames = read_frames('run.chain.config')
+    assert frames.shape[:2] == (13, 4)
+    residuals = joint_residuals(frames, tmp_path / 'chain.const')
+    assert residuals.shape == (13, 3) and np.max(residuals) < 1e-9, np.max(residuals)
+    assert np.max(frames[-1, :, 2] - frames[0, :, 2]) < -1e-3  # they fall ...
+    assert np.max(np.abs(frames[-1, :, 4:] - frames[0, :, 4:])) > 1e-4  # ... and turn (the chain bends)
+    moved = (tmp_path / 'chain.const').read_text().replace('1.25 0 0  -1.25 0 0', '1.251 0 0  -1.25 0 0', 1)
+    (tmp_path / 'moved.const').write_text(moved)
+    assert abs(np.max(joint_residuals(frames[:1], tmp_path / 'moved.const')) - 1e-3) < 1e-9
 
 
 def test_chain_of_single_blobs_with_the_multiblob_schemes_is_the_pinv_answer(tmp_path, monkeypatch):
@@ -272,7 +314,7 @@ def test_several_articulated_lines_and_structures_in_one_run(tmp_path, monkeypat
     _, together = setup_system(tmp_path, '\n'.join(lines + common), monkeypatch)
     assert together.system.articulated.num_constraints == 6
     both = art.articulated_velocities(together.system, together.system.articulated,
-                                      together.system.configuration, 0.0).velocities
+                                      together.system.start_configuration, 0.0).velocities
     alone = []
     for clones in ('free', 'copies_0', 'copies_1', 'chain'):
         if clones == 'free':
@@ -285,13 +327,13 @@ def test_several_articulated_lines_and_structures_in_one_run(tmp_path, monkeypat
         _, setup = setup_system(tmp_path, '\n'.join(text + common), monkeypatch)
         if setup.system.articulated is None:
             from multi_bodies.solver import body_solver
-            problem = setup.system.mobility_problem(setup.system.configuration)
+            problem = setup.system.mobility_problem(setup.system.start_configuration)
             alone.append(body_solver.solve(problem, problem.rhs(force_torque=setup.system.forces_torques(
-                setup.system.configuration)), setup.system.build_preconditioner(setup.system.configuration),
+                setup.system.start_configuration)), setup.system.build_preconditioner(setup.system.start_configuration),
                 tolerance=1e-12).velocities)
         else:
             alone.append(art.articulated_velocities(setup.system, setup.system.articulated,
-                                                    setup.system.configuration, 0.0).velocities)
+                                                    setup.system.start_configuration, 0.0).velocities)
     alone = np.concatenate(alone)
     assert np.max(np.abs(both - alone)) < 1e-3 * np.max(np.abs(alone))
     assert np.max(np.abs(alone[4:7] - alone[1:4])) > 1e-2 * np.max(np.abs(alone))  # the copies differ
@@ -309,9 +351,9 @@ def test_active_swimmer_exerts_no_net_force_or_torque_on_the_fluid(tmp_path, mon
     options = read_input_file('inputfile_bacteria_constant_angular_velocity.dat', 'dynamic')
     setup = prepare(options, 'dynamics', log=lambda *a: None)
     system = setup.system
-    result = art.articulated_velocities(system, system.articulated, system.configuration, 0.0)
+    result = art.articulated_velocities(system, system.articulated, system.start_configuration, 0.0)
     lam = result.lambda_blobs
-    r = system.blob_positions(system.configuration)
+    r = system.blob_positions(system.start_configuration)
     scale = np.sum(np.linalg.norm(lam, axis=1)) * (1 + np.max(np.abs(r)))
     assert np.linalg.norm(result.velocities[1, 3:] - result.velocities[0, 3:]) > 50  # the motor turns (100 rad/s)
     assert np.linalg.norm(lam.sum(axis=0)) < 1e-8 * scale

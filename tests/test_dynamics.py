@@ -19,7 +19,7 @@ from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies.files import structure_generators as gen
 from multi_bodies.files.snapshots import write_clones_file
 from multi_bodies.files.structure_files import write_vertex_file
-from multi_bodies.solver.system import System
+from multi_bodies.solver.model import Model
 from quaternion_integrator.schemes import make_scheme
 from utils import UserInputError
 
@@ -140,8 +140,8 @@ def sphere_system(vertex, location, blob_radius, implementation, g=1.0):
     hooks = mbf.load_user_hooks('/nonexistent')
     physics = dict(g=g, repulsion_strength_wall=0.0, debye_length_wall=1.0, repulsion_strength=0.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=blob_radius, blob_mass=1.0)
-    return System([body], bodies_to_arrays([body]), hooks, physics, 1.0, blob_radius, 1e-12,
-                  vector_product_name=implementation, blobs_name=implementation.replace('C++', 'python'))
+    return Model([body], bodies_to_arrays([body]), hooks, physics, 1.0, blob_radius, 1e-12,
+                 vector_product_name=implementation, blobs_name=implementation.replace('C++', 'python'))
 
 
 def as_list(value):
@@ -158,17 +158,20 @@ def test_sphere_sediments_at_published_body_mobility(height, reference_dir):
     N = np.array(as_list(entry['body_mobility_6x6']), dtype=float)
     system = sphere_system(vertex, location, float(entry['blob_radius']), 'C++')
     scheme = make_scheme('deterministic_forward_euler', 0.01)
-    velocity = scheme.step(system, 0)[0]
+    state = scheme.step(system, scheme.init(system, system.start_configuration))
+    velocity = state.velocities[0]
     force = np.array([0, 0, -12.0, 0, 0, 0])
     np.testing.assert_allclose(velocity, N @ force, rtol=0, atol=1e-9 * abs(N[2, 2] * 12))
-    np.testing.assert_allclose(system.arrays.locations[0], np.array(location) + 0.01 * (N @ force)[:3], atol=1e-12)
+    np.testing.assert_allclose(state.configuration.locations[0], np.array(location) + 0.01 * (N @ force)[:3],
+                               atol=1e-12)
 
 
 def test_sphere_far_from_walls_follows_stokes_drag():
     """Without a wall, a calibrated shell of hydrodynamic radius 1 falls at F / (6 pi eta)."""
     blobs, a, _ = gen.calibrated_shell(42)
     system = sphere_system(blobs, [0.0, 0.0, 50.0], a, 'C++_no_wall', g=0.5)
-    velocity = make_scheme('deterministic_forward_euler', 0.1).step(system, 0)[0]
+    scheme = make_scheme('deterministic_forward_euler', 0.1)
+    velocity = scheme.step(system, scheme.init(system, system.start_configuration)).velocities[0]
     np.testing.assert_allclose(velocity, [0, 0, -0.5 * 42 / (6 * np.pi), 0, 0, 0], atol=1e-10)
 
 
@@ -186,12 +189,13 @@ def boomerang_final_state(scheme_name, dt, t_end):
     body.ID = 'boomerang'
     physics = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=0.5, repulsion_strength=0.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=0.25, blob_mass=1.0)
-    system = System([body], bodies_to_arrays([body]), mbf.load_user_hooks('/nonexistent'), physics, 1.0, 0.25,
-                    1e-12, vector_product_name='python')
+    system = Model([body], bodies_to_arrays([body]), mbf.load_user_hooks('/nonexistent'), physics, 1.0, 0.25,
+                   1e-12, vector_product_name='python')
     scheme = make_scheme(scheme_name, dt)
-    for step in range(int(round(t_end / dt))):
-        scheme.step(system, step)
-    return np.concatenate((system.arrays.locations[0], system.arrays.orientations[0]))
+    state = scheme.init(system, system.start_configuration)
+    for _ in range(int(round(t_end / dt))):
+        state = scheme.step(system, state)
+    return np.concatenate((state.configuration.locations[0], state.configuration.orientations[0]))
 
 
 @pytest.mark.parametrize('scheme_name, order', [('deterministic_forward_euler', 1),

@@ -96,7 +96,7 @@ def test_unconstrained_solve_is_the_rigid_least_squares_motion():
     """rigid_projection: K^T (v - K U) = 0 (normal equations) for a random blob velocity field."""
     bodies = equilibrium_blobs(3, 3)
     system = make_system(bodies, [3])
-    c = system.configuration
+    c = system.start_configuration
     v = np.random.default_rng(4).standard_normal((system.num_blobs, 3))
     U = rigid_projection(system, c, v)
     np.testing.assert_allclose(U[:, :3], v, atol=1e-13)  # one blob: the rigid motion is the blob's velocity
@@ -132,16 +132,17 @@ def run_small_systems(scheme_name, n_systems, n_bodies, n_steps, dt, kT=KT, disa
         scheme = make_scheme(scheme_name, dt, Opts(kT=kT))
         scheme.thermal_drift = not disable_drift
         rng = np.random.default_rng(seed + 1)
-        start = system.configuration.locations.copy()
+        state = scheme.init(system, system.start_configuration)
+        start = state.configuration.locations.copy()
         z_sum, bins = np.zeros(n_bodies), np.zeros((n_bodies, len(HIST_EDGES) - 1))
-        for step in range(n_steps):
-            scheme.step(system, step, rng)
-            z = system.configuration.locations[:, 2]
+        for _ in range(n_steps):
+            state = scheme.step(system, state, rng)
+            z = state.configuration.locations[:, 2]
             z_sum += z
             bins[np.arange(n_bodies), np.clip(np.searchsorted(HIST_EDGES, z) - 1, 0, len(HIST_EDGES) - 2)] += 1
         z_all.append(z_sum / n_steps)
         bins_all.append(bins / n_steps)
-        moves.append(system.configuration.locations[:, :2] - start[:, :2])
+        moves.append(state.configuration.locations[:, :2] - start[:, :2])
     return np.concatenate(z_all), np.concatenate(bins_all), np.concatenate(moves)
 
 
@@ -177,29 +178,17 @@ def free_blob_msd_score(kT_scheme, n_bodies=200, n_steps=50, dt=0.05):
     for b in bodies:
         b.location = b.location + np.array([0.0, 0.0, 50.0])
     system = make_system(bodies, [n_bodies], vector_product=CPP + '_no_wall' if CPP == 'C++' else 'python_no_wall')
+    # free diffusion: no gravity, no wall repulsion (and no blob-blob forces in make_system): zero forces
+    system = system.replace(physics=dict(system.physics, g=0.0, repulsion_strength_wall=0.0))
     scheme = make_scheme('stochastic_EM', dt, Opts(kT=kT_scheme))
     rng = np.random.default_rng(8)
-    start = system.configuration.locations.copy()
-    no_force = np.zeros((n_bodies, 6))
-    for step in range(n_steps):
-        new, _ = free_step(scheme, system, step, rng, no_force)
-        system.set_configuration(new)
-    per_body = np.sum((system.configuration.locations - start) ** 2, axis=1) / (6 * n_steps * dt)
+    state = scheme.init(system, system.start_configuration)
+    start = state.configuration.locations.copy()
+    np.testing.assert_array_equal(system.forces_torques(state.configuration), 0.0)
+    for _ in range(n_steps):
+        state = scheme.step(system, state, rng)
+    per_body = np.sum((state.configuration.locations - start) ** 2, axis=1) / (6 * n_steps * dt)
     return (per_body.mean() - KT * 1.0) / (per_body.std(ddof=1) / np.sqrt(per_body.size))
-
-
-def free_step(scheme, system, step, rng, force_torque):
-    """One EM step with the external forces replaced by ``force_torque`` (free diffusion, no gravity)."""
-    original = system.forces_and_slip
-
-    def forces_and_slip(configuration):
-        blob_forces, _, slip = original(configuration)
-        return np.zeros_like(blob_forces), force_torque, slip
-    system.forces_and_slip = forces_and_slip
-    try:
-        return scheme.advance(system, system.configuration, step, rng)
-    finally:
-        system.forces_and_slip = original
 
 
 def test_em_free_diffusion_without_wall():

@@ -1,19 +1,19 @@
 """Speed options of the stochastic schemes (doc/dynamics.md, speed options)."""
 import os
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'benchmarks'))
 
+from multi_bodies.files.input_options import options_with  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 from utils import UserInputError  # noqa: E402
 
 
 def options(tolerance):
-    return SimpleNamespace(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=tolerance)
+    return options_with(kT=1.0, rf_delta=1e-3, update_PC=1, noise_solver_tolerance=tolerance)
 
 
 @pytest.mark.parametrize('tolerance', [0.0, 1.0, -1e-3])
@@ -31,8 +31,8 @@ def test_noise_tolerance_changes_the_step_by_its_size_and_costs_fewer_products()
     for tolerance in (None, 1e-4):
         system = bench_dynamics.boomerang_system(4, 'python')
         scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options(tolerance))
-        _, velocities = scheme.advance(system, system.configuration, 0, np.random.default_rng(5))
-        results[tolerance] = (velocities, system.counters(scheme)['stochastic_iterations_count'])
+        state = scheme.step(system, scheme.init(system, system.start_configuration), np.random.default_rng(5))
+        results[tolerance] = (state.velocities, state.counters.info()['stochastic_iterations_count'])
     (exact, lanczos_exact), (loose, lanczos_loose) = results[None], results[1e-4]
     assert lanczos_loose < lanczos_exact
     difference = np.linalg.norm(loose - exact) / np.linalg.norm(exact)
@@ -72,7 +72,8 @@ def test_paired_step_equals_the_unpaired_step(scheme_name):
         assert system.paired_mobility_product is not None
         scheme = make_scheme(scheme_name, 0.01, options(None))
         scheme.pair_products = pair
-        steps[pair] = scheme.advance(system, system.configuration, 0, np.random.default_rng(5))[1]
+        steps[pair] = scheme.step(system, scheme.init(system, system.start_configuration),
+                                  np.random.default_rng(5)).velocities
     np.testing.assert_allclose(steps[True], steps[False], rtol=1e-9, atol=1e-12)
 
 
@@ -237,15 +238,14 @@ def test_fresh_noise_solve_from_zero_gives_the_warm_started_step_with_fewer_prod
     from quaternion_integrator import stochastic_schemes
     results = {}
     for cold in (False, True):
-        system = bench_dynamics.boomerang_system(9, 'C++')
-        counter = bench_dynamics.count_products(system)
+        system, counter = bench_dynamics.count_products(bench_dynamics.boomerang_system(9, 'C++'))
         scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options(None))
         scheme.cold_start_fresh_noise = cold
         rng = np.random.default_rng(5)
-        configuration = system.configuration
-        for step in range(3):
-            configuration, velocities = scheme.advance(system, configuration, step, rng)
-        results[cold] = (velocities, counter.counts['residual'])
+        state = scheme.init(system, system.start_configuration)
+        for _ in range(3):
+            state = scheme.step(system, state, rng)
+        results[cold] = (state.velocities, counter.counts['residual'])
     assert stochastic_schemes.StochasticScheme.cold_start_fresh_noise
     (warm, warm_residuals), (cold, cold_residuals) = results[False], results[True]
     np.testing.assert_allclose(cold, warm, rtol=0, atol=1e-6 * np.abs(warm).max())

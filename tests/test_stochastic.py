@@ -26,10 +26,12 @@ import numpy as np
 import pytest
 
 import mobility
-from body.body import Body, bodies_to_arrays, rotation_matrices
+from body.body import Body, Configuration, bodies_to_arrays, rotation_matrices
 from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies.files import structure_generators as gen
-from multi_bodies.solver.system import System
+from multi_bodies.files.input_options import options_with
+from multi_bodies.solver.model import Model
+from quaternion_integrator.scheme_state import StepWork
 from quaternion_integrator import stochastic_schemes
 from quaternion_integrator.schemes import make_scheme
 from stochastic_forcing import lanczos_square_root, symmetric_root
@@ -47,11 +49,9 @@ ROLLERS = ['stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers
 A, ETA, KT, G, EPS_WALL, B_WALL = 1.0, 1.0 / (6.0 * np.pi), 1.0, 2.0, 2.0, 0.25
 
 
-class Opts:
-    """The few options a stochastic scheme reads."""
-
-    def __init__(self, kT=KT, rf_delta=1e-3, update_PC=1):
-        self.kT, self.rf_delta, self.update_PC = kT, rf_delta, update_PC
+def Opts(kT=KT, rf_delta=1e-3, update_PC=1):
+    """Options of the table's defaults with the few a stochastic scheme reads set."""
+    return options_with(kT=kT, rf_delta=rf_delta, update_PC=update_PC)
 
 
 def physics(**extra):
@@ -63,8 +63,8 @@ def physics(**extra):
 
 def make_system(bodies, types, vector_product=CPP, blobs='python', tolerance=1e-6, domain='single_wall'):
     arrays = bodies_to_arrays(bodies, types)
-    system = System(bodies, arrays, mbf.load_user_hooks('/nonexistent'), physics(), ETA, A, tolerance,
-                    vector_product_name=vector_product, blobs_name=blobs, domain=domain)
+    system = Model(bodies, arrays, mbf.load_user_hooks('/nonexistent'), physics(), ETA, A, tolerance,
+                   vector_product_name=vector_product, blobs_name=blobs, domain=domain)
     return system
 
 
@@ -121,21 +121,23 @@ def run_heights(scheme_name, n_bodies, n_steps, dt, seed, disable_drift=False, v
     if disable_drift:
         scheme.thermal_drift = False
     rng = np.random.default_rng(seed + 1)
-    start = system.arrays.locations.copy()
+    state = scheme.init(system, system.start_configuration)
+    start = state.configuration.locations.copy()
     window_start = start[:, :2].copy()
     increments = []  # in-plane displacements over consecutive windows of MSD_WINDOW steps
     z_sum = np.zeros(n_bodies)
     bins = np.zeros((n_bodies, len(HIST_EDGES) - 1))
     for step in range(n_steps):
-        scheme.step(system, step, rng)
-        z = system.arrays.locations[:, 2]
+        state = scheme.step(system, state, rng)
+        locations = state.configuration.locations
+        z = locations[:, 2]
         z_sum += z
         bins[np.arange(n_bodies), np.clip(np.searchsorted(HIST_EDGES, z) - 1, 0, len(HIST_EDGES) - 2)] += 1
         if (step + 1) % MSD_WINDOW == 0:
-            increments.append(system.arrays.locations[:, :2] - window_start)
-            window_start = system.arrays.locations[:, :2].copy()
-    displacement = system.arrays.locations[:, :2] - start[:, :2]
-    return z_sum / n_steps, bins / n_steps, displacement, scheme, np.array(increments)
+            increments.append(locations[:, :2] - window_start)
+            window_start = locations[:, :2].copy()
+    displacement = state.configuration.locations[:, :2] - start[:, :2]
+    return z_sum / n_steps, bins / n_steps, displacement, state, np.array(increments)
 
 
 def z_score(per_body, exact):
@@ -221,15 +223,13 @@ def multiblob_scene():
     return bodies, [3, 2]
 
 
-def preconditioned_samples(system, problem, pc, rng, count, wrong_factor=False):
+def transposed_factor_samples(problem, pc, rng, count):
+    """Noise of the 2017 published code (multiplied by L^T instead of L), wired here by hand: a control."""
     def matvec(v):
         return pc.L_inv_dot(problem.M_dot(pc.L_inv_T_dot(v)))
 
-    if wrong_factor:  # the 2017 published code: multiplied by L^T instead of L
-        def L_mult(v):
-            return pc._blockwise(v, [None if F is None else np.swapaxes(F, 1, 2) for F in pc.cholesky_factors])
-    else:
-        L_mult = pc.L_dot
+    def L_mult(v):
+        return pc._blockwise(v, [None if F is None else np.swapaxes(F, 1, 2) for F in pc.cholesky_factors])
     return np.array([lanczos_square_root(matvec, rng.standard_normal(3 * problem.num_blobs), 1e-4,
                                          L_mult=L_mult).noise for _ in range(count)])
 
@@ -237,21 +237,27 @@ def preconditioned_samples(system, problem, pc, rng, count, wrong_factor=False):
 def test_preconditioned_lanczos_covariance_multiblob():
     """With the block Cholesky preconditioner the noise covariance is M; the 2017 transposed factor fails.
 
-    1000 samples on 5 multi-blob bodies (69 blobs): probes |z| < 4.5 and Frobenius statistic < 1.25 for
-    ours; the wrong factor gives a statistic above 1.6 (about 2.5 measured).
+    The noise is drawn through the production path: the schemes' ``lanczos_noise`` (a step's StepWork over
+    the model, ``Model.lanczos_noise`` with the preconditioner a scheme builds), so a change of that wiring
+    (a dropped or transposed factor L) fails here.  1000 samples on 5 multi-blob bodies (69 blobs): probes
+    |z| < 4.5 and Frobenius statistic < 1.25 for ours; the transposed factor gives a statistic above 1.6
+    (about 2.5 measured).
     """
     bodies, types = multiblob_scene()
-    system = make_system(bodies, types)
-    system.blob_radius = 0.3
-    system.eta = ETA
-    problem = system.mobility_problem(system.configuration)
-    pc = system.build_preconditioner(problem.configuration)
+    system = make_system(bodies, types).replace(blob_radius=0.3, eta=ETA)
+    scheme = make_scheme('stochastic_first_order_RFD', 0.01, options_with(noise_solver_tolerance=1e-4))
+    state = scheme.init(system, system.start_configuration)
+    work = StepWork(system, state)
+    problem = system.mobility_problem(state.configuration)
+    pc = scheme.preconditioner(work, 0, problem)
     M = mobility.blob_mobility_matrix('python')(problem.r_vectors, ETA, 0.3)
     probes = probe_directions(M, 7)
-    ours = preconditioned_samples(system, problem, pc, np.random.default_rng(8), 1000)
+    rng = np.random.default_rng(8)
+    ours = np.array([scheme.lanczos_noise(work, problem, rng.standard_normal(3 * problem.num_blobs), 1.0, pc)
+                     for _ in range(1000)])
     assert np.max(np.abs(covariance_z_scores(ours, M, probes))) < 4.5
     assert frobenius_statistic(ours, M) < 1.25
-    wrong = preconditioned_samples(system, problem, pc, np.random.default_rng(8), 1000, wrong_factor=True)
+    wrong = transposed_factor_samples(problem, pc, np.random.default_rng(8), 1000)
     assert frobenius_statistic(wrong, M) > 1.6
 
 
@@ -262,24 +268,29 @@ def test_lanczos_non_convergence_is_reported():
     result = lanczos_square_root(lambda v: M @ v, np.ones(180), 1e-14, max_iterations=3)
     assert not result.converged and result.iterations == 3
     bodies = equilibrium_blobs(40, 10, spacing=2.5)
-    system = make_system(bodies, [40], tolerance=1e-12)
-    system.lanczos_max_iterations = 3
+    system = make_system(bodies, [40], tolerance=1e-12).replace(lanczos_max_iterations=3)
+    scheme = make_scheme('stochastic_first_order_RFD', 0.01, Opts())
+    start = scheme.init(system, system.start_configuration)
+    work = StepWork(system, start)
     with pytest.warns(RuntimeWarning, match='Lanczos did not converge'):
-        system.lanczos_noise(system.mobility_problem(system.configuration), np.ones(120), 1.0)
-    assert system.counters()['lanczos_not_converged_count'] == 1
+        work.lanczos_noise(system.mobility_problem(start.configuration), np.ones(120), 1.0)
+    state = work.state(start, start.configuration, 1, None)
+    assert state.counters.info()['lanczos_not_converged_count'] == 1
+    assert state.counters.lanczos_iterations == 3
 
 
 def test_operator_is_a_value():
     """An operator built at a configuration gives the same product after the bodies move."""
     bodies, types = multiblob_scene()
     system = make_system(bodies, types)
-    problem = system.mobility_problem(system.configuration)
+    problem = system.mobility_problem(system.start_configuration)
     x = np.random.default_rng(11).standard_normal(problem.size)
     before = problem.matvec(x)
-    locations, orientations = system.get_state()
-    system.set_state(locations + 0.3, orientations[::-1])
+    locations, orientations = problem.configuration.copy_arrays()
+    locations += 0.3
+    orientations[:] = orientations[::-1]
     np.testing.assert_array_equal(problem.matvec(x), before)
-    assert np.linalg.norm(system.mobility_problem(system.configuration).matvec(x) - before) > \
+    assert np.linalg.norm(system.mobility_problem(Configuration(locations, orientations)).matvec(x) - before) > \
         1e-3 * np.linalg.norm(before)
 
 
@@ -317,10 +328,11 @@ def test_rigid_body_rfd_drift_of_one_blob():
     bodies[0].location = np.array([0.0, 0.0, 1.5 * A])
     system = make_system(bodies, [1], tolerance=1e-10)
     scheme = make_scheme('stochastic_first_order_RFD', 0.01, Opts(rf_delta=1e-4))
-    old = system.configuration
+    old = system.start_configuration
     pc = system.build_preconditioner(old)
     rng = np.random.default_rng(15)
-    draws = np.array([scheme.rfd_drift(system, old, rng.standard_normal((1, 6)), pc)[0]
+    work = StepWork(system, scheme.init(system, old))
+    draws = np.array([scheme.rfd_drift(work, old, rng.standard_normal((1, 6)), pc)[0]
                       for _ in range(1000)])
     mean, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(draws.shape[0])
     exact = np.zeros(6)
@@ -370,8 +382,8 @@ GB_CASES = [(name, 150, 300, 0.01) for name in RIGID_ITERATIVE] + \
 def test_gibbs_boltzmann_heights(scheme_name, n_bodies, n_steps, dt):
     """VALIDATION T1 (own parameters): single-blob heights keep the exact equilibrium distribution."""
     vector_product = 'python' if scheme_name in RIGID_DENSE else CPP
-    z_means, bins, _, scheme, increments = run_heights(scheme_name, n_bodies, n_steps, dt, seed=100,
-                                           vector_product=vector_product)
+    z_means, bins, _, _, increments = run_heights(scheme_name, n_bodies, n_steps, dt, seed=100,
+                                                  vector_product=vector_product)
     assert_gibbs_boltzmann(z_means, bins, scheme_name)
     # the heights alone would pass for an integrator that never moves (the start is an exact sample):
     # the same run must also diffuse in the plane at the equilibrium rate (VALIDATION T2) ...
@@ -456,9 +468,10 @@ def trapped_blob_variance(scheme_name, dt, n_steps, kT=KT, n_bodies=100, seed=30
     scheme = make_scheme(scheme_name, dt, Opts(kT=kT))
     noise = np.random.default_rng(seed + 1)
     total = np.zeros(n_bodies)
-    for step in range(n_steps):
-        scheme.step(system, step, noise)
-        total += (system.arrays.locations[:, 2] - TRAP_Z0) ** 2
+    state = scheme.init(system, system.start_configuration)
+    for _ in range(n_steps):
+        state = scheme.step(system, state, noise)
+        total += (state.configuration.locations[:, 2] - TRAP_Z0) ** 2
     return total / n_steps * TRAP_KZ
 
 
@@ -651,23 +664,24 @@ def boomerang_brownian():
         body.ID = 'boomerang'
         body.body_length = body.calc_body_length()
         bodies.append(body)
-    system = System(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'),
-                    boomerang_keywords(), ETA, BOOM_A, 1e-4, vector_product_name=CPP, blobs_name=CPP)
+    system = Model(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'),
+                   boomerang_keywords(), ETA, BOOM_A, 1e-4, vector_product_name=CPP, blobs_name=CPP)
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
     rng = np.random.default_rng(402)
     sums = np.zeros((n_bodies, 3))
     squared, predicted = np.zeros(n_bodies), np.zeros(n_bodies)
+    state = scheme.init(system, system.start_configuration)
     for step in range(n_steps):
         if step % BOOM_MOTION_EVERY == 0:  # E[|dr|^2 | state] = 2 kT dt tr N_tt(state) + O(dt^2), N from here
-            N = system.dense_matrices(system.configuration)[3]
+            N = system.dense_matrices(state.configuration)[3]
             blocks = np.array([np.trace(N[6 * b:6 * b + 3, 6 * b:6 * b + 3]) for b in range(n_bodies)])
             predicted += 2.0 * KT * scheme.dt * blocks
-            before = system.arrays.locations.copy()
-        scheme.step(system, step, rng)
+            before = state.configuration.locations.copy()
+        state = scheme.step(system, state, rng)
         if step % BOOM_MOTION_EVERY == 0:
-            squared += np.sum((system.arrays.locations - before) ** 2, axis=1)
-        c = rotation_matrices(system.arrays.orientations)[:, 2, 2]
-        sums += np.column_stack((system.arrays.locations[:, 2], c, c ** 2))
+            squared += np.sum((state.configuration.locations - before) ** 2, axis=1)
+        c = rotation_matrices(state.configuration.orientations)[:, 2, 2]
+        sums += np.column_stack((state.configuration.locations[:, 2], c, c ** 2))
     return sums / n_steps, exact, squared / predicted
 
 

@@ -40,7 +40,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspa
 from body.body import Body, bodies_to_arrays  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files import structure_generators as gen  # noqa: E402
-from multi_bodies.solver.system import System  # noqa: E402
+from multi_bodies.files.input_options import options_with  # noqa: E402
+from multi_bodies.solver.model import Model  # noqa: E402
 from body.geometry import rotation_matrices  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
@@ -88,8 +89,8 @@ def blob_system(n_bodies, b, seed, backend):
         bodies.append(body)
     physics = dict(g=G, repulsion_strength_wall=EPS_WALL, debye_length_wall=b, repulsion_strength=1.0,
                    debye_length=1.0, periodic_length=np.zeros(3), blob_radius=A, blob_mass=1.0)
-    return System(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
-                  A, 1e-6, vector_product_name=backend, blobs_name='python')
+    return Model(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
+                 A, 1e-6, vector_product_name=backend, blobs_name='python')
 
 
 def run(scheme_name, n_bodies, n_steps, dt, b=SOFT, seed=1, backend='C++'):
@@ -107,21 +108,23 @@ def run(scheme_name, n_bodies, n_steps, dt, b=SOFT, seed=1, backend='C++'):
     import contextlib
     import io
     system = blob_system(n_bodies, b, seed, backend if scheme_name not in DENSE else 'python')
-    scheme = make_scheme(scheme_name, dt, SimpleNamespace(kT=KT, rf_delta=1e-3, update_PC=1))
+    scheme = make_scheme(scheme_name, dt, options_with(kT=KT, rf_delta=1e-3, update_PC=1))
     rng = np.random.default_rng(seed + 1)
     sums = np.zeros(n_bodies)
     counts = np.zeros((n_bodies, HEIGHT_EDGES.size - 1))
     stopped, done = None, 0
+    state = scheme.init(system, system.start_configuration)
     start = time.perf_counter()
     for step in range(n_steps):
         try:
             with contextlib.redirect_stdout(io.StringIO()):  # the 'Invalid configuration number' lines
-                scheme.step(system, step, rng)
+                state = scheme.step(system, state, rng)
         except Exception as err:  # utils.SimulationStopped (100 rejections in a row), or a failed solve
             stopped = str(err).split(';')[0]
+            state = getattr(err, 'state', None) or state  # the counts of the stopped step
             break
         done += 1
-        z = system.arrays.locations[:, 2]
+        z = state.configuration.locations[:, 2]
         sums += z
         if step % 5 == 0:
             index = np.clip(np.searchsorted(HEIGHT_EDGES, z, side='right') - 1, 0, counts.shape[1] - 1)
@@ -130,7 +133,7 @@ def run(scheme_name, n_bodies, n_steps, dt, b=SOFT, seed=1, backend='C++'):
     widths = np.diff(HEIGHT_EDGES)
     histogram = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1) / widths
     return SimpleNamespace(per_body_mean=sums / max(done, 1), per_body_histogram=histogram,
-                           invalid=scheme.invalid_configurations, steps=done, stopped=stopped,
+                           invalid=state.counters.invalid_configurations, steps=done, stopped=stopped,
                            seconds_per_unit_time=seconds / (max(done, 1) * dt))
 
 
@@ -318,16 +321,17 @@ def boomerang_chart(args, plt):
         bodies.append(body)
     physics = dict(g=g, repulsion_strength_wall=eps, debye_length_wall=b, repulsion_strength=1.0, debye_length=1.0,
                    periodic_length=np.zeros(3), blob_radius=a, blob_mass=1.0)
-    system = System(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
-                    a, 1e-4, vector_product_name='C++', blobs_name='C++')
-    scheme = make_scheme('stochastic_Slip_Trapz', 0.01, SimpleNamespace(kT=KT, rf_delta=1e-3, update_PC=1))
+    system = Model(bodies, bodies_to_arrays(bodies, [n_bodies]), user_hooks.load_user_hooks('/nonexistent'), physics, ETA,
+                   a, 1e-4, vector_product_name='C++', blobs_name='C++')
+    scheme = make_scheme('stochastic_Slip_Trapz', 0.01, options_with(kT=KT, rf_delta=1e-3, update_PC=1))
     heights, tilts = [], []
     n_steps = 300 if args.quick else 2000
+    state = scheme.init(system, system.start_configuration)
     for step in range(n_steps):
-        scheme.step(system, step, rng)
+        state = scheme.step(system, state, rng)
         if step % 5 == 0:
-            heights.append(system.arrays.locations[:, 2].copy())
-            tilts.append(rotation_matrices(system.arrays.orientations)[:, 2, 2])
+            heights.append(state.configuration.locations[:, 2].copy())
+            tilts.append(rotation_matrices(state.configuration.orientations)[:, 2, 2])
     heights, tilts = np.concatenate(heights), np.concatenate(tilts)
     cos_edges = np.linspace(-1, 1, 21)
     exact_cos = np.histogram(R[:, 2, 2], bins=cos_edges, weights=weights, density=True)[0]

@@ -210,10 +210,10 @@ class Advisor(ResolutionMeasurements, AdvisorReport):
     def scene_rhs(self):
         """Force-torque (Nb, 6) and slip (N, 3) of the scene (seeded random forces when they vanish)."""
         scene = self.scene
-        from multi_bodies.solver.system import System
-        system = System(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
-                        scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
-                        blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
+        from multi_bodies.solver.model import Model
+        system = Model(scene.bodies, scene.arrays, scene.hooks, scene.physics(), scene.eta, scene.a,
+                       scene.options.solver_tolerance, vector_product_name=self.backend, blobs_name=self.backend,
+                       blob_blob_name=self._forces_backend(), periodic_length=scene.options.periodic_length)
         force_torque = system.forces_torques(scene.arrays.configuration, scene.r_vectors)
         slip = system.slip(scene.arrays.configuration) if system.has_slip else np.zeros_like(scene.r_vectors)
         if not np.any(force_torque) and not np.any(slip):

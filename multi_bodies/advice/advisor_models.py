@@ -320,7 +320,7 @@ class Scene:
         self.program = program_of(probe)
         self.options = read_input_file(input_file, 'mcmc' if self.program == 'mcmc' else None)
         self.hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
-        self.bodies, self.types = read_bodies(self.options, self.hooks.set_slip_by_ID,
+        self.bodies, self.types, _ = read_bodies(self.options, self.hooks.set_slip_by_ID,
                                               single_blob_bodies='rollers' in self.options.scheme)
         self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
         slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]

@@ -14,7 +14,7 @@ little away from them).
 
 Then the recommended input is checked: it is read and set up as the
 program would (``run_setup.prepare``: the start check refuses blobs below
-the wall), and one mobility problem is solved (``System.deterministic_velocities``,
+the wall), and one mobility problem is solved (``Model.deterministic_velocities``,
 or the roller velocities) for the user's input and for the recommended one.
 The model change is kept only if the total force per body and the body
 velocities agree within the target (velocities: the target plus the
@@ -103,7 +103,7 @@ def read_options(text, input_file, program):
 
 
 def set_up(options, program):
-    """The System of ``options`` as the program sets it up (start check included); UserInputError if refused."""
+    """The Model of ``options`` as the program sets it up (start check included); UserInputError if refused."""
     from multi_bodies.run.run_setup import prepare
     script = {'dynamic': 'dynamics', 'static': 'static'}[program]
     with contextlib.redirect_stdout(io.StringIO()):
@@ -111,29 +111,25 @@ def set_up(options, program):
 
 
 def force_parts(system):
-    """(rest (Nb, 6), {parameter: contribution (Nb, 6)}) of the forces-torques at the system's configuration.
+    """(rest (Nb, 6), {parameter: contribution (Nb, 6)}) of the forces-torques at the model's start configuration.
 
     Each per-blob parameter enters the default laws linearly, so its contribution is the force with only
-    that parameter on minus the force with all of them off (``rest``: what does not depend on them).
+    that parameter on minus the force with all of them off (``rest``: what does not depend on them).  The
+    models compared are built from the user's (``Model.replace``), which stays as it is.
     """
     saved = dict(system.physics)
-    configuration = system.configuration
+    configuration = system.start_configuration
     off = dict(saved, **{name: 0.0 for name in PER_BLOB_PARAMETERS})
-    try:
-        system.physics = off
-        rest = system.forces_torques(configuration)
-        parts = {}
-        for name in PER_BLOB_PARAMETERS:
-            system.physics = dict(off, **{name: saved[name]})
-            parts[name] = system.forces_torques(configuration) - rest
-    finally:
-        system.physics = saved
+    rest = system.replace(physics=off).forces_torques(configuration)
+    parts = {}
+    for name in PER_BLOB_PARAMETERS:
+        parts[name] = system.replace(physics=dict(off, **{name: saved[name]})).forces_torques(configuration) - rest
     return rest, parts
 
 
 def velocities(system, scheme):
     """Body velocities of one mobility problem: (Nb, 6), or (N, 3) linear velocities of rollers."""
-    configuration = system.configuration
+    configuration = system.start_configuration
     if 'rollers' in scheme:
         return system.roller_velocities(configuration).velocities
     return system.deterministic_velocities(configuration).velocities
@@ -176,7 +172,7 @@ def velocity_difference(old, new, length):
 
 # ------------------------------------------------------------------ keep the physics, then check
 class PhysicsCheck:
-    """The user's model (System, forces, velocities) and the checks of a recommendation against it.
+    """The user's model (Model, forces, velocities) and the checks of a recommendation against it.
 
     ``advisor``: the Advisor (its scene, recommendation, notes, files, accuracy, log).
     """
@@ -402,7 +398,7 @@ def blob_speeds(system, body_velocities, scheme):
     v = np.asarray(body_velocities)
     if 'rollers' in scheme:
         return np.linalg.norm(v.reshape(-1, 3), axis=1)
-    blob_v = system.arrays.K_dot(system.configuration, v.reshape(-1, 6))
+    blob_v = system.arrays.K_dot(system.start_configuration, v.reshape(-1, 6))
     return np.linalg.norm(np.asarray(blob_v).reshape(-1, 3), axis=1)
 
 
@@ -412,11 +408,12 @@ def trajectory(options, scheme_name, dt, steps):
     Raises utils.SimulationStopped (a blob below the wall, GMRES not converged) or LinAlgError.
     """
     from quaternion_integrator.schemes import make_scheme
-    system = set_up(options, 'dynamic')
+    model = set_up(options, 'dynamic')
     scheme = make_scheme(scheme_name, dt, options)
-    for step in range(steps):
-        scheme.step(system, step, None)
-    return np.array(system.configuration.locations, dtype=float)
+    state = scheme.init(model, model.start_configuration)
+    for _ in range(steps):
+        state = scheme.step(model, state, None)
+    return np.array(state.configuration.locations, dtype=float)
 
 
 def measured_dt(options, scheme_name, dt_start, accuracy, steps=4, refinements=6):
@@ -438,7 +435,7 @@ def measured_dt(options, scheme_name, dt_start, accuracy, steps=4, refinements=6
     result = None
     for _ in range(refinements + 4):
         try:
-            x0 = np.array(set_up(options, 'dynamic').configuration.locations, dtype=float)
+            x0 = np.array(set_up(options, 'dynamic').start_configuration.locations, dtype=float)
             x1, x2, x3 = (trajectory(options, scheme_name, dt / k, steps * k) for k in (1, 2, 4))
         except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
             tries.append((dt, 'stops: %s' % str(err).split(';')[0]))

@@ -40,7 +40,7 @@ from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
 from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
 from multi_bodies.files.structure_files import read_body_table, read_slip_file, read_vertex_file
-from multi_bodies.solver.system import make_system
+from multi_bodies.solver.model import make_model
 
 
 def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
@@ -60,7 +60,8 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         ``output_name.restart`` at that step: it says where the snapshot
         starts in each ``.config`` file.
 
-    Returns (list of Body, list of (ID, number of bodies) per structure type).  The bodies of the
+    Returns :data:`BodiesRead` (list of Body, list of (ID, number of bodies) per structure type, the
+    ``ArticulatedSet`` of the ``articulated`` lines or None).  The bodies of the
     ``obstacle`` lines come after those of every ``structure`` line; each body has
     ``prescribed_velocity``: None for a free body, (6,) lab-frame ``[v, w]`` for a body of
     prescribed kinematics (zeros for an obstacle, the row of the ``structure`` line's velocity file).
@@ -100,8 +101,8 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
             body.prescribed_velocity = None if prescribed is None else prescribed[index].copy()
             bodies.append(body)
         types.append((spec.ID, locations.shape[0]))
-    read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies, restart_record)
-    return bodies, types
+    articulated = read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_bodies, restart_record)
+    return BodiesRead(bodies, types, articulated)
 
 
 def saved_or_input_configuration(options, spec, restart_record=None):
@@ -157,12 +158,11 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
     """Append the bodies of every ``articulated`` line to ``bodies`` and ``types``; returns the ArticulatedSet or None.
 
     Body ``i`` of a line's clones file uses vertex file ``i % n`` of its ``.list_vertex`` file (``n`` bodies per
-    articulated body, the first number of the ``.const`` file).  The set is kept as ``options._articulated_set``.
+    articulated body, the first number of the ``.const`` file).
     With ``initial_step > 0`` the bodies start from the saved step (as :func:`read_bodies`).
     """
     from multi_bodies.solver import articulated as art
     specs = getattr(options, 'articulated', None) or []
-    options._articulated_set = None
     if not specs:
         return None
     articulated = art.ArticulatedSet()
@@ -201,7 +201,6 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
             bodies.append(body)
         articulated.add(const, first, locations.shape[0] // const.num_bodies)
         types.append((spec.ID, locations.shape[0]))
-    options._articulated_set = articulated
     return articulated
 
 
@@ -252,6 +251,10 @@ def simplify_slip_function(body):
             body.function_slip = reference_slip_in_lab_frame
 
 
+BodiesRead = namedtuple('BodiesRead', ['bodies', 'types', 'articulated'])
+BodiesRead.__doc__ = """What :func:`read_bodies` returns: the Body list, (ID, count) per structure type and the
+``ArticulatedSet`` of the ``articulated`` lines (None without)."""
+
 RunSetup = namedtuple('RunSetup', ['hooks', 'bodies', 'types', 'body_arrays', 'system'])
 RunSetup.__doc__ = """What :func:`prepare` returns: the hooks, the Body list, (ID, count) per structure type,
 the BodyArrays and the System."""
@@ -272,21 +275,11 @@ def load_hooks(options, directory, log=print):
     return hooks
 
 
-def wall_is_seen(options, system, script):
-    """Whether the hydrodynamics of this run sees the wall (then no blob centre may start below it)."""
-    if 'rollers' in options.scheme:
-        return options.domain != 'no_wall'
-    names = [system.blobs_name]
-    if script == 'dynamics' or options.scheme == 'mobility':  # body_mobility and resistance use dense blocks only
-        names.append(system.vector_product_name)
-    return not all(name.endswith('_no_wall') for name in names)
-
-
-def check_start(options, system, types):
+def check_start(options, model, types):
     """Refuse a start with a blob centre below the wall (when the wall is seen), naming the structure line."""
-    if not system.check_wall:
+    if not model.check_wall:
         return
-    invalid = system.invalid_bodies(system.configuration)
+    invalid = model.invalid_bodies(model.start_configuration)
     if invalid.size:
         first = int(invalid[0])
         start = 0
@@ -335,14 +328,13 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
-        bodies, types = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
+        bodies, types, articulated = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
                                     single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
                                     restart_record=restart_record)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
-    articulated = getattr(options, '_articulated_set', None)
     body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if articulated is not None
-                                   else [count for _, count in types])
+                                   else [count for _, count in types], per_body_slip=script != 'mcmc')
     fixed = [spec for spec in all_structure_specs(options) if spec.obstacle or spec.velocity_file is not None]
     if fixed and script == 'mcmc':
         raise utils.UserInputError('%s: the Monte Carlo program has no obstacles or bodies of prescribed '
@@ -354,15 +346,11 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
                                    % options.input_file)
     if script == 'mcmc':
         return RunSetup(hooks, bodies, types, body_arrays, None)
-    slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
-    body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
-    system = make_system(options, bodies, body_arrays, hooks, print_residual=print_residual, log=log)
-    system.articulated = articulated  # joints of the articulated bodies (None without 'articulated' lines)
-    system.nonlinear_tolerance = options.nonlinear_solver_tolerance
+    system = make_model(options, bodies, body_arrays, hooks, script=script, articulated=articulated,
+                        print_residual=print_residual, log=log)
     log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))
-    system.check_wall = wall_is_seen(options, system, script)
     check_start(options, system, types)
     return RunSetup(hooks, bodies, types, body_arrays, system)
 

@@ -43,7 +43,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 import utils
-from body.body import K_dot, bodies_to_arrays
+from body.body import Configuration, K_dot, bodies_to_arrays
 from multi_bodies.solver import user_hooks
 from multi_bodies.run.run_setup import read_bodies
 from multi_bodies.run import run_output
@@ -343,9 +343,10 @@ class VtkSeries:
 class AlsoWriteVtk:
     """Wraps the snapshot writer of a running script: each ``save(step)`` also writes the VTK files.
 
-    ``snapshot_writer``: any object with ``save(step, ...)``; ``system``: the
-    running system, whose ``arrays`` (a ``BodyArrays``) hold the configuration
-    at the time of the save; ``types``: list of (structure ID, bodies).
+    ``snapshot_writer``: any object with ``save(step, locations (Nb, 3),
+    orientations (Nb, 4), ...)``, the configuration saved; ``system``: the
+    run's model (its ``arrays``, a ``BodyArrays``, and its joints);
+    ``types``: list of (structure ID, bodies).
     """
 
     def __init__(self, snapshot_writer, options, types, system):
@@ -354,23 +355,24 @@ class AlsoWriteVtk:
                                 options.dt, options.periodic_length, wrap_periodic=False,
                                 first_step=options.initial_step)
         # articulated bodies: the joints too, output_name.joints.<step>.vtp (doc/articulated.md)
-        self.joints = getattr(system, 'articulated', None)
+        self.joints = system.articulated
         if self.joints is not None:
             self.output_name, self.dt = options.output_name, options.dt
             self.joint_collection = PvdCollection(collection_name(options.output_name, 'joints'),
                                                   options.initial_step if options.initial_step > 0 else None)
 
-    def save(self, step, *args, **kwargs):
-        """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step``."""
-        result = self.snapshot_writer.save(step, *args, **kwargs)
-        self.series.write(step, self.system.arrays, self.system.configuration)
+    def save(self, step, locations, orientations, *args, **kwargs):
+        """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step`` at that configuration."""
+        result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
+        configuration = Configuration(locations, orientations)
+        self.series.write(step, self.system.arrays, configuration)
         if self.joints is not None:
-            self.write_joints(step)
+            self.write_joints(step, configuration)
         return result
 
-    def write_joints(self, step):
+    def write_joints(self, step, configuration):
         """``output_name.joints.<step>.vtp``: each joint at ``q_p + R_p l_p`` with its residual and bodies."""
-        configuration, time = self.system.configuration, step_time(step, self.dt)
+        time = step_time(step, self.dt)
         a, _ = self.joints.lab_links(configuration, time)
         points = configuration.locations[self.joints.bodies[:, 0]] + a[:, :3]
         residual = np.linalg.norm(self.joints.violation(configuration, time), axis=1)
@@ -392,7 +394,7 @@ STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 def load_run(options):
     """Bodies of the input file: (BodyArrays with the slip of the slip files and hooks, types)."""
     hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
-    bodies, types = read_bodies(options, hooks.set_slip_by_ID)
+    bodies, types, _ = read_bodies(options, hooks.set_slip_by_ID)
     # articulated lines mix vertex files: the array types are the runs of bodies sharing one reference
     from multi_bodies.run.run_setup import array_runs
     body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if getattr(options, 'articulated', None)

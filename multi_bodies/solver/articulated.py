@@ -55,6 +55,7 @@ import scipy.sparse.linalg as spla
 
 from body.body import as_configuration
 from body.geometry import rotation_matrices
+from multi_bodies.solver.body_solver import SolutionParts
 from multi_bodies.files.expressions import parse_expression
 from utils import UserInputError, read_text_file
 
@@ -97,6 +98,10 @@ def compile_expression(text, where):
     evaluate = build(tree)
     return lambda t: float(np.float64(evaluate(np.float64(t))))
 
+
+Restored = namedtuple('Restored', ['configuration', 'nonlinear_iterations'])
+Restored.__doc__ = """Result of :meth:`ArticulatedSet.restore`: the Configuration with the joints restored and the
+residual evaluations of its nonlinear correction (the published ``nonlinear_iterations_count`` adds them)."""
 
 ConstFile = namedtuple('ConstFile', ['num_bodies', 'bodies', 'links', 'expressions', 'path'])
 ConstFile.__doc__ = """A ``.const`` file: ``num_bodies``; ``bodies`` (Nc, 2) int (p, q); ``links`` (Nc, 6) the
@@ -212,8 +217,9 @@ class ArticulatedSet:
     """Every joint of a run and the articulated bodies they form.
 
     Attributes: ``bodies`` (Nc, 2) global body indices (p, q); ``reference_links`` (Nc, 6); ``groups`` list of
-    :class:`ArticulatedBody`; ``num_constraints``; ``nonlinear_iterations`` (residual evaluations of the
-    nonlinear correction, the published ``nonlinear_iterations_count``); ``names`` per group (input IDs).
+    :class:`ArticulatedBody`; ``num_constraints``; ``names`` per group (input IDs).  Built once at set-up
+    (:meth:`add`); nothing here changes during a run (the residual evaluations of the nonlinear correction
+    are returned by :meth:`restore`).
     """
 
     def __init__(self):
@@ -221,7 +227,6 @@ class ArticulatedSet:
         self.reference_links = np.zeros((0, 6))
         self.expressions = []
         self.groups = []
-        self.nonlinear_iterations = 0
         self.link_override = None  # callable (t, links (Nc, 6)) -> (links, rates) or None (user hook)
 
     @property
@@ -317,7 +322,7 @@ class ArticulatedSet:
         return np.array([U[g.body_indices, :3].mean(axis=0) for g in self.groups]).reshape(-1, 3)
 
     def restore(self, configuration, centres, t, tolerance, verbose=False):
-        """Joints restored at time ``t``: a new Configuration (see module docstring).
+        """Joints restored at time ``t``: :data:`Restored` (a new Configuration, see module docstring).
 
         centres (n_groups, 3): the geometric centres to keep; tolerance: ``nonlinear_solver_tolerance``
         (max-norm of the joint residuals, length units).
@@ -333,18 +338,21 @@ class ArticulatedSet:
         new = Configuration(locations, orientations)
         a, _ = self.lab_links(new, t)
         g_all = self.violation(new, t)
+        evaluations = 0
         for group in self.groups:
-            self._nonlinear_correction(group, locations, orientations, a[group.constraint_indices],
-                                       g_all[group.constraint_indices], tolerance, verbose)
-        return Configuration(locations, orientations)
+            evaluations += self._nonlinear_correction(group, locations, orientations, a[group.constraint_indices],
+                                                      g_all[group.constraint_indices], tolerance, verbose)
+        return Restored(Configuration(locations, orientations), evaluations)
 
     def _nonlinear_correction(self, group, locations, orientations, a, g, tolerance, verbose):
-        """Least-squares correction of one articulated body (in place on locations, orientations)."""
+        """Least-squares correction of one articulated body (in place on locations, orientations).
+
+        Returns the number of residual evaluations (0 when the joints already hold to ``tolerance``)."""
         if group.constraint_indices.size == 0:
-            return
+            return 0
         g_inf = float(np.max(np.abs(g)))
         if g_inf < tolerance:
-            return
+            return 0
         nb = group.body_indices.size
         pairs = group.local_bodies
         q = locations[group.body_indices].copy()
@@ -381,7 +389,6 @@ class ArticulatedSet:
         result = scop.least_squares(residual, x0, jac=jacobian, bounds=(low, high), method='dogbox',
                                     ftol=tolerance, xtol=tolerance * 1e-3, gtol=None, x_scale='jac',
                                     max_nfev=x0.size, verbose=2 if verbose else 0)
-        self.nonlinear_iterations += counter[0]
         x = result.x
         dq = x[:3 * nb].reshape(nb, 3)
         dq = dq - dq.mean(axis=0)
@@ -390,6 +397,7 @@ class ArticulatedSet:
         from body.geometry import quaternion_products
         locations[group.body_indices] += dq
         orientations[group.body_indices] = quaternion_products(theta, orientations[group.body_indices])
+        return counter[0]
 
 
 def _skew(v):
@@ -452,6 +460,15 @@ class ArticulatedProblem:
     def split(self, x):
         n3, n6 = 3 * self.num_blobs, 3 * self.num_blobs + 6 * self.num_bodies
         return x[:n3], x[n3:n6], x[n6:]
+
+    def prepare_rhs(self, rhs):
+        """The right-hand side as :meth:`rhs` made it (its force part is projected there)."""
+        return rhs
+
+    def solution(self, x):
+        """``[lambda; U; psi]`` split: SolutionParts(lambda (N, 3), U (Nb, 6) projected, joint forces (Nc, 3))."""
+        lam, U, psi = self.split(x)
+        return SolutionParts(lam.reshape(-1, 3), self.project_velocities(U), self.joint_forces(psi))
 
     def C_dot(self, velocities):
         """``Q^T C U`` (num_multipliers,) of body velocities (Nb, 6)."""
@@ -538,32 +555,6 @@ class ArticulatedPreconditioner:
         return np.concatenate((first + correction, psi))
 
 
-ArticulatedSolution = namedtuple('ArticulatedSolution', ['velocities', 'multipliers', 'lambda_blobs', 'iterations',
-                                                         'converged', 'residual', 'normalised_solution'])
-
-
-def solve_articulated(problem, rhs, preconditioner, tolerance, x0=None, print_residual=False):
-    """Preconditioned GMRES (``body_solver.gmres_solve``) on the normalised articulated system.
-
-    rhs (size,); x0: normalised first guess (the previous ``normalised_solution``) or None.
-    Returns :data:`ArticulatedSolution` (velocities (Nb, 6), multipliers (Nc, 3), lambda_blobs (N, 3)).
-    """
-    from multi_bodies.solver.body_solver import gmres_solve
-    rhs = np.asarray(rhs, dtype=float).reshape(-1)
-    norm = float(np.linalg.norm(rhs))
-    if norm == 0.0:
-        return ArticulatedSolution(np.zeros((problem.num_bodies, 6)), np.zeros((problem.num_constraints, 3)),
-                                   np.zeros((problem.num_blobs, 3)), 0, True, 0.0, None)
-    if x0 is not None and np.shape(x0) != rhs.shape:
-        x0 = None
-    pc = preconditioner.operator if hasattr(preconditioner, 'operator') else preconditioner
-    result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=pc, x0=x0,
-                         print_residual=print_residual)
-    lam, U, psi = problem.split(result.x * norm)
-    return ArticulatedSolution(problem.project_velocities(U), problem.joint_forces(psi), lam.reshape(-1, 3), result.iterations,
-                               result.converged, result.residual, result.x)
-
-
 # ---------------------------------------------------------------------------------------------- single blobs
 def roller_mobility_product(system, r_vectors):
     """``[v; w] = M6 [F; T]`` of single-blob bodies at blob positions (N, 3): a function of (N, 6) -> (N, 6)."""
@@ -582,74 +573,96 @@ def roller_mobility_product(system, r_vectors):
     return apply
 
 
-def roller_articulated_velocities(system, articulated, configuration, t, force_torque, x0=None):
-    """Velocities (Nb, 6) of single-blob bodies with joints: ``U = M6 (F + C^T phi)``, ``C U = B``.
+class RollerJointProblem:
+    """Single-blob bodies with joints at one configuration and time: the constraint Schur complement.
 
-    GMRES on the constraint Schur complement ``C M6 C^T phi = B - C M6 F`` (size 3Nc), preconditioned by the
-    exact inverse of ``C D C^T`` per articulated body with ``D`` the self mobility (``1/(6 pi eta a)``,
-    ``1/(8 pi eta a^3)``).  Returns (velocities, multipliers (Nc, 3), iterations, converged, residual, guess).
+    ``U = M6 (F + C^T phi)`` with ``C U = B`` gives ``C M6 C^T phi = B - C M6 F`` (unknowns phi, size 3Nc);
+    ``M6`` is the roller mobility of the blobs (:func:`roller_mobility_product`).  Implements the problem
+    protocol of ``body_solver.solve``; ``rhs()`` is ``B - C M6 F`` of the force-torque given at construction,
+    ``solution(phi)`` the velocities ``U_free + M6 C^T phi`` and the joint forces.  The preconditioner
+    (:meth:`preconditioner`) is the exact inverse of ``C D C^T`` per articulated body with ``D`` the self
+    mobility (``1/(6 pi eta a)``, ``1/(8 pi eta a^3)``).
     """
-    from multi_bodies.solver.body_solver import gmres_solve
-    configuration = as_configuration(configuration)
-    r_vectors = system.blob_positions(configuration)
-    M6 = roller_mobility_product(system, r_vectors)
-    a, rates = articulated.lab_links(configuration, t)
-    nb, nc = configuration.num_bodies, articulated.num_constraints
-    U_free = M6(force_torque)
-    rhs = (articulated.B(rates) - articulated.C_dot(a, U_free)).reshape(-1)
 
-    def matvec(phi):
-        return articulated.C_dot(a, M6(articulated.CT_dot(a, phi, nb))).reshape(-1)
-    eta, radius = system.eta, system.blob_radius
-    D = np.diag([1 / (6 * np.pi * eta * radius)] * 3 + [1 / (8 * np.pi * eta * radius ** 3)] * 3)
-    blocks = []
-    for group in articulated.groups:
-        C = articulated.C_dense_group(group, a)
-        Dg = np.kron(np.eye(group.body_indices.size), D)
-        blocks.append(np.linalg.pinv(C @ Dg @ C.T, rcond=1e-12, hermitian=True))
+    def __init__(self, model, articulated, configuration, t, force_torque):
+        configuration = as_configuration(configuration)
+        self.articulated = articulated
+        self.M6 = roller_mobility_product(model, model.blob_positions(configuration))
+        self.a, self.rates = articulated.lab_links(configuration, t)
+        self.num_bodies, self.num_constraints = configuration.num_bodies, articulated.num_constraints
+        self.eta, self.blob_radius = model.eta, model.blob_radius
+        self.U_free = self.M6(force_torque)
+        self.size = 3 * self.num_constraints
+        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
-    def precondition(r):
-        r = np.asarray(r).reshape(-1, 3)
-        out = np.zeros_like(r)
-        for group, S in zip(articulated.groups, blocks):
-            out[group.constraint_indices] = (S @ r[group.constraint_indices].reshape(-1)).reshape(-1, 3)
-        return out.reshape(-1)
-    size = 3 * nc
-    operator = spla.LinearOperator((size, size), matvec=matvec, dtype=float)
-    pc = spla.LinearOperator((size, size), matvec=precondition, dtype=float)
-    norm = float(np.linalg.norm(rhs))
-    if norm == 0.0:
-        phi, iterations, converged, residual, guess = np.zeros(size), 0, True, 0.0, x0
-    else:
-        if x0 is not None and np.shape(x0) != rhs.shape:
-            x0 = None
-        result = gmres_solve(operator, rhs / norm, system.tolerance, preconditioner=pc, x0=x0,
-                             print_residual=system.print_residual)
-        phi, iterations, converged, residual, guess = result.x * norm, result.iterations, result.converged, \
-            result.residual, result.x
-    velocities = U_free + M6(articulated.CT_dot(a, phi, nb))
-    return velocities, phi.reshape(-1, 3), iterations, converged, residual, guess
+    def matvec(self, phi):
+        articulated, a = self.articulated, self.a
+        return articulated.C_dot(a, self.M6(articulated.CT_dot(a, phi, self.num_bodies))).reshape(-1)
+
+    def rhs(self):
+        """``B - C M6 F`` (3Nc,)."""
+        return (self.articulated.B(self.rates) - self.articulated.C_dot(self.a, self.U_free)).reshape(-1)
+
+    def prepare_rhs(self, rhs):
+        return rhs
+
+    def solution(self, phi):
+        """SolutionParts(None, velocities (Nb, 6), joint forces (Nc, 3))."""
+        velocities = self.U_free + self.M6(self.articulated.CT_dot(self.a, phi, self.num_bodies))
+        return SolutionParts(None, velocities, np.asarray(phi).reshape(-1, 3))
+
+    def preconditioner(self):
+        """The exact inverse of ``C D C^T`` per articulated body, a LinearOperator of size 3Nc."""
+        articulated, a = self.articulated, self.a
+        D = np.diag([1 / (6 * np.pi * self.eta * self.blob_radius)] * 3
+                    + [1 / (8 * np.pi * self.eta * self.blob_radius ** 3)] * 3)
+        blocks = []
+        for group in articulated.groups:
+            C = articulated.C_dense_group(group, a)
+            Dg = np.kron(np.eye(group.body_indices.size), D)
+            blocks.append(np.linalg.pinv(C @ Dg @ C.T, rcond=1e-12, hermitian=True))
+
+        def precondition(r):
+            r = np.asarray(r).reshape(-1, 3)
+            out = np.zeros_like(r)
+            for group, S in zip(articulated.groups, blocks):
+                out[group.constraint_indices] = (S @ r[group.constraint_indices].reshape(-1)).reshape(-1, 3)
+            return out.reshape(-1)
+        return spla.LinearOperator((self.size, self.size), matvec=precondition, dtype=float)
 
 
-def articulated_velocities(system, articulated, configuration, t, force_torque=None, slip=None, x0=None,
-                           single_blobs=False):
-    """Velocities of every body with the joints of ``articulated`` at ``configuration`` and time ``t``.
+def articulated_problem(model, articulated, configuration, t, force_torque=None, slip=None, single_blobs=False):
+    """The problem of every body with the joints of ``articulated`` at ``configuration`` and time ``t``.
 
-    force_torque (Nb, 6) and slip (N, 3): None for those of the system's hooks.  ``single_blobs``: the roller
-    model (:func:`roller_articulated_velocities`), else the blob saddle-point problem (:class:`ArticulatedProblem`).
-    Returns :data:`ArticulatedSolution` (``lambda_blobs`` None for single blobs).  Nothing is counted here.
+    force_torque (Nb, 6) and slip (N, 3): None for those of the model's hooks.  ``single_blobs``: the roller
+    model (:class:`RollerJointProblem`), else the blob saddle-point problem (:class:`ArticulatedProblem`).
+    Returns (problem, right-hand side, preconditioner) for the one solve (``body_solver.solve``).
     """
     if single_blobs:
         if force_torque is None:
-            force_torque = system.forces_torques(configuration)
-        U, phi, iterations, converged, residual, guess = roller_articulated_velocities(
-            system, articulated, configuration, t, force_torque, x0=x0)
-        return ArticulatedSolution(U, phi, None, iterations, converged, residual, guess)
+            force_torque = model.forces_torques(configuration)
+        problem = RollerJointProblem(model, articulated, configuration, t, force_torque)
+        return problem, problem.rhs(), problem.preconditioner()
     if force_torque is None or slip is None:
-        _, hooks_force_torque, hooks_slip = system.forces_and_slip(configuration)
+        _, hooks_force_torque, hooks_slip = model.forces_and_slip(configuration)
         force_torque = hooks_force_torque if force_torque is None else force_torque
         slip = hooks_slip if slip is None else slip
-    problem = ArticulatedProblem(system.mobility_problem(configuration), articulated, configuration, t)
-    preconditioner = ArticulatedPreconditioner(problem, system.build_preconditioner(configuration))
-    return solve_articulated(problem, problem.rhs(slip, force_torque), preconditioner, system.tolerance, x0=x0,
-                             print_residual=system.print_residual)
+    problem = ArticulatedProblem(model.mobility_problem(configuration), articulated, configuration, t)
+    preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
+    return problem, problem.rhs(slip, force_torque), preconditioner
+
+
+def articulated_velocities(model, articulated, configuration, t, force_torque=None, slip=None, x0=None,
+                           single_blobs=False):
+    """Velocities of every body with the joints of ``articulated`` at ``configuration`` and time ``t``.
+
+    The problem of :func:`articulated_problem` solved by ``model.solve`` (the package's one solve, at
+    ``solver_tolerance``; raises SimulationStopped when GMRES does not converge), from the normalised first
+    guess ``x0``.  Returns its ``body_solver.SolveResult``: ``velocities`` (Nb, 6), the joint forces (Nc, 3)
+    in ``constraint_force_torque``, ``lambda_blobs`` (None for single blobs), ``iterations``.  Nothing is
+    counted here.
+    """
+    problem, rhs, preconditioner = articulated_problem(model, articulated, configuration, t, force_torque, slip,
+                                                       single_blobs)
+    what = 'the articulated roller problem' if single_blobs else 'the articulated mobility problem'
+    return model.solve(problem, rhs, preconditioner, x0=x0, what=what)

@@ -25,7 +25,8 @@ Everything here is a function of a :class:`body.body.Configuration` passed
 in: a problem, a preconditioner or a dense matrix is built at the
 configuration it is given and copies what it needs, so it stays valid when
 the bodies move.  There is one iterative solve, :func:`solve` (and the GMRES
-wrapper :func:`gmres_solve` it shares with the roller torque solve): it
+wrapper :func:`gmres_solve` under it) for every problem of the package (the
+problem protocol, see :func:`solve`): it
 builds nothing behind the caller's back (the preconditioner and the first
 guess are arguments) and returns the true residual of its answer.  The body
 mobility ``pinv(K^T M^{-1} K)`` of dense blocks is computed in one place,
@@ -39,6 +40,8 @@ import scipy.linalg.lapack as _lapack
 import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions, saddle_point_product
+
+from utils import SimulationStopped
 
 from . import krylov
 
@@ -63,13 +66,25 @@ residual : float, ``|b - A x| / |b|`` of the returned solution (the true residua
 normalised_solution : ndarray (3N + 6Nb,), the solution of the normalised system ``A y = b / |b|``:
     the first guess for the next solve of a similar right-hand side (SPEC 4.2); None for a zero
     right-hand side (nothing was solved: keep the guess you had).
-constraint_force_torque : ndarray (Nb, 6) or None, with bodies of prescribed kinematics
-    (``multi_bodies.solver.obstacles``): the force-torque that holds each such body on its prescribed
-    motion (zero rows for free bodies); None for the free problem.
+constraint_force_torque : the problem's constraint forces, or None: with bodies of prescribed kinematics
+    (``multi_bodies.solver.obstacles``) the force-torque (Nb, 6) that holds each such body on its
+    prescribed motion (zero rows for free bodies); with joints the joint forces (Nc, 3); for rollers of
+    prescribed spin the torques (N, 3); None for the free rigid problem.
 """
+
+SolutionParts = namedtuple('SolutionParts', ['lambda_blobs', 'velocities', 'constraint'])
+SolutionParts.__doc__ = """A problem's solution split (``problem.solution(x)``): blob forces (N, 3), body velocities
+(Nb, 6) and constraint forces (the problem's multipliers), each None where the problem has none."""
 
 GmresResult = namedtuple('GmresResult', ['x', 'iterations', 'converged', 'residual'])
 GmresResult.__doc__ = """Result of :func:`gmres_solve`: solution ``x``, inner iterations, converged, true relative residual."""
+
+
+def check_finite(values, what):
+    """Raise utils.SimulationStopped when ``values`` hold NaN or inf (``what`` names them in the message)."""
+    if not np.all(np.isfinite(values)):
+        raise SimulationStopped('the %s are not finite (NaN or inf); check the user-defined functions, the time '
+                                'step and the configuration' % what)
 
 
 def blob_radius_argument(body_arrays, blob_radius, blobs=slice(None)):
@@ -183,6 +198,18 @@ class MobilityProblem:
                 V = np.swapaxes(Vt, 1, 2)
                 self._projectors.append((bodies, np.matmul(V * keep[:, None, :], Vt)))
         return self._projectors
+
+    def prepare_rhs(self, rhs):
+        """The right-hand side (3N + 6Nb,) with its force part projected (:meth:`project_forces`)."""
+        n3 = 3 * self.num_blobs
+        if self.num_bodies:
+            rhs[n3:] = self.project_forces(rhs[n3:]).reshape(-1)
+        return rhs
+
+    def solution(self, x):
+        """``[lambda; U]`` (3N + 6Nb,) split: SolutionParts(lambda (N, 3), U (Nb, 6), None)."""
+        n3 = 3 * self.num_blobs
+        return SolutionParts(x[:n3].reshape(-1, 3), x[n3:].reshape(-1, 6), None)
 
     def M_dot(self, blob_forces):
         """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
@@ -425,46 +452,48 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
 
 def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
           print_residual=False):
-    """Solve the mobility problem ``A [lambda; U] = rhs`` by preconditioned GMRES: the one solve of the package.
+    """Solve ``A x = rhs`` of any problem of the package by preconditioned GMRES: the one solve of the package.
+
+    The problem protocol (``doc/adding_a_problem.md``), implemented by the rigid
+    (:class:`MobilityProblem`), mixed (``obstacles.MixedMobilityProblem``), articulated
+    (``articulated.ArticulatedProblem``, ``articulated.RollerJointProblem``) and roller
+    (``rollers.RollerSpinProblem``) problems:
+
+    * ``size`` (int) and ``operator`` (a SciPy LinearOperator of that size), the matrix ``A``;
+    * ``prepare_rhs(rhs) -> rhs``: what the problem does to a right-hand side before the solve (the rigid
+      problems project the force part on what the bodies' blobs can balance; others return it unchanged);
+    * ``solution(x) -> SolutionParts``: the solution split into blob forces, body velocities and
+      constraint forces (each None where the problem has none).
 
     Parameters
     ----------
-    problem : MobilityProblem, the configuration and the operator.
-    rhs : ndarray (3N + 6Nb,), ``[slip part; -force part]`` (``problem.rhs`` or :func:`mobility_rhs`).
-        Its force part is first projected on what the bodies' blobs can balance
-        (``problem.project_forces``: torques on single blobs and rods).
-    preconditioner : BlockDiagonalPreconditioner, LinearOperator or None (explicitly unpreconditioned).
-        Nothing is built here: build one at the problem's configuration (or reuse one built nearby).
-    x0 : ndarray (3N + 6Nb,) or None
+    problem : a problem of the protocol above, built at one configuration.
+    rhs : ndarray (problem.size,) (``problem.rhs(...)``).
+    preconditioner : an object with ``operator`` (a LinearOperator), a LinearOperator, or None
+        (explicitly unpreconditioned).  Nothing is built here: build one at the problem's configuration
+        (or reuse one built nearby).
+    x0 : ndarray (problem.size,) or None
         First guess of the *normalised* system ``A y = rhs / |rhs|`` (SPEC 4.2: the published code
-        passes the previous normalised solution, ``SolveResult.normalised_solution``); None is zeros.
+        passes the previous normalised solution, ``SolveResult.normalised_solution``); None (or a
+        guess of another size) is zeros.
     tolerance : float, GMRES stops when ``|r| <= tolerance |rhs|``.
 
-    Returns :data:`SolveResult` (the solution of ``A x = rhs``, un-normalised, and its true residual).
-    Nothing is counted or stored here; the caller decides what a non-converged solve means.
+    Returns :data:`SolveResult` (the solution of ``A x = rhs``, un-normalised, its true residual and its
+    iteration count).  Nothing is counted or stored here; the caller decides what a non-converged solve means.
     """
-    rhs = np.array(rhs, dtype=float).reshape(-1)
-    n3 = 3 * problem.num_blobs
-    if problem.num_bodies:
-        rhs[n3:] = problem.project_forces(rhs[n3:]).reshape(-1)
+    rhs = problem.prepare_rhs(np.array(rhs, dtype=float).reshape(-1))
     norm = float(np.linalg.norm(rhs))
-    split = getattr(problem, 'split_body_unknowns', None)  # bodies of prescribed kinematics (obstacles.py)
     if norm == 0.0:
-        zeros = np.zeros((problem.num_bodies, 6))
-        return SolveResult(np.zeros((problem.num_blobs, 3)), zeros, 0, True, 0.0, None,
-                           None if split is None else zeros.copy())
-    if isinstance(preconditioner, BlockDiagonalPreconditioner):
-        preconditioner = preconditioner.operator
+        parts = problem.solution(np.zeros(problem.size))
+        return SolveResult(parts.lambda_blobs, parts.velocities, 0, True, 0.0, None, parts.constraint)
+    preconditioner = getattr(preconditioner, 'operator', preconditioner)
     if x0 is not None and np.shape(x0) != rhs.shape:
         x0 = None
     result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
                          restart=restart, maxiter=maxiter, print_residual=print_residual)
-    x = result.x * norm
-    velocities, constraint = x[n3:].reshape(-1, 6), None
-    if split is not None:
-        velocities, constraint = split(velocities)
-    return SolveResult(x[:n3].reshape(-1, 3), velocities, result.iterations, result.converged,
-                       result.residual, result.x, constraint)
+    parts = problem.solution(result.x * norm)
+    return SolveResult(parts.lambda_blobs, parts.velocities, result.iterations, result.converged,
+                       result.residual, result.x, parts.constraint)
 
 
 # ---------------------------------------------------------------------------------------------- dense algebra

@@ -1,53 +1,44 @@
-"""The many-body system that a time-stepping scheme advances.
+"""The model of a run: everything fixed for the run, frozen (floor 4).
 
-A ``System`` holds every body as contiguous arrays (``BodyArrays``: locations
-(Nb, 3), scalar-first quaternions (Nb, 4)), the backends chosen once at
-set-up (matrix-free ``M f``, dense blocks for the preconditioner, blob-blob
-and body-body forces, roller couplings) and the physics hooks of the run
-(defaults of ``multi_bodies_functions`` or the user's overrides).  It can
+A ``Model`` holds every body's structure as contiguous arrays (``BodyArrays``),
+the backends chosen once at set-up (matrix-free ``M f``, dense blocks for the
+preconditioner, blob-blob and body-body forces, roller couplings), the
+physics hooks of the run (defaults of ``multi_bodies_functions`` or the
+user's overrides), the tolerances, the joints of articulated bodies and
+whether the wall is seen.  It can
 
 * compute blob positions, forces and torques (SPEC section 7) and slip;
-* solve the mobility problem (SPEC 4.2, GMRES with the block-diagonal
-  preconditioner of 4.3) or its dense variant;
+* build the problems of the package at a configuration (rigid, mixed,
+  articulated, rollers: one protocol, ``body_solver.solve``) and solve them
+  (SPEC 4.2, GMRES with the block-diagonal preconditioner of 4.3), or their
+  dense variants;
 * give roller velocities (SPEC 5.2);
 * say which bodies have a blob centre below the wall.
 
 Every one of these takes the configuration it is about
-(``body.body.Configuration``) as an argument: nothing here reads "the
-current state" behind the caller's back, so a scheme can evaluate forces at
-its predictor while the step's start stays what it was.  The run's current
-configuration is ``System.configuration``, a value the time loop replaces
-after each accepted step (``set_configuration``).
-
-Schemes (``quaternion_integrator.schemes``) receive a System and never reach
-into globals.  The warm starts of the solves live in the schemes' history.
-Counters for ``.info`` live here (``gmres_iterations``); the last
-deterministic solve's count is ``last_iterations``.
+(``body.body.Configuration``) as an argument and returns what it computed,
+with its counts (GMRES and Lanczos iterations): the model holds no
+configuration, no counter and no history.  The run's state (configuration,
+scheme history, counters) is a value the time loop passes along
+(``quaternion_integrator.scheme_state.RunState``).  Nothing can be assigned
+to a model after its construction; :meth:`Model.replace` builds a variant
+(the advisor compares models built this way).
 
 Units: the user's; lengths as the input file, velocities length/time,
 forces force units, ``eta`` viscosity.
 """
-from collections import namedtuple
-
 import numpy as np
-import scipy.sparse.linalg as spla
 
 import mobility
 from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
-from multi_bodies.solver import body_solver
-from multi_bodies.solver import obstacles
-from multi_bodies.solver import physics as mbf
-from multi_bodies.solver import user_hooks
 from body.geometry import Quaternion
-from stochastic_forcing import displace_positions, lanczos_square_root, rfd
+from multi_bodies.solver import body_solver, obstacles, rollers, user_hooks
+from multi_bodies.solver import physics as mbf
+from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
+from stochastic_forcing import lanczos_square_root
 from utils import SimulationStopped, UserInputError
 
 NO_WALL = '_no_wall'
-
-RollerVelocities = namedtuple('RollerVelocities', ['velocities', 'torque_guess'])
-RollerVelocities.__doc__ = """Roller velocities (N, 3) and the normalised torque solution to start the next
-prescribed-spin solve from (None with ``free_kinematics``)."""
-
 
 # ------------------------------------------------------------------ backend choice
 def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None):
@@ -86,29 +77,21 @@ def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None
     raise UserInputError('no usable backend for %s' % name)
 
 
-def check_finite(values, what):
-    """Raise SimulationStopped when ``values`` hold NaN or inf."""
-    if not np.all(np.isfinite(values)):
-        raise SimulationStopped('the %s are not finite (NaN or inf); check the user-defined functions, the time '
-                                'step and the configuration' % what)
-
-
-# ------------------------------------------------------------------ the system
-class System:
-    """Bodies as arrays, backends and hooks of one run (see module docstring).
+# ------------------------------------------------------------------ the model
+class Model:
+    """Bodies as arrays, backends, physics and tolerances of one run: frozen (see module docstring).
 
     Parameters
     ----------
     bodies : list of body.body.Body
-        In input order; used by the hooks that take bodies (kept in sync with
-        the arrays only when such a hook is user-defined).
+        In input order; only the hooks that take bodies use them (``Body`` objects are the published
+        API's; the run's configuration is never read from them).
     body_arrays : body.body.BodyArrays
-        The fixed structure of the bodies; its ``configuration`` (from the
-        input files) is the run's first ``System.configuration``.
+        The fixed structure of the bodies (its ``configuration`` is the one read from the input files).
     hooks : multi_bodies.solver.user_hooks.PhysicsHooks
     physics : dict
-        Keywords of the hooks: g, repulsion_strength_wall, debye_length_wall,
-        repulsion_strength, debye_length, periodic_length, blob_radius, blob_mass.
+        Keywords of the hooks: g, repulsion_strength_wall, debye_length_wall, repulsion_strength,
+        debye_length, periodic_length, blob_radius, blob_mass.
     eta, blob_radius, solver_tolerance : float
     vector_product_name, blobs_name, blob_blob_name, body_body_name : str
         Implementation names (``auto`` already resolved).
@@ -117,88 +100,106 @@ class System:
         Roller parameters (SPEC 5.2).
     print_residual : bool
         Print every GMRES residual.
+    articulated : multi_bodies.solver.articulated.ArticulatedSet or None
+        The joints of articulated bodies (None without ``articulated`` lines).
+    nonlinear_tolerance : float
+        ``nonlinear_solver_tolerance`` of the joints' restoration.
+    check_wall : bool
+        Whether a blob centre below ``z = 0`` is invalid (False without a wall).
+    lanczos_max_iterations : int
+    mobility_product, paired_mobility_product : callables or None
+        Replace the chosen backend's ``M f`` (and paired) product (benchmarks count products this way);
+        None is the backend's.
+
+    Every attribute is set here; assigning one afterwards raises ``AttributeError`` (a model is a value:
+    build another with :meth:`replace`).
     """
 
     def __init__(self, bodies, body_arrays, hooks, physics, eta, blob_radius, solver_tolerance,
                  vector_product_name='python', blobs_name='python', blob_blob_name='None', body_body_name='None',
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
-                 domain='single_wall', print_residual=False):
-        self.bodies = bodies
-        self.arrays = body_arrays
-        self.configuration = body_arrays.configuration
-        self.hooks = hooks
-        self.physics = dict(physics)
-        self.eta, self.blob_radius, self.tolerance = float(eta), float(blob_radius), float(solver_tolerance)
-        self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3)
-        self.omega_one_roller = np.asarray(omega_one_roller, dtype=float).reshape(3)
-        self.free_kinematics = bool(free_kinematics)
-        self.domain = domain
-        self.print_residual = print_residual
-        self.vector_product_name, self.blobs_name = vector_product_name, blobs_name
-        self.mobility_product = mobility.mobility_vector_product(vector_product_name)
+                 domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
+                 check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None):
+        arguments = dict(locals())
+        del arguments['self']
+        set_ = object.__setattr__
+        set_(self, '_arguments', arguments)
+        set_(self, 'bodies', bodies)
+        set_(self, 'arrays', body_arrays)
+        set_(self, 'hooks', hooks)
+        set_(self, 'physics', dict(physics))
+        set_(self, 'eta', float(eta))
+        set_(self, 'blob_radius', float(blob_radius))
+        set_(self, 'tolerance', float(solver_tolerance))
+        set_(self, 'periodic_length', np.asarray(periodic_length, dtype=float).reshape(3))
+        set_(self, 'omega_one_roller', np.asarray(omega_one_roller, dtype=float).reshape(3))
+        set_(self, 'free_kinematics', bool(free_kinematics))
+        set_(self, 'domain', domain)
+        set_(self, 'print_residual', print_residual)
+        set_(self, 'articulated', articulated)
+        set_(self, 'nonlinear_tolerance', float(nonlinear_tolerance))
+        set_(self, 'check_wall', bool(check_wall))
+        set_(self, 'lanczos_max_iterations', int(lanczos_max_iterations))
+        set_(self, 'vector_product_name', vector_product_name)
+        set_(self, 'blobs_name', blobs_name)
+        set_(self, 'mobility_product', mobility_product if mobility_product is not None
+             else mobility.mobility_vector_product(vector_product_name))
         # (M v1, M v2) in one pass over the pairs, or None where the backend has no such product
-        self.paired_mobility_product = paired_product(vector_product_name, body_arrays, self.periodic_length)
-        self.blob_mobility_matrix = mobility.blob_mobility_matrix(blobs_name)
-        self.stacked_mobility = mobility.blob_mobility_matrix(blobs_name)  # takes stacks of bodies
-        self.blob_blob_name, self.body_body_name = blob_blob_name, body_body_name
-        radii_given = bool(getattr(body_arrays, 'radii_given', False))
-        self.blob_blob_forces = mbf.blob_blob_force_calculator(
+        set_(self, 'paired_mobility_product', paired_mobility_product if paired_mobility_product is not None
+             else paired_product(vector_product_name, body_arrays, self.periodic_length))
+        set_(self, 'blob_mobility_matrix', mobility.blob_mobility_matrix(blobs_name))
+        set_(self, 'stacked_mobility', mobility.blob_mobility_matrix(blobs_name))  # takes stacks of bodies
+        set_(self, 'blob_blob_name', blob_blob_name)
+        set_(self, 'body_body_name', body_body_name)
+        radii_given = bool(body_arrays.radii_given)
+        set_(self, 'blob_blob_forces', mbf.blob_blob_force_calculator(
             blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda,
-            python_forces=hooks.blob_blob_forces_python, radii_given=radii_given)
+            python_forces=hooks.blob_blob_forces_python, radii_given=radii_given))
         # Per-blob radii reach the default blob-blob laws (contact a_i + a_j); a user's law gets blob_radius.
-        self.blob_blob_physics = self.physics
+        blob_blob_physics = self.physics
         if radii_given and hooks.blob_blob_forces_python is None:
-            self.blob_blob_physics = dict(self.physics, blob_radii=body_arrays.blob_radii)
-        self.body_body_forces = mbf.body_body_force_calculator(
+            blob_blob_physics = dict(self.physics, blob_radii=body_arrays.blob_radii)
+        set_(self, 'blob_blob_physics', blob_blob_physics)
+        set_(self, 'body_body_forces', mbf.body_body_force_calculator(
             body_body_name, pair_force_torque=hooks.body_body_force_torque,
-            python_forces_torques=hooks.body_body_forces_python)
-        self.uses_bodies = any(not hooks.is_default(name) for name in
-                               ('bodies_external_force_torque', 'preprocess', 'postprocess'))
+            python_forces_torques=hooks.body_body_forces_python))
+        set_(self, 'uses_bodies', any(not hooks.is_default(name) for name in
+                                      ('bodies_external_force_torque', 'preprocess', 'postprocess')))
         # Bodies whose slip is a user function (set by set_slip_by_ID); the others use the vectorised slip.
-        self.slip_function_bodies = [k for k, b in enumerate(bodies)
-                                     if getattr(b, 'function_slip', reference_slip_in_lab_frame)
-                                     is not reference_slip_in_lab_frame]
-        self.slip_functions = bool(self.slip_function_bodies)
-        self.has_slip = self.slip_functions or bool(np.any(body_arrays.reference_slip))
-        self.check_wall = True
-        self.gmres_iterations = 0          # every GMRES iteration (the published deterministic_iterations_count)
-        self.gmres_stochastic_iterations = 0  # of those: noise and random-finite-difference solves
-        self.lanczos_iterations = 0
-        self.lanczos_not_converged = 0
-        self.lanczos_max_iterations = 1000
-        self.solves = {'deterministic': 0, 'stochastic': 0}
-        self.last_iterations = 0
+        slip_function_bodies = [k for k, b in enumerate(bodies)
+                                if b.function_slip is not reference_slip_in_lab_frame]
+        set_(self, 'slip_function_bodies', slip_function_bodies)
+        set_(self, 'slip_functions', bool(slip_function_bodies))
+        set_(self, 'has_slip', self.slip_functions or bool(np.any(body_arrays.reference_slip)))
+        # Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
+        set_(self, 'body_lengths', np.array([1.0 if b.body_length is None else b.body_length for b in bodies],
+                                            dtype=float))
         # Bodies of prescribed kinematics (obstacles, velocity files): (Nb,) bool and (Nb, 6) lab-frame [v, w].
-        self.fixed_bodies, self.prescribed_velocities = obstacles.fixed_bodies_of(bodies)
+        fixed_bodies, prescribed_velocities = obstacles.fixed_bodies_of(bodies)
+        set_(self, 'fixed_bodies', fixed_bodies)
+        set_(self, 'prescribed_velocities', prescribed_velocities)
 
-    # -------------------------------------------------------------- counters for .info
-    def counters(self, scheme=None):
-        """Counters of the run for ``.info`` (published names first), as a dict name -> int.
+    def __setattr__(self, name, value):
+        raise AttributeError('a Model is frozen: %s cannot be assigned after construction (build another with '
+                             'model.replace(%s=...))' % (name, name))
 
-        ``deterministic_iterations_count``: GMRES iterations of every mobility
-        solve (as the published code counts them); ``stochastic_iterations_count``:
-        Lanczos iterations.  Then the split of the GMRES count, solves per
-        kind and Lanczos calls that did not converge.
-        """
-        return {'invalid_configuration_count': getattr(scheme, 'invalid_configurations', 0),
-                'deterministic_iterations_count': self.gmres_iterations,
-                'stochastic_iterations_count': self.lanczos_iterations,
-                'gmres_iterations_deterministic_solves': self.gmres_iterations - self.gmres_stochastic_iterations,
-                'gmres_iterations_noise_and_rfd_solves': self.gmres_stochastic_iterations,
-                'deterministic_solves_count': self.solves['deterministic'],
-                'noise_and_rfd_solves_count': self.solves['stochastic'],
-                'lanczos_not_converged_count': self.lanczos_not_converged}
+    def __delattr__(self, name):
+        raise AttributeError('a Model is frozen: %s cannot be deleted' % name)
 
-    def set_counters(self, counters):
-        """Continue the counts of an earlier segment of the run (restart)."""
-        self.gmres_iterations = int(counters.get('deterministic_iterations_count', 0))
-        self.lanczos_iterations = int(counters.get('stochastic_iterations_count', 0))
-        self.gmres_stochastic_iterations = int(counters.get('gmres_iterations_noise_and_rfd_solves', 0))
-        self.solves['deterministic'] = int(counters.get('deterministic_solves_count', 0))
-        self.solves['stochastic'] = int(counters.get('noise_and_rfd_solves_count', 0))
-        self.lanczos_not_converged = int(counters.get('lanczos_not_converged_count', 0))
+    @property
+    def arguments(self):
+        """The constructor arguments of this model (a new dict: name -> value)."""
+        return dict(self._arguments)
 
-    # -------------------------------------------------------------- state
+    def replace(self, **changes):
+        """A new model (of this one's class) with the constructor arguments ``changes`` (name -> value) and the
+        others of this one."""
+        unknown = set(changes) - set(self._arguments)
+        if unknown:
+            raise TypeError('Model has no argument %s' % ', '.join(sorted(unknown)))
+        return type(self)(**dict(self._arguments, **changes))
+
+    # -------------------------------------------------------------- structure
     @property
     def num_bodies(self):
         return self.arrays.num_bodies
@@ -208,31 +209,9 @@ class System:
         return self.arrays.num_blobs
 
     @property
-    def body_lengths(self):
-        """Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
-
-        Read once from the bodies the run was set up with; the schemes never read Body objects.
-        """
-        if getattr(self, '_body_lengths', None) is None:
-            self._body_lengths = np.array([getattr(b, 'body_length', 1.0) for b in self.bodies], dtype=float)
-        return self._body_lengths
-
-    def set_configuration(self, configuration):
-        """Make ``configuration`` (a Configuration, or (locations, orientations)) the run's current one."""
-        configuration = as_configuration(configuration)
-        if configuration.num_bodies != self.num_bodies:
-            raise ValueError('a configuration of %d bodies for a system of %d' % (configuration.num_bodies,
-                                                                                   self.num_bodies))
-        self.configuration = configuration
-        self.arrays.configuration = configuration
-
-    def get_state(self):
-        """Writable copies (locations (Nb, 3), orientations (Nb, 4)) of the current configuration."""
-        return self.configuration.copy_arrays()
-
-    def set_state(self, locations, orientations):
-        """``set_configuration(Configuration(locations, orientations))``."""
-        self.set_configuration(Configuration(locations, orientations))
+    def start_configuration(self):
+        """The configuration read from the input files (a value; the run state holds the current one)."""
+        return self.arrays.configuration
 
     def blob_positions(self, configuration):
         """Lab-frame blob positions at ``configuration``, shape (N, 3)."""
@@ -283,7 +262,7 @@ class System:
             extra = self.hooks.bodies_external_force_torque(self.synced_bodies(configuration), r_vectors,
                                                             **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
-        bodies_law = getattr(self.hooks, 'body_body_of_bodies', None)
+        bodies_law = self.hooks.body_body_of_bodies
         if bodies_law is not None and self.body_body_name == 'python':  # published style: takes the bodies
             extra = bodies_law(self.synced_bodies(configuration), r_vectors,
                                omega_one_roller=self.omega_one_roller, **self.physics)
@@ -341,8 +320,7 @@ class System:
                                            self.blob_radius, self.periodic_length)
 
     def build_preconditioner(self, configuration):
-        """Block-diagonal preconditioner (and Lanczos factors) at ``configuration`` (or a problem's)."""
-        configuration = getattr(configuration, 'configuration', configuration)
+        """Block-diagonal preconditioner (and Lanczos factors) at ``configuration``."""
         if self.has_fixed_bodies:
             return obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
                                                  self.blob_radius, stacked_mobility=self.stacked_mobility,
@@ -351,36 +329,31 @@ class System:
                                                        self.eta, self.blob_radius,
                                                        stacked_mobility=self.stacked_mobility)
 
-    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic', tolerance=None):
-        """:func:`body_solver.solve` at ``solver_tolerance``, counted for ``.info``; stops the run if it fails.
+    def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
+              what='the mobility problem'):
+        """:func:`body_solver.solve` (the one solve, any problem of its protocol) at ``solver_tolerance``.
 
-        rhs (3N + 6Nb,) (``problem.rhs(...)``); preconditioner as body_solver.solve (None: unpreconditioned);
-        x0: first guess of the normalised system (``SolveResult.normalised_solution`` of an earlier solve);
-        kind : 'deterministic' or 'stochastic' (noise and RFD solves), for the counters.
-        tolerance : relative tolerance of this solve; None is ``solver_tolerance``.
-        Returns body_solver.SolveResult; raises SimulationStopped when GMRES does not converge.
+        rhs (problem.size,); preconditioner as body_solver.solve (None: unpreconditioned); x0: first guess
+        of the normalised system (``SolveResult.normalised_solution`` of an earlier solve); tolerance: None
+        is ``solver_tolerance``; what: the problem's name in the message of a failure.
+        Returns body_solver.SolveResult (with its ``iterations``: nothing is counted here); raises
+        SimulationStopped when GMRES does not converge.
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
-        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance,
+        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
                                    print_residual=self.print_residual)
-        self.solves[kind] += 1
-        self.gmres_iterations += result.iterations
-        if kind == 'deterministic':
-            self.last_iterations = result.iterations
-        else:
-            self.gmres_stochastic_iterations += result.iterations
         if not result.converged:
-            raise SimulationStopped('GMRES did not converge to solver_tolerance %g in %d iterations (relative '
-                                    'residual %.3e); try a larger solver_tolerance or check the configuration'
-                                    % (tolerance, result.iterations, result.residual))
+            raise SimulationStopped('GMRES of %s did not converge to solver_tolerance %g in %d iterations '
+                                    '(relative residual %.3e); try a larger solver_tolerance or check the '
+                                    'configuration' % (what, tolerance, result.iterations, result.residual))
         return result
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
-        """``factor * M^{1/2} z`` at the configuration of ``problem`` (3N,), counted for ``.info``.
+        """``factor * M^{1/2} z`` at the configuration of ``problem``: a ``stochastic_forcing.LanczosResult``.
 
-        With a preconditioner the Lanczos iteration runs on ``L^{-1} M L^{-T}``
-        and the result is multiplied by ``L`` (covariance ``M``; SPEC decision 1).
-        A Lanczos call that does not converge is counted and warned about once per call.
+        ``noise`` (3N,), ``iterations``, ``converged`` (nothing is counted here).  With a preconditioner the
+        Lanczos iteration runs on ``L^{-1} M L^{-T}`` and the result is multiplied by ``L`` (covariance
+        ``M``; SPEC decision 1).  A call that does not converge is warned about.
         tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``.
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
@@ -392,17 +365,17 @@ class System:
             L_mult = preconditioner.L_dot
         result = lanczos_square_root(matvec, z, tolerance, max_iterations=self.lanczos_max_iterations,
                                      factor=factor, L_mult=L_mult, print_residual=self.print_residual)
-        self._count_lanczos(result)
-        return result.noise
+        self.warn_if_not_converged(result, tolerance)
+        return result
 
-    def _count_lanczos(self, result):
-        self.lanczos_iterations += result.iterations
+    def warn_if_not_converged(self, result, tolerance=None):
+        """Warn (RuntimeWarning) when a Lanczos result did not converge."""
         if not result.converged:
-            self.lanczos_not_converged += 1
             import warnings
             warnings.warn('Lanczos did not converge to solver_tolerance %g in %d iterations (last relative change '
                           '%.3e); the noise is approximate (counted in .info as lanczos_not_converged_count)'
-                          % (self.tolerance, result.iterations, result.relative_change), RuntimeWarning)
+                          % (self.tolerance if tolerance is None else tolerance, result.iterations,
+                             result.relative_change), RuntimeWarning)
 
     def dense_matrices(self, configuration, inverse=True):
         """Dense algebra at ``configuration``: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
@@ -437,7 +410,7 @@ class System:
         return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
                                                      self.blob_mobility_matrix, self.eta, self.blob_radius)
 
-    # -------------------------------------------------------------- rollers
+    # -------------------------------------------------------------- rollers (multi_bodies.solver.rollers)
     def roller_product(self, kind):
         """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``."""
         if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
@@ -450,72 +423,16 @@ class System:
         return mobility.blob_product(name, kind)
 
     def roller_velocities(self, configuration, torque_guess=None):
-        """Linear velocities of single-blob rollers at ``configuration`` (SPEC 5.2): RollerVelocities.
-
-        Forces: one-blob plus blob-blob.  ``free_kinematics``: torque
-        ``8 pi eta a^3 omega_one_roller`` per blob; otherwise the torque that
-        makes every blob spin at ``omega_one_roller`` (GMRES on ``M_WT``,
-        started from ``torque_guess``, the normalised torque of the last solve).
-        Then ``v = M_UF F + M_UT T``, shape (N, 3).
-        """
-        r_vectors = self.blob_positions(configuration)
-        forces = self.blob_forces(r_vectors).reshape(-1)
-        check_finite(forces, 'blob forces')
-        a, eta, L = self.blob_radius, self.eta, self.periodic_length
-        if self.free_kinematics:
-            torques = np.tile(8.0 * np.pi * eta * a ** 3 * self.omega_one_roller, self.num_blobs)
-        else:
-            torques, torque_guess = self._prescribed_spin_torques(r_vectors, forces, torque_guess)
-        velocity = self.roller_product('trans_times_force')(r_vectors, forces, eta, a, L)
-        if np.any(torques != 0):
-            velocity = velocity + self.roller_product('trans_times_torque')(r_vectors, torques, eta, a, L)
-        return RollerVelocities(np.asarray(velocity).reshape(-1, 3), torque_guess)
+        """``rollers.roller_velocities``: RollerVelocities (velocities (N, 3), torque_guess, iterations)."""
+        return rollers.roller_velocities(self, configuration, torque_guess)
 
     def roller_noise(self, r_vectors, z, factor):
-        """``factor * M_UF^{1/2} z`` of single-blob rollers at blob positions (N, 3) (Lanczos, no preconditioner)."""
-        product = self.roller_product('trans_times_force')
-        a, eta, L = self.blob_radius, self.eta, self.periodic_length
-        result = lanczos_square_root(lambda v: np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1), z,
-                                     self.tolerance, max_iterations=self.lanczos_max_iterations, factor=factor,
-                                     print_residual=self.print_residual)
-        self._count_lanczos(result)
-        return result.noise.reshape(-1, 3)
+        """``rollers.roller_noise``: a LanczosResult with ``noise`` (N, 3)."""
+        return rollers.roller_noise(self, r_vectors, z, factor)
 
     def roller_drift(self, r_vectors, W, kT, delta):
-        """Thermal drift ``kT div M_UF`` of rollers by a random finite difference (SPEC 5.2), shape (N, 3).
-
-        ``(kT/(delta a)) [M_UF(r + delta a W/2) W - M_UF(r - delta a W/2) W]`` with W (3N,) ~ N(0, 1);
-        zero without a wall (the free-space RPY tensor is divergence free).
-        """
-        if self.domain == 'no_wall' or kT == 0:
-            return np.zeros_like(r_vectors)
-        product = self.roller_product('trans_times_force')
-        a, eta, L = self.blob_radius, self.eta, self.periodic_length
-        W = np.asarray(W, dtype=float).reshape(-1)
-        difference = rfd(lambda r: np.asarray(product(r, W, eta, a, L)).reshape(-1, 3), r_vectors, W, delta * a,
-                         displace_positions)
-        return kT * difference
-
-    def _prescribed_spin_torques(self, r_vectors, forces, torque_guess):
-        a, eta, L = self.blob_radius, self.eta, self.periodic_length
-        n3 = forces.size
-        omega = np.tile(self.omega_one_roller, self.num_blobs)
-        rhs = omega - self.roller_product('rot_times_force')(r_vectors, forces, eta, a, L)
-        norm = np.linalg.norm(rhs)
-        if norm == 0.0:
-            return np.zeros(n3), torque_guess
-        rot_times_torque = self.roller_product('rot_times_torque')
-        operator = spla.LinearOperator((n3, n3), matvec=lambda t: rot_times_torque(r_vectors, t, eta, a, L),
-                                       dtype=float)
-        x0 = torque_guess if torque_guess is not None and np.shape(torque_guess) == rhs.shape else np.zeros(n3)
-        result = body_solver.gmres_solve(operator, rhs / norm, self.tolerance, x0=x0, restart=20,
-                                         maxiter=1000, print_residual=self.print_residual)
-        self.last_iterations = result.iterations
-        self.gmres_iterations += result.iterations
-        if not result.converged:
-            raise SimulationStopped('GMRES for the roller torques did not converge to solver_tolerance %g '
-                                    '(relative residual %.3e)' % (self.tolerance, result.residual))
-        return result.x * norm, result.x
+        """``rollers.roller_drift``: ``kT div M_UF`` by a random finite difference, (N, 3)."""
+        return rollers.roller_drift(self, r_vectors, W, kT, delta)
 
 
 def paired_product(name, body_arrays, periodic_length):
@@ -626,8 +543,25 @@ def resolve_blob_blob_implementation(name, hooks, log=None):
     return name
 
 
-def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=None):
-    """A System from validated input ``Options`` (``auto`` backends resolved and logged).
+def wall_is_seen(options, vector_product_name, blobs_name, script='dynamics'):
+    """Whether the hydrodynamics of a run sees the wall (then no blob centre may be below it).
+
+    script : 'dynamics' or 'static' (body_mobility and resistance use the dense blocks only).
+    """
+    if 'rollers' in options.scheme:
+        return options.domain != 'no_wall'
+    names = [blobs_name]
+    if script == 'dynamics' or options.scheme == 'mobility':
+        names.append(vector_product_name)
+    return not all(name.endswith('_no_wall') for name in names)
+
+
+def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulated=None, print_residual=False,
+               log=None):
+    """The Model of validated input ``Options`` (``auto`` backends resolved and logged).
+
+    script : 'dynamics' or 'static' (which backends decide whether the wall is seen); articulated : the
+    ``ArticulatedSet`` of the run's joints or None.
 
     The user's ``forces_pycuda_user_defined.py`` is imported here when the
     blob-blob forces run on pycuda (a clear error without a GPU), and the
@@ -666,8 +600,9 @@ def make_system(options, bodies, body_arrays, hooks, print_residual=False, log=N
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
         forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
-    return System(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
-                  vector_product_name=product, blobs_name=blobs, blob_blob_name=forces,
-                  body_body_name=body_body,
-                  periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
-                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual)
+    return Model(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
+                 vector_product_name=product, blobs_name=blobs, blob_blob_name=forces, body_body_name=body_body,
+                 periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
+                 free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
+                 articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
+                 check_wall=wall_is_seen(options, product, blobs, script))

@@ -32,7 +32,8 @@ displaced by them.
 """
 import numpy as np
 
-from multi_bodies.solver.body_solver import BlockDiagonalPreconditioner, MobilityProblem, body_mobility_from_resistance
+from multi_bodies.solver.body_solver import (BlockDiagonalPreconditioner, MobilityProblem, SolutionParts,
+                                           body_mobility_from_resistance)
 
 
 def fixed_bodies_of(bodies):
@@ -98,6 +99,13 @@ class MixedMobilityProblem(MobilityProblem):
         projected = super().project_forces(force_torque)
         projected[self.fixed] = np.asarray(force_torque, dtype=float).reshape(-1, 6)[self.fixed]
         return projected
+
+    def solution(self, x):
+        """``[lambda; body unknowns]`` split: SolutionParts(lambda (N, 3), velocities (Nb, 6), constraint
+        force-torque (Nb, 6)) (:meth:`split_body_unknowns`)."""
+        n3 = 3 * self.num_blobs
+        velocities, constraint = self.split_body_unknowns(x[n3:])
+        return SolutionParts(x[:n3].reshape(-1, 3), velocities, constraint)
 
     def split_body_unknowns(self, body_unknowns, prescribed_motion=True):
         """(velocities (Nb, 6), constraint force-torque (Nb, 6)) from the body part of a solution (Nb, 6).

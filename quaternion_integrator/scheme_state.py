@@ -1,0 +1,187 @@
+"""The run state: a value the time loop passes from step to step, and one step's working copy of it (floor 5).
+
+``RunState`` holds what changes during a run: the configuration, the index
+of the next step, the counters (``multi_bodies.solver.counters.Counters``)
+and the scheme's history (the warm starts of the solves, the previous
+velocities of the multistep schemes, the step and configuration the
+preconditioner was built at).  It is frozen; a step returns a new one
+(``scheme.step(model, state, rng) -> state``).  Its :meth:`RunState.history`
+is what the restart records save, so a restart continues bit for bit.
+
+``StepWork`` is the working copy one step uses: it reads the model's
+physics (attribute look-ups it does not define itself go to the frozen
+model), advances a copy of the history as the step's solves return, adds
+their counts, and at the end makes the next ``RunState``.  It lives for one
+step only.
+"""
+from dataclasses import dataclass, replace
+from typing import Any, Optional
+
+import numpy as np
+
+from body.body import Configuration
+from multi_bodies.solver.counters import Counters
+
+# The history fields (saved in restart records, SPEC decision 11).
+HISTORY_FIELDS = ('first_guess', 'roller_torque_guess', 'previous_velocities')
+
+
+def _copy(array):
+    return None if array is None else np.array(array, dtype=float, copy=True)
+
+
+@dataclass(frozen=True)
+class RunState:
+    """The state of a run between two steps (a value).
+
+    configuration : body.body.Configuration
+    step : int, index of the next step (the first step of a run is ``initial_step``)
+    counters : Counters
+    first_guess : (3N + 6Nb,) or None, normalised solution of the last deterministic solve (SPEC 4.2)
+    roller_torque_guess : (3N,) or None, normalised torque of the last prescribed-spin roller solve
+    previous_velocities : (Nb, 6) / (N, 3) or None, the deterministic velocities of the last accepted step
+        (Adams-Bashforth schemes)
+    preconditioner_step : int or None, the step at which the preconditioner of the stochastic schemes
+        was built; preconditioner_configuration : the Configuration it was built at
+    preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
+    velocities : the velocities the last step used (not saved)
+    last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
+    """
+    configuration: Configuration
+    step: int = 0
+    counters: Counters = Counters()
+    first_guess: Optional[np.ndarray] = None
+    roller_torque_guess: Optional[np.ndarray] = None
+    previous_velocities: Optional[np.ndarray] = None
+    preconditioner_step: Optional[int] = None
+    preconditioner_configuration: Optional[Configuration] = None
+    preconditioner: Any = None
+    velocities: Optional[np.ndarray] = None
+    last_iterations: int = 0
+
+    def history(self):
+        """What a restart record saves of the scheme (copies): a dict of arrays, ints and None."""
+        history = {name: _copy(getattr(self, name)) for name in HISTORY_FIELDS}
+        history['invalid_configurations'] = self.counters.invalid_configurations
+        history['preconditioner_step'] = self.preconditioner_step
+        history['preconditioner_configuration'] = None if self.preconditioner_configuration is None \
+            else self.preconditioner_configuration.copy_arrays()
+        return history
+
+    def with_history(self, history):
+        """This state continued from a saved :meth:`history` (None or empty: unchanged)."""
+        if not history:
+            return self
+        saved = history.get('preconditioner_configuration')
+        step = history.get('preconditioner_step')
+        changes = {name: _copy(history.get(name)) for name in HISTORY_FIELDS}
+        changes.update(preconditioner_step=None if step is None else int(step),
+                       preconditioner_configuration=None if saved is None else Configuration(*saved),
+                       preconditioner=None,
+                       counters=replace(self.counters,
+                                        invalid_configurations=int(history.get('invalid_configurations', 0))))
+        return replace(self, **changes)
+
+
+class StepWork:
+    """One step's working copy of a RunState, over the frozen model (see module docstring).
+
+    Attributes: ``model``, ``step_index``, the history fields of RunState (advanced by the step), the
+    step's count increments.  Any other attribute is the model's (``work.mobility_problem(q)`` is
+    ``model.mobility_problem(q)``).
+    """
+
+    def __init__(self, model, state):
+        self.model = model
+        self.step_index = state.step
+        self.first_guess = state.first_guess
+        self.roller_torque_guess = state.roller_torque_guess
+        self.previous_velocities = state.previous_velocities
+        self.pending_previous = None
+        self.preconditioner_step = state.preconditioner_step
+        self.preconditioner_configuration = state.preconditioner_configuration
+        self.preconditioner = state.preconditioner
+        self.last_iterations = state.last_iterations
+        self.start_counters = state.counters
+        self.increments = {}
+
+    def __getattr__(self, name):
+        if name == 'model':  # not yet set (copying): no recursion
+            raise AttributeError(name)
+        return getattr(self.model, name)
+
+    def count(self, **increments):
+        """Add ``increments`` (Counters field name -> int) to the step's counts."""
+        for name, value in increments.items():
+            self.increments[name] = self.increments.get(name, 0) + int(value)
+
+    def total(self, name):
+        """The run's count ``name`` (a Counters field) including this step's so far."""
+        return getattr(self.start_counters, name) + self.increments.get(name, 0)
+
+    # -------------------------------------------------------------- the counted operations
+    def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic', tolerance=None,
+              what='the mobility problem'):
+        """``model.solve`` (the one solve), counted as a ``kind`` ('deterministic' or 'stochastic') solve."""
+        result = self.model.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, what=what)
+        self.record_solve(result, kind)
+        return result
+
+    def record_solve(self, result, kind='deterministic'):
+        """Count a SolveResult of ``kind`` (its GMRES iterations and the solve)."""
+        if kind == 'deterministic':
+            self.count(gmres_iterations=result.iterations, deterministic_solves=1)
+            self.last_iterations = result.iterations
+        else:
+            self.count(gmres_iterations=result.iterations, gmres_stochastic_iterations=result.iterations,
+                       stochastic_solves=1)
+
+    def deterministic_velocities(self, configuration, preconditioner=None, x0=None):
+        """``model.deterministic_velocities``, counted."""
+        result = self.model.deterministic_velocities(configuration, preconditioner=preconditioner, x0=x0)
+        self.record_solve(result)
+        return result
+
+    def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
+        """``model.lanczos_noise(...).noise`` (3N,), counted."""
+        result = self.model.lanczos_noise(problem, z, factor, preconditioner, tolerance=tolerance)
+        self.record_lanczos(result)
+        return result.noise
+
+    def record_lanczos(self, result):
+        self.count(lanczos_iterations=result.iterations, lanczos_not_converged=0 if result.converged else 1)
+
+    def roller_velocities(self, configuration):
+        """Roller velocities (N, 3) at ``configuration``, the prescribed spin warm started; counted."""
+        result = self.model.roller_velocities(configuration, self.roller_torque_guess)
+        self.roller_torque_guess = result.torque_guess
+        if not self.model.free_kinematics:
+            self.count(gmres_iterations=result.iterations)
+            self.last_iterations = result.iterations
+        return result.velocities
+
+    def roller_noise(self, r_vectors, z, factor):
+        """``model.roller_noise(...).noise`` (N, 3), counted."""
+        result = self.model.roller_noise(r_vectors, z, factor)
+        self.record_lanczos(result)
+        return result.noise
+
+    def restore_joints(self, configuration, centres, t):
+        """``articulated.restore`` at the model's ``nonlinear_tolerance``: the Configuration; its evaluations counted."""
+        restored = self.model.articulated.restore(configuration, centres, t, self.model.nonlinear_tolerance,
+                                                  verbose=self.model.print_residual)
+        self.count(nonlinear_iterations=restored.nonlinear_iterations)
+        return restored.configuration
+
+    # -------------------------------------------------------------- the next state
+    def state(self, start, configuration, step, velocities):
+        """The RunState after this work: ``start`` with the advanced history, the counts added, ``configuration``
+        and ``step``, and ``velocities`` (those the step used, or None)."""
+        return replace(start, configuration=configuration, step=int(step),
+                       counters=start.counters.plus(**self.increments),
+                       first_guess=self.first_guess, roller_torque_guess=self.roller_torque_guess,
+                       previous_velocities=self.previous_velocities,
+                       preconditioner_step=self.preconditioner_step,
+                       preconditioner_configuration=self.preconditioner_configuration,
+                       preconditioner=self.preconditioner, velocities=velocities,
+                       last_iterations=self.last_iterations)
