@@ -14,7 +14,7 @@ The library, one job a subpackage::
     files/      input files and structure files: the option table and parser,
                 .vertex/.clones/.slip readers, snapshots (.clones/.config), generators
     solver/     the mobility problem: default physics (pair laws), user hooks,
-                the System, the saddle-point problem and its one solve
+                the frozen Model, the problems (one protocol) and their one solve
     run/        a run: set-up shared by every script, run output and restart
                 records, the dynamic run, VTK and velocity-field output
     ensembles/  replicas on Dask and their statistics

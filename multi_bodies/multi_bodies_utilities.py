@@ -29,7 +29,7 @@ prescribed velocities for those bodies whatever ``velocity_file`` says.
 The set-up (input checks, ``user_defined_functions.py`` overrides in either
 style, bodies and their slip from ``set_slip_by_ID``, backends including
 ``auto``, start check) is ``run_setup.prepare``, shared with
-``multi_bodies.py``; forces and slip come from the same ``System`` methods
+``multi_bodies.py``; forces and slip come from the same ``Model`` methods
 as in the dynamics.
 
 Every run writes ``output_name.inputfile`` and ``output_name.bodies_info``;
@@ -172,7 +172,7 @@ def write_velocity_field(options, system, r_vectors, lambda_blobs):
 def run(options):
     """Solve the static problem of validated ``options``; returns the exit status."""
     # Shared with multi_bodies.py: the option checks of the table (scheme a static problem, tracer_radius >= 0,
-    # ...), hooks, bodies, arrays, backends, System, start check.
+    # ...), hooks, bodies, arrays, backends, Model, start check.
     setup = prepare(options, 'static', log=print)
     system = setup.system
     if options.scheme != 'mobility' and getattr(system, 'articulated', None) is not None:

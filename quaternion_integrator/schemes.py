@@ -91,7 +91,7 @@ class DeterministicMidpoint(DeterministicForwardEuler):
 
 
 class DeterministicForwardEulerRollers(Scheme):
-    """Single-blob rollers: ``r += v dt`` with v of ``System.roller_velocities`` (orientation fixed)."""
+    """Single-blob rollers: ``r += v dt`` with v of ``Model.roller_velocities`` (orientation fixed)."""
     name = 'deterministic_forward_euler_rollers'
     rollers = True
 

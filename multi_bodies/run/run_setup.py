@@ -1,4 +1,4 @@
-"""Set-up shared by the three programs: input checks, hooks, bodies, backends, the System, start checks.
+"""Set-up shared by the three programs: input checks, hooks, bodies, backends, the Model, start checks.
 
 ``multi_bodies.py`` (dynamics), ``multi_bodies_utilities.py`` (static
 problems) and ``many_bodyMCMC/many_body_MCMC.py`` (Monte Carlo) call
@@ -12,7 +12,7 @@ problems) and ``many_bodyMCMC/many_body_MCMC.py`` (Monte Carlo) call
    every override that cannot take effect;
 3. the bodies of the ``structure`` lines, each given its slip by the
    ``set_slip_by_ID`` hook;
-4. the bodies as arrays, and (dynamics, static problems) the System with
+4. the bodies as arrays, and (dynamics, static problems) the Model with
    the backends (``auto`` resolved to the fastest usable one, honouring
    overrides);
 5. the start check: no blob centre below the wall when the hydrodynamics
@@ -257,7 +257,7 @@ BodiesRead.__doc__ = """What :func:`read_bodies` returns: the Body list, (ID, co
 
 RunSetup = namedtuple('RunSetup', ['hooks', 'bodies', 'types', 'body_arrays', 'system'])
 RunSetup.__doc__ = """What :func:`prepare` returns: the hooks, the Body list, (ID, count) per structure type,
-the BodyArrays and the System."""
+the BodyArrays and the Model."""
 
 # prepare's script names -> the program names of input_options.OPTION_TABLE
 PROGRAM_OF_SCRIPT = {'dynamics': 'dynamic', 'static': 'static', 'mcmc': 'mcmc'}
@@ -300,7 +300,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     ----------
     options : validated input options (``input_options.read_input_file``)
     script : 'dynamics' (multi_bodies.py), 'static' (multi_bodies_utilities.py)
-        or 'mcmc' (many_body_MCMC.py: no System, no hydrodynamic start check)
+        or 'mcmc' (many_body_MCMC.py: no Model, no hydrodynamic start check)
     print_residual : bool
         Print every GMRES residual.
     log : callable(str)

@@ -433,7 +433,7 @@ def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_
     **kwargs
         The physics keywords (g, repulsion_strength_wall, ..., blob_mass).
 
-    The scripts use ``System.forces_torques``, which calls the run's hooks
+    The scripts use ``Model.forces_torques``, which calls the run's hooks
     (the user's overrides included); this function is the same sum over this
     module's attributes.
     """
