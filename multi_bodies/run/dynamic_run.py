@@ -47,7 +47,7 @@ class DynamicRun:
         if options.initial_step > 0:
             self.restart, self.restart_end = run_output.find_restart_record(options.output_name,
                                                                             options.initial_step)
-        # Shared with the static and Monte Carlo scripts: checks, hooks, bodies, arrays, backends, System, start check.
+        # Shared with the static and Monte Carlo scripts: checks, hooks, bodies, arrays, backends, Model, start check.
         setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
         self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
         arrays = setup.body_arrays
