@@ -12,7 +12,11 @@ other option values), then runs BOTH scripts on the result:
 * squirmer: a 42-blob shell with its shipped ``.slip`` file, dynamic and
   mobility problem;
 * rollers: the shipped ``inputfile_rollers.dat`` (2 steps) and the mobility
-  problem of its four single-blob bodies.
+  problem of its four single-blob bodies;
+* articulated: a chain of two one-blob bodies, its ``.list_vertex`` and its
+  ``.const`` with expressions of t (issue 27), dynamic problem;
+* driven: a free body and a body of prescribed velocity (a velocity file on
+  its structure line, issue 27), dynamic and mobility problem.
 
 The scripts run in-process, exactly as their ``__main__`` block runs them
 (``utils.fail_cleanly(main)``), because a child process costs a second of
@@ -78,8 +82,19 @@ SCENES = {
     'rollers': ('inputfile_rollers.dat', ('inputfile_rollers_mobility.dat',),
                 ('inputfile_rollers.dat', 'inputfile_rollers_mobility.dat', 'Structures/blob.vertex',
                  'Structures/four_rollers.clones')),
+    # issue 27: the files of an articulated chain (.list_vertex, .const with expressions of t) and a body of
+    # prescribed velocity (the fourth file of a structure line), written by add_chain_and_driven_scenes
+    # (the static problem of the chain scene is the rollers' one: a mobility problem with an articulated line
+    # ended in an AttributeError at commit 37754c1, in a file under refactoring; reported with issue 27)
+    'articulated': ('inputfile_chain.dat', ('inputfile_rollers_mobility.dat',),
+                    ('inputfile_chain.dat', 'Structures/chain.list_vertex', 'Structures/chain.const',
+                     'Structures/chain.clones', 'Structures/blob.vertex')),
+    'driven': ('inputfile_driven.dat', ('inputfile_driven_mobility.dat',),
+               ('inputfile_driven.dat', 'inputfile_driven_mobility.dat', 'Structures/driven.velocity',
+                'Structures/driven.clones',
+                'Structures/free.clones')),
 }
-SCENE_WEIGHTS = ['boomerang'] * 3 + ['squirmer', 'rollers']
+SCENE_WEIGHTS = ['boomerang'] * 3 + ['squirmer', 'rollers', 'articulated', 'driven']
 INPUTS = sorted({name for _, statics, files in SCENES.values() for name in files if name.startswith('inputfile')})
 DYNAMIC_INPUTS = {dynamic for dynamic, _, _ in SCENES.values()}
 MUTABLE = sorted({name for _, _, files in SCENES.values() for name in files})
@@ -197,7 +212,7 @@ def mutate_known(data, label):
     elif label == 'unknown option':
         lines.insert(len(lines) // 2, 'no_such_option 1')
     elif label == 'missing file':
-        n = next(n for n, line in enumerate(lines) if line.split()[:1] == ['structure'])
+        n = next(n for n, line in enumerate(lines) if line.split()[:1] in (['structure'], ['articulated']))
         words = lines[n].split()
         lines[n] = ' '.join([words[0], 'Structures/missing_file.vertex'] + words[2:])
     elif label == 'non-numeric eta':
@@ -262,10 +277,37 @@ def expected_outcome(kind, input_name, edits):
 
 
 # ---------------------------------------------------------------------- the earlier run
+COMMON_LINES = ('eta 1.0\nblob_radius 0.25\ng 1.0\ndt 0.01\nn_steps 2\nn_save 1\nsolver_tolerance 1e-8\n'
+                'mobility_blobs_implementation python\nmobility_vector_prod_implementation python\n'
+                'blob_blob_force_implementation python\nrepulsion_strength_wall 1.0\ndebye_length_wall 0.2\n')
+
+
+def add_chain_and_driven_scenes(folder):
+    """Inputs of the 'articulated' and 'driven' scenes (issue 27), beside the shipped ones."""
+    structures = folder / 'Structures'
+    (structures / 'chain.list_vertex').write_text('Structures/blob.vertex\nStructures/blob.vertex\n')
+    (structures / 'chain.const').write_text('2\n1\n0 1 0.5 0 0 -0.5 0 0 0.5 0 0 -0.5 0 0.1*sin(t) 0 0 0 0 0 '
+                                            '0.1*cos(t)\n')
+    (structures / 'chain.clones').write_text('2\n0 0 3 1 0 0 0\n1 0 3 1 0 0 0\n')
+    (structures / 'driven.velocity').write_text('0.2 0 0 0 0 0.1\n')
+    (structures / 'driven.clones').write_text('1\n2.5 0 2.5 1 0 0 0\n')
+    (structures / 'free.clones').write_text('1\n0 0 2.0 1 0 0 0\n')
+    chain = 'articulated Structures/chain.list_vertex Structures/chain.clones Structures/chain.const\n'
+    driven = ('structure Structures/blob.vertex Structures/free.clones\n'
+              'structure Structures/blob.vertex Structures/driven.clones None Structures/driven.velocity\n')
+    for name, scheme, lines, output in (
+            ('inputfile_chain.dat', 'articulated_deterministic_forward_euler', chain, 'data/chain'),
+            ('inputfile_driven.dat', 'deterministic_forward_euler', driven, 'data/driven'),
+            ('inputfile_driven_mobility.dat', 'mobility', driven, 'data/driven_mobility')):
+        (folder / name).write_text('scheme %s\n%soutput_name %s\n%s' % (scheme, COMMON_LINES, output, lines))
+    return folder
+
+
 @pytest.fixture(scope='module')
 def earlier_run(tmp_path_factory):
     """The unmutated scene after one run of each script (its outputs must survive failed validations)."""
     folder = add_generated_inputs(copy_scene(tmp_path_factory.mktemp('fuzz') / 'earlier'))
+    add_chain_and_driven_scenes(folder)
     edit_input(folder / 'inputfile_dynamic.dat', n_steps=2)
     edit_input(folder / 'inputfile_rollers.dat', n_steps=2, n_save=1)
     for dynamic_input, static_inputs, _ in SCENES.values():

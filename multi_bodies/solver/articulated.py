@@ -127,6 +127,9 @@ def read_list_vertex_file(path, where):
     return names
 
 
+LARGEST_LINK = 1e150  # as every number of a structure file: its square still fits in a double
+
+
 def read_const_file(path, where):
     """Read a ``.const`` file (manual section 4.3) into :data:`ConstFile`; bad content is a UserInputError."""
     if not os.path.isfile(path):
@@ -156,6 +159,9 @@ def read_const_file(path, where):
             links[c] = [float(w) for w in words[2:8]]
         except ValueError:
             raise UserInputError('%s: the first 8 fields must be two body indices and six numbers' % at)
+        if not np.all(np.abs(links[c]) <= LARGEST_LINK):  # also NaN and inf
+            raise UserInputError('%s: a joint vector component is not a finite number of magnitude at most %g; fix '
+                                 'the value' % (at, LARGEST_LINK))
         if np.any(bodies[c] < 0) or np.any(bodies[c] >= num_bodies):
             raise UserInputError('%s: body indices must be between 0 and %d' % (at, num_bodies - 1))
         expressions.append(None if len(words) == 8 else [compile_expression(w, at) for w in words[8:]])
