@@ -260,7 +260,7 @@ class AlsoSampleStructureFactors:
         self.interval = interval
         self.structure, self.correlations = self.plan.accumulators(options, interval * options.dt)
         expected = max(1, (options.n_steps - options.initial_step) // interval + 1)
-        self.block_length = max(1, expected // 10)
+        self.block_length = max(1, -(-expected // 10))  # ten blocks (the last may be shorter)
         self.samples, self.last_write = 0, time.monotonic()
 
     def save(self, step, locations, orientations, *args, **kwargs):

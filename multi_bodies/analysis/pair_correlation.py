@@ -147,6 +147,8 @@ class PairCorrelation:
 
     def __init__(self, periodic_length, r_max, n_bins=100, dimension=2):
         self.box = _check_box(periodic_length, dimension, r_max)
+        if int(n_bins) < 1:
+            raise UserInputError('g(r) needs at least one bin, got %d' % n_bins)
         self.dimension, self.r_max, self.n_bins = dimension, float(r_max), int(n_bins)
         self.edges = np.linspace(0.0, self.r_max, self.n_bins + 1)
         self.counts = BlockSums((self.n_bins,))
