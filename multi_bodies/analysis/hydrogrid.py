@@ -267,7 +267,7 @@ class AlsoSampleStructureFactors:
         """The snapshot writer's ``save`` (same arguments), then the HydroGrid sample of ``step``."""
         result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
         if step % self.interval == 0:
-            positions = np.asarray(locations, dtype=float)[None, :, :]
+            positions = np.asarray(getattr(locations, 'locations', locations), dtype=float)[None, :, :]  # (1, Nb, 3)
             frame, block = np.array([self.samples]), np.array([self.samples // self.block_length])
             self.structure.add(positions, frame, block)
             if self.correlations is not None:
