@@ -612,6 +612,20 @@ def test_a_second_run_into_a_live_output_name_is_refused(tmp_path, second):
     assert not (folder / 'data' / 'run.set_aside').exists() and not (folder / 'data' / 'run.lock').exists()
 
 
+def test_a_second_monte_carlo_chain_into_a_live_output_name_is_refused(tmp_path):
+    folder = mcmc_scene(tmp_path / 'run', n_steps=4000, n_save=40)
+    first = start(MCMC, folder)
+    assert wait_for_lock(first, folder)
+    first.send_signal(signal.SIGSTOP)
+    try:
+        status, _, err = run(MCMC, folder)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    assert first.wait(timeout=120) == 0
+    assert status == 2 and 'Traceback' not in err and 'is in use by another run (pid %d' % first.pid in err, err
+    assert not (folder / 'data' / 'run.set_aside').exists()
+
+
 def test_a_stale_run_lock_is_taken_over_and_logged(tmp_path):
     import json
     import socket
