@@ -94,6 +94,7 @@ class Scheme:
     """
     name = None
     rollers = False
+    dense = False  # dense algebra (O(N^3) per step): the dense memory check of the run applies
 
     def __init__(self, dt):
         if not dt > 0:

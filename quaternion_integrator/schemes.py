@@ -131,12 +131,12 @@ def check_fixed_bodies_supported(name, options):
     """Refuse (UserInputError) obstacles or prescribed velocities with a scheme that does not solve the mixed problem."""
     if options is None or name in SCHEMES_WITH_OBSTACLES:
         return
-    specs = list(getattr(options, 'structures', [])) + list(getattr(options, 'obstacles', []))
+    specs = list(options.structures) + list(options.obstacles)
     fixed = [spec for spec in specs if getattr(spec, 'obstacle', False)
              or getattr(spec, 'velocity_file', None) is not None]
     if not fixed or name not in _all_schemes():
         return
-    where = getattr(options, 'where', lambda option: option)
+    where = options.where
     raise UserInputError(
         "%s: scheme %s does not support obstacles or bodies of prescribed velocity (%s: %s line); use "
         "stochastic_Slip_Trapz or stochastic_Slip_Mid for a stochastic run (or a deterministic scheme: %s)"

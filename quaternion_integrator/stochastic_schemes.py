@@ -132,11 +132,8 @@ class StochasticScheme(Scheme):
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
         result = work.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
-        split = getattr(problem, 'split_body_unknowns', None)
-        if split is not None:  # bodies of prescribed kinematics are not moved by noise or RFD solves
-            velocities, _ = split(result.velocities, prescribed_motion=False)
-            result = result._replace(velocities=velocities)
-        return result
+        # bodies of prescribed kinematics are not moved by noise or RFD solves
+        return result._replace(velocities=problem.without_prescribed_motion(result.velocities))
 
     def lanczos_noise(self, work, problem, z, factor, preconditioner):
         """``factor M^{1/2} z`` at ``problem`` (Model.lanczos_noise, counted) at the scheme's ``noise_tolerance``."""

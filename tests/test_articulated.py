@@ -237,7 +237,7 @@ def test_locked_chain_far_from_the_wall_sediments_as_one_body(tmp_path, monkeypa
     assert np.max(np.abs(displacement - displacement[1])) < 1e-9 * np.linalg.norm(displacement[1])
 
 
-def joint_residuals(frames, const_path):
+def joint_residuals_from_file(frames, const_path):
     """|q_p + R_p l_p - q_q - R_q l_q| (frames, joints) of saved frames (F, Nb, 7), from the .const file's links.
 
     Computed here from the file and the quaternions (R(q) = 2 [[p p^T + s^2 - 1/2] + s [p]_x], scalar first),
@@ -270,13 +270,13 @@ def test_joints_hold_at_every_saved_step(tmp_path, monkeypatch, scheme):
     assert run_dynamics(options, log=lambda *a: None) == 0
     frames = read_frames('run.chain.config')
     assert frames.shape[:2] == (13, 4)
-    residuals = joint_residuals(frames, tmp_path / 'chain.const')
+    residuals = joint_residuals_from_file(frames, tmp_path / 'chain.const')
     assert residuals.shape == (13, 3) and np.max(residuals) < 1e-9, np.max(residuals)
     assert np.max(frames[-1, :, 2] - frames[0, :, 2]) < -1e-3  # they fall ...
     assert np.max(np.abs(frames[-1, :, 4:] - frames[0, :, 4:])) > 1e-4  # ... and turn (the chain bends)
     moved = (tmp_path / 'chain.const').read_text().replace('1.25 0 0  -1.25 0 0', '1.251 0 0  -1.25 0 0', 1)
     (tmp_path / 'moved.const').write_text(moved)
-    assert abs(np.max(joint_residuals(frames[:1], tmp_path / 'moved.const')) - 1e-3) < 1e-9
+    assert abs(np.max(joint_residuals_from_file(frames[:1], tmp_path / 'moved.const')) - 1e-3) < 1e-9
 
 
 def test_chain_of_single_blobs_with_the_multiblob_schemes_is_the_pinv_answer(tmp_path, monkeypatch):

@@ -47,9 +47,11 @@ def test_a_step_returns_a_new_state_and_keeps_the_old_one(example_model):
     scheme = make_scheme('deterministic_adams_bashforth', options.dt, options)
     start = scheme.init(model, model.start_configuration)
     locations = start.configuration.locations.copy()
+    bodies_before = np.array([b.location for b in model.bodies])
     first = scheme.step(model, start, None)
     second = scheme.step(model, first, None)
     np.testing.assert_array_equal(start.configuration.locations, locations)
+    np.testing.assert_array_equal([b.location for b in model.bodies], bodies_before)  # the model's bodies: unmoved
     assert start.step == 0 and first.step == 1 and second.step == 2
     assert start.counters.gmres_iterations == 0 < first.counters.gmres_iterations < second.counters.gmres_iterations
     assert start.previous_velocities is None and first.previous_velocities is not None
@@ -102,3 +104,35 @@ def test_the_checker_sees_a_planted_gmres_call(tmp_path):
     planted = tmp_path / 'planted.py'
     planted.write_text('def my_solve(a, b):\n    return body_solver.gmres_solve(a, b, 1e-8)\n')
     assert ('my_solve', 'gmres_solve') in calls_in(planted)
+
+
+HOOK_WRITES_A_BODY = '''
+import numpy as np
+
+
+def bodies_external_force_torque(bodies, r_vectors, *args, **kwargs):
+    bodies[0].location[2] += 1.0  # a force hook that moves a body: the run would ignore it
+    return np.zeros((2 * len(bodies), 3))
+'''
+
+POSTPROCESS_LIFTS_THE_BODY = '''
+def postprocess(bodies, *args, **kwargs):
+    for b in bodies:
+        b.location[2] += 0.5
+'''
+
+
+def test_hooks_see_read_only_bodies_and_postprocess_moves_copies(tmp_path, monkeypatch, capsys):
+    """A published-style force hook that writes to a body is stopped with a message naming the hook (it got a
+    read-only view at the configuration evaluated); ``postprocess`` gets writable copies, and what it does to
+    them is the next configuration: each of 3 steps lifts the boomerang by 0.5 on top of its motion."""
+    from test_dynamics import boomerang_scene, read_trajectory, run_script
+    boomerang_scene(tmp_path, n_steps=3, extra={'g': 0.0, 'repulsion_strength_wall': 0.0})
+    (tmp_path / 'user_defined_functions.py').write_text(HOOK_WRITES_A_BODY)
+    assert run_script(tmp_path, 'input.dat', monkeypatch) == 1
+    error = capsys.readouterr().err
+    assert 'bodies_external_force_torque' in error and 'read-only' in error, error
+    (tmp_path / 'user_defined_functions.py').write_text(POSTPROCESS_LIFTS_THE_BODY)
+    assert run_script(tmp_path, 'input.dat', monkeypatch) == 0
+    heights = read_trajectory(tmp_path, 'run', 'boomerang')[:, 0, 2]
+    np.testing.assert_allclose(np.diff(heights), 0.5, rtol=0, atol=1e-12)  # force-free: only the lift moves it

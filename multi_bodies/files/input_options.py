@@ -558,7 +558,7 @@ def check_value(name, value, where=None, program=None):
 
 def check_articulated(options):
     """Articulated bodies need an articulated scheme, and an articulated scheme needs articulated bodies."""
-    lines = getattr(options, 'articulated', [])
+    lines = options.articulated
     if lines and options.scheme not in ARTICULATED_SCHEMES + STATIC_SCHEMES:
         raise UserInputError("%s: scheme '%s' cannot move articulated bodies (the 'articulated' line %s); use %s"
                              % (options.where('scheme'), options.scheme, lines[0].where,

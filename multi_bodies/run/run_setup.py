@@ -66,7 +66,7 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
     ``prescribed_velocity``: None for a free body, (6,) lab-frame ``[v, w]`` for a body of
     prescribed kinematics (zeros for an obstacle, the row of the ``structure`` line's velocity file).
     """
-    if not options.structures and not getattr(options, 'articulated', None):
+    if not options.structures and not options.articulated:
         raise utils.UserInputError("%s: no 'structure' line; add 'structure <file.vertex> <file.clones>'"
                                    % options.input_file)
     bodies, types = [], []
@@ -113,11 +113,11 @@ def saved_or_input_configuration(options, spec, restart_record=None):
     the step's ``.clones`` file (quaternions renormalised by the readers).
     """
     clones = spec.clones_file
-    restart_step = getattr(options, 'initial_step', 0)
+    restart_step = options.initial_step
     stop_files = (restart_record or {}).get('stop_files') or {}
     if restart_step > 0 and spec.ID in stop_files:  # a step saved when a signal stopped the run
         clones = run_output.stop_snapshot_path(options.output_name, restart_record, spec.ID)
-    elif restart_step > 0 and getattr(options, 'save_clones', 'one_file_per_step') == 'one_file':
+    elif restart_step > 0 and options.save_clones == 'one_file':
         clones = config_name(options.output_name, spec.ID)
         offsets = (restart_record or {}).get('config_offsets') or {}
         if spec.ID not in offsets or not os.path.isfile(clones):
@@ -138,7 +138,7 @@ def saved_or_input_configuration(options, spec, restart_record=None):
 
 def all_structure_specs(options):
     """The StructureSpec of every ``structure`` line, then of every ``obstacle`` line (the body order)."""
-    return list(options.structures) + list(getattr(options, 'obstacles', []))
+    return list(options.structures) + list(options.obstacles)
 
 
 def prescribed_velocities(spec, num_bodies):
@@ -162,7 +162,7 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
     With ``initial_step > 0`` the bodies start from the saved step (as :func:`read_bodies`).
     """
     from multi_bodies.solver import articulated as art
-    specs = getattr(options, 'articulated', None) or []
+    specs = options.articulated
     if not specs:
         return None
     articulated = art.ArticulatedSet()
@@ -220,7 +220,7 @@ def array_runs(bodies):
 def write_articulated_copies(options):
     """Copies of the ``.list_vertex`` and ``.const`` files of every articulated line (``output_name.<file name>``)."""
     import shutil
-    for spec in getattr(options, 'articulated', None) or []:
+    for spec in options.articulated:
         for path in (spec.list_vertex_file, spec.const_file):
             shutil.copyfile(path, '%s.%s' % (options.output_name, os.path.basename(path)))
 
@@ -284,7 +284,7 @@ def check_start(options, model, types):
         first = int(invalid[0])
         start = 0
         for (structure_id, count), spec in zip(types, all_structure_specs(options) +
-                                               list(getattr(options, 'articulated', None) or [])):
+                                               list(options.articulated)):
             if first < start + count:
                 raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
                                            '%d bodies are affected. Move the bodies up in the clones file.'
@@ -322,7 +322,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
     run_output.check_periodic_length(options)
-    if script == 'mcmc' and getattr(options, 'articulated', None):
+    if script == 'mcmc' and options.articulated:
         raise utils.UserInputError("%s: the Monte Carlo sampler has no joints; remove the 'articulated' line or run "
                                    "it with multi_bodies.py and an articulated scheme" % options.articulated[0].where)
     directory = os.getcwd() if directory is None else directory

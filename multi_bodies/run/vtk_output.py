@@ -397,7 +397,7 @@ def load_run(options):
     bodies, types, _ = read_bodies(options, hooks.set_slip_by_ID)
     # articulated lines mix vertex files: the array types are the runs of bodies sharing one reference
     from multi_bodies.run.run_setup import array_runs
-    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if getattr(options, 'articulated', None)
+    body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if options.articulated
                                    else [count for _, count in types])
     slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in bodies]
     body_arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)

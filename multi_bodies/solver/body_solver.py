@@ -211,6 +211,10 @@ class MobilityProblem:
         n3 = 3 * self.num_blobs
         return SolutionParts(x[:n3].reshape(-1, 3), x[n3:].reshape(-1, 6), None)
 
+    def without_prescribed_motion(self, velocities):
+        """Body velocities (Nb, 6) of a solve with the prescribed motion taken out (no body is prescribed here)."""
+        return velocities
+
     def M_dot(self, blob_forces):
         """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
         return np.asarray(self.mobility_product(self.r_vectors, np.asarray(blob_forces, dtype=float).reshape(-1),

@@ -27,6 +27,8 @@ to a model after its construction; :meth:`Model.replace` builds a variant
 Units: the user's; lengths as the input file, velocities length/time,
 forces force units, ``eta`` viscosity.
 """
+import copy
+
 import numpy as np
 
 import mobility
@@ -110,6 +112,8 @@ class Model:
     mobility_product, paired_mobility_product : callables or None
         Replace the chosen backend's ``M f`` (and paired) product (benchmarks count products this way);
         None is the backend's.
+    pycuda_blob_blob_forces : callable or None
+        The user's ``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py`` (None: the hooks').
 
     Every attribute is set here; assigning one afterwards raises ``AttributeError`` (a model is a value:
     build another with :meth:`replace`).
@@ -119,7 +123,8 @@ class Model:
                  vector_product_name='python', blobs_name='python', blob_blob_name='None', body_body_name='None',
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
-                 check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None):
+                 check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
+                 pycuda_blob_blob_forces=None):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -153,7 +158,9 @@ class Model:
         set_(self, 'body_body_name', body_body_name)
         radii_given = bool(body_arrays.radii_given)
         set_(self, 'blob_blob_forces', mbf.blob_blob_force_calculator(
-            blob_blob_name, pair_force=hooks.blob_blob_force, pycuda_forces=hooks.calc_blob_blob_forces_pycuda,
+            blob_blob_name, pair_force=hooks.blob_blob_force,
+            pycuda_forces=hooks.calc_blob_blob_forces_pycuda if pycuda_blob_blob_forces is None
+            else pycuda_blob_blob_forces,
             python_forces=hooks.blob_blob_forces_python, radii_given=radii_given))
         # Per-blob radii reach the default blob-blob laws (contact a_i + a_j); a user's law gets blob_radius.
         blob_blob_physics = self.physics
@@ -163,8 +170,6 @@ class Model:
         set_(self, 'body_body_forces', mbf.body_body_force_calculator(
             body_body_name, pair_force_torque=hooks.body_body_force_torque,
             python_forces_torques=hooks.body_body_forces_python))
-        set_(self, 'uses_bodies', any(not hooks.is_default(name) for name in
-                                      ('bodies_external_force_torque', 'preprocess', 'postprocess')))
         # Bodies whose slip is a user function (set by set_slip_by_ID); the others use the vectorised slip.
         slip_function_bodies = [k for k, b in enumerate(bodies)
                                 if b.function_slip is not reference_slip_in_lab_frame]
@@ -217,23 +222,36 @@ class Model:
         """Lab-frame blob positions at ``configuration``, shape (N, 3)."""
         return self.arrays.blob_positions(configuration)
 
-    def synced_bodies(self, configuration):
-        """The Body objects placed at ``configuration`` (for the user hooks that take bodies)."""
-        for body, location, orientation in zip(self.bodies, configuration.locations, configuration.orientations):
-            body.location = location.copy()
+    def bodies_at(self, configuration, writable=False):
+        """The bodies as the published API's ``Body`` objects placed at ``configuration`` (for the user hooks).
+
+        Fresh copies of the run's bodies (the model's are never moved): their ``location`` (3,) and
+        ``orientation`` (a Quaternion) are those of ``configuration``, read-only unless ``writable`` (a hook
+        that writes to them gets a clear error instead of a change the run would ignore).  Only
+        ``postprocess``, which may move the bodies, gets writable copies.
+        """
+        views = []
+        for template, location, orientation in zip(self.bodies, configuration.locations, configuration.orientations):
+            body = copy.copy(template)
+            body.location = np.array(location, dtype=float)
             body.orientation = Quaternion(orientation)
-        return self.bodies
+            if not writable:
+                body.location.flags.writeable = False
+                body.orientation.entries.flags.writeable = False
+            views.append(body)
+        return views
 
     def preprocess(self, configuration):
-        """The user's ``preprocess(bodies)`` at ``configuration`` (nothing with the default)."""
+        """The user's ``preprocess(bodies)`` at ``configuration``, on read-only views (nothing with the default)."""
         if not self.hooks.is_default('preprocess'):
-            self.hooks.preprocess(self.synced_bodies(configuration))
+            self.hooks.preprocess(self.bodies_at(configuration))
 
     def postprocess(self, configuration):
-        """The configuration after the user's ``postprocess(bodies)`` (``configuration`` itself with the default)."""
+        """The configuration after the user's ``postprocess(bodies)`` on writable copies of the bodies at
+        ``configuration`` (``configuration`` itself with the default)."""
         if self.hooks.is_default('postprocess'):
             return configuration
-        bodies = self.synced_bodies(configuration)
+        bodies = self.bodies_at(configuration, writable=True)
         self.hooks.postprocess(bodies)
         return Configuration(np.array([b.location for b in bodies]), np.array([b.orientation.entries for b in bodies]))
 
@@ -258,14 +276,17 @@ class Model:
         """
         r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
         force_torque = self.arrays.KT_dot(configuration, self.blob_forces(r_vectors), r_vectors)
-        if not self.hooks.is_default('bodies_external_force_torque'):
-            extra = self.hooks.bodies_external_force_torque(self.synced_bodies(configuration), r_vectors,
-                                                            **self.physics)
-            force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         bodies_law = self.hooks.body_body_of_bodies
-        if bodies_law is not None and self.body_body_name == 'python':  # published style: takes the bodies
-            extra = bodies_law(self.synced_bodies(configuration), r_vectors,
-                               omega_one_roller=self.omega_one_roller, **self.physics)
+        if bodies_law is not None and self.body_body_name != 'python':
+            bodies_law = None
+        views = None
+        if not self.hooks.is_default('bodies_external_force_torque') or bodies_law is not None:
+            views = self.bodies_at(configuration)
+        if not self.hooks.is_default('bodies_external_force_torque'):
+            extra = self.hooks.bodies_external_force_torque(views, r_vectors, **self.physics)
+            force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
+        if bodies_law is not None:  # published style: takes the bodies
+            extra = bodies_law(views, r_vectors, omega_one_roller=self.omega_one_roller, **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         elif self.body_body_forces is not None:
             force_torque = force_torque + np.asarray(self.body_body_forces(
@@ -283,7 +304,7 @@ class Model:
         slip = self.arrays.lab_frame_slip(configuration)
         if not self.slip_functions:
             return slip
-        bodies = self.synced_bodies(configuration)
+        bodies = self.bodies_at(configuration)
         offsets = self.arrays.blob_offsets
         for k in self.slip_function_bodies:
             body = bodies[k]
@@ -588,21 +609,20 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
             return build()
         except UserInputError as err:
             raise UserInputError('%s: %s: %s' % (options.where(option_name), option_name, err))
-    if forces == 'pycuda' and getattr(hooks, 'pycuda_file', None) is not None \
-            and hooks.calc_blob_blob_forces_pycuda is None:
-        hooks.calc_blob_blob_forces_pycuda = checked('blob_blob_force_implementation',
-                                                     lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
-        hooks.overridden.append('calc_blob_blob_forces_pycuda')
+    pycuda_forces = hooks.calc_blob_blob_forces_pycuda
+    if forces == 'pycuda' and hooks.pycuda_file is not None and pycuda_forces is None:
+        pycuda_forces = checked('blob_blob_force_implementation',
+                                lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
         if log is not None:
             log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)
     checked('mobility_vector_prod_implementation', lambda: mobility.mobility_vector_product(product))
     checked('mobility_blobs_implementation', lambda: mobility.blob_mobility_matrix(blobs))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
-        forces, pycuda_forces=hooks.calc_blob_blob_forces_pycuda, radii_given=body_arrays.radii_given))
+        forces, pycuda_forces=pycuda_forces, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
     return Model(bodies, body_arrays, hooks, physics, options.eta, options.blob_radius, options.solver_tolerance,
                  vector_product_name=product, blobs_name=blobs, blob_blob_name=forces, body_body_name=body_body,
                  periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
                  articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
-                 check_wall=wall_is_seen(options, product, blobs, script))
+                 check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces)

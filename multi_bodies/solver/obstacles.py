@@ -107,6 +107,11 @@ class MixedMobilityProblem(MobilityProblem):
         velocities, constraint = self.split_body_unknowns(x[n3:])
         return SolutionParts(x[:n3].reshape(-1, 3), velocities, constraint)
 
+    def without_prescribed_motion(self, velocities):
+        """Body velocities (Nb, 6) of a solve with the prescribed bodies' rows zero (noise and RFD solves do not
+        move them)."""
+        return np.where(self.free[:, None], np.asarray(velocities, dtype=float).reshape(-1, 6), 0.0)
+
     def split_body_unknowns(self, body_unknowns, prescribed_motion=True):
         """(velocities (Nb, 6), constraint force-torque (Nb, 6)) from the body part of a solution (Nb, 6).
 
