@@ -32,6 +32,11 @@ every unmutated input.  Asserted for every run:
   message names the input file, the line and the option or file), and an added
   comment or changed whitespace runs (status 0).
 
+A second fuzzer (issue 27) forges restart records: one field of the record of
+a dynamic (``one_file_per_step`` and ``one_file``), articulated or Monte Carlo
+run replaced by a value of another type, sign or size, the checksum
+recomputed; the restart must end in one ``error:`` line (exit 2) or run.
+
 Findings in files owned elsewhere are listed in ``KNOWN_FOREIGN`` (each
 reproduced by a strict xfail test at the end); any other finding fails.
 CI runs ``RMB_FUZZ_EXAMPLES`` cases (default 300) with a fixed seed
@@ -474,3 +479,106 @@ def test_known_static_output_folder_is_a_file(earlier_run, tmp_path):
     shutil.copytree(earlier_run, folder)
     edit_input(folder / 'inputfile.dat', output_name='Structures/force.dat/run')
     check_run('static', folder, 'inputfile.dat')
+
+
+# ---------------------------------------------------------------------- forged restart records (issue 27)
+# A record rewritten with its checksum recomputed: any field replaced by a value of another type, sign or size.
+# The restart must end in one line (exit 2) or run (exit 0); never a traceback, never a memory or time bomb.
+FORGED_VALUES = [-1, 0, 7, 2 ** 40, 2 ** 70, -2 ** 63, 1.5, float('nan'), float('inf'), 'x', '', '../../x', None,
+                 True, [], {}, [1, 2], {'a': 1}, [[[[[[[[1]]]]]]]], 'e' * 64]
+
+
+def _record_paths(value, path=()):
+    """Every (path of keys) inside a decoded record, containers and leaves."""
+    import numpy as np
+    found = [path] if path else []
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found += _record_paths(item, path + (key,))
+    elif isinstance(value, list):  # a tuple is replaced whole (its items cannot be assigned)
+        for index, item in enumerate(value):
+            found += _record_paths(item, path + (index,))
+    return found
+
+
+def _forged_value(draw_index, old):
+    import numpy as np
+    extra = [np.zeros((2, 3)), np.full(5, np.nan), np.zeros(0), np.arange(3)]
+    values = FORGED_VALUES + extra + ([old[:1], old * 2] if isinstance(old, np.ndarray) else [])
+    return values[draw_index % len(values)]
+
+
+def _run_scene(kind, folder):
+    """(status, out, err) of the scene's script run in-process on ``folder/input.dat``."""
+    if kind != 'mcmc':
+        return run_in_process('dynamic', folder, 'input.dat')
+    import contextlib
+    import importlib
+    import io
+    import utils
+    main = importlib.import_module('many_bodyMCMC.many_body_MCMC').main
+    out, err, previous = io.StringIO(), io.StringIO(), os.getcwd()
+    os.chdir(str(folder))
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                status = utils.fail_cleanly(main, ['input.dat'])
+            except SystemExit as stop:
+                status = stop.code
+    finally:
+        os.chdir(previous)
+    return (0 if status is None else status), out.getvalue(), err.getvalue()
+
+
+RECORD_SCENES = ('driven', 'one_file', 'articulated', 'mcmc')
+
+
+@pytest.fixture(scope='module')
+def recorded_runs(tmp_path_factory):
+    """{scene: (folder, restart step)}: finished runs whose record of the restart step the fuzzer forges."""
+    from test_crash_safety import mcmc_scene
+    from test_data_safety import articulated_scene, driven_scene
+    root = tmp_path_factory.mktemp('records')
+    scenes = {'driven': (driven_scene(root / 'driven', n_steps=6), 3),
+              'one_file': (driven_scene(root / 'one_file', n_steps=6, save_clones='one_file'), 3),
+              'articulated': (articulated_scene(root / 'articulated', n_steps=6), 3),
+              'mcmc': (mcmc_scene(root / 'mcmc', n_steps=80, n_save=40), 40)}
+    for kind, (folder, _) in scenes.items():
+        assert _run_scene(kind, folder)[0] == 0, kind
+    return scenes
+
+
+@settings(max_examples=max(20, EXAMPLES // 3), derandomize=not RANDOM, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(scene=st.sampled_from(RECORD_SCENES), where=st.integers(0, 10 ** 6), what=st.integers(0, 10 ** 6))
+def test_forged_restart_records_never_make_a_traceback(recorded_runs, tmp_path_factory, scene, where, what):
+    """Issue 27: any field of a restart record (dynamic, save_clones one_file, articulated, Monte Carlo) replaced
+    with a value of another type, sign or size, the checksum recomputed: one-line refusal or a run, never a
+    traceback.  (A value of the right kind cannot be told from the original: the checksum guards damage only.)"""
+    from test_data_safety import forge_record, set_options_text
+    from multi_bodies.run.restart_records import restart_record
+    base, step = recorded_runs[scene]
+    folder = tmp_path_factory.mktemp('forged')
+    shutil.rmtree(folder)
+    shutil.copytree(base, folder)
+    record = restart_record(str(folder / 'data' / 'run'), step)
+    paths = _record_paths(record)
+    path = paths[where % len(paths)]
+
+    def change(record):
+        target = record
+        for key in path[:-1]:
+            target = target[key]
+        target[path[-1]] = _forged_value(what, target[path[-1]])
+    try:
+        forge_record(str(folder / 'data' / 'run'), step, change)
+        (folder / 'input.dat').write_text(set_options_text(folder, initial_step=step))
+        try:
+            status, out, err = _run_scene(scene, folder)
+        except Exception as error:
+            raise Finding(traceback_signature(scene, error), 'record field %r forged: %s' % (path, error))
+        assert status in (0, 2) and 'Traceback' not in out + err, (path, status, err[-2000:])
+        if status == 2:
+            assert len([line for line in err.splitlines() if line.startswith('error:')]) == 1, err
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -10,6 +10,7 @@ shape); :func:`run_problem` checks it against the run it is to continue
 (the structures, the number of bodies).  Each returns None or one line
 naming the field, which the caller turns into a refusal naming the record.
 """
+import math
 import numbers
 
 import numpy as np
@@ -29,6 +30,16 @@ def _require(condition, text):
 
 def _is_int(value, low=0):
     return isinstance(value, numbers.Integral) and not isinstance(value, bool) and int(value) >= low
+
+
+def _finite(value):
+    """True for a real number (not a bool) that is finite as a double."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def _is_name(value):
@@ -72,7 +83,7 @@ def _check_data(value, where, depth=0):
     if value is None or isinstance(value, (bool, str)):
         return
     if isinstance(value, numbers.Number):
-        _require(isinstance(value, numbers.Integral) or np.isfinite(value), '%s is %r' % (where, value))
+        _require(isinstance(value, numbers.Integral) or _finite(value), '%s is %r' % (where, value))
         return
     if isinstance(value, (np.ndarray, np.generic)):
         _check_array(np.asarray(value), where)
@@ -96,8 +107,8 @@ def _check_generator(state):
              'state.rng names the bit generator %s, not one of numpy' % _short(name))
     _require(isinstance(state.get('state'), dict), 'state.rng of %s holds no state table' % name)
     if 'has_gauss' in state:
-        _require(state['has_gauss'] in (0, 1) and isinstance(state.get('gauss'), numbers.Real)
-                 and np.isfinite(state['gauss']), 'state.rng has a cached Gaussian that is not a finite number')
+        _require(state['has_gauss'] in (0, 1) and _finite(state.get('gauss')),
+                 'state.rng has a cached Gaussian that is not a finite number')
     if name == 'MT19937':
         key = state['state'].get('key')
         _require(isinstance(key, np.ndarray) and key.shape == (624,) and key.dtype.kind in 'ui'
@@ -117,6 +128,8 @@ def _check_state(state):
     counters = state.get('counters')
     _require(counters is None or (isinstance(counters, dict) and all(_is_int(v) for v in counters.values())),
              'state.counters is not a table of non-negative integers')
+    _require((state.get('locations') is None) == (state.get('orientations') is None),
+             'state holds locations without orientations, or orientations without locations')
     for key, columns in (('locations', 3), ('orientations', 4)):
         if state.get(key) is not None:
             _check_array(state[key], 'state.' + key, columns)
@@ -161,7 +174,56 @@ def run_problem(record, types):
         value = state.get(key)
         if value is not None and value.shape[0] != bodies:
             return 'state.%s holds %d bodies, this run has %d' % (key, value.shape[0], bodies)
+    try:
+        _check_history(state.get('scheme'), bodies)
+        _check_sampler(state, bodies)
+    except _Bad as bad:
+        return str(bad)
     return None
+
+
+def _check_sampler(state, bodies):
+    """The Monte Carlo chain's state (``MetropolisSampler.get_state``), when present, with its generator."""
+    sampler = state.get('sampler')
+    if sampler is None:
+        return
+    _require(isinstance(sampler, dict), 'state.sampler is a %s, not a table' % type(sampler).__name__)
+    _require(state.get('rng') is not None, 'state.sampler without state.rng')
+    for key, columns in (('locations', 3), ('orientations', 4)):
+        _require(key in sampler, 'state.sampler has no %s' % key)
+        _check_array(sampler[key], 'state.sampler.' + key, columns)
+        _require(sampler[key].shape[0] == bodies, 'state.sampler.%s holds %d bodies, this run has %d'
+                 % (key, sampler[key].shape[0], bodies))
+    for key in ('max_translation', 'max_angle_shift'):
+        value = sampler.get(key)
+        _require(_finite(value) and value > 0,
+                 'state.sampler.%s is %s, not a positive number' % (key, _short(value)))
+    counters = sampler.get('counters')
+    _require(isinstance(counters, (list, tuple)) and len(counters) == 7 and all(_is_int(c) for c in counters),
+             'state.sampler.counters is %s, not seven integers >= 0' % _short(counters))
+
+
+def _check_history(history, bodies):
+    """The scheme history fields this package writes (``RunState.history``), when present: counts are integers
+    >= 0, the preconditioner's configuration (locations, orientations) of this run's bodies, the warm starts and
+    previous velocities flat or per body float arrays (a warm start of another size is ignored by the solve)."""
+    if history is None:
+        return
+    _require(isinstance(history, dict), 'state.scheme is a %s, not a table' % type(history).__name__)
+    for key, optional in (('invalid_configurations', False), ('preconditioner_step', True)):
+        _require(key not in history or (optional and history[key] is None) or _is_int(history[key]),
+                 'state.scheme.%s is %s, not an integer >= 0' % (key, _short(history.get(key))))
+    saved = history.get('preconditioner_configuration')
+    _require(saved is None or (isinstance(saved, (list, tuple)) and len(saved) == 2
+                               and all(isinstance(a, np.ndarray) and a.dtype.kind == 'f' for a in saved)
+                               and saved[0].shape == (bodies, 3) and saved[1].shape == (bodies, 4)),
+             'state.scheme.preconditioner_configuration is not the locations (%d, 3) and orientations (%d, 4) of '
+             'this run' % (bodies, bodies))
+    for key in ('first_guess', 'roller_torque_guess', 'previous_velocities'):
+        value = history.get(key)
+        _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim <= 2
+                                   and (value.ndim < 2 or value.shape[0] == bodies)),
+                 'state.scheme.%s is not a float array of this run (%s)' % (key, _short(value)))
 
 
 def _kind(state_or_rng):
