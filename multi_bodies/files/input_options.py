@@ -194,7 +194,11 @@ OPTION_TABLE = {
     'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM),
     'omega_one_roller': _option('floats3', (0.0, 0.0, 0.0), ('rollers',)),
     'free_kinematics': _option('bool', True, ('rollers',)),
-    'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall'))),
+    'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall', 'in_plane'))),
+    # gravity tilt (radians) of the published reader: passed to the hooks as the keyword tilt_angle
+    'tilt_angle': _option('float', 0.0, SDM),
+    # radius of a multiblob roller that the published Multi_Blob_Two_Rollers program hard-codes (1.0): a hook keyword
+    'particle_radius': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the radius of one particle')),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),
@@ -228,7 +232,7 @@ OPTION_TABLE = {
 UNSUPPORTED_FEATURES = {
     "HydroGrid's snapshots of the concentration cells": ('save_HydroGrid_cells',),
     'lubrication corrections (the Lubrication solver)': ('repulsion_strength_firm', 'firm_delta', 'Lub_Cut',
-                                                         'domType', 'tilt_angle', 'stiffness_wall', 'mu',
+                                                         'domType', 'stiffness_wall', 'mu',
                                                          'vacf', 'zmin', 'zmax'),
     'a solver of a later published version': ('hydro_interactions', 'slip_length', 'plot_velocity_field_shell',
                                               'hydrodynamic_radius'),
@@ -306,6 +310,21 @@ class Options:
     def as_dict(self):
         """Option values by name (structures excluded)."""
         return {name: getattr(self, name) for name in OPTION_TABLE}
+
+    def replace(self, **values):
+        """A copy of these options with ``values`` (name -> typed value) set, each checked against the table
+        (the parsed options themselves are never changed after reading)."""
+        import copy
+        unknown = [name for name in values if name not in OPTION_TABLE]
+        if unknown:
+            raise KeyError('not an option of the table: %s' % ', '.join(unknown))
+        for name, value in values.items():
+            if value is not None:
+                check_value(name, value, self.where(name))
+        twin = copy.copy(self)
+        for name, value in values.items():
+            setattr(twin, name, value)
+        return twin
 
 
 def options_with(**values):
