@@ -20,7 +20,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ('body', 'mobility', 'multi_bodies', 'quaternion_integrator', 'stochastic_forcing', 'many_bodyMCMC',
-            'boomerang', 'sphere')
+            'boomerang', 'sphere', 'lubrication')
 
 # The scripts (floor 9) and the published override module (floor 8, re-exports the physics for user files).
 SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', 'multi_bodies.advise',
@@ -43,7 +43,7 @@ def floor(module):
         return 8
     rules = [('utils', 1), ('body.geometry', 1), ('mobility', 1),
              ('body', 2), ('stochastic_forcing', 2),
-             ('multi_bodies.files', 3), ('multi_bodies.solver', 4),
+             ('multi_bodies.files', 3), ('multi_bodies.solver', 4), ('lubrication', 4),
              ('quaternion_integrator', 5), ('sphere', 5),
              ('multi_bodies.run', 6), ('multi_bodies.analysis', 6), ('many_bodyMCMC', 6), ('boomerang', 6),
              ('multi_bodies.advice', 7), ('multi_bodies.ensembles', 7), ('multi_bodies', 7)]

@@ -1,0 +1,169 @@
+"""The sparse near-field correction Delta_R = R_sup - R_MB of N spheres of one radius (6N x 6N, CSR).
+
+``R_x = sum over pairs closer than cutoff a of R_x^pair(r_ij) + sum over spheres of R_x^wall(h_i)`` with
+``x`` = sup (resolved two-sphere and sphere-wall resistances) or MB (the same systems modelled by single
+RPY / RPB blobs, the far-field model itself, so the correction does not count it twice); blocks from
+:mod:`lubrication.resistance`.  Vector layout ``[F1 T1 F2 T2 ...]`` (force units) against
+``[U1 W1 U2 W2 ...]`` (velocity, angular velocity).
+
+Pairs are found by a k-d tree (scipy ``cKDTree``; periodic axes by its toroidal box) within ``cutoff * a``;
+the pair vector is the minimum image of ``r_j - r_i`` (``body.geometry.minimum_image``) divided by ``a`` in
+EVERY direction.  (The published ``ResistCOO`` divides by ``a`` only along periodic axes, so with
+``a != 1`` its pair lubrication is wrong: at ``a = 0.5`` every neighbour counts as touching.)  A pair is
+kept when ``r_ij / a < cutoff`` (strict, as published).  With a wall every sphere gets its wall term (the
+published ``cutoff_wall = 1e10`` puts it on everywhere); in free space there is none.
+
+Entries are kept as computed (the published code drops entries below 1e-12 in absolute value, whatever
+the units; here only exact zeros are left out), so the matrices are exactly symmetric.
+"""
+from collections import namedtuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from body.geometry import minimum_image
+from utils import UserInputError
+
+from . import resistance
+
+DEFAULT_CUTOFF = 4.5  # centre distance in units of a (the published Lub_Cut default)
+
+NeighbourPairs = namedtuple('NeighbourPairs', ['pairs', 'r_over_a', 'r_hat'])
+NeighbourPairs.__doc__ = """Pairs of spheres closer than the cutoff.
+
+pairs : (P, 2) int, indices (i, j) with i < j.
+r_over_a : (P,) centre distance over the radius.
+r_hat : (P, 3) unit vectors from sphere i to sphere j (minimum image)."""
+
+LubricationMatrices = namedtuple('LubricationMatrices', ['R_sup', 'R_MB', 'Delta_R', 'neighbours', 'isolated'])
+LubricationMatrices.__doc__ = """The near-field matrices of N spheres at one configuration.
+
+R_sup, R_MB, Delta_R : scipy.sparse.csr_matrix (6N, 6N), force units per velocity (Delta_R = R_sup - R_MB).
+neighbours : :data:`NeighbourPairs` (the pairs within the cutoff).
+isolated : (N,) bool, spheres with no neighbour within the cutoff and (with a wall) higher than
+    ``cutoff * a``: the preconditioner leaves them alone (as published)."""
+
+
+def check_geometry(locations, a, eta, cutoff, periodic_length):
+    """Validated (locations (N, 3), a, eta, cutoff, periodic_length (3,)); UserInputError names the bad one."""
+    try:
+        locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    except ValueError:
+        raise UserInputError('lubrication: the sphere locations must be an array of shape (N, 3); got shape %s'
+                             % (np.shape(locations),)) from None
+    if not np.all(np.isfinite(locations)):
+        raise UserInputError('lubrication: the sphere locations hold NaN or inf; check the configuration')
+    for name, value in (('blob_radius a', a), ('eta', eta), ('Lub_Cut (cutoff)', cutoff)):
+        if not np.isfinite(value) or not float(value) > 0:
+            raise UserInputError('lubrication: %s = %r must be a positive number' % (name, value))
+    L = np.asarray(periodic_length, dtype=float).reshape(-1)
+    if L.shape != (3,) or not np.all(np.isfinite(L)) or np.any(L < 0):
+        raise UserInputError('lubrication: periodic_length %r must be three lengths >= 0 (0: not periodic)'
+                             % (periodic_length,))
+    return locations, float(a), float(eta), float(cutoff), L
+
+
+def neighbour_pairs(locations, a, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0)):
+    """Pairs of spheres closer than ``cutoff * a`` (centre distance), as :data:`NeighbourPairs`.
+
+    locations : (N, 3) sphere centres (length units); a : radius; cutoff : in units of a;
+    periodic_length : (3,) box lengths, 0 for a non-periodic axis (minimum image on the others).
+    """
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    periodic = L > 0
+    if locations.shape[0] < 2:
+        empty = np.zeros((0, 2), dtype=np.intp)
+        return NeighbourPairs(empty, np.zeros(0), np.zeros((0, 3)))
+    points = locations.copy()
+    if np.any(periodic):
+        # the toroidal tree wants periodic coordinates in [0, L)
+        wrapped = np.mod(points[:, periodic], L[periodic])
+        points[:, periodic] = np.where(wrapped >= L[periodic], 0.0, wrapped)
+        if np.any(cutoff * a > 0.5 * L[periodic]):
+            raise UserInputError('lubrication: the pair cutoff Lub_Cut * a = %g is more than half a periodic box '
+                                 'length %s; make the box larger or the cutoff smaller'
+                                 % (cutoff * a, L[periodic]))
+    tree = cKDTree(points, boxsize=np.where(periodic, L, 0.0) if np.any(periodic) else None)
+    pairs = tree.query_pairs(r=cutoff * a, output_type='ndarray')
+    pairs = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    displacement = minimum_image(locations[pairs[:, 1]] - locations[pairs[:, 0]], L) / a
+    r_over_a = np.linalg.norm(displacement, axis=1)
+    keep = r_over_a < cutoff
+    pairs, displacement, r_over_a = pairs[keep], displacement[keep], r_over_a[keep]
+    if np.any(r_over_a == 0):
+        i, j = pairs[np.argmax(r_over_a == 0)]
+        raise UserInputError('lubrication: spheres %d and %d are at the same place; check the configuration' % (i, j))
+    return NeighbourPairs(pairs, r_over_a, displacement / r_over_a[:, None])
+
+
+def _pair_indices(pairs):
+    """Row and column indices (P, 12, 12) of the pair blocks in the 6N x 6N matrix."""
+    local = np.arange(6)
+    index = np.concatenate((6 * pairs[:, :1] + local, 6 * pairs[:, 1:] + local), axis=1)  # (P, 12)
+    return np.broadcast_to(index[:, :, None], index.shape + (12,)), np.broadcast_to(index[:, None, :],
+                                                                                    index.shape[:1] + (12, 12))
+
+
+def _wall_indices(n):
+    index = 6 * np.arange(n)[:, None] + np.arange(6)  # (N, 6)
+    return np.broadcast_to(index[:, :, None], (n, 6, 6)), np.broadcast_to(index[:, None, :], (n, 6, 6))
+
+
+def _sparse(size, parts):
+    """CSR (size, size) from (rows, cols, data) triplets of any shapes, duplicates summed, zeros left out."""
+    rows = np.concatenate([p[0].reshape(-1) for p in parts]) if parts else np.zeros(0, dtype=np.intp)
+    cols = np.concatenate([p[1].reshape(-1) for p in parts]) if parts else np.zeros(0, dtype=np.intp)
+    data = np.concatenate([p[2].reshape(-1) for p in parts]) if parts else np.zeros(0)
+    nonzero = data != 0.0
+    matrix = sp.coo_matrix((data[nonzero], (rows[nonzero], cols[nonzero])), shape=(size, size)).tocsr()
+    matrix.sum_duplicates()
+    return matrix
+
+
+def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
+                        firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+    """R_sup, R_MB and Delta_R = R_sup - R_MB of spheres at ``locations``: a :data:`LubricationMatrices`.
+
+    locations : (N, 3) sphere centres (length units; the wall, if any, is the plane z = 0);
+    a : sphere radius; eta : viscosity; cutoff : pair cutoff in units of a (``Lub_Cut``, default 4.5);
+    periodic_length : (3,) box (0: not periodic); wall : True above a no-slip wall at z = 0, False in free
+    space (no wall term); firm_delta : gap clamp in units of a (``firm_delta``, the published
+    ``debye_cut``; default 1e-4); handover : ``'published'`` (the hook for a smooth blend between
+    formulas; see :mod:`lubrication.resistance`).
+    """
+    locations, a, eta, cutoff, L = check_geometry(locations, a, eta, cutoff, periodic_length)
+    firm_delta = resistance.check_firm_delta(firm_delta)
+    resistance.check_handover(handover)
+    n = locations.shape[0]
+    factors = resistance.resistance_factors(eta, a)
+    neighbours = neighbour_pairs(locations, a, cutoff, L)
+    sup_parts, mb_parts = [], []
+    if neighbours.pairs.shape[0]:
+        rows, cols = _pair_indices(neighbours.pairs)
+        sup_parts.append((rows, cols, resistance.pair_resistance_sup(neighbours.r_over_a, neighbours.r_hat, factors,
+                                                                    firm_delta, handover)))
+        mb_parts.append((rows, cols, resistance.pair_resistance_blob_model(neighbours.r_over_a, neighbours.r_hat,
+                                                                          factors, firm_delta)))
+    if wall and n:
+        rows, cols = _wall_indices(n)
+        h = locations[:, 2] / a
+        sup_parts.append((rows, cols, resistance.wall_resistance_sup(h, factors, firm_delta, handover)))
+        mb_parts.append((rows, cols, resistance.wall_resistance_blob_model(h, factors, firm_delta)))
+    R_sup = _sparse(6 * n, sup_parts)
+    R_MB = _sparse(6 * n, mb_parts)
+    Delta_R = (R_sup - R_MB).tocsr()
+    has_neighbour = np.zeros(n, dtype=bool)
+    has_neighbour[neighbours.pairs.reshape(-1)] = True
+    isolated = ~has_neighbour
+    if wall:
+        isolated &= locations[:, 2] >= cutoff * a
+    return LubricationMatrices(R_sup, R_MB, Delta_R, neighbours, isolated)
+
+
+def delta_R(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
+            firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+    """Only Delta_R (6N, 6N) CSR of :func:`resistance_matrices` (same arguments)."""
+    return resistance_matrices(locations, a, eta, cutoff, periodic_length, wall, firm_delta, handover).Delta_R

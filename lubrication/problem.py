@@ -1,0 +1,180 @@
+"""The lubrication-corrected mobility M_lub = (M^-1 + Delta_R)^-1 as a problem of the package's one solve.
+
+``M`` is the far-field 6N x 6N mobility of single blobs (translational and rotational Rotne-Prager-Blake
+above the wall, Rotne-Prager-Yamakawa in free space; the package's blob products
+``mobility.blob_product(name, kind)``), ``Delta_R`` the sparse near-field correction
+(:mod:`lubrication.assembly`).  Velocities ``U = M_lub F`` (and more generally ``U = (I + M Delta_R)^-1
+(X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F``
+(``multi_bodies.solver.body_solver.solve``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
+(``s = 6 pi eta a * tolerance``), since ``I + M Delta_R ~ M R_sup`` where ``M^-1 ~ R_MB``.  The published
+code factors ``R_sup + s I`` with CHOLMOD; here SciPy's sparse LU (``splu``), no extra dependency.
+
+Vector layout ``[F1 T1 F2 T2 ...]`` (forces, torques) and ``[U1 W1 U2 W2 ...]`` (velocities, angular
+velocities); the problem's ``solution`` gives velocities (N, 6) rows ``[U W]``.
+"""
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+import mobility
+from mobility import backends
+from multi_bodies.solver.body_solver import SolutionParts, solve
+from utils import UserInputError
+
+from . import assembly, resistance
+
+NO_WALL = '_no_wall'
+PRODUCT_KINDS = ('trans_times_force', 'trans_times_torque', 'rot_times_force', 'rot_times_torque')
+
+
+def far_field_implementation(implementation, wall):
+    """The blob-product name for ``implementation`` ('python', 'C++', 'pycuda'; None: C++ if usable, else
+    python) with or without the wall."""
+    if implementation is None:
+        implementation = 'C++' if backends.is_usable('C++') else 'python'
+    base = implementation[:-len(NO_WALL)] if implementation.endswith(NO_WALL) else implementation
+    if base not in ('python', 'C++', 'pycuda', 'numba'):
+        raise UserInputError('lubrication: far-field implementation %r is not one of python, C++, pycuda (with or '
+                             'without _no_wall)' % implementation)
+    return base + ('' if wall else NO_WALL)
+
+
+def far_field_product(r_vectors, eta, a, periodic_length=(0.0, 0.0, 0.0), wall=True, implementation=None):
+    """``f(x (6N,)) -> M x (6N,)``: the single-blob translational and rotational mobility at r_vectors (N, 3).
+
+    x and the result in the layout ``[F1 T1 F2 T2 ...]`` -> ``[U1 W1 U2 W2 ...]``; RPB above the wall
+    at z = 0 (``wall=True``), RPY in free space; ``implementation`` as :func:`far_field_implementation`.
+    """
+    r_vectors = np.ascontiguousarray(np.asarray(r_vectors, dtype=float).reshape(-1, 3))
+    name = far_field_implementation(implementation, wall)
+    products = {kind: mobility.blob_product(name, kind) for kind in PRODUCT_KINDS}
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    n = r_vectors.shape[0]
+
+    def apply(x):
+        ft = np.asarray(x, dtype=float).reshape(n, 6)
+        F, T = np.ascontiguousarray(ft[:, :3]).reshape(-1), np.ascontiguousarray(ft[:, 3:]).reshape(-1)
+        out = np.empty((n, 6))
+        out[:, :3] = (np.asarray(products['trans_times_force'](r_vectors, F, eta, a, L)).reshape(-1, 3)
+                      + np.asarray(products['trans_times_torque'](r_vectors, T, eta, a, L)).reshape(-1, 3))
+        out[:, 3:] = (np.asarray(products['rot_times_force'](r_vectors, F, eta, a, L)).reshape(-1, 3)
+                      + np.asarray(products['rot_times_torque'](r_vectors, T, eta, a, L)).reshape(-1, 3))
+        return out.reshape(-1)
+    return apply
+
+
+class LubricationPreconditioner:
+    """``P^-1 x = (R_sup + s I)^-1 R_MB x`` (the published preconditioner of ``I + M Delta_R``).
+
+    matrices : :data:`lubrication.assembly.LubricationMatrices`; shift : ``s`` (force per velocity; the
+    published ``6 pi eta a * tolerance``).  Isolated spheres (no neighbour, far from the wall) are left
+    alone (identity), as published.  ``operator`` is a LinearOperator (6N, 6N); ``factor_time`` counts
+    nothing: the factorisation is made once here (``scipy.sparse.linalg.splu``).
+    """
+
+    def __init__(self, matrices, shift):
+        size = matrices.R_sup.shape[0]
+        self.R_MB = matrices.R_MB
+        self.isolated_rows = np.repeat(np.asarray(matrices.isolated, dtype=bool), 6)
+        shifted = (matrices.R_sup + float(shift) * sp.identity(size, format='csr')).tocsc()
+        # R_sup + s I is symmetric: symmetric-mode ordering, pivots on the diagonal
+        self.factor = spla.splu(shifted, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                                options={'SymmetricMode': True}) if size else None
+        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+
+    def apply(self, x):
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if self.factor is None:
+            return x.copy()
+        rhs = self.R_MB @ x
+        rhs[self.isolated_rows] = 0.0
+        y = self.factor.solve(rhs)
+        y[self.isolated_rows] = x[self.isolated_rows]
+        return y
+
+
+class LubricationProblem:
+    """``(I + M Delta_R) U = X + M F`` of N spheres at one configuration: a problem of the one solve.
+
+    Parameters
+    ----------
+    locations : (N, 3) sphere centres (length units; the wall, if any, at z = 0).
+    a, eta : sphere radius and viscosity.
+    wall : True above a no-slip wall (RPB far field and wall terms), False in free space.
+    cutoff : pair cutoff in units of a (``Lub_Cut``, default 4.5).
+    periodic_length : (3,) box lengths, 0 for non-periodic axes.
+    firm_delta : gap clamp in units of a (default 1e-4).
+    implementation : far-field blob products ('python', 'C++', 'pycuda'; None: C++ when built).
+    matrices : :data:`lubrication.assembly.LubricationMatrices` already built at ``locations`` (else built).
+    handover : ``'published'`` (see :mod:`lubrication.resistance`).
+
+    Protocol of ``multi_bodies.solver.body_solver.solve``: ``size`` (6N), ``operator`` (``x + M Delta_R x``),
+    ``prepare_rhs`` (unchanged), ``solution(x)`` -> ``SolutionParts(None, velocities (N, 6), None)``.
+    ``rhs(force_torque, velocity)`` builds ``X + M F``; ``preconditioner(tolerance)`` the published one.
+    """
+
+    def __init__(self, locations, a, eta, wall=True, cutoff=assembly.DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0),
+                 firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None, handover='published'):
+        locations, a, eta, cutoff, L = assembly.check_geometry(locations, a, eta, cutoff, periodic_length)
+        if wall and np.any(locations[:, 2] <= 0):
+            raise UserInputError('lubrication: sphere %d is at or below the wall (z = %g); the spheres must be above '
+                                 'z = 0' % (np.argmax(locations[:, 2] <= 0), locations[np.argmax(locations[:, 2] <= 0), 2]))
+        self.locations, self.a, self.eta, self.cutoff, self.periodic_length = locations, a, eta, cutoff, L
+        self.wall = bool(wall)
+        if matrices is None:
+            matrices = assembly.resistance_matrices(locations, a, eta, cutoff, L, wall, firm_delta, handover)
+        self.matrices = matrices
+        self.Delta_R = matrices.Delta_R
+        self.num_bodies = locations.shape[0]
+        self.size = 6 * self.num_bodies
+        self.mobility_product = far_field_product(locations, eta, a, L, wall, implementation)
+        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
+
+    def matvec(self, x):
+        """``(I + M Delta_R) x`` for x (6N,)."""
+        x = np.asarray(x, dtype=float).reshape(-1)
+        return x + self.mobility_product(self.Delta_R @ x)
+
+    def rhs(self, force_torque=None, velocity=None):
+        """``X + M F`` (6N,): force_torque F (N, 6) or (6N,) [F T per sphere], velocity X likewise (either None)."""
+        out = np.zeros(self.size)
+        if force_torque is not None:
+            out += self.mobility_product(np.asarray(force_torque, dtype=float).reshape(-1))
+        if velocity is not None:
+            out += np.asarray(velocity, dtype=float).reshape(-1)
+        return out
+
+    def prepare_rhs(self, rhs):
+        return rhs
+
+    def solution(self, x):
+        return SolutionParts(None, np.asarray(x, dtype=float).reshape(self.num_bodies, 6), None)
+
+    def preconditioner(self, tolerance=1e-8):
+        """The published preconditioner at this configuration, shift ``6 pi eta a * tolerance``."""
+        return LubricationPreconditioner(self.matrices, 6.0 * np.pi * self.eta * self.a * tolerance)
+
+
+def lubricated_velocities(locations, force_torque, a, eta, tolerance=1e-8, x0=None, **options):
+    """Velocities ``M_lub F`` of spheres at ``locations`` (N, 3) under force_torque (N, 6): a ``SolveResult``.
+
+    ``options`` go to :class:`LubricationProblem` (wall, cutoff, periodic_length, firm_delta,
+    implementation).  ``result.velocities`` is (N, 6) ``[U W]``; ``result.iterations`` the GMRES count.
+    """
+    problem = LubricationProblem(locations, a, eta, **options)
+    return solve(problem, problem.rhs(force_torque), problem.preconditioner(tolerance), x0=x0,
+                 tolerance=tolerance)
+
+
+def dense_far_field_mobility(problem):
+    """The far-field M (6N, 6N) of a problem, column by column (small N: tests and checks)."""
+    identity = np.eye(problem.size)
+    M = np.column_stack([problem.mobility_product(column) for column in identity])
+    return 0.5 * (M + M.T)
+
+
+def dense_lubricated_mobility(problem):
+    """``M_lub = (M^-1 + Delta_R)^-1`` (6N, 6N) by dense algebra (small N: tests and checks)."""
+    M = dense_far_field_mobility(problem)
+    M_lub = np.linalg.inv(np.linalg.inv(M) + problem.Delta_R.toarray())
+    return 0.5 * (M_lub + M_lub.T)
