@@ -14,7 +14,8 @@ kept when ``r_ij / a < cutoff`` (strict, as published).  With a wall every spher
 published ``cutoff_wall = 1e10`` puts it on everywhere); in free space there is none.
 
 Entries are kept as computed (the published code drops entries below 1e-12 in absolute value, whatever
-the units; here only exact zeros are left out), so the matrices are exactly symmetric.
+the units; here only exact zeros are left out); the sums are symmetrised, so the matrices are exactly
+symmetric.
 """
 from collections import namedtuple
 
@@ -120,7 +121,9 @@ def _sparse(size, parts):
     nonzero = data != 0.0
     matrix = sp.coo_matrix((data[nonzero], (rows[nonzero], cols[nonzero])), shape=(size, size)).tocsr()
     matrix.sum_duplicates()
-    return matrix
+    # the sums of duplicates are not made in one fixed order (SciPy sorts the columns of a row without
+    # keeping the order of equal ones), so (p, q) and (q, p) may differ by rounding: make it exact
+    return ((matrix + matrix.T) * 0.5).tocsr()
 
 
 def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,

@@ -176,8 +176,8 @@ def pair_resistance_sup(r, r_hat, factors, firm_delta=DEFAULT_FIRM_DELTA, handov
         R[near] = pair_blocks(r_hat[near], *near_contact_scalars(r[near]), factors)
     if np.any(middle):
         mobility_factors = tuple(1.0 / f for f in factors)
-        R[middle] = np.linalg.inv(pair_blocks(r_hat[middle], *table_pair_scalars('WS', r[middle]),
-                                              mobility_factors))
+        inverse = np.linalg.inv(pair_blocks(r_hat[middle], *table_pair_scalars('WS', r[middle]), mobility_factors))
+        R[middle] = 0.5 * (inverse + np.swapaxes(inverse, 1, 2))  # exactly symmetric (the inverse is, to rounding)
     if np.any(far):
         R[far] = pair_blocks(r_hat[far], *table_pair_scalars('JO', r[far]), factors)
     return R
