@@ -256,3 +256,15 @@ def test_spheres_below_the_wall_and_bad_shapes_are_refused():
     with pytest.raises(UserInputError, match='periodic box'):
         assembly.resistance_matrices(np.array([[0.0, 0.0, 2.0], [2.5, 0.0, 2.0]]), 1.0, 1.0,
                                      periodic_length=(6.0, 6.0, 0.0))
+
+
+def test_the_worked_example_of_the_doc_runs_and_prints_what_it_says(capsys):
+    """doc/lubrication.md: its Python block runs as written and prints the numbers the text quotes."""
+    import re
+    text = (Path(__file__).resolve().parents[1] / 'doc' / 'lubrication.md').read_text()
+    code = re.findall(r'```python\n(.*?)```', text, re.S)[0]
+    exec(compile(code, 'doc/lubrication.md', 'exec'), {})
+    printed = capsys.readouterr().out
+    assert 'approach speed with lubrication: 0.01330' in printed
+    assert 'approach speed, single blobs:     0.03513' in printed
+    assert '0.0133 with lubrication' in text and '0.0351 with single blobs' in text
