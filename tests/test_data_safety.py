@@ -695,3 +695,12 @@ def test_a_forged_record_is_a_one_line_refusal_naming_it(tmp_path, save_clones, 
     status, out, err = run_dynamic(folder)
     assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
     assert 'step 6' in err and words in err, err
+
+
+def test_an_output_name_with_a_nul_byte_is_a_one_line_refusal(tmp_path):
+    """Found by the fuzzer (issue 27): a NUL byte in output_name made open() raise ValueError (a traceback)."""
+    folder = driven_scene(tmp_path / 'run')
+    (folder / 'input.dat').write_text(set_options_text(folder, output_name='data/r\x00un'))
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and 'holds a NUL byte' in err, err
+    assert not (folder / 'data').exists()

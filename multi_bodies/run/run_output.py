@@ -76,6 +76,9 @@ def prepare_output_directory(output_name, where='output_name'):
     Raises UserInputError naming ``where`` (the option's file and line) when
     the folder cannot be created, is a file, or is read-only.
     """
+    if '\x00' in output_name:  # no file name can hold it (open() would raise ValueError)
+        raise UserInputError('%s: output_name %r holds a NUL byte, which no file name can hold; write the output '
+                             'name in plain text' % (where, output_name))
     folder = os.path.dirname(output_name) or os.curdir
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise UserInputError('%s: output_name %s needs the folder %s, but that is a file; choose another '
