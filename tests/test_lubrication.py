@@ -268,3 +268,22 @@ def test_the_worked_example_of_the_doc_runs_and_prints_what_it_says(capsys):
     assert 'approach speed with lubrication: 0.01330' in printed
     assert 'approach speed, single blobs:     0.03513' in printed
     assert '0.0133 with lubrication' in text and '0.0351 with single blobs' in text
+
+
+def test_the_shipped_tables_are_the_published_ones_and_install_as_package_data():
+    """lubrication/tables/ holds the five published tables unchanged, and setup.py installs them."""
+    import ast
+    import fnmatch
+    from lubrication import tables
+    names = sorted(set(tables.PAIR_TABLES.values()) | set(tables.WALL_TABLES.values()))
+    assert len(names) == 5
+    setup = (Path(__file__).resolve().parents[1] / 'setup.py').read_text()
+    call = next(node for node in ast.walk(ast.parse(setup)) if isinstance(node, ast.Call)
+                and getattr(node.func, 'id', None) == 'setup')
+    keywords = {k.arg: ast.literal_eval(k.value) for k in call.keywords if k.arg in ('packages', 'package_data')}
+    assert 'lubrication' in keywords['packages']
+    patterns = keywords['package_data']['lubrication']
+    for name in names:
+        assert any(fnmatch.fnmatch('tables/' + name, pattern) for pattern in patterns), name
+        if (REFERENCE / 'tables' / name).is_file():
+            assert (tables.TABLE_DIRECTORY / name).read_bytes() == (REFERENCE / 'tables' / name).read_bytes(), name
