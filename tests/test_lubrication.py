@@ -150,10 +150,12 @@ def rescaling(a, n_spheres):
     return np.tile(np.array([1.0, 1.0, 1.0, a, a, a]), n_spheres)
 
 
-def test_radius_a_equals_radius_one_rescaled():
+@pytest.mark.parametrize('a', [0.5, 2.25, 1.0155])
+def test_radius_a_equals_radius_one_rescaled(a):
     """Dimensional analysis: lengths in units of a, resistances by a^n; it holds with the pair vector scaled by
-    a in every direction (the published code scales it only along periodic axes)."""
-    a, eta = 0.5, 0.9
+    a in every direction (the published code scales it only along periodic axes).  The radii of the published
+    examples: chain and sheets 0.5, quasicrystal 2.25, rollers 1.0155."""
+    eta = 0.9
     unit = lattice_near_wall(4, spacing=2.1, height=1.05, jitter=0.08)
     one = lub_problem.LubricationProblem(unit, 1.0, eta)
     scaled = lub_problem.LubricationProblem(a * unit, a, eta)
