@@ -117,8 +117,9 @@ class LubricationProblem:
                  firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None, handover='published'):
         locations, a, eta, cutoff, L = assembly.check_geometry(locations, a, eta, cutoff, periodic_length)
         if wall and np.any(locations[:, 2] <= 0):
+            below = int(np.argmax(locations[:, 2] <= 0))
             raise UserInputError('lubrication: sphere %d is at or below the wall (z = %g); the spheres must be above '
-                                 'z = 0' % (np.argmax(locations[:, 2] <= 0), locations[np.argmax(locations[:, 2] <= 0), 2]))
+                                 'z = 0' % (below, locations[below, 2]))
         self.locations, self.a, self.eta, self.cutoff, self.periodic_length = locations, a, eta, cutoff, L
         self.wall = bool(wall)
         if matrices is None:

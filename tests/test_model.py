@@ -79,7 +79,7 @@ def calls_in(path):
 
 def package_files():
     for package in ('body', 'mobility', 'multi_bodies', 'quaternion_integrator', 'stochastic_forcing',
-                    'many_bodyMCMC', 'boomerang', 'sphere'):
+                    'many_bodyMCMC', 'boomerang', 'sphere', 'lubrication'):
         for path in (REPO / package).rglob('*.py'):
             if 'examples' not in path.parts:
                 yield path
