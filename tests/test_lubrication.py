@@ -289,3 +289,20 @@ def test_the_shipped_tables_are_the_published_ones_and_install_as_package_data()
         assert any(fnmatch.fnmatch('tables/' + name, pattern) for pattern in patterns), name
         if (REFERENCE / 'tables' / name).is_file():
             assert (tables.TABLE_DIRECTORY / name).read_bytes() == (REFERENCE / 'tables' / name).read_bytes(), name
+
+
+def test_gmres_solve_equals_the_dense_inverse_in_a_periodic_box_and_in_free_space():
+    """The same check with the pseudo-periodic far field (minimum image in the pairs) and without the wall."""
+    locations = lattice_near_wall(5, spacing=2.1, height=1.05, a=0.5, jitter=0.02, seed=9)
+    force_torque = np.random.default_rng(12).standard_normal(6 * locations.shape[0])
+    box = 5 * 2.1 * 0.5
+    for options in ({'periodic_length': (box, box, 0.0)}, {'wall': False}):
+        lub = lub_problem.LubricationProblem(locations, 0.5, 1.0, **options)
+        if 'periodic_length' in options:  # every pair within 4.5 a, across the box edges too (brute force)
+            d = locations[:, None, :] - locations[None, :, :]
+            d[..., :2] -= box * np.round(d[..., :2] / box)
+            assert lub.matrices.neighbours.pairs.shape[0] == np.count_nonzero(np.triu(
+                np.linalg.norm(d, axis=2) < 4.5 * 0.5, k=1))
+        expected = lub_problem.dense_lubricated_mobility(lub) @ force_torque
+        result = solve(lub, lub.rhs(force_torque), lub.preconditioner(1e-10), tolerance=1e-10)
+        assert relative_error(result.velocities.ravel(), expected) <= 1e-8, options

@@ -114,6 +114,8 @@ class Model:
         None is the backend's.
     pycuda_blob_blob_forces : callable or None
         The user's ``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py`` (None: the hooks').
+    surface : multi_bodies.solver.surface.Surface or None
+        Phoretic and slip-length data of the blobs (``.Laplace``, ``.slip_length`` files; doc/phoretic.md).
 
     Every attribute is set here; assigning one afterwards raises ``AttributeError`` (a model is a value:
     build another with :meth:`replace`).
@@ -124,7 +126,7 @@ class Model:
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
                  check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
-                 pycuda_blob_blob_forces=None):
+                 pycuda_blob_blob_forces=None, surface=None):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -175,7 +177,9 @@ class Model:
                                 if b.function_slip is not reference_slip_in_lab_frame]
         set_(self, 'slip_function_bodies', slip_function_bodies)
         set_(self, 'slip_functions', bool(slip_function_bodies))
-        set_(self, 'has_slip', self.slip_functions or bool(np.any(body_arrays.reference_slip)))
+        set_(self, 'surface', surface)
+        set_(self, 'has_slip', self.slip_functions or bool(np.any(body_arrays.reference_slip))
+             or (surface is not None and surface.phoretic is not None))
         # Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
         set_(self, 'body_lengths', np.array([1.0 if b.body_length is None else b.body_length for b in bodies],
                                             dtype=float))
@@ -302,6 +306,8 @@ class Model:
         (Nblobs, 3), finite).
         """
         slip = self.arrays.lab_frame_slip(configuration)
+        if self.surface is not None and self.surface.phoretic is not None:  # the solute's active slip
+            slip = slip + self.surface.phoretic_slip(self, configuration)
         if not self.slip_functions:
             return slip
         bodies = self.bodies_at(configuration)
@@ -332,7 +338,10 @@ class Model:
 
     def mobility_problem(self, configuration):
         """The saddle-point problem at ``configuration`` (a value; body_solver.MobilityProblem, or
-        obstacles.MixedMobilityProblem when some bodies have prescribed kinematics)."""
+        obstacles.MixedMobilityProblem when some bodies have prescribed kinematics; the slip-length problem
+        of multi_bodies.solver.slip_length with .slip_length files)."""
+        if self.surface is not None and self.surface.has_slip_length:
+            return self.surface.slip_length_problem(self, configuration)
         if self.has_fixed_bodies:
             return obstacles.MixedMobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
                                                   self.blob_radius, self.periodic_length, self.fixed_bodies,
@@ -342,6 +351,8 @@ class Model:
 
     def build_preconditioner(self, configuration):
         """Block-diagonal preconditioner (and Lanczos factors) at ``configuration``."""
+        if self.surface is not None and self.surface.has_slip_length:
+            return self.surface.slip_length_preconditioner(self, configuration)
         if self.has_fixed_bodies:
             return obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
                                                  self.blob_radius, stacked_mobility=self.stacked_mobility,
@@ -578,7 +589,7 @@ def wall_is_seen(options, vector_product_name, blobs_name, script='dynamics'):
 
 
 def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulated=None, print_residual=False,
-               log=None):
+               log=None, surface=None):
     """The Model of validated input ``Options`` (``auto`` backends resolved and logged).
 
     script : 'dynamics' or 'static' (which backends decide whether the wall is seen); articulated : the
@@ -625,4 +636,5 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                  periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
                  articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
-                 check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces)
+                 check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces,
+                 surface=surface)
