@@ -126,7 +126,7 @@ class Option(namedtuple('Option', ['kind', 'default', 'rule', 'used_by', 'progra
                         defaults=(True,))):
     """One row of OPTION_TABLE.
 
-    kind : str, int, float, floats3, ints2, grid9, bool, optional_str, optional_int
+    kind : str, int, float, floats3, floats9 (one to nine), ints2, grid9, bool, optional_str, optional_int
     default : the value when the file does not set the option
     rule : Range, Choice or None, checked whatever the program
     used_by : tuple of usage tags (see above); () = no effect
@@ -217,6 +217,10 @@ OPTION_TABLE = {
     'cells': _option('ints2', (1, 1), ('dynamic',)),  # two ints >= 1, checked by analysis.hydrogrid
     'green_particles': _option('ints2', (0, 0), ('dynamic',)),  # 0 <= i0 <= i1, checked by analysis.hydrogrid
     'slip_file': _option('optional_str', None, (), dynamics=False),
+    # phoretic bodies (.Laplace third files, doc/phoretic.md): background c_bg = b0 + G.x + x^T H x, D
+    'background_Laplace': _option('floats9', (), SD),
+    'diffusion_coefficient': _option('float', 1.0, SD, Range(0, low_open=True, fix='the solute diffusivity')),
+    'save_concentration': _option('bool', False, ('dynamic',), dynamics=False),
     'structure_names': _option('optional_str', None, (), dynamics=False),
     # Monte Carlo sampler only (many_bodyMCMC, doc/mcmc.md); 0 step sizes select the published defaults
     'mcmc_move': _option('str', 'all_bodies', ('mcmc',), Choice(MCMC_MOVES)),
@@ -249,17 +253,27 @@ ArticulatedSpec.__doc__ = """One ``articulated`` line (doc/articulated.md): the 
 ``.const`` file names, the ID (clones file name without ``.clones``) and ``where``."""
 
 StructureSpec = namedtuple('StructureSpec', ['vertex_file', 'clones_file', 'slip_file', 'ID', 'where',
-                                             'velocity_file', 'obstacle'], defaults=(None, False))
+                                             'velocity_file', 'obstacle', 'laplace_file', 'slip_length_file'],
+                           defaults=(None, False, None, None))
 StructureSpec.__doc__ = """One ``structure`` or ``obstacle`` line: file names (relative to the working
 directory), the structure ID (clones file name without directory and ``.clones``), ``where``
 ("file, line n") for error messages, ``velocity_file`` (the fourth file of a ``structure`` line: the
 prescribed lab-frame velocities ``vx vy vz wx wy wz`` of its bodies, one line per body; None for free
-bodies) and ``obstacle`` (True for an ``obstacle`` line: bodies held at zero velocity)."""
+bodies) and ``obstacle`` (True for an ``obstacle`` line: bodies held at zero velocity); ``laplace_file`` and
+``slip_length_file``: a ``.Laplace`` or ``.slip_length`` file among the third and later words (any position,
+recognised by the suffix as published; doc/phoretic.md), or None."""
 
 
 def parse_structure_line(name, value, where):
     """The StructureSpec of one ``structure`` (2 to 4 files) or ``obstacle`` (2 or 3 files) line."""
     files = value.split()
+    surface = {}
+    for suffix in ('.Laplace', '.slip_length'):  # phoretic and slip-length data: any position after two files
+        found = [f for f in files[2:] if f.endswith(suffix)]
+        if len(found) > 1:
+            raise UserInputError("%s: more than one %s file on one line: %s" % (where, suffix, ' '.join(found)))
+        surface[suffix] = found[0] if found else None
+        files = files[:2] + [f for f in files[2:] if f not in found]
     if name == 'obstacle':
         if len(files) not in (2, 3):
             raise UserInputError("%s: 'obstacle' expects two or three file names (vertex clones [slip]), got "
@@ -272,7 +286,7 @@ def parse_structure_line(name, value, where):
     slip = files[2] if len(files) >= 3 and files[2] != 'None' else None
     velocity = files[3] if len(files) == 4 else None
     return StructureSpec(files[0], files[1], slip, structure_id_from_clones(files[1]), where, velocity,
-                         name == 'obstacle')
+                         name == 'obstacle', surface['.Laplace'], surface['.slip_length'])
 
 
 class Options:
@@ -390,6 +404,16 @@ def _convert(kind, name, value, where):
         if len(numbers) != 3:
             fail('three numbers')
         return numbers
+    if kind == 'floats9':  # one to nine numbers (background_Laplace), padded with zeros where used
+        try:
+            numbers = tuple(finite(w, 'one to nine numbers') for w in words)
+        except UserInputError:
+            raise
+        except ValueError:
+            fail('one to nine numbers')
+        if not 1 <= len(numbers) <= 9:
+            fail('one to nine numbers')
+        return numbers
     if kind == 'ints2':
         try:
             numbers = tuple(int(w) for w in words)
@@ -503,8 +527,10 @@ def is_used(name, program, scheme):
 
 def unused_options(options, program):
     """Names of the options the file sets that a run of ``program`` does not use (table order)."""
+    phoretic = any(spec.laplace_file for spec in options.structures + options.obstacles)  # domain: wall images
     return [name for name in OPTION_TABLE
-            if options.is_set(name) and OPTION_TABLE[name].used_by and not is_used(name, program, options.scheme)]
+            if options.is_set(name) and OPTION_TABLE[name].used_by and not is_used(name, program, options.scheme)
+            and not (name == 'domain' and phoretic)]
 
 
 _USERS = {'static': 'the static problems', 'dynamic': 'the dynamic schemes', 'stochastic': 'the stochastic schemes',

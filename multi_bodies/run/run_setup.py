@@ -41,6 +41,7 @@ from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noq
 from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
 from multi_bodies.files.structure_files import read_body_table, read_slip_file, read_vertex_file
 from multi_bodies.solver.model import make_model
+from multi_bodies.solver.surface import read_surface
 
 
 def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
@@ -348,6 +349,10 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         return RunSetup(hooks, bodies, types, body_arrays, None)
     system = make_model(options, bodies, body_arrays, hooks, script=script, articulated=articulated,
                         print_residual=print_residual, log=log)
+    surface = read_surface(options, all_structure_specs(options), types, body_arrays.type_blobs,
+                           options.domain == 'single_wall', system.check_wall)  # .Laplace, .slip_length files
+    if surface is not None:
+        system = system.replace(surface=surface)
     log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))

@@ -1,0 +1,214 @@
+"""Rigid bodies whose surface has a Navier slip length: the modified saddle-point problem (floor 3).
+
+Each blob of such a body carries a lab-frame normal ``n_i`` (its ``.slip_length``
+file's body-frame normal turned with the body, not renormalised), a slip
+length ``l_i`` ([L], 0 is no slip) and a quadrature weight ``w_i`` ([L]^2).
+The unknowns are ``X = [lambda (3N); U (6Nb); u (3N)]``: blob forces, body
+velocities and the surface slip velocity of every blob.  With
+``xi_i = l_i / (eta w_i)``, ``P_i = I - n_i n_i^T`` and the Stokes double
+layer ``D`` of :func:`double_layer` the equations are (the published FreeSlip
+formulation, doc/phoretic.md)::
+
+    M lambda - (I/2 + D)(K U) - (I/2 + D) u = s_RHS
+    -K^T lambda                              = -F
+    Xi P lambda + u                          = 0      (Navier: u = -(l / (eta w)) P lambda)
+
+with ``s_RHS = s - s_rig / 2 + D[s_rig]`` for a prescribed slip ``s``, where
+``s_rig`` is the rigid motion ``m_k + o_k x (r_i - x_k)`` with
+``(m_k, o_k) = K_k^T s_k / N_k``.  For ``l = 0`` the slip ``u`` vanishes but
+``(I/2 + D) K U`` stays in place of ``K U``: the solution differs from the
+ordinary rigid one by a discretisation error (``D`` of a rigid motion is
+about half of it on a closed surface), which the tests measure.
+
+``D`` is the free-space operator: the published code uses it whatever the
+domain, and this package refuses slip-length bodies when the hydrodynamics
+sees a wall (``multi_bodies.solver.surface``).
+"""
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from body.body import K_matrices
+from multi_bodies.solver.body_solver import (MobilityProblem, SolutionParts, blob_radius_argument,
+                                             body_mobility_from_resistance, spd_inverse)
+
+PAIRS_PER_CHUNK = 1 << 19
+SELF_DISTANCE = 1e-14  # pairs closer than this are skipped (the published self term)
+
+
+def double_layer(x, normals, weights, blob_radius, v):
+    """The regularised Stokes double layer ``(D v)_i`` (N, 3) of blob vectors v (N, 3) or (3N,).
+
+    ``(D v)_i = -(3 / 4 pi) sum_{j, r >= 1e-14} w_j / r^5 [ (1 - 10 a^2 / (3 r^2)) (r.n_j)(r.v_j) r
+    + (2 a^2 / 3) ((n_j.v_j) r + (r.v_j) n_j + (r.n_j) v_j) ]`` with ``r = x_i - x_j``: the
+    free-space stresslet double layer ``T_ilm = -(3 / 4 pi) r_i r_l r_m / r^5`` (no 1/eta) with the
+    RPY-like correction ``(1 + a^2/3 grad^2)``.  x, normals (N, 3); weights (N,); blob_radius a.
+    """
+    x = np.ascontiguousarray(x, dtype=float).reshape(-1, 3)
+    n = np.asarray(normals, dtype=float).reshape(-1, 3)
+    v = np.asarray(v, dtype=float).reshape(-1, 3)
+    w = np.asarray(weights, dtype=float).reshape(-1)
+    a2 = float(blob_radius) ** 2
+    N = x.shape[0]
+    out = np.zeros((N, 3))
+    nv = np.einsum('ij,ij->i', n, v) * w
+    wn, wv = n * w[:, None], v * w[:, None]
+    step = max(1, PAIRS_PER_CHUNK // max(1, N))
+    for start in range(0, N, step):
+        rows = slice(start, min(N, start + step))
+        r = x[rows, None, :] - x[None, :, :]
+        d2 = np.einsum('ijk,ijk->ij', r, r)
+        far = d2 >= SELF_DISTANCE ** 2
+        inv_d2 = np.divide(1.0, d2, out=np.zeros_like(d2), where=far)
+        inv_r5 = inv_d2 * inv_d2 * np.sqrt(inv_d2)
+        rn = np.einsum('ijk,jk->ij', r, n)
+        rv = np.einsum('ijk,jk->ij', r, v)
+        radial = inv_r5 * ((1.0 - (10.0 / 3.0) * a2 * inv_d2) * rn * rv * w[None, :] + (2.0 / 3.0) * a2 * nv[None, :])
+        out[rows] = (np.einsum('ij,ijk->ik', radial, r)
+                     + (2.0 / 3.0) * a2 * ((inv_r5 * rv) @ wn + (inv_r5 * rn) @ wv))
+    return -(3.0 / (4.0 * np.pi)) * out
+
+
+class SlipLengthProblem:
+    """The slip-length saddle-point problem of all bodies at one configuration (the problem protocol).
+
+    Parameters
+    ----------
+    rigid : body_solver.MobilityProblem at the configuration (its ``M``, ``K`` and ``K^T`` products)
+    normals : (N, 3) lab-frame normals; slip_lengths, weights : (N,)
+
+    ``size`` = 6N + 6Nb; ``solution(x)`` gives ``SolutionParts(lambda (N, 3), U (Nb, 6), None)`` and
+    :meth:`surface_slip` the surface slip velocity ``u`` (N, 3) of a solution.
+    """
+
+    def __init__(self, rigid, normals, slip_lengths, weights):
+        self.rigid = rigid
+        self.normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+        self.weights = np.asarray(weights, dtype=float).reshape(-1)
+        self.slip_lengths = np.asarray(slip_lengths, dtype=float).reshape(-1)
+        self.xi = self.slip_lengths / (rigid.eta * self.weights)
+        self.num_blobs, self.num_bodies = rigid.num_blobs, rigid.num_bodies
+        self.size = 6 * self.num_blobs + 6 * self.num_bodies
+        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
+
+    def D_dot(self, v):
+        """``D v`` (N, 3) of blob vectors v (N, 3)."""
+        return double_layer(self.rigid.r_vectors, self.normals, self.weights, self.rigid.blob_radius, v)
+
+    def tangential(self, v):
+        """``P v = v - n (n.v)`` (N, 3) of blob vectors v."""
+        v = np.asarray(v, dtype=float).reshape(-1, 3)
+        return v - self.normals * np.einsum('ij,ij->i', self.normals, v)[:, None]
+
+    def split(self, x):
+        """(lambda (N, 3), U (Nb, 6), u (N, 3)) of a vector of the layout ``[lambda; U; u]``."""
+        x = np.asarray(x, dtype=float).reshape(-1)
+        n3, nb6 = 3 * self.num_blobs, 6 * self.num_bodies
+        return x[:n3].reshape(-1, 3), x[n3:n3 + nb6].reshape(-1, 6), x[n3 + nb6:].reshape(-1, 3)
+
+    def matvec(self, x):
+        lam, U, u = self.split(x)
+        moving = self.rigid.K_dot(U) + u
+        first = self.rigid.M_dot(lam).reshape(-1, 3) - 0.5 * moving - self.D_dot(moving)
+        second = -self.rigid.KT_dot(lam).reshape(-1)
+        third = self.xi[:, None] * self.tangential(lam) + u
+        return np.concatenate((first.reshape(-1), second, third.reshape(-1)))
+
+    def rhs(self, slip=None, force_torque=None):
+        """``[s - s_rig/2 + D[s_rig]; -F; 0]`` (size,) of slip (N, 3) and force_torque (Nb, 6) (None: zero)."""
+        rhs = np.zeros(self.size)
+        n3, nb6 = 3 * self.num_blobs, 6 * self.num_bodies
+        if slip is not None and np.any(slip):
+            slip = np.asarray(slip, dtype=float).reshape(-1, 3)
+            counts = np.diff(self.rigid.body_arrays.blob_offsets)
+            mean_motion = self.rigid.KT_dot(slip).reshape(-1, 6) / counts[:, None]
+            rigid_slip = self.rigid.K_dot(mean_motion).reshape(-1, 3)
+            rhs[:n3] = (slip - 0.5 * rigid_slip + self.D_dot(rigid_slip)).reshape(-1)
+        if force_torque is not None:
+            rhs[n3:n3 + nb6] = -np.asarray(force_torque, dtype=float).reshape(-1)
+        return rhs
+
+    def prepare_rhs(self, rhs):
+        n3, nb6 = 3 * self.num_blobs, 6 * self.num_bodies
+        if self.num_bodies:
+            rhs[n3:n3 + nb6] = self.rigid.project_forces(rhs[n3:n3 + nb6]).reshape(-1)
+        return rhs
+
+    def solution(self, x):
+        lam, U, _ = self.split(x)
+        return SolutionParts(lam, U, None)
+
+    def surface_slip(self, x):
+        """The surface slip velocity ``u`` (N, 3) of a solution x (size,)."""
+        return self.split(x)[2]
+
+    def without_prescribed_motion(self, velocities):
+        return velocities
+
+
+class SlipLengthPreconditioner:
+    """Block-diagonal preconditioner of :class:`SlipLengthProblem` (the published one, free bodies).
+
+    Per body, ``A_k = M_k + Xi_k P_k`` (Cholesky inverse) and ``N_k = pinv(K_k^T A_k^-1 K_k)``; applied
+    to ``y = [y1; y2; y3]``: ``U = N (-y2 - K^T A^-1 y1)``, ``lambda = A^-1 (y1 + K U)``,
+    ``u = -Xi P lambda + y3`` (the exact inverse of the body-diagonal system without ``D`` and with
+    ``I/2 + D`` replaced by ``I``, when ``y3 = 0``).
+    """
+
+    def __init__(self, body_arrays, configuration, stacked_mobility, eta, blob_radius, normals, slip_lengths,
+                 weights):
+        self.body_arrays = body_arrays
+        r_vectors = body_arrays.blob_positions(configuration)
+        locations = configuration.locations
+        normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+        self.xi = np.asarray(slip_lengths, dtype=float).reshape(-1) / (eta * np.asarray(weights, float).reshape(-1))
+        self.normals = normals
+        self.blocks = []
+        for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
+            nb = bodies.stop - bodies.start
+            if nb == 0:
+                self.blocks.append(None)
+                continue
+            r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
+            radius = blob_radius_argument(body_arrays, blob_radius, blobs)
+            if np.ndim(radius):
+                radius = np.reshape(radius, (nb, n_blobs))
+            A = np.array(stacked_mobility(r_type, eta, radius), dtype=float)
+            n = normals[blobs].reshape(nb, n_blobs, 3)
+            xiP = self.xi[blobs].reshape(nb, n_blobs, 1, 1) * (np.eye(3) - n[:, :, :, None] * n[:, :, None, :])
+            for i in range(n_blobs):  # add the 3x3 diagonal blocks (a loop over a body's blobs, set-up only)
+                A[:, 3 * i:3 * i + 3, 3 * i:3 * i + 3] += xiP[:, i]
+            A_inv = np.stack([spd_inverse(block) for block in A])
+            K = K_matrices(r_type, locations[bodies])
+            A_inv_K = A_inv @ K
+            N = body_mobility_from_resistance(np.swapaxes(K, 1, 2) @ A_inv_K)
+            self.blocks.append((A_inv, A_inv_K, K, N))
+        size = 6 * body_arrays.num_blobs + 6 * body_arrays.num_bodies
+        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+
+    def apply(self, y):
+        y = np.asarray(y, dtype=float).reshape(-1)
+        n3, nb6 = 3 * self.body_arrays.num_blobs, 6 * self.body_arrays.num_bodies
+        y1, y2, y3 = y[:n3].reshape(-1, 3), y[n3:n3 + nb6].reshape(-1, 6), y[n3 + nb6:].reshape(-1, 3)
+        lam, U = np.zeros_like(y1), np.zeros_like(y2)
+        for (bodies, blobs), block in zip(self.body_arrays.type_slices, self.blocks):
+            if block is None:
+                continue
+            A_inv, A_inv_K, K, N = block
+            nb = bodies.stop - bodies.start
+            s = y1[blobs].reshape(nb, -1, 1)
+            L1 = A_inv @ s
+            U_k = N @ (-y2[bodies][:, :, None] - np.swapaxes(K, 1, 2) @ L1)
+            lam[blobs] = (L1 + A_inv_K @ U_k).reshape(-1, 3)
+            U[bodies] = U_k[:, :, 0]
+        P_lam = lam - self.normals * np.einsum('ij,ij->i', self.normals, lam)[:, None]
+        u = -self.xi[:, None] * P_lam + y3
+        return np.concatenate((lam.reshape(-1), U.reshape(-1), u.reshape(-1)))
+
+
+def slip_length_problem(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length,
+                        reference_normals, slip_lengths, weights):
+    """The :class:`SlipLengthProblem` at ``configuration`` (normals turned with the bodies)."""
+    from multi_bodies.solver.phoretic import lab_normals
+    rigid = MobilityProblem(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length)
+    return SlipLengthProblem(rigid, lab_normals(body_arrays, rigid.configuration, reference_normals),
+                             slip_lengths, weights)
