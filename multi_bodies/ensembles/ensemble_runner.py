@@ -163,7 +163,7 @@ def run_replica(spec):
                 spec['folder'], result['host'], result['pid'],
                 'resuming from step %d' % resume if resume else 'fresh start'), flush=True)
             if resume:
-                options.initial_step = resume
+                options = options.replace(initial_step=resume)
             result['resumed_from'] = resume
             exit_status = run_dynamics(options, log=print)
         except UserInputError as err:

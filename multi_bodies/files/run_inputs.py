@@ -59,14 +59,14 @@ def restart_inputs(options, directory):
     ``directory``: the run directory (where the override sources are imported from).  Each file appears once.
     """
     found = []
-    specs = list(options.structures) + list(getattr(options, 'obstacles', None) or [])
+    specs = list(options.structures) + list(options.obstacles)
     for spec in specs:
         found.append(('vertex', spec.vertex_file))
         if spec.slip_file is not None:
             found.append(('slip', spec.slip_file))
         if getattr(spec, 'velocity_file', None) is not None:
             found.append(('velocity', spec.velocity_file))
-    for spec in getattr(options, 'articulated', None) or []:
+    for spec in options.articulated:
         found.append(('list_vertex', spec.list_vertex_file))
         found.append(('const', spec.const_file))
         found.extend(('vertex', name) for name in _list_vertex_names(spec.list_vertex_file))

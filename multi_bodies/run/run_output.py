@@ -113,9 +113,7 @@ SMALLEST_BOX = 1e-6
 
 def check_periodic_length(options):
     """Refuse a negative, infinite or vanishing periodic_length (each entry 0 or at least SMALLEST_BOX)."""
-    box = getattr(options, 'periodic_length', None)
-    if box is None:
-        return
+    box = options.periodic_length
     if not all(np.isfinite(v) and (v == 0 or v >= SMALLEST_BOX) for v in box):
         raise UserInputError('%s: periodic_length %s: each length must be 0 (that axis is not periodic) or a box '
                              'length of at least %g, in the units of the blob radius'

@@ -352,7 +352,7 @@ def make_generator(options):
     operating system (the state is still saved in ``.random_state``, so the
     run can be repeated).
     """
-    kind = getattr(options, 'random_generator', 'auto') or 'auto'
+    kind = options.random_generator or 'auto'
     if options.random_state is not None:
         return load_random_state(options.random_state, options.where('random_state'), kind)
     if options.seed is not None and options.seed < 0:
