@@ -14,8 +14,8 @@ kept when ``r_ij / a < cutoff`` (strict, as published).  With a wall every spher
 published ``cutoff_wall = 1e10`` puts it on everywhere); in free space there is none.
 
 Entries are kept as computed (the published code drops entries below 1e-12 in absolute value, whatever
-the units; here only exact zeros are left out); the sums are symmetrised, so the matrices are exactly
-symmetric.
+the units; here only exact zeros are left out), and the matrices are exactly symmetric.  They are put
+together as 6 x 6 blocks (a diagonal block per sphere, two per pair) and handed to SciPy as CSR.
 """
 from collections import namedtuple
 
@@ -100,30 +100,36 @@ def neighbour_pairs(locations, a, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0
     return NeighbourPairs(pairs, r_over_a, displacement / r_over_a[:, None])
 
 
-def _pair_indices(pairs):
-    """Row and column indices (P, 12, 12) of the pair blocks in the 6N x 6N matrix."""
-    local = np.arange(6)
-    index = np.concatenate((6 * pairs[:, :1] + local, 6 * pairs[:, 1:] + local), axis=1)  # (P, 12)
-    return np.broadcast_to(index[:, :, None], index.shape + (12,)), np.broadcast_to(index[:, None, :],
-                                                                                    index.shape[:1] + (12, 12))
+class _BlockPattern:
+    """Where the 6 x 6 blocks of N spheres and P pairs go: a diagonal block per sphere, an (i, j) and a (j, i)
+    block per pair (each pair once, i < j), in the row-major order of a block-sparse (BSR) matrix."""
 
+    def __init__(self, n, pairs):
+        self.n, self.pairs = n, pairs
+        block_rows = np.concatenate((np.arange(n), pairs[:, 0], pairs[:, 1]))
+        block_cols = np.concatenate((np.arange(n), pairs[:, 1], pairs[:, 0]))
+        self.order = np.lexsort((block_cols, block_rows))
+        self.indices = block_cols[self.order]
+        self.indptr = np.concatenate(([0], np.cumsum(np.bincount(block_rows, minlength=n))))
 
-def _wall_indices(n):
-    index = 6 * np.arange(n)[:, None] + np.arange(6)  # (N, 6)
-    return np.broadcast_to(index[:, :, None], (n, 6, 6)), np.broadcast_to(index[:, None, :], (n, 6, 6))
+    def blocks(self, pair_blocks, wall_blocks):
+        """The blocks (N + 2P, 6, 6) in BSR order from pair blocks (P, 12, 12) and wall blocks (N, 6, 6) or None.
 
+        A sphere's diagonal block sums, in one fixed order, its wall block and the self blocks of its pairs,
+        so the (p, q) and (q, p) entries are sums of the same numbers in the same order: exactly symmetric.
+        """
+        diagonal = np.zeros((self.n, 6, 6)) if wall_blocks is None else np.array(wall_blocks, dtype=float)
+        np.add.at(diagonal, self.pairs[:, 0], pair_blocks[:, :6, :6])
+        np.add.at(diagonal, self.pairs[:, 1], pair_blocks[:, 6:, 6:])
+        every = np.concatenate((diagonal, pair_blocks[:, :6, 6:], pair_blocks[:, 6:, :6]))
+        return every[self.order]
 
-def _sparse(size, parts):
-    """CSR (size, size) from (rows, cols, data) triplets of any shapes, duplicates summed, zeros left out."""
-    rows = np.concatenate([p[0].reshape(-1) for p in parts]) if parts else np.zeros(0, dtype=np.intp)
-    cols = np.concatenate([p[1].reshape(-1) for p in parts]) if parts else np.zeros(0, dtype=np.intp)
-    data = np.concatenate([p[2].reshape(-1) for p in parts]) if parts else np.zeros(0)
-    nonzero = data != 0.0
-    matrix = sp.coo_matrix((data[nonzero], (rows[nonzero], cols[nonzero])), shape=(size, size)).tocsr()
-    matrix.sum_duplicates()
-    # the sums of duplicates are not made in one fixed order (SciPy sorts the columns of a row without
-    # keeping the order of equal ones), so (p, q) and (q, p) may differ by rounding: make it exact
-    return ((matrix + matrix.T) * 0.5).tocsr()
+    def csr(self, blocks):
+        """CSR (6N, 6N) of blocks in BSR order, exact zeros left out."""
+        size = 6 * self.n
+        matrix = sp.bsr_matrix((blocks, self.indices, self.indptr), shape=(size, size)).tocsr()
+        matrix.eliminate_zeros()
+        return matrix
 
 
 def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
@@ -143,21 +149,18 @@ def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_lengt
     n = locations.shape[0]
     factors = resistance.resistance_factors(eta, a)
     neighbours = neighbour_pairs(locations, a, cutoff, L)
-    sup_parts, mb_parts = [], []
-    if neighbours.pairs.shape[0]:
-        rows, cols = _pair_indices(neighbours.pairs)
-        sup_parts.append((rows, cols, resistance.pair_resistance_sup(neighbours.r_over_a, neighbours.r_hat, factors,
-                                                                    firm_delta, handover)))
-        mb_parts.append((rows, cols, resistance.pair_resistance_blob_model(neighbours.r_over_a, neighbours.r_hat,
-                                                                          factors, firm_delta)))
+    pattern = _BlockPattern(n, neighbours.pairs)
+    pair_sup = resistance.pair_resistance_sup(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta, handover)
+    pair_mb = resistance.pair_resistance_blob_model(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta)
+    wall_sup = wall_mb = None
     if wall and n:
-        rows, cols = _wall_indices(n)
         h = locations[:, 2] / a
-        sup_parts.append((rows, cols, resistance.wall_resistance_sup(h, factors, firm_delta, handover)))
-        mb_parts.append((rows, cols, resistance.wall_resistance_blob_model(h, factors, firm_delta)))
-    R_sup = _sparse(6 * n, sup_parts)
-    R_MB = _sparse(6 * n, mb_parts)
-    Delta_R = (R_sup - R_MB).tocsr()
+        wall_sup = resistance.wall_resistance_sup(h, factors, firm_delta, handover)
+        wall_mb = resistance.wall_resistance_blob_model(h, factors, firm_delta)
+    blocks_sup = pattern.blocks(pair_sup, wall_sup)
+    blocks_mb = pattern.blocks(pair_mb, wall_mb)
+    R_sup, R_MB = pattern.csr(blocks_sup), pattern.csr(blocks_mb)
+    Delta_R = pattern.csr(blocks_sup - blocks_mb)
     has_neighbour = np.zeros(n, dtype=bool)
     has_neighbour[neighbours.pairs.reshape(-1)] = True
     isolated = ~has_neighbour
