@@ -20,7 +20,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ('body', 'mobility', 'multi_bodies', 'quaternion_integrator', 'stochastic_forcing', 'many_bodyMCMC',
-            'boomerang', 'sphere', 'lubrication')
+            'boomerang', 'sphere', 'lubrication', 'read_input')
 
 # The scripts (floor 9) and the published override module (floor 8, re-exports the physics for user files).
 SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', 'multi_bodies.advise',
@@ -30,7 +30,9 @@ SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', '
            'sphere.make_mobility_table', 'multi_bodies.analyse'}
 # The published import paths that users' files and drivers import: thin faces over the package, on the top
 # floor of their room (floor 8), never imported by the package itself.
-PUBLISHED_FACES = {'quaternion_integrator.quaternion'}
+PUBLISHED_FACES = {'quaternion_integrator.quaternion', 'mobility.mobility', 'general_application_utils',
+                   'read_input', 'read_input.read_input', 'read_input.read_vertex_file', 'read_input.read_clones_file',
+                   'read_input.read_slip_file'}
 TOP_LEVEL_ALLOWED = {'__init__', 'multi_bodies_functions'} | {s.split('.', 1)[1] for s in SCRIPTS
                                                                if s.startswith('multi_bodies.')}
 
@@ -55,7 +57,7 @@ def floor(module):
 
 def package_modules():
     """Dotted name -> path of every Python file of the package (tests, benchmarks and doc charts excluded)."""
-    modules = {'utils': REPO / 'utils.py'}
+    modules = {'utils': REPO / 'utils.py', 'general_application_utils': REPO / 'general_application_utils.py'}
     for package in PACKAGES:
         for path in (REPO / package).rglob('*.py'):
             if 'examples' in path.parts or 'Structures' in path.parts:
