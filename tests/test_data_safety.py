@@ -473,7 +473,8 @@ def test_const_expressions_have_a_size_and_depth_limit(tmp_path, expression, wor
 # Law: a deterministic program given the same state and inputs writes the same bytes, so a restart from step 6 of a
 # 12-step run either writes the uninterrupted run's step 12 exactly or is refused; an input that changes the
 # trajectory must be refused with the change named.
-NEUTRAL_REFUSED = {'output_name': 'other.a.00000006.clones, which does not exist'}  # another name: no step 6
+NEUTRAL_REFUSED = {'output_name': 'other.a.00000006.clones, which does not exist',  # another name: no step 6
+                   'call_HydroGrid': 'call_HydroGrid needs a periodic box'}  # refused as input: this scene has none
 
 
 def changed_value(name, option, value):

@@ -211,11 +211,13 @@ OPTION_TABLE = {
     'save_velocities': _option('bool', False, (), dynamics=False),
     'save_vtk': _option('bool', False, ('dynamic',), dynamics=False),
     # the published HydroGrid options, computed by the package (multi_bodies/analysis/hydrogrid.py, doc/analysis.md)
-    'call_HydroGrid': _option('bool', False, ('dynamic',)),
-    'sample_HydroGrid': _option('int', 1, ('dynamic',), Range(1, fix='sample every sample_HydroGrid steps')),
-    'save_HydroGrid': _option('int', 0, ('dynamic',), Range(0, fix='0 averages over the whole run')),
-    'cells': _option('ints2', (1, 1), ('dynamic',)),  # two ints >= 1, checked by analysis.hydrogrid
-    'green_particles': _option('ints2', (0, 0), ('dynamic',)),  # 0 <= i0 <= i1, checked by analysis.hydrogrid
+    'call_HydroGrid': _option('bool', False, ('dynamic',), dynamics=False),
+    'sample_HydroGrid': _option('int', 1, ('dynamic',), Range(1, fix='sample every sample_HydroGrid steps'),
+                                dynamics=False),
+    'save_HydroGrid': _option('int', 0, ('dynamic',), Range(0, fix='0 averages over the whole run'),
+                              dynamics=False),
+    'cells': _option('ints2', (1, 1), ('dynamic',), dynamics=False),  # two ints >= 1, checked by analysis.hydrogrid
+    'green_particles': _option('ints2', (0, 0), ('dynamic',), dynamics=False),  # 0 <= i0 <= i1, checked by analysis.hydrogrid
     'slip_file': _option('optional_str', None, (), dynamics=False),
     # phoretic bodies (.Laplace third files, doc/phoretic.md): background c_bg = b0 + G.x + x^T H x, D
     'background_Laplace': _option('floats9', (), SD),
