@@ -10,6 +10,9 @@
 * The boomerang of the manual: an apex at the origin and two straight arms
   along +x and +y with equally spaced blobs (15 blobs, spacing 0.3).
 * A straight rod of equally spaced blobs along x, centred at the origin.
+* The ``.Laplace`` file of a Janus sphere (reaction rate, emitting rate and
+  surface mobility per hemisphere) and the ``.slip_length`` file of a sphere
+  of uniform slip length, for a given ``.vertex`` file (doc/phoretic.md).
 * A single blob at the origin (the body of the roller schemes), and
   ``.clones`` files of bodies on a square lattice at one height, all with the
   identity orientation.
@@ -22,6 +25,8 @@ importable)::
     python -m multi_bodies.files.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators blob --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators janus-laplace --vertex multi_bodies/Structures/shell_N_42_Rg_0_8912_Rh_1.vertex --emitting-front 1 --emitting-back 0 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators slip-length --vertex multi_bodies/Structures/shell_N_162_Rg_0_9497_Rh_1.vertex --slip-length 1000 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators lattice --nx 2 --ny 2 --spacing 5 --height 1 --name four_rollers --output multi_bodies/Structures
 
 Each command prints the file it wrote and the blob radius to use with it.
@@ -180,6 +185,65 @@ def squirmer_slip(blobs, B1=1.0, beta=0.0, axis=(1.0, 0.0, 0.0)):
     return (B1 * (1.0 + beta * cos_t))[:, None] * (cos_t[:, None] * n - e)
 
 
+def _surface_normals_and_weights(blobs, weight_radius):
+    """Normals ``r / |r_0|`` (n, 3) (unit only when every blob lies on one sphere about the origin, as
+    published) and weights ``4 pi R_w^2 / n`` (n,) of body-frame blobs (n, 3)."""
+    blobs = np.asarray(blobs, dtype=float).reshape(-1, 3)
+    normals = blobs / np.linalg.norm(blobs[0])
+    return normals, np.full(blobs.shape[0], 4.0 * np.pi * weight_radius ** 2 / blobs.shape[0])
+
+
+def janus_laplace_table(blobs, front=(5.0, 0.0, 5.0), back=(5.0, 0.0, 5.0), weight_radius=1.0):
+    """The ``.Laplace`` table (n, 7) of a Janus sphere: ``n k alpha mu w`` per blob (doc/phoretic.md).
+
+    front, back : (reaction rate k, emitting rate alpha, surface mobility mu) of the blobs with body-frame
+    z > 0 and z < 0; blobs at z = 0 get the average.  Normals and weights as
+    :func:`_surface_normals_and_weights` (the published create_laplace_file_janus_sphere.py; its defaults).
+    """
+    blobs = np.asarray(blobs, dtype=float).reshape(-1, 3)
+    normals, weights = _surface_normals_and_weights(blobs, weight_radius)
+    front, back = np.asarray(front, dtype=float), np.asarray(back, dtype=float)
+    values = np.where(blobs[:, 2:3] > 0, front, np.where(blobs[:, 2:3] < 0, back, 0.5 * (front + back)))
+    return np.column_stack((normals, values, weights))
+
+
+def slip_length_table(blobs, slip_length, weight_radius=1.0):
+    """The ``.slip_length`` table (n, 5) of a sphere of uniform slip length: ``n l w`` per blob (doc/phoretic.md).
+
+    Normals and weights as :func:`_surface_normals_and_weights` (the published create_slip_length_file.py).
+    """
+    normals, weights = _surface_normals_and_weights(blobs, weight_radius)
+    return np.column_stack((normals, np.full(weights.size, float(slip_length)), weights))
+
+
+def write_surface_table(path, table, header):
+    """Write a ``.Laplace`` or ``.slip_length`` table with a ``#`` header line (full double precision)."""
+    np.savetxt(path, table, header=header, fmt='%.18e')
+
+
+def _surface_main(args, command):
+    """The ``janus-laplace`` and ``slip-length`` commands: the file next to ``--output``; returns its path."""
+    from multi_bodies.files.structure_files import read_vertex_file
+    blobs = read_vertex_file(args.vertex)
+    stem = os.path.splitext(os.path.basename(args.vertex))[0]
+    os.makedirs(args.output, exist_ok=True)
+    if args.kind == 'janus-laplace':
+        front = (args.reaction_front, args.emitting_front, args.mobility_front)
+        back = (args.reaction_back, args.emitting_back, args.mobility_back)
+        table = janus_laplace_table(blobs, front, back, args.weight_radius)
+        suffix = ''.join('_janus_%s' % name for name, f, b in zip(('k', 'alpha', 'M'), front, back) if f != b)
+        path = os.path.join(args.output, stem + suffix + '.Laplace')
+        header = 'Columns: normals, reaction rate, emitting rate, surface mobility, weights (made by: %s)' % command
+    else:
+        table = slip_length_table(blobs, args.slip_length, args.weight_radius)
+        path = os.path.join(args.output, '%s_slip_length_%s.slip_length' % (stem, ('%g' % args.slip_length)
+                                                                             .replace('.', '_')))
+        header = 'Columns: normals, slip length, weights (made by: %s)' % command
+    write_surface_table(path, table, header)
+    print('wrote %s (%d blobs)' % (path, table.shape[0]))
+    return path
+
+
 def _format_number(value):
     return ('%.4f' % value).replace('.', '_')
 
@@ -209,11 +273,23 @@ def main(argv=None):
     p_lattice.add_argument('--spacing', type=float, required=True, help='distance between neighbours')
     p_lattice.add_argument('--height', type=float, required=True, help='z of every body location')
     p_lattice.add_argument('--name', required=True, help='file name without .clones')
-    for p in (p_shell, p_boom, p_rod, p_slip, p_blob, p_lattice):
+    p_janus = sub.add_parser('janus-laplace', help='.Laplace file of a Janus sphere (per-hemisphere k, alpha, mu)')
+    p_length = sub.add_parser('slip-length', help='.slip_length file of a sphere of uniform slip length')
+    for p in (p_janus, p_length):
+        p.add_argument('--vertex', required=True, help='the .vertex file of the sphere (blobs about the origin)')
+        p.add_argument('--weight-radius', type=float, default=1.0, help='weights 4 pi R^2 / n (default 1)')
+    for half in ('front', 'back'):
+        p_janus.add_argument('--reaction-%s' % half, type=float, default=5.0, help='k of z %s 0' % '><'[half == 'back'])
+        p_janus.add_argument('--emitting-%s' % half, type=float, default=0.0, help='alpha of that hemisphere')
+        p_janus.add_argument('--mobility-%s' % half, type=float, default=5.0, help='mu of that hemisphere')
+    p_length.add_argument('--slip-length', type=float, required=True, help='the slip length l >= 0')
+    for p in (p_shell, p_boom, p_rod, p_slip, p_blob, p_lattice, p_janus, p_length):
         p.add_argument('--output', default='.', help='folder for the file (default: .)')
     args = parser.parse_args(argv)
 
     command = 'python -m multi_bodies.files.structure_generators ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    if args.kind in ('janus-laplace', 'slip-length'):
+        return _surface_main(args, command)
     if args.kind == 'lattice':
         if args.nx < 1 or args.ny < 1:
             parser.error('--nx and --ny must be positive')

@@ -13,6 +13,8 @@ the published reader (``numpy.loadtxt``) takes them; there is no count line.
 Every mistake is a ``utils.UserInputError`` naming the file, the line and the
 structure line that named the file.
 """
+import os
+
 import numpy as np
 
 from multi_bodies.files.structure_files import _check_extra_columns, _meaningful_lines, _parse_row
@@ -35,6 +37,8 @@ def _read_table(path, kind, columns, expected, num_blobs, vertex_file, reference
 
 def read_laplace_file(path, num_blobs, vertex_file, referenced_from=None):
     """The ``.Laplace`` table of one structure, shape (num_blobs, 7) (columns as the module docstring)."""
+    _hint_if_missing(path, vertex_file, referenced_from, 'janus-laplace --vertex %s' % vertex_file,
+                     'the published Laplace_sphere folder does not ship its .Laplace file')
     table = _read_table(path, 'Laplace', 7, LAPLACE_COLUMNS, num_blobs, vertex_file, referenced_from)
     _check_weights(path, table[:, 6], referenced_from)
     return table
@@ -42,6 +46,7 @@ def read_laplace_file(path, num_blobs, vertex_file, referenced_from=None):
 
 def read_slip_length_file(path, num_blobs, vertex_file, referenced_from=None):
     """The ``.slip_length`` table of one structure, shape (num_blobs, 5) (columns as the module docstring)."""
+    _hint_if_missing(path, vertex_file, referenced_from, 'slip-length --vertex %s --slip-length L' % vertex_file, '')
     table = _read_table(path, 'slip_length', 5, SLIP_LENGTH_COLUMNS, num_blobs, vertex_file, referenced_from)
     negative = np.flatnonzero(table[:, 3] < 0)
     if negative.size:
@@ -49,6 +54,16 @@ def read_slip_length_file(path, num_blobs, vertex_file, referenced_from=None):
                              % (path, negative[0] + 1, table[negative[0], 3]))
     _check_weights(path, table[:, 4], referenced_from)
     return table
+
+
+def _hint_if_missing(path, vertex_file, referenced_from, command, note):
+    """A missing surface file: the error names the generator command that writes one (doc/phoretic.md)."""
+    if os.path.isfile(path):
+        return
+    raise UserInputError("%s file '%s' not found (named in %s)%s; write one with: python -m "
+                         "multi_bodies.files.structure_generators %s --output %s"
+                         % (os.path.splitext(path)[1][1:], path, referenced_from, ' (%s)' % note if note else '',
+                            command, os.path.dirname(path) or '.'))
 
 
 def _check_weights(path, weights, referenced_from):

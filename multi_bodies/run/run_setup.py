@@ -219,11 +219,14 @@ def array_runs(bodies):
 
 
 def write_articulated_copies(options):
-    """Copies of the ``.list_vertex`` and ``.const`` files of every articulated line (``output_name.<file name>``)."""
+    """Copies of the ``.list_vertex`` and ``.const`` files of every articulated line, and of the ``.Laplace`` and
+    ``.slip_length`` files of every structure line, as published (``output_name.<file name>``)."""
     import shutil
-    for spec in options.articulated:
-        for path in (spec.list_vertex_file, spec.const_file):
-            shutil.copyfile(path, '%s.%s' % (options.output_name, os.path.basename(path)))
+    paths = [path for spec in options.articulated for path in (spec.list_vertex_file, spec.const_file)]
+    paths += [path for spec in all_structure_specs(options) for path in (spec.laplace_file, spec.slip_length_file)
+              if path]
+    for path in paths:
+        shutil.copyfile(path, '%s.%s' % (options.output_name, os.path.basename(path)))
 
 
 def _is_default_helper(function, name):

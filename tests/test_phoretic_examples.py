@@ -1,0 +1,94 @@
+"""The published phoretic and slip-length example folders (Laplace_sphere, chiral_phoretic_particle, FreeSlip) run
+unchanged with this package's multi_bodies.py, their trajectories equal to the published ones; their missing files
+get a clear message; the generators write the published .Laplace and .slip_length files (doc/phoretic.md)."""
+import importlib.util
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import REPO_ROOT
+from multi_bodies.files.snapshots import read_config_series
+from multi_bodies.files import structure_generators
+
+PUBLISHED = 'published_2025/phoretic/multi_bodies'
+SCRIPT = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
+RUNS = {  # folder: (input file, the published .config it wrote)
+    'Laplace_sphere': ('inputfile.dat', 'run.shell.config'),
+    'chiral_phoretic_particle': ('inputfile_chiral_phoretic_particle.dat',
+                                 'data/run_chiral_phoretic_particle.two_sprinklers.config'),
+    'FreeSlip': ('inputfile.dat', 'run.blob.config'),
+}
+
+
+@pytest.fixture
+def published_copy(reference_dir, tmp_path):
+    """A copy of the published tree (inputs, structures, user files; none of the published outputs)."""
+    source = reference_dir / PUBLISHED
+    target = tmp_path / 'multi_bodies'
+    shutil.copytree(source, target, ignore=shutil.ignore_patterns('run.*', 'run_*', 'probe_*.py'))
+    return target
+
+
+def _run(folder, input_name):
+    return subprocess.run([sys.executable, SCRIPT, '--input-file', input_name], cwd=folder, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.mark.parametrize('name', sorted(RUNS))
+def test_published_folder_runs_unchanged(reference_dir, published_copy, name):
+    folder = published_copy / 'examples' / name
+    input_name, config = RUNS[name]
+    if name == 'chiral_phoretic_particle':
+        shutil.rmtree(folder / 'data', ignore_errors=True)  # the published folder has no data/ folder
+    if name == 'FreeSlip' and importlib.util.find_spec('numexpr') is None:
+        # its user_defined_functions.py imports numexpr (unused, and its slip function returns zero)
+        result = _run(folder, input_name)
+        assert result.returncode == 2 and 'imports numexpr' in result.stderr + result.stdout
+        (folder / 'user_defined_functions.py').unlink()
+    result = _run(folder, input_name)
+    assert result.returncode == 0, result.stdout + result.stderr
+    ours = read_config_series(str(folder / config))
+    published = read_config_series(str(reference_dir / PUBLISHED / 'examples' / name / config))
+    for mine, theirs in zip(ours, published):  # locations (S, Nb, 3), then quaternions (S, Nb, 4)
+        assert mine.shape == theirs.shape
+        # the changes over the run against the published ones (measured: 1e-12 relative or better)
+        moved, moved_published = mine[-1] - mine[0], theirs[-1] - theirs[0]
+        scale = max(np.max(np.abs(moved_published)), 1e-6)
+        assert np.max(np.abs(moved - moved_published)) < 1e-8 * scale + 1e-13, (moved, moved_published)
+        np.testing.assert_array_equal(mine[0], theirs[0])
+    for third in ('shell_N_42_Rg_0_8913_Rh_1.Laplace',) if name == 'Laplace_sphere' else ():
+        assert (folder / ('run.' + third)).is_file()  # the copy of the third file, as published
+
+
+def test_missing_published_files_get_a_clear_message(published_copy):
+    folder = published_copy / 'examples' / 'Laplace_sphere'
+    (published_copy / 'Structures' / 'shell_N_42_Rg_0_8913_Rh_1.Laplace').unlink()
+    result = _run(folder, 'inputfile.dat')
+    assert result.returncode == 2 and 'Traceback' not in result.stderr
+    assert 'structure_generators janus-laplace --vertex ../../Structures/shell_N_42_Rg_0_8913_Rh_1.vertex' \
+        in result.stderr, result.stderr
+    (published_copy / 'Structures' / 'shell.clones').unlink()
+    result = _run(folder, 'inputfile.dat')
+    assert result.returncode == 2 and "clones file '../../Structures/shell.clones' not found" in result.stderr
+
+
+def test_generators_write_the_published_files(reference_dir, tmp_path):
+    """The Janus-sphere and slip-length generators give the files the published generators made (same numbers)."""
+    structures = reference_dir / PUBLISHED / 'Structures'
+    path = structure_generators.main(['janus-laplace', '--vertex', str(structures / 'shell_N_42_Rg_0_8913_Rh_1.vertex'),
+                                      '--output', str(tmp_path)])
+    np.testing.assert_array_equal(np.loadtxt(path), np.loadtxt(structures / 'shell_N_42_Rg_0_8913_Rh_1.Laplace'))
+    path = structure_generators.main(['slip-length', '--vertex', str(structures / 'shell_N_162_Rg_1_Rh_1_0530.vertex'),
+                                      '--slip-length', '1000', '--output', str(tmp_path)])
+    np.testing.assert_array_equal(np.loadtxt(path),
+                                  np.loadtxt(structures / 'shell_N_162_Rg_1_slip_length_1e+03.slip_length'))
+    # a Janus sphere: the two hemispheres differ, the equator takes the average, and the name says what differs
+    path = structure_generators.main(['janus-laplace', '--vertex', str(structures / 'shell_N_42_Rg_0_8913_Rh_1.vertex'),
+                                      '--emitting-front', '1', '--emitting-back', '0', '--output', str(tmp_path)])
+    assert path.endswith('_janus_alpha.Laplace')
+    table, blobs = np.loadtxt(path), np.loadtxt(structures / 'shell_N_42_Rg_0_8913_Rh_1.vertex', skiprows=1)
+    expected = np.where(blobs[:, 2] > 0, 1.0, np.where(blobs[:, 2] < 0, 0.0, 0.5))
+    np.testing.assert_array_equal(table[:, 4], expected)
