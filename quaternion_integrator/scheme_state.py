@@ -23,7 +23,7 @@ from body.body import Configuration
 from multi_bodies.solver.counters import Counters
 
 # The history fields (saved in restart records, SPEC decision 11).
-HISTORY_FIELDS = ('first_guess', 'roller_torque_guess', 'previous_velocities')
+HISTORY_FIELDS = ('first_guess', 'roller_torque_guess', 'previous_velocities', 'concentration_guess')
 
 
 def _copy(array):
@@ -41,6 +41,7 @@ class RunState:
     roller_torque_guess : (3N,) or None, normalised torque of the last prescribed-spin roller solve
     previous_velocities : (Nb, 6) / (N, 3) or None, the deterministic velocities of the last accepted step
         (Adams-Bashforth schemes)
+    concentration_guess : (N,) or None, normalised blob concentrations of the last solute solve (phoretic bodies)
     preconditioner_step : int or None, the step at which the preconditioner of the stochastic schemes
         was built; preconditioner_configuration : the Configuration it was built at
     preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
@@ -53,6 +54,7 @@ class RunState:
     first_guess: Optional[np.ndarray] = None
     roller_torque_guess: Optional[np.ndarray] = None
     previous_velocities: Optional[np.ndarray] = None
+    concentration_guess: Optional[np.ndarray] = None
     preconditioner_step: Optional[int] = None
     preconditioner_configuration: Optional[Configuration] = None
     preconditioner: Any = None
@@ -97,6 +99,7 @@ class StepWork:
         self.first_guess = state.first_guess
         self.roller_torque_guess = state.roller_torque_guess
         self.previous_velocities = state.previous_velocities
+        self.concentration_guess = state.concentration_guess
         self.pending_previous = None
         self.preconditioner_step = state.preconditioner_step
         self.preconditioner_configuration = state.preconditioner_configuration
@@ -138,9 +141,21 @@ class StepWork:
 
     def deterministic_velocities(self, configuration, preconditioner=None, x0=None):
         """``model.deterministic_velocities``, counted."""
-        result = self.model.deterministic_velocities(configuration, preconditioner=preconditioner, x0=x0)
+        result = self.model.deterministic_velocities(configuration, preconditioner=preconditioner, x0=x0,
+                                                     solute=self.solute(configuration))
         self.record_solve(result)
         return result
+
+    def solute(self, configuration):
+        """Phoretic runs: the concentration solve at ``configuration`` warm started from (and into)
+        ``concentration_guess`` (``multi_bodies.solver.surface``); None for other runs."""
+        from multi_bodies.solver.surface import warm_solute
+        solved, self.concentration_guess = warm_solute(self.model, configuration, self.concentration_guess)
+        return solved
+
+    def forces_and_slip(self, configuration):
+        """``model.forces_and_slip`` with the warm-started solute (phoretic runs)."""
+        return self.model.forces_and_slip(configuration, self.solute(configuration))
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
         """``model.lanczos_noise(...).noise`` (3N,), counted."""
@@ -181,6 +196,7 @@ class StepWork:
                        counters=start.counters.plus(**self.increments),
                        first_guess=self.first_guess, roller_torque_guess=self.roller_torque_guess,
                        previous_velocities=self.previous_velocities,
+                       concentration_guess=self.concentration_guess,
                        preconditioner_step=self.preconditioner_step,
                        preconditioner_configuration=self.preconditioner_configuration,
                        preconditioner=self.preconditioner, velocities=velocities,

@@ -297,8 +297,11 @@ class Model:
                 configuration.locations, configuration.orientations, **self.physics)).reshape(-1, 6)
         return force_torque
 
-    def slip(self, configuration):
+    def slip(self, configuration, solute=None):
         """Active slip of every blob in the lab frame at ``configuration``, shape (N, 3).
+
+        With phoretic bodies the slip of the solute field is added (``solute``: the (problem, SolveResult) of
+        ``surface.solve_concentrations`` at ``configuration``, warm started by the step; None solves it here).
 
         Bodies with the default slip use the vectorised rotation of the
         reference slip; a body whose ``function_slip`` was set by the user's
@@ -307,7 +310,7 @@ class Model:
         """
         slip = self.arrays.lab_frame_slip(configuration)
         if self.surface is not None and self.surface.phoretic is not None:  # the solute's active slip
-            slip = slip + self.surface.phoretic_slip(self, configuration)
+            slip = slip + self.surface.phoretic_slip(self, configuration, solute)
         if not self.slip_functions:
             return slip
         bodies = self.bodies_at(configuration)
@@ -321,11 +324,11 @@ class Model:
                 'the lab-frame slip of the %d blobs of body %d (%s)' % (body.Nblobs, k, body.ID))
         return slip
 
-    def forces_and_slip(self, configuration):
+    def forces_and_slip(self, configuration, solute=None):
         """(r_vectors (N, 3), force_torque (Nb, 6), slip (N, 3)) at ``configuration``, checked finite."""
         r_vectors = self.blob_positions(configuration)
         force_torque = self.forces_torques(configuration, r_vectors)
-        slip = self.slip(configuration) if self.has_slip else np.zeros_like(r_vectors)
+        slip = self.slip(configuration, solute) if self.has_slip else np.zeros_like(r_vectors)
         check_finite(force_torque, 'forces and torques')
         check_finite(slip, 'slip')
         return r_vectors, force_torque, slip
@@ -417,14 +420,14 @@ class Model:
         return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.blob_mobility_matrix,
                                           self.eta, self.blob_radius, inverse=inverse)
 
-    def deterministic_velocities(self, configuration, preconditioner=None, x0=None):
+    def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None):
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
 
         preconditioner : one built at ``configuration`` when None (the deterministic schemes rebuild it
         every step, as the published code does); x0 : normalised first guess.
         Returns body_solver.SolveResult (``velocities`` (Nb, 6), ``normalised_solution`` for the next guess).
         """
-        _, force_torque, slip = self.forces_and_slip(configuration)
+        _, force_torque, slip = self.forces_and_slip(configuration, solute)
         problem = self.mobility_problem(configuration)
         if preconditioner is None:
             preconditioner = self.build_preconditioner(configuration)

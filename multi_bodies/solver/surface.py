@@ -60,9 +60,10 @@ class Surface:
                              what='the concentration (Laplace) problem')
         return problem, result
 
-    def phoretic_slip(self, model, configuration):
-        """Active slip (N, 3) of the solute field at ``configuration``."""
-        problem, result = self.solve_concentrations(model, configuration)
+    def phoretic_slip(self, model, configuration, solved=None):
+        """Active slip (N, 3) of the solute field at ``configuration``; ``solved``: the (problem, SolveResult) of
+        :meth:`solve_concentrations` there (None: solved here from zero)."""
+        problem, result = self.solve_concentrations(model, configuration) if solved is None else solved
         return self.phoretic.slip(problem, result.constraint_force_torque)
 
     def slip_length_problem(self, model, configuration):
@@ -74,6 +75,17 @@ class Surface:
         return slip_length.SlipLengthPreconditioner(model.arrays, configuration, model.stacked_mobility, model.eta,
                                                     model.blob_radius, self.slip_normals, self.slip_lengths,
                                                     self.slip_weights)
+
+
+def warm_solute(model, configuration, guess):
+    """(solved, next guess) of a step: ``solved`` the (problem, SolveResult) of the concentrations at
+    ``configuration`` started from the normalised ``guess`` (N,) or None, or None when the model has no phoretic
+    bodies (then the guess is returned unchanged)."""
+    surface = model.surface
+    if surface is None or surface.phoretic is None:
+        return None, guess
+    problem, result = surface.solve_concentrations(model, configuration, x0=guess)
+    return (problem, result), (guess if result.normalised_solution is None else result.normalised_solution)
 
 
 def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic_wall):
