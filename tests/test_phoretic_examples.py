@@ -92,3 +92,28 @@ def test_generators_write_the_published_files(reference_dir, tmp_path):
     table, blobs = np.loadtxt(path), np.loadtxt(structures / 'shell_N_42_Rg_0_8913_Rh_1.vertex', skiprows=1)
     expected = np.where(blobs[:, 2] > 0, 1.0, np.where(blobs[:, 2] < 0, 0.0, 0.5))
     np.testing.assert_array_equal(table[:, 4], expected)
+
+
+def test_concentration_and_vtk_outputs(reference_dir, published_copy):
+    """``save_concentration`` writes the blob concentrations and slip of every saved step (step 0: the published
+    probe's), ``save_vtk`` adds them to the blob files as point data; without .Laplace files the option is refused."""
+    from multi_bodies.run.concentration_output import read_concentration_file
+    folder = published_copy / 'examples' / 'chiral_phoretic_particle'
+    text = (folder / 'inputfile_chiral_phoretic_particle.dat').read_text()
+    (folder / 'in.dat').write_text(text + '\nsave_concentration True\nsave_vtk True\nn_steps 2\n')
+    result = _run(folder, 'in.dat')
+    assert result.returncode == 0, result.stderr
+    blocks = read_concentration_file(str(folder / 'data/run_chiral_phoretic_particle.concentration'))
+    assert blocks.shape == (3, 144, 7)
+    probe = np.load(reference_dir / PUBLISHED / 'examples/chiral_phoretic_particle/data/'
+                                                'run_chiral_phoretic_particle.probe.npz')
+    np.testing.assert_array_equal(blocks[0, :, :3], probe['step0_r_vectors'])
+    assert np.max(np.abs(blocks[0, :, 3] - probe['step0_c'])) < 1e-10 * np.max(np.abs(probe['step0_c']))
+    assert np.max(np.abs(blocks[0, :, 4:] - probe['step0_slip'])) < 1e-10 * np.max(np.abs(probe['step0_slip']))
+    assert not np.array_equal(blocks[2, :, :3], blocks[0, :, :3])  # the later blocks are at the later steps
+    vtp = sorted((folder / 'data').glob('*blobs*.vtp'))
+    assert vtp and 'Name="concentration"' in vtp[0].read_text(errors='replace')
+    folder = published_copy / 'examples' / 'FreeSlip'
+    (folder / 'in.dat').write_text((folder / 'inputfile.dat').read_text() + '\nsave_concentration True\n')
+    result = _run(folder, 'in.dat')
+    assert result.returncode == 2 and 'save_concentration' in result.stderr and 'no structure line' in result.stderr

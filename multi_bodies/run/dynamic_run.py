@@ -123,6 +123,9 @@ class DynamicRun:
         if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
             from multi_bodies.run.vtk_output import AlsoWriteVtk
             writer = AlsoWriteVtk(writer, options, self.types, model)
+        if options.save_concentration:  # phoretic runs: output_name.concentration (doc/phoretic.md)
+            from multi_bodies.run.concentration_output import AlsoWriteConcentration
+            writer = AlsoWriteConcentration(writer, options, model)
         if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
             from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
             writer = AlsoSampleStructureFactors(writer, options, log=self.log)

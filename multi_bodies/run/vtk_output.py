@@ -162,7 +162,7 @@ def write_vtp(path, points, point_arrays):
     return path
 
 
-def blob_point_arrays(blob_radius, blob_body_index, blob_structure, blob_velocities=None, blob_slip=None):
+def blob_point_arrays(blob_radius, blob_body_index, blob_structure, blob_velocities=None, blob_slip=None, extra=()):
     """Point arrays of the blob file (see the module docstring).
 
     Parameters
@@ -172,6 +172,7 @@ def blob_point_arrays(blob_radius, blob_body_index, blob_structure, blob_velocit
     blob_structure : pair ``(structure_index (N,) int, StringArray of the structure IDs)``.
     blob_velocities : (N, 3) or None, blob velocities (length/time).
     blob_slip : (N, 3) or None, lab-frame active slip (length/time).
+    extra : more (name, values (N,) or (N, 3)) point arrays (the concentration of phoretic runs).
     """
     structure_index, structure_names = blob_structure
     count = np.asarray(blob_body_index).shape[0]
@@ -183,7 +184,7 @@ def blob_point_arrays(blob_radius, blob_body_index, blob_structure, blob_velocit
         arrays.append(('velocity', np.asarray(blob_velocities, dtype=float).reshape(-1, 3)))
     if blob_slip is not None:
         arrays.append(('slip', np.asarray(blob_slip, dtype=float).reshape(-1, 3)))
-    return arrays
+    return arrays + list(extra)
 
 
 def body_point_arrays(orientations, body_structure, body_velocities=None):
@@ -297,7 +298,7 @@ class VtkSeries:
         self._blob_structure = None
         self.collections = {kind: PvdCollection(collection_name(output_name, kind), keep) for kind in (BLOBS, BODIES)}
 
-    def write(self, step, body_arrays, configuration, body_velocities=None, blob_slip=None):
+    def write(self, step, body_arrays, configuration, body_velocities=None, blob_slip=None, blob_arrays=()):
         """Write the files of ``step``: bodies of ``body_arrays`` (a ``BodyArrays``) at ``configuration``.
 
         ``body_velocities``: (Nb, 6) or None.  ``blob_slip``: (N, 3) lab-frame
@@ -322,7 +323,7 @@ class VtkSeries:
             self._blob_structure = (blob_structure_index, StringArray(self.structure_names, blob_structure_index))
         radii = getattr(body_arrays, 'blob_radii', body_arrays.blob_radius)  # the radius of each blob
         files = ((BLOBS, r_vectors, blob_point_arrays(radii, blob_index, self._blob_structure,
-                                                      blob_velocities, blob_slip)),
+                                                      blob_velocities, blob_slip, blob_arrays)),
                  (BODIES, locations, body_point_arrays(configuration.orientations, self._body_structure,
                                                        body_velocities)))
         time = step_time(step, self.dt)
@@ -365,7 +366,9 @@ class AlsoWriteVtk:
         """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step`` at that configuration."""
         result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
         configuration = Configuration(locations, orientations)
-        self.series.write(step, self.system.arrays, configuration)
+        from multi_bodies.run.concentration_output import surface_point_data  # phoretic runs: c and slip
+        slip, extra = surface_point_data(self.system, configuration)
+        self.series.write(step, self.system.arrays, configuration, blob_slip=slip, blob_arrays=extra)
         if self.joints is not None:
             self.write_joints(step, configuration)
         return result
