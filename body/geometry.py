@@ -86,6 +86,17 @@ class Quaternion:
         angle = 2.0 * np.arctan2(sin_half, s)
         return angle * self.p / sin_half
 
+    def square_root(self):
+        """The principal square root ``r`` with ``r * r == q`` (published method, used by the chain examples'
+        force files): for a unit ``q`` the rotation about the same axis by half the angle,
+        ``(q + 1) / |q + 1|`` (scalar part >= 0); scaled by ``sqrt(|q|)`` otherwise.  ``q = -1`` (a turn
+        by 2 pi) has no principal root: the identity is returned, as for ``q = 1``."""
+        norm = float(np.linalg.norm(self.entries))
+        shifted = self.entries / norm + np.array([1.0, 0.0, 0.0, 0.0])
+        size = float(np.linalg.norm(shifted))
+        root = shifted / size if size > 0 else np.array([1.0, 0.0, 0.0, 0.0])
+        return Quaternion(np.sqrt(norm) * root)
+
     def normalized(self):
         """The same orientation with unit norm."""
         return Quaternion(self.entries / np.linalg.norm(self.entries))

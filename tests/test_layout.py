@@ -32,7 +32,7 @@ SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', '
 # floor of their room (floor 8), never imported by the package itself.
 PUBLISHED_FACES = {'quaternion_integrator.quaternion', 'mobility.mobility', 'general_application_utils',
                    'read_input', 'read_input.read_input', 'read_input.read_vertex_file', 'read_input.read_clones_file',
-                   'read_input.read_slip_file'}
+                   'read_input.read_slip_file', 'Lub_Solver'}
 TOP_LEVEL_ALLOWED = {'__init__', 'multi_bodies_functions'} | {s.split('.', 1)[1] for s in SCRIPTS
                                                                if s.startswith('multi_bodies.')}
 
@@ -57,7 +57,8 @@ def floor(module):
 
 def package_modules():
     """Dotted name -> path of every Python file of the package (tests, benchmarks and doc charts excluded)."""
-    modules = {'utils': REPO / 'utils.py', 'general_application_utils': REPO / 'general_application_utils.py'}
+    modules = {'utils': REPO / 'utils.py', 'general_application_utils': REPO / 'general_application_utils.py',
+               'Lub_Solver': REPO / 'Lub_Solver.py'}
     for package in PACKAGES:
         for path in (REPO / package).rglob('*.py'):
             if 'examples' in path.parts or 'Structures' in path.parts:
