@@ -58,7 +58,7 @@ class Lub_Solver:
         self.num_rejections_jump = 0
         self.Delta_R = self.R_Sup = self.R_MB = None
         self.counts = integrators.new_counts()
-        self.near_field_root = 'cholesky'
+        self.near_field_root = 'lanczos'
         self.implementation = None
 
     # -- configuration ---------------------------------------------------------------------------------------

@@ -81,7 +81,7 @@ class LubricationSettings(namedtuple('LubricationSettings', [
 
 def lubrication_settings(a, eta, wall=True, cutoff=assembly.DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0),
                          firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, handover='published',
-                         near_field_root='cholesky', rfd_delta=PUBLISHED_RFD_DELTA, rfd_scaled_by_a=False):
+                         near_field_root='lanczos', rfd_delta=PUBLISHED_RFD_DELTA, rfd_scaled_by_a=False):
     """Checked :class:`LubricationSettings` (UserInputError names the bad option)."""
     if near_field_root not in NEAR_FIELD_ROOTS:
         raise UserInputError('lubrication: near_field_root %r is not one of %s' % (near_field_root,
