@@ -203,14 +203,15 @@ def _noise(settings, problem, kT, dt, rng, tolerance, counts):
 
 
 def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8, omega=None,
-                     torque_cap=None, matrices=None):
+                     torque_cap=None, matrices=None, rfd=True):
     """One step of the published stochastic trapezoidal scheme (module note): a :data:`StepResult`.
 
     settings : :class:`lubrication.brownian.LubricationSettings`; locations (N, 3), orientations (N, 4);
     force_torque_at : callable (locations, orientations) -> (N, 6); kT, dt; rng (module note);
     omega, torque_cap : prescribed rotation (see :func:`torque_from_omega`; the torques are recomputed at
     the predictor's configuration for the corrector); matrices : the near-field matrices at ``locations``
-    if already built.
+    if already built; rfd : False leaves out the far-field drift term ``D_M`` (a negative control: the
+    equilibrium is then wrong).
     """
     counts = new_counts()
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
@@ -225,7 +226,7 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
     if settings.wall and np.any(mid_locations[:, 2] <= 0.0):
         return StepResult(locations, orientations, 1, 0, predictor, torques, counts)
     drift = np.zeros(problem.size)
-    if kT > 0:
+    if kT > 0 and rfd:
         drift = 2.0 * far_field_drift(settings, locations, rng.standard_normal(problem.size), kT).reshape(-1)
         counts['far_field_products'] += 2
     mid_problem = counted_problem(settings, mid_locations, counts)

@@ -8,6 +8,9 @@ Laws checked, each with a negative control that must fail the same test:
 * the mean of the random finite difference is ``kT div M_lub``, the divergence taken by central finite
   differences of the dense M_lub, at a configuration away from the formula hand-overs (r = 2.006 a,
   2.1 a, h = 1.1 a, the cutoff);
+* heights of spheres with their lubrication wall term keep the Gibbs-Boltzmann distribution under the
+  trapezoidal scheme, and the spheres move at the equilibrium rate (in-plane diffusion 4 kT <mu_par> tau);
+  without the corrector's far-field drift the heights leave it;
 * deterministic steps (kT = 0) equal Euler and Heun steps written with dense algebra; torques from
   ``torque_from_omega`` give the prescribed angular velocity through the dense M_lub.
 
@@ -198,3 +201,94 @@ def test_stochastic_steps_run_and_move_the_spheres():
         step = step_function(SETTINGS, THREE, orientations, gravity, 0.01, 1e-3, rng)
         assert step.rejected_wall == step.rejected_jump == 0
         assert 0 < np.abs(step.locations - THREE).max() < 0.1
+
+
+# ---------------------------------------------------------------- Gibbs-Boltzmann with lubrication
+# Scene of the package's other Gibbs-Boltzmann tests (tests/test_stochastic.py): a = 1, eta = 1/(6 pi) (mu0 = 1),
+# kT = 1, weight 2, soft wall eps = 2, b = 0.25; here every sphere also has its lubrication wall term.  Spheres
+# 25 a apart (no pair within the cutoff), started from an exact sample of the height density, so each
+# sphere's time-averaged height is an unbiased estimate of <z>; standard errors from the spread over spheres.
+GB_ETA, GB_KT, GB_WEIGHT, GB_EPS, GB_B = 1.0 / (6.0 * np.pi), 1.0, 2.0, 2.0, 0.25
+GB_GRID = np.linspace(1e-3, 25.0, 200001)
+
+
+def gb_density(z):
+    U = GB_WEIGHT * z + np.where(z < 1.0, GB_EPS + GB_EPS * (1.0 - z) / GB_B, GB_EPS * np.exp(-(z - 1.0) / GB_B))
+    return np.exp(-U / GB_KT)
+
+
+GB_CDF = np.cumsum(gb_density(GB_GRID))
+GB_CDF /= GB_CDF[-1]
+GB_MEAN = np.trapezoid(GB_GRID * gb_density(GB_GRID), GB_GRID) / np.trapezoid(gb_density(GB_GRID), GB_GRID)
+GB_EDGES = np.concatenate(([0.0], np.interp(np.arange(1, 8) / 8.0, GB_CDF, GB_GRID), [25.0]))  # 8 bins of 1/8
+GB_CHI2_LIMIT = 24.0  # sum of 8 squared bin z-scores: about chi^2 with 7 degrees of freedom, p = 0.001
+GB_WINDOW = 10
+
+
+def gb_forces(locations, orientations):
+    z = locations[:, 2]
+    force_torque = np.zeros((locations.shape[0], 6))
+    wall = np.where(z < 1.0, GB_EPS / GB_B, GB_EPS / GB_B * np.exp(-(z - 1.0) / GB_B))
+    force_torque[:, 2] = -GB_WEIGHT + wall
+    return force_torque
+
+
+def run_lubricated_heights(n_spheres, n_steps, dt, seed, rfd=True):
+    """Per-sphere mean heights (n,), bin fractions (n, 8) and in-plane window displacements (windows, n, 2)."""
+    rng = np.random.default_rng(seed)
+    side = int(np.ceil(np.sqrt(n_spheres)))
+    grid = np.array([(i, j) for i in range(side) for j in range(side)][:n_spheres], dtype=float) * 25.0
+    locations = np.column_stack((grid, np.interp(rng.random(n_spheres), GB_CDF, GB_GRID)))
+    orientations = np.tile([1.0, 0.0, 0.0, 0.0], (n_spheres, 1))
+    settings = brownian.lubrication_settings(1.0, GB_ETA)
+    heights, windows, start = [], [], locations[:, :2].copy()
+    for n in range(n_steps):
+        step = integrators.trapezoidal_step(settings, locations, orientations, gb_forces, GB_KT, dt, rng, 1e-6,
+                                            rfd=rfd)
+        assert step.rejected_wall == step.rejected_jump == 0
+        locations, orientations = step.locations, step.orientations
+        heights.append(locations[:, 2])
+        if (n + 1) % GB_WINDOW == 0:
+            windows.append(locations[:, :2] - start)
+            start = locations[:, :2].copy()
+    heights = np.array(heights)
+    bins = np.stack([np.mean((heights >= lo) & (heights < hi), axis=0) for lo, hi in zip(GB_EDGES[:-1],
+                                                                                          GB_EDGES[1:])], axis=1)
+    return heights.mean(axis=0), bins, np.array(windows)
+
+
+def mean_lubricated_parallel_mobility():
+    """<mu_par> of one sphere with its lubrication wall term over the exact height density (quadrature)."""
+    z = np.linspace(1.0 + 1e-3, 12.0, 600)
+    mu = np.array([dense_lubricated_mobility(SETTINGS_GB.problem([[0.0, 0.0, h]]))[0, 0] for h in z])
+    density = gb_density(z)
+    # heights below 1 + 1e-3 carry about 1e-3 of the weight and move by the clamped (tiny) mobility: left out
+    return np.trapezoid(mu * density, z) / np.trapezoid(gb_density(GB_GRID), GB_GRID)
+
+
+SETTINGS_GB = brownian.lubrication_settings(1.0, GB_ETA)
+
+
+def sphere_z_scores(z_means, bins):
+    def z(values, expected):
+        return (values.mean(axis=0) - expected) / (values.std(axis=0, ddof=1) / np.sqrt(values.shape[0]))
+    return z(z_means, GB_MEAN), z(bins, np.full(8, 1.0 / 8.0))
+
+
+@pytest.mark.slow
+def test_gibbs_boltzmann_heights_with_lubrication_and_a_wrong_equilibrium_without_the_drift():
+    z_means, bins, windows = run_lubricated_heights(150, 300, 0.01, seed=100)
+    mean_score, bin_scores = sphere_z_scores(z_means, bins)
+    assert abs(mean_score) < 4.0, (z_means.mean(), GB_MEAN, mean_score)
+    assert np.sum(bin_scores ** 2) < GB_CHI2_LIMIT, np.round(bin_scores, 2)
+    # the spheres move at the equilibrium rate: E|dx, dy|^2 = 4 kT <mu_par> tau over windows of tau
+    per_sphere = np.mean(np.sum(windows ** 2, axis=2), axis=0) / (4.0 * GB_WINDOW * 0.01)
+    expected = GB_KT * mean_lubricated_parallel_mobility()
+    motion = (per_sphere.mean() - expected) / (per_sphere.std(ddof=1) / np.sqrt(per_sphere.size))
+    assert abs(motion) < 4.0, (per_sphere.mean(), expected, motion)  # measured 0.68
+    wrong_kT = (per_sphere.mean() - 1.25 * expected) / (per_sphere.std(ddof=1) / np.sqrt(per_sphere.size))
+    assert abs(wrong_kT) > 4.0  # the motion check sees a 25 % wrong kT (measured -9.6)
+    # negative control: without the far-field drift term of the corrector the heights leave the equilibrium
+    z_means, bins, _ = run_lubricated_heights(150, 300, 0.01, seed=100, rfd=False)
+    mean_score, bin_scores = sphere_z_scores(z_means, bins)
+    assert abs(mean_score) > 4.0 or np.sum(bin_scores ** 2) > GB_CHI2_LIMIT  # measured chi^2 38 (6.0 with it)
