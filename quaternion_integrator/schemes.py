@@ -32,6 +32,7 @@ from quaternion_integrator.scheme_base import (InvalidConfiguration, Scheme, eul
 from quaternion_integrator.stochastic_schemes import RIGID_STOCHASTIC_SCHEME_CLASSES
 from quaternion_integrator.roller_schemes import ROLLER_SCHEME_CLASSES
 from quaternion_integrator.articulated_schemes import ARTICULATED_SCHEME_CLASSES
+from quaternion_integrator.lubrication_schemes import LUBRICATION_SCHEME_CLASSES
 from utils import UserInputError
 
 __all__ = ['InvalidConfiguration', 'make_scheme', 'SCHEMES', 'STOCHASTIC_SCHEMES', 'euler_update']
@@ -110,7 +111,8 @@ SCHEMES.update({cls.name: cls for cls in ARTICULATED_SCHEME_CLASSES})  # joints:
 
 def _all_schemes():
     schemes = dict(SCHEMES)
-    schemes.update({cls.name: cls for cls in RIGID_STOCHASTIC_SCHEME_CLASSES + ROLLER_SCHEME_CLASSES})
+    schemes.update({cls.name: cls for cls in RIGID_STOCHASTIC_SCHEME_CLASSES + ROLLER_SCHEME_CLASSES
+                    + LUBRICATION_SCHEME_CLASSES})  # lubrication: doc/lubrication.md
     return schemes
 
 
@@ -119,7 +121,7 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
-                      'stochastic_GDC_RFD')
+                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM')
 
 
 # Schemes that solve the mixed problem of bodies of prescribed kinematics (obstacles, velocity files).

@@ -1,0 +1,98 @@
+"""Lubrication schemes of ``multi_bodies.py`` (floor 5): spheres of one radius with the near-field
+corrections of :mod:`lubrication` (doc/lubrication.md).
+
+* ``lubrication_trapezoidal`` - the published stochastic trapezoidal predictor-corrector
+  (:func:`lubrication.integrators.trapezoidal_step`: same noise in predictor and corrector, far-field RFD
+  in the corrector; Heun's method at kT = 0);
+* ``lubrication_EM`` - Euler-Maruyama with the random finite difference of M_lub
+  (:func:`lubrication.integrators.euler_maruyama_step`).
+
+Every body must be one blob (a sphere of radius ``blob_radius``, e.g. a ``.vertex`` file with the single
+line ``0 0 0``), without slip.  Options: ``Lub_Cut`` (pair cutoff, units of a), ``firm_delta`` (gap clamp,
+units of a), ``repulsion_strength_firm`` (the examples' firm pair repulsion, added to the forces when
+not 0; :mod:`lubrication.firm_repulsion`), ``kT``, ``rf_delta`` (the RFD step, absolute as published),
+``solver_tolerance``; the wall or not from ``mobility_vector_prod_implementation`` (``*_no_wall``).
+Forces and torques are the run's (``multi_bodies_functions`` and the user's hooks).
+
+A step that would put a sphere below the wall or move one more than ``2a`` is rejected as published:
+the configuration stays, the step counts (the time advances), the rejection is counted in
+``invalid_configurations`` and printed; it is not retried.  Draws per step (kT > 0): the near-field W
+(6N), the far-field W (6N), the RFD direction (6N).
+"""
+import numpy as np
+
+from body.body import Configuration
+from lubrication import brownian, integrators
+from lubrication.firm_repulsion import firm_repulsion_forces
+from multi_bodies.files.input_options import options_with
+from quaternion_integrator.stochastic_schemes import StochasticScheme
+from utils import UserInputError
+
+
+class LubricationScheme(StochasticScheme):
+    """Common part of the lubrication schemes: settings from the model and the options, forces, counts."""
+    step_function = None
+
+    def __init__(self, dt, options=None):
+        super().__init__(dt, options)
+        options = options_with() if options is None else options
+        self.cutoff = float(options.Lub_Cut)
+        self.firm_delta = float(options.firm_delta)
+        self.firm_strength = float(options.repulsion_strength_firm)
+
+    def settings(self, work):
+        """:class:`lubrication.brownian.LubricationSettings` of the run (radius, viscosity, wall, box)."""
+        name = work.vector_product_name
+        return brownian.lubrication_settings(work.blob_radius, work.eta, wall=not name.endswith('_no_wall'),
+                                             cutoff=self.cutoff, periodic_length=work.periodic_length,
+                                             firm_delta=self.firm_delta, implementation=name,
+                                             rfd_delta=self.delta)
+
+    def check_spheres(self, work):
+        """UserInputError unless every body is one blob, all of radius ``blob_radius``, without slip."""
+        if work.num_blobs != work.num_bodies:
+            raise UserInputError('scheme %s: every body must be a single blob (a sphere; .vertex file with one '
+                                 'blob at 0 0 0); the structures have %d blobs for %d bodies'
+                                 % (self.name, work.num_blobs, work.num_bodies))
+        if work.has_slip:
+            raise UserInputError('scheme %s: the spheres cannot have slip (remove the .slip files and slip '
+                                 'functions)' % self.name)
+
+    def attempt(self, work, step_index, rng, old):
+        self.check_spheres(work)
+        settings = self.settings(work)
+
+        def force_torque_at(locations, orientations):
+            _, force_torque, _ = work.forces_and_slip(Configuration(locations, orientations))
+            force_torque = np.array(force_torque, dtype=float).reshape(-1, 6)
+            if self.firm_strength != 0:
+                force_torque[:, :3] += firm_repulsion_forces(locations, work.blob_radius, self.firm_strength,
+                                                             self.firm_delta, work.periodic_length)
+            return force_torque
+        step = type(self).step_function(settings, old.locations, old.orientations, force_torque_at, self.kT,
+                                        self.dt, rng, work.tolerance)
+        counts = step.counts
+        work.count(gmres_iterations=counts['gmres_iterations'], lanczos_iterations=counts['lanczos_iterations'])
+        work.last_iterations = counts['gmres_iterations']
+        if step.rejected_wall or step.rejected_jump:
+            work.count(invalid_configurations=1)
+            print('Rejected step %d (%s): %s; the configuration is kept (invalid configuration number %d)'
+                  % (step_index, self.name, 'a sphere below the wall' if step.rejected_wall
+                     else 'a sphere would move more than 2 blob_radius', work.total('invalid_configurations')))
+            return old, np.zeros((work.num_bodies, 6))
+        return Configuration(step.locations, step.orientations), step.velocities
+
+
+class LubricationTrapezoidal(LubricationScheme):
+    """The published stochastic trapezoidal predictor-corrector with lubrication (``Update_Bodies_Trap``)."""
+    name = 'lubrication_trapezoidal'
+    step_function = staticmethod(integrators.trapezoidal_step)
+
+
+class LubricationEulerMaruyama(LubricationScheme):
+    """Euler-Maruyama with lubrication and the random finite difference of M_lub."""
+    name = 'lubrication_EM'
+    step_function = staticmethod(integrators.euler_maruyama_step)
+
+
+LUBRICATION_SCHEME_CLASSES = (LubricationTrapezoidal, LubricationEulerMaruyama)
