@@ -127,9 +127,11 @@ def test_chain_example_with_its_own_input_runs_two_stochastic_steps(tmp_path):
     assert 0 < np.abs(frames[0, :, :3] - start[:, :3]).max() < 0.5
 
 
+@pytest.mark.slow
 def test_colloidal_sheets_runs_unchanged(tmp_path):
+    """520 spheres; one step takes about 9 s here, 8.5 s of it in the example's pure-Python pair forces."""
     folder = copy_example(tmp_path, 'Colloidal_Sheets')
-    shorten(folder, 'inputfile_suspension.dat', 2)
+    shorten(folder, 'inputfile_suspension.dat', 1)
     run_driver(folder, 'main_chain.py', 'inputfile_suspension.dat')
     outputs = list((folder / 'data').glob('*.config'))
     assert len(outputs) == 1 and read_config(outputs[0]).shape[0] == 1
