@@ -93,7 +93,8 @@ def finite_difference_divergence(mobility_at, locations, h=1e-4):
             step = np.zeros_like(locations)
             step[body, axis] = h
             column = 6 * body + axis
-            divergence += (mobility_at(locations + step)[:, column] - mobility_at(locations - step)[:, column]) / (2 * h)
+            plus, minus = mobility_at(locations + step), mobility_at(locations - step)
+            divergence += (plus[:, column] - minus[:, column]) / (2 * h)
     return divergence
 
 
