@@ -5,7 +5,12 @@ corrections of :mod:`lubrication` (doc/lubrication.md).
   (:func:`lubrication.integrators.trapezoidal_step`: same noise in predictor and corrector, far-field RFD
   in the corrector; Heun's method at kT = 0);
 * ``lubrication_EM`` - Euler-Maruyama with the random finite difference of M_lub
-  (:func:`lubrication.integrators.euler_maruyama_step`).
+  (:func:`lubrication.integrators.euler_maruyama_step`);
+* ``lubrication_trapezoidal_rollers`` - the trapezoidal scheme for rollers driven about
+  ``omega_one_roller``: with ``free_kinematics False`` every sphere spins at that rate (the torques of
+  :func:`lubrication.integrators.torque_from_omega`, recomputed at the predictor), with ``True`` every
+  sphere feels the torque ``8 pi eta a^3 omega_one_roller`` (as the package's roller schemes); the wall
+  or not from ``domain`` (``single_wall`` or ``no_wall``), as for the other roller schemes.
 
 Every body must be one blob (a sphere of radius ``blob_radius``, e.g. a ``.vertex`` file with the single
 line ``0 0 0``), without slip.  Options: ``Lub_Cut`` (pair cutoff, units of a), ``firm_delta`` (gap clamp,
@@ -40,10 +45,15 @@ class LubricationScheme(StochasticScheme):
         self.firm_delta = float(options.firm_delta)
         self.firm_strength = float(options.repulsion_strength_firm)
 
+    def wall_and_backend(self, work):
+        """(wall, far-field backend name) of the run: from ``mobility_vector_prod_implementation``."""
+        name = work.vector_product_name
+        return not name.endswith('_no_wall'), name
+
     def settings(self, work):
         """:class:`lubrication.brownian.LubricationSettings` of the run (radius, viscosity, wall, box)."""
-        name = work.vector_product_name
-        return brownian.lubrication_settings(work.blob_radius, work.eta, wall=not name.endswith('_no_wall'),
+        wall, name = self.wall_and_backend(work)
+        return brownian.lubrication_settings(work.blob_radius, work.eta, wall=wall,
                                              cutoff=self.cutoff, periodic_length=work.periodic_length,
                                              firm_delta=self.firm_delta, implementation=name,
                                              rfd_delta=self.delta)
@@ -68,9 +78,9 @@ class LubricationScheme(StochasticScheme):
             if self.firm_strength != 0:
                 force_torque[:, :3] += firm_repulsion_forces(locations, work.blob_radius, self.firm_strength,
                                                              self.firm_delta, work.periodic_length)
-            return force_torque
+            return self.add_torques(work, force_torque)
         step = type(self).step_function(settings, old.locations, old.orientations, force_torque_at, self.kT,
-                                        self.dt, rng, work.tolerance)
+                                        self.dt, rng, work.tolerance, **self.prescribed_rotation(work))
         counts = step.counts
         work.count(gmres_iterations=counts['gmres_iterations'], lanczos_iterations=counts['lanczos_iterations'])
         work.last_iterations = counts['gmres_iterations']
@@ -81,6 +91,15 @@ class LubricationScheme(StochasticScheme):
                      else 'a sphere would move more than 2 blob_radius', work.total('invalid_configurations')))
             return old, np.zeros((work.num_bodies, 6))
         return Configuration(step.locations, step.orientations), step.velocities
+
+
+    def add_torques(self, work, force_torque):
+        """Extra torques of the scheme (N, 6) -> (N, 6): none here."""
+        return force_torque
+
+    def prescribed_rotation(self, work):
+        """Keywords of the step function for a prescribed rotation rate: none here."""
+        return {}
 
 
 class LubricationTrapezoidal(LubricationScheme):
@@ -95,4 +114,29 @@ class LubricationEulerMaruyama(LubricationScheme):
     step_function = staticmethod(integrators.euler_maruyama_step)
 
 
-LUBRICATION_SCHEME_CLASSES = (LubricationTrapezoidal, LubricationEulerMaruyama)
+class LubricationTrapezoidalRollers(LubricationTrapezoidal):
+    """The trapezoidal scheme for rollers spun about ``omega_one_roller`` (see the module note)."""
+    name = 'lubrication_trapezoidal_rollers'
+
+    def wall_and_backend(self, work):
+        name = work.vector_product_name
+        base = name[:-len('_no_wall')] if name.endswith('_no_wall') else name
+        wall = work.domain != 'no_wall'
+        return wall, base + ('' if wall else '_no_wall')
+
+    def check_spheres(self, work):
+        super().check_spheres(work)
+        if work.domain not in ('single_wall', 'no_wall'):
+            raise UserInputError('scheme %s: domain %s is not available with lubrication; use single_wall or '
+                                 'no_wall' % (self.name, work.domain))
+
+    def add_torques(self, work, force_torque):
+        if work.free_kinematics:
+            force_torque[:, 3:] += 8.0 * np.pi * work.eta * work.blob_radius ** 3 * work.omega_one_roller
+        return force_torque
+
+    def prescribed_rotation(self, work):
+        return {} if work.free_kinematics else {'omega': np.array(work.omega_one_roller, dtype=float)}
+
+
+LUBRICATION_SCHEME_CLASSES = (LubricationTrapezoidal, LubricationEulerMaruyama, LubricationTrapezoidalRollers)

@@ -121,7 +121,8 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
-                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM')
+                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM',
+                      'lubrication_trapezoidal_rollers')
 
 
 # Schemes that solve the mixed problem of bodies of prescribed kinematics (obstacles, velocity files).

@@ -137,3 +137,37 @@ def test_firm_repulsion_is_minus_the_gradient_of_its_potential():
     forces = firm_repulsion_forces(locations, a, strength, firm_delta)
     np.testing.assert_allclose(forces, expected, rtol=1e-6, atol=1e-9)
     assert np.all(firm_repulsion_forces(locations, a, 0.0, firm_delta) == 0)
+
+
+def test_lubrication_rollers_spin_at_the_prescribed_rate(tmp_path):
+    """free_kinematics False: every sphere turns at omega_one_roller (torques solved for), so after n steps of
+    Heun (kT = 0) each orientation is the rotation by n dt omega about y (to the solver tolerance)."""
+    write_scene(tmp_path, scheme='lubrication_trapezoidal_rollers', omega_one_roller='0 3.0 0',
+                free_kinematics='False', domain='single_wall')
+    result = run(tmp_path)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert 'warning' not in result.stdout + result.stderr
+    trajectory = frames(tmp_path)
+    angle = 5 * 0.01 * 3.0
+    expected = np.array([np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0])
+    np.testing.assert_allclose(trajectory[-1, :, 3:], np.tile(expected, (3, 1)), atol=1e-8)
+    # rolling near the wall: the spheres move along +x
+    assert np.all(trajectory[-1, :, 0] - START[:, 0] > 0)
+
+
+def test_lubrication_rollers_with_a_constant_torque(tmp_path):
+    """free_kinematics True: the torque 8 pi eta a^3 omega per sphere; Heun with the dense M_lub."""
+    write_scene(tmp_path, scheme='lubrication_trapezoidal_rollers', omega_one_roller='0 3.0 0',
+                free_kinematics='True', g=0.0, n_steps=2)
+    result = run(tmp_path)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    torque = np.zeros((3, 6))
+    torque[:, 4] = 8.0 * np.pi * 3.0
+
+    def velocity(q):
+        return (dense_lubricated_mobility(lubrication.LubricationProblem(q, 1.0, 1.0)) @ torque.ravel()).reshape(3, 6)
+    q = START.copy()
+    for _ in range(2):
+        first = velocity(q)
+        q = q + 0.5 * 0.01 * (first + velocity(q + 0.01 * first[:, :3]))[:, :3]
+    np.testing.assert_allclose(frames(tmp_path)[-1, :, :3], q, rtol=0, atol=1e-9)
