@@ -220,7 +220,7 @@ def test_periodic_z_is_accepted_in_free_space():
 from multi_bodies.files import input_options as io_  # noqa: E402
 from multi_bodies.files.input_options import Choice, Range  # noqa: E402
 
-DOC_LETTERS = {'static': 'S', 'dynamic': 'D', 'stochastic': 'D', 'rollers': 'R', 'mcmc': 'M'}
+DOC_LETTERS = {'static': 'S', 'dynamic': 'D', 'stochastic': 'D', 'rollers': 'R', 'mcmc': 'M', 'lubrication': 'D'}
 
 
 def doc_rows():

@@ -31,7 +31,8 @@ from utils import UserInputError, read_text_file, warn_user
 #
 # Usage tags of ``used_by``: 'static' (multi_bodies_utilities.py), 'dynamic' (multi_bodies.py, every scheme),
 # 'stochastic' (the dynamic stochastic schemes only), 'rollers' (the dynamic roller schemes only), 'mcmc'
-# (many_bodyMCMC/many_body_MCMC.py).  An empty ``used_by``: read for compatibility, no effect.
+# (many_bodyMCMC/many_body_MCMC.py), 'lubrication' (the lubrication schemes only).  An empty ``used_by``: read for
+# compatibility, no effect.
 PROGRAMS = ('dynamic', 'static', 'mcmc')
 STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
 # Names of the dynamic schemes (quaternion_integrator.schemes holds the classes; tests/test_input.py checks
@@ -44,7 +45,8 @@ STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth'
                       'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
                       'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
                       'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
-                      'stochastic_GDC_RFD')
+                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM',
+                      'lubrication_trapezoidal_rollers')
 # Articulated bodies (doc/articulated.md; quaternion_integrator.articulated_schemes holds the classes).
 ARTICULATED_SCHEMES = ('articulated_deterministic_forward_euler', 'articulated_deterministic_midpoint',
                        'articulated_deterministic_forward_euler_rollers')
@@ -199,6 +201,11 @@ OPTION_TABLE = {
     'tilt_angle': _option('float', 0.0, SDM),
     # radius of a multiblob roller that the published Multi_Blob_Two_Rollers program hard-codes (1.0): a hook keyword
     'particle_radius': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the radius of one particle')),
+    # lubrication schemes only (doc/lubrication.md): pair cutoff and gap clamp in units of blob_radius, firm repulsion
+    'Lub_Cut': _option('float', 4.5, ('lubrication',), Range(2, low_open=True, fix='a centre distance in radii, '
+                                                                                  'e.g. 4.5')),
+    'firm_delta': _option('float', 1e-4, ('lubrication',), Range(0, 1, True, True, fix='a gap in radii, e.g. 1e-4')),
+    'repulsion_strength_firm': _option('float', 0.0, ('lubrication',)),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),
@@ -237,8 +244,7 @@ OPTION_TABLE = {
 # they belong to (named in the refusal, so a user knows what is missing rather than only that a line is wrong).
 UNSUPPORTED_FEATURES = {
     "HydroGrid's snapshots of the concentration cells": ('save_HydroGrid_cells',),
-    'lubrication corrections (the Lubrication solver)': ('repulsion_strength_firm', 'firm_delta', 'Lub_Cut',
-                                                         'domType', 'stiffness_wall', 'mu',
+    'lubrication corrections (the Lubrication solver)': ('domType', 'stiffness_wall', 'mu',
                                                          'vacf', 'zmin', 'zmax'),
     'a solver of a later published version': ('hydro_interactions', 'slip_length', 'plot_velocity_field_shell',
                                               'hydrodynamic_radius'),
@@ -519,6 +525,8 @@ def usage_tags(program, scheme):
             tags.add('stochastic')
         if 'rollers' in scheme:
             tags.add('rollers')
+        if scheme.startswith('lubrication'):
+            tags.add('lubrication')
     return tags
 
 
@@ -536,7 +544,8 @@ def unused_options(options, program):
 
 
 _USERS = {'static': 'the static problems', 'dynamic': 'the dynamic schemes', 'stochastic': 'the stochastic schemes',
-          'rollers': 'the roller schemes', 'mcmc': 'the Monte Carlo sampler'}
+          'rollers': 'the roller schemes', 'mcmc': 'the Monte Carlo sampler',
+          'lubrication': 'the lubrication schemes'}
 
 
 def unused_option_warnings(options, program=None):
