@@ -72,6 +72,13 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
+        'multi_bodies.solver._laplace_cpp',
+        ['multi_bodies/solver/cpp/laplace_module.cpp'],
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
+    Pybind11Extension(
         'body._rigid_cpp',
         ['body/cpp/rigid_module.cpp'],
         extra_compile_args=compile_args,

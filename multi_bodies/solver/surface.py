@@ -8,6 +8,7 @@ problem and its preconditioner.  See doc/phoretic.md.
 
 Which runs are refused, and why:
 
+* surface files with the roller schemes (single blobs have no surface);
 * phoretic data on some structure lines but not all (every blob is a node of
   the solute's boundary integral; the published code crashes), or on
   ``articulated`` lines (not read by the published code either);
@@ -105,6 +106,9 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
     if options.articulated:
         raise UserInputError('%s: .Laplace and .slip_length files are not read on articulated bodies; remove the '
                              "'articulated' line or the surface files" % options.articulated[0].where)
+    if 'rollers' in options.scheme:
+        raise UserInputError('%s: scheme %s moves single-blob rollers, which have no surface; remove the .Laplace and '
+                             '.slip_length files or use a rigid-body scheme' % (options.where('scheme'), options.scheme))
     surface = Surface()
     if any(laplace):
         missing = [s for s in specs if s.laplace_file is None]

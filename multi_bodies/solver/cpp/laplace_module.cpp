@@ -1,0 +1,100 @@
+// Laplace layer potentials on the blobs (pybind11 module multi_bodies.solver._laplace_cpp).
+//
+// The compiled twin of multi_bodies/solver/laplace_kernels.py (the NumPy reference, same formulas, used when
+// this module is not built): point quadrature at the blob centres, the free-space self term (j = i) dropped,
+// and with a wall (z = 0) the Neumann image of every source, j = i included, with R = (x_i - x_j, y_i - y_j,
+// z_i + z_j) and n* = (n_x, n_y, -n_z).  One pass over the pairs gives the four sums the solute needs:
+//   single_i = sum_j ws_j / r,  double_i = sum_j wd_j (r.n_j) / r^3,
+//   dipole_i = sum_j wp_j r / r^3,  grad_i = sum_j wg_j (n_j - 3 r (r.n_j) / r^2) / r^3
+// (densities already multiplied by the quadrature weights; the 1/(4 pi) is applied by the caller).
+// OpenMP over targets: each thread writes its own rows, no reductions across threads.
+//
+// Layouts (C-contiguous doubles): x, normals (N, 3); densities (N,) or empty (not computed); outputs
+// single, double (N,), dipole, grad (N, 3).
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace py = pybind11;
+using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+namespace {
+
+struct Sums {
+  double single = 0.0, dbl = 0.0, dip[3] = {0.0, 0.0, 0.0}, grad[3] = {0.0, 0.0, 0.0};
+};
+
+// Add the terms of one source at separation d (3) with normal n (3).
+inline void add_pair(Sums &s, const double *d, const double *n, double ws, double wd, double wp, double wg,
+                     bool want_s, bool want_d, bool want_p, bool want_g) {
+  const double r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  const double inv_r = 1.0 / std::sqrt(r2);
+  const double inv_r3 = inv_r * inv_r * inv_r;
+  if (want_s) s.single += ws * inv_r;
+  const double rn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+  if (want_d) s.dbl += wd * rn * inv_r3;
+  if (want_p)
+    for (int k = 0; k < 3; ++k) s.dip[k] += wp * inv_r3 * d[k];
+  if (want_g) {
+    const double f = wg * inv_r3, c = 3.0 * rn * inv_r * inv_r;
+    for (int k = 0; k < 3; ++k) s.grad[k] += f * (n[k] - c * d[k]);
+  }
+}
+
+const double *optional(const Array &a, long n, const char *name, bool &want) {
+  want = a.size() > 0;
+  if (want && (a.ndim() != 1 || a.shape(0) != n)) throw std::invalid_argument(std::string(name) + " must be (N,)");
+  return want ? a.data() : nullptr;
+}
+
+py::tuple layers(const Array &x, const Array &normals, const Array &ws, const Array &wd, const Array &wp,
+                 const Array &wg, bool wall) {
+  if (x.ndim() != 2 || x.shape(1) != 3) throw std::invalid_argument("x must be (N, 3)");
+  const long N = x.shape(0);
+  if (normals.ndim() != 2 || normals.shape(0) != N || normals.shape(1) != 3)
+    throw std::invalid_argument("normals must be (N, 3)");
+  bool want_s, want_d, want_p, want_g;
+  const double *s_ = optional(ws, N, "single density", want_s), *d_ = optional(wd, N, "double density", want_d);
+  const double *p_ = optional(wp, N, "dipole density", want_p), *g_ = optional(wg, N, "gradient density", want_g);
+  py::array_t<double> single(N), dbl(N), dip({N, 3L}), grad({N, 3L});
+  const double *X = x.data(), *Nn = normals.data();
+  double *out_s = single.mutable_data(), *out_d = dbl.mutable_data(), *out_p = dip.mutable_data(),
+         *out_g = grad.mutable_data();
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      Sums s;
+      const double *xi = X + 3 * i;
+      for (long j = 0; j < N; ++j) {
+        const double *xj = X + 3 * j, *nj = Nn + 3 * j;
+        const double ws_j = want_s ? s_[j] : 0.0, wd_j = want_d ? d_[j] : 0.0;
+        const double wp_j = want_p ? p_[j] : 0.0, wg_j = want_g ? g_[j] : 0.0;
+        if (j != i) {
+          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
+          add_pair(s, d, nj, ws_j, wd_j, wp_j, wg_j, want_s, want_d, want_p, want_g);
+        }
+        if (wall) {
+          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] + xj[2]};
+          const double n_image[3] = {nj[0], nj[1], -nj[2]};
+          add_pair(s, d, n_image, ws_j, wd_j, wp_j, wg_j, want_s, want_d, want_p, want_g);
+        }
+      }
+      out_s[i] = s.single;
+      out_d[i] = s.dbl;
+      for (int k = 0; k < 3; ++k) out_p[3 * i + k] = s.dip[k], out_g[3 * i + k] = s.grad[k];
+    }
+  }
+  return py::make_tuple(single, dbl, dip, grad);
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_laplace_cpp, m) {
+  m.doc() = "Laplace single, double, dipole and double-layer-gradient sums on the blobs (see laplace_kernels.py)";
+  m.def("layers", &layers, py::arg("x"), py::arg("normals"), py::arg("single"), py::arg("double_"),
+        py::arg("dipole"), py::arg("grad_double"), py::arg("wall"),
+        "(single (N,), double (N,), dipole (N, 3), grad_double (N, 3)); empty densities are not computed");
+}
