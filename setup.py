@@ -72,8 +72,8 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
-        'multi_bodies.solver._laplace_cpp',
-        ['multi_bodies/solver/cpp/laplace_module.cpp'],
+        'multi_bodies.solver._surface_cpp',
+        ['multi_bodies/solver/cpp/surface_module.cpp'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,

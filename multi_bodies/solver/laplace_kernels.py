@@ -19,7 +19,7 @@ Integral and Singularity Methods*, 1992, ch. 6, for the free-space layers).
 
 The NumPy version (:func:`layers_numpy`, the reference) is vectorised over
 all pairs and chunked over targets, so memory is ``O(chunk N)``; the compiled
-pair loop (``multi_bodies/solver/cpp/laplace_module.cpp``, OpenMP over
+pair loop (``multi_bodies/solver/cpp/surface_module.cpp``, OpenMP over
 targets) computes the same sums with O(N) memory and is used when built.  Shapes: positions and normals
 (N, 3), densities and weights (N,); scalar results (N,), vector results
 (N, 3).
@@ -36,10 +36,10 @@ def _chunks(num_targets, num_sources):
         yield slice(start, min(num_targets, start + step))
 
 
-try:  # the compiled pair loop (multi_bodies/solver/cpp/laplace_module.cpp, OpenMP); NumPy without it
-    from multi_bodies.solver import _laplace_cpp
+try:  # the compiled pair loop (multi_bodies/solver/cpp/surface_module.cpp, OpenMP); NumPy without it
+    from multi_bodies.solver import _surface_cpp
 except ImportError:  # pragma: no cover - a build without a C++ compiler
-    _laplace_cpp = None
+    _surface_cpp = None
 
 
 def layers(x, normals, weights, wall, single=None, double=None, grad_double=None, dipole=None, backend=None):
@@ -48,10 +48,10 @@ def layers(x, normals, weights, wall, single=None, double=None, grad_double=None
     backend : 'C++' (the compiled pair loop), 'python' (:func:`layers_numpy`) or None (C++ when built).
     """
     if backend is None:
-        backend = 'python' if _laplace_cpp is None else 'C++'
+        backend = 'python' if _surface_cpp is None else 'C++'
     if backend == 'python':
         return layers_numpy(x, normals, weights, wall, single, double, grad_double, dipole)
-    if _laplace_cpp is None:
+    if _surface_cpp is None:
         raise RuntimeError('the C++ Laplace kernels are not built (python3 -m pip install --no-build-isolation '
                            '--no-deps -e .)')
     w = np.asarray(weights, dtype=float).reshape(-1)
@@ -59,7 +59,7 @@ def layers(x, normals, weights, wall, single=None, double=None, grad_double=None
     given = {'single': single, 'double': double, 'dipole': dipole, 'grad_double': grad_double}
     densities = [empty if given[k] is None else np.asarray(given[k], dtype=float).reshape(-1) * w
                  for k in ('single', 'double', 'dipole', 'grad_double')]
-    results = _laplace_cpp.layers(np.ascontiguousarray(x, dtype=float).reshape(-1, 3),
+    results = _surface_cpp.layers(np.ascontiguousarray(x, dtype=float).reshape(-1, 3),
                                   np.ascontiguousarray(normals, dtype=float).reshape(-1, 3), *densities, bool(wall))
     return {k: v / FOUR_PI for k, v in zip(('single', 'double', 'dipole', 'grad_double'), results)
             if given[k] is not None}

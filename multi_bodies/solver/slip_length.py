@@ -34,7 +34,29 @@ PAIRS_PER_CHUNK = 1 << 19
 SELF_DISTANCE = 1e-14  # pairs closer than this are skipped (the published self term)
 
 
-def double_layer(x, normals, weights, blob_radius, v):
+try:  # the compiled pair loop (multi_bodies/solver/cpp/surface_module.cpp, OpenMP); NumPy without it
+    from multi_bodies.solver import _surface_cpp
+except ImportError:  # pragma: no cover - a build without a C++ compiler
+    _surface_cpp = None
+
+
+def double_layer(x, normals, weights, blob_radius, v, backend=None):
+    """:func:`double_layer_numpy` (the reference), or the same sums by the compiled pair loop.
+
+    backend : 'C++', 'python' or None (C++ when built).
+    """
+    if backend == 'python' or (backend is None and _surface_cpp is None):
+        return double_layer_numpy(x, normals, weights, blob_radius, v)
+    if _surface_cpp is None:
+        raise RuntimeError('the C++ surface kernels are not built (python3 -m pip install --no-build-isolation '
+                           '--no-deps -e .)')
+    return _surface_cpp.stokes_double_layer(np.ascontiguousarray(x, dtype=float).reshape(-1, 3),
+                                            np.ascontiguousarray(normals, dtype=float).reshape(-1, 3),
+                                            np.ascontiguousarray(weights, dtype=float).reshape(-1),
+                                            float(blob_radius), np.ascontiguousarray(v, dtype=float).reshape(-1, 3))
+
+
+def double_layer_numpy(x, normals, weights, blob_radius, v):
     """The regularised Stokes double layer ``(D v)_i`` (N, 3) of blob vectors v (N, 3) or (3N,).
 
     ``(D v)_i = -(3 / 4 pi) sum_{j, r >= 1e-14} w_j / r^5 [ (1 - 10 a^2 / (3 r^2)) (r.n_j)(r.v_j) r

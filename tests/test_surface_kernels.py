@@ -1,4 +1,4 @@
-"""The compiled Laplace pair loop against the NumPy reference (multi_bodies/solver/laplace_kernels.py), with and without
+"""The compiled surface kernels (Laplace layers, Stokes double layer) against the NumPy references, with and without
 the wall, including blobs near the wall; and the layers against closed forms on a sphere."""
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from multi_bodies.solver import laplace_kernels
 
 @pytest.mark.parametrize('wall', [False, True])
 def test_compiled_equals_numpy(wall):
-    if laplace_kernels._laplace_cpp is None:
+    if laplace_kernels._surface_cpp is None:
         pytest.skip('the C++ Laplace kernels are not built (pip install -e . builds them)')
     rng = np.random.default_rng(3)
     x = rng.uniform(-3, 3, size=(300, 3))
@@ -36,3 +36,16 @@ def test_layers_on_a_sphere():
     assert abs(np.mean(out['double']) + 0.5) < 0.02
     # negative control: the inward normals flip the double layer's sign
     assert abs(np.mean(laplace_kernels.layers(x, -x, w, False, double=np.ones(2562))['double']) - 0.5) < 0.02
+
+
+def test_compiled_stokes_double_layer_equals_numpy():
+    from multi_bodies.solver import slip_length
+    if slip_length._surface_cpp is None:
+        pytest.skip('the C++ surface kernels are not built (pip install -e . builds them)')
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-3, 3, size=(300, 3))
+    x[7] = x[3]  # two blobs at one point: skipped as a self pair by both
+    n, v, w = rng.normal(size=(300, 3)), rng.normal(size=(300, 3)), rng.uniform(0.1, 1, size=300)
+    ours = slip_length.double_layer(x, n, w, 0.3, v, backend='C++')
+    reference = slip_length.double_layer(x, n, w, 0.3, v, backend='python')
+    assert np.max(np.abs(ours - reference)) < 1e-12 * np.max(np.abs(reference))

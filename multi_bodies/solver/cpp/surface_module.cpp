@@ -1,6 +1,6 @@
-// Laplace layer potentials on the blobs (pybind11 module multi_bodies.solver._laplace_cpp).
+// Surface kernels of phoretic and slip-length bodies (pybind11 module multi_bodies.solver._surface_cpp).
 //
-// The compiled twin of multi_bodies/solver/laplace_kernels.py (the NumPy reference, same formulas, used when
+// layers: the Laplace layer potentials on the blobs, the compiled twin of multi_bodies/solver/laplace_kernels.py (the NumPy reference, same formulas, used when
 // this module is not built): point quadrature at the blob centres, the free-space self term (j = i) dropped,
 // and with a wall (z = 0) the Neumann image of every source, j = i included, with R = (x_i - x_j, y_i - y_j,
 // z_i + z_j) and n* = (n_x, n_y, -n_z).  One pass over the pairs gives the four sums the solute needs:
@@ -11,6 +11,11 @@
 //
 // Layouts (C-contiguous doubles): x, normals (N, 3); densities (N,) or empty (not computed); outputs
 // single, double (N,), dipole, grad (N, 3).
+//
+// stokes_double_layer: the regularised Stokes double layer of multi_bodies/solver/slip_length.py
+// (double_layer, the NumPy reference): with r = x_i - x_j, pairs closer than 1e-14 skipped,
+//   (D v)_i = -(3/4 pi) sum_j w_j / r^5 [ (1 - 10 a^2/(3 r^2)) (r.n_j)(r.v_j) r
+//             + (2 a^2/3) ((n_j.v_j) r + (r.v_j) n_j + (r.n_j) v_j) ],  free space only.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
@@ -90,11 +95,48 @@ py::tuple layers(const Array &x, const Array &normals, const Array &ws, const Ar
   return py::make_tuple(single, dbl, dip, grad);
 }
 
+py::array_t<double> stokes_double_layer(const Array &x, const Array &normals, const Array &weights, double a,
+                                        const Array &v) {
+  if (x.ndim() != 2 || x.shape(1) != 3) throw std::invalid_argument("x must be (N, 3)");
+  const long N = x.shape(0);
+  if (normals.size() != 3 * N || v.size() != 3 * N || weights.size() != N)
+    throw std::invalid_argument("normals and v must be (N, 3), weights (N,)");
+  py::array_t<double> out({N, 3L});
+  const double *X = x.data(), *Nn = normals.data(), *W = weights.data(), *V = v.data();
+  double *O = out.mutable_data();
+  const double a2 = a * a, self2 = 1e-28, factor = -3.0 / (4.0 * M_PI);
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      double s[3] = {0.0, 0.0, 0.0};
+      const double *xi = X + 3 * i;
+      for (long j = 0; j < N; ++j) {
+        const double *xj = X + 3 * j, *n = Nn + 3 * j, *vj = V + 3 * j;
+        const double r[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
+        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        if (r2 < self2) continue;
+        const double inv_r2 = 1.0 / r2, inv_r5 = inv_r2 * inv_r2 * std::sqrt(inv_r2);
+        const double rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
+        const double rv = r[0] * vj[0] + r[1] * vj[1] + r[2] * vj[2];
+        const double nv = n[0] * vj[0] + n[1] * vj[1] + n[2] * vj[2];
+        const double c = W[j] * inv_r5, b = (2.0 / 3.0) * a2;
+        const double radial = c * ((1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn * rv + b * nv);
+        for (int k = 0; k < 3; ++k) s[k] += radial * r[k] + c * b * (rv * n[k] + rn * vj[k]);
+      }
+      for (int k = 0; k < 3; ++k) O[3 * i + k] = factor * s[k];
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
-PYBIND11_MODULE(_laplace_cpp, m) {
-  m.doc() = "Laplace single, double, dipole and double-layer-gradient sums on the blobs (see laplace_kernels.py)";
+PYBIND11_MODULE(_surface_cpp, m) {
+  m.doc() = "Laplace layers (laplace_kernels.py) and the Stokes double layer (slip_length.py) on the blobs";
   m.def("layers", &layers, py::arg("x"), py::arg("normals"), py::arg("single"), py::arg("double_"),
         py::arg("dipole"), py::arg("grad_double"), py::arg("wall"),
         "(single (N,), double (N,), dipole (N, 3), grad_double (N, 3)); empty densities are not computed");
+  m.def("stokes_double_layer", &stokes_double_layer, py::arg("x"), py::arg("normals"), py::arg("weights"),
+        py::arg("blob_radius"), py::arg("v"), "(D v) (N, 3): the regularised free-space Stokes double layer");
 }
