@@ -290,7 +290,7 @@ class Model:
             extra = self.hooks.bodies_external_force_torque(views, r_vectors, **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         if bodies_law is not None:  # published style: takes the bodies
-            extra = bodies_law(views, r_vectors, omega_one_roller=self.omega_one_roller, **self.physics)
+            extra = bodies_law(views, r_vectors, **self.physics)  # physics holds omega_one_roller
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         elif self.body_body_forces is not None:
             force_torque = force_torque + np.asarray(self.body_body_forces(
@@ -447,7 +447,10 @@ class Model:
 
     # -------------------------------------------------------------- rollers (multi_bodies.solver.rollers)
     def roller_product(self, kind):
-        """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``."""
+        """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``.
+
+        ``domain in_plane``: the single-wall coupling with its in-plane block only (``rollers.in_plane_product``).
+        """
         if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
             raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
                                  'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
@@ -455,6 +458,8 @@ class Model:
         name = name[len('radii_'):] if name.startswith('radii_') else name  # published aliases (one radius here)
         base = name[:-len(NO_WALL)] if name.endswith(NO_WALL) else name
         name = base + (NO_WALL if self.domain == 'no_wall' else '')
+        if self.domain == 'in_plane':
+            return rollers.in_plane_product(mobility.blob_product(name, kind), kind)
         return mobility.blob_product(name, kind)
 
     def roller_velocities(self, configuration, torque_guess=None):

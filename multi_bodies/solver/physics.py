@@ -408,12 +408,28 @@ def body_body_force_calculator(implementation, pair_force_torque=None, python_fo
                          % implementation)
 
 
+# Every keyword that the published code passes to one of its hooks (calc_one_blob_forces, calc_blob_blob_forces,
+# bodies_external_force_torque, body_body_force_torque, force_torque_calculator_sort_by_bodies) in its main program
+# or the main programs of its example folders; the lubrication-only keywords (mu, B0, omega, ...) are not here.
+PUBLISHED_HOOK_KEYWORDS = ('g', 'repulsion_strength_wall', 'debye_length_wall', 'repulsion_strength', 'debye_length',
+                           'periodic_length', 'blob_radius', 'blob_mass', 'eta', 'a', 'particle_radius',
+                           'omega_one_roller', 'tilt_angle', 'kT')
+
+
 def physics_keywords(options):
-    """Keyword arguments of every hook (SPEC section 7) from validated input options; ``blob_mass`` is 1."""
+    """Keyword arguments of every hook (SPEC section 7) from validated input options: ``PUBLISHED_HOOK_KEYWORDS``.
+
+    ``blob_mass`` is 1; ``a`` is ``blob_radius`` (the published name); ``particle_radius`` (length) is the
+    option of that name (default 1.0, the value the published Multi_Blob_Two_Rollers program sets);
+    ``omega_one_roller`` (3,) in 1/time; ``tilt_angle`` in radians; ``periodic_length`` (3,).
+    """
     return dict(g=options.g, repulsion_strength_wall=options.repulsion_strength_wall,
                 debye_length_wall=options.debye_length_wall, repulsion_strength=options.repulsion_strength,
                 debye_length=options.debye_length, periodic_length=np.array(options.periodic_length, dtype=float),
-                blob_radius=options.blob_radius, blob_mass=1.0)
+                blob_radius=options.blob_radius, blob_mass=1.0, eta=options.eta, a=options.blob_radius,
+                particle_radius=options.particle_radius,
+                omega_one_roller=np.array(options.omega_one_roller, dtype=float),
+                tilt_angle=options.tilt_angle, kT=options.kT)
 
 
 def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_blob_forces=None,

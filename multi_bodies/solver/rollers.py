@@ -17,6 +17,7 @@ import scipy.sparse.linalg as spla
 
 from multi_bodies.solver.body_solver import SolutionParts, check_finite
 from stochastic_forcing import displace_positions, lanczos_square_root, rfd
+from utils import UserInputError
 
 RollerVelocities = namedtuple('RollerVelocities', ['velocities', 'torque_guess', 'iterations'])
 RollerVelocities.__doc__ = """Roller velocities (N, 3), the normalised torque solution to start the next
@@ -54,6 +55,30 @@ class RollerSpinProblem:
 
     def solution(self, torques):
         return SolutionParts(None, None, np.asarray(torques).reshape(-1, 3))
+
+
+def in_plane_product(product, kind):
+    """The ``domain in_plane`` coupling of a single-wall roller ``product`` (published manual, section 6.2).
+
+    ``P M P`` with ``P`` the projection on the plane of the wall (x, y): the x, y components of the force (or
+    torque) of every blob act through the x, y rows of the single-wall coupling and the z component of every
+    velocity is zero, so heights never change.  Only the translational couplings exist (``trans_times_force``,
+    ``trans_times_torque``), as in the published code; the prescribed-spin couplings are refused.
+    ``product(r_vectors (N, 3), vector (3N,), eta, a, L) -> (3N,)``, the same signature returned.
+    """
+    if kind not in ('trans_times_force', 'trans_times_torque'):
+        raise UserInputError('domain in_plane: the published in-plane roller mobility has translational couplings '
+                             'only, so the rollers need free_kinematics True (a constant torque), not a prescribed '
+                             'spin; or use domain single_wall')
+
+    def in_plane(r_vectors, vector, eta, a, L):
+        projected = np.array(vector, dtype=float).reshape(-1, 3)
+        projected[:, 2] = 0.0
+        velocity = np.array(product(r_vectors, projected.reshape(-1), eta, a, L), dtype=float).reshape(-1, 3)
+        velocity[:, 2] = 0.0
+        return velocity.reshape(-1)
+    in_plane.__name__ = 'in_plane_' + getattr(product, '__name__', kind)
+    return in_plane
 
 
 def roller_velocities(model, configuration, torque_guess=None):
@@ -94,7 +119,11 @@ def roller_noise(model, r_vectors, z, factor):
                                  model.tolerance, max_iterations=model.lanczos_max_iterations, factor=factor,
                                  print_residual=model.print_residual)
     model.warn_if_not_converged(result)
-    return result._replace(noise=result.noise.reshape(-1, 3))
+    noise = result.noise.reshape(-1, 3)
+    if model.domain == 'in_plane':  # the square root of P M P has zero z rows; Lanczos leaves round-off there
+        noise = noise.copy()
+        noise[:, 2] = 0.0
+    return result._replace(noise=noise)
 
 
 def roller_drift(model, r_vectors, W, kT, delta):

@@ -230,7 +230,7 @@ class PhysicsHooks:
         if 'bodies_external_force_torque' in found:
             function = found['bodies_external_force_torque']
 
-            def bodies_external(bodies, r_vectors, **kw):
+            def bodies_external(bodies, r_vectors, function=function, **kw):  # bound now: `function` is reused
                 nb = len(bodies)
                 value = call_user_function(function, 'bodies_external_force_torque', bodies, r_vectors, **kw)
                 return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], function,
@@ -241,7 +241,7 @@ class PhysicsHooks:
             function = found['set_slip_by_ID']
             one_argument = positional_capacity(function) == 1
 
-            def set_slip(body, slip):
+            def set_slip(body, slip, function=function, one_argument=one_argument):
                 if one_argument:
                     call_user_function(function, 'set_slip_by_ID', body)
                 else:
@@ -251,7 +251,7 @@ class PhysicsHooks:
         if 'calc_body_body_forces_torques_python' in found:
             function = found['calc_body_body_forces_torques_python']
 
-            def body_body_of_bodies(bodies, r_vectors, **kw):
+            def body_body_of_bodies(bodies, r_vectors, function=function, **kw):
                 nb = len(bodies)
                 value = call_user_function(function, 'calc_body_body_forces_torques_python', bodies, r_vectors, **kw)
                 return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], function,
@@ -403,6 +403,18 @@ def _public_callables(module):
     return {name: value for name, value in vars(module).items() if not name.startswith('_') and callable(value)}
 
 
+# Top-level modules and folders of the published code's tree: an import of one of them that fails is a published
+# module path, not a missing package (pip would install unrelated software of the same name).
+PUBLISHED_TREE_MODULES = ('mobility', 'articulated', 'constraint', 'general_application_utils', 'read_input', 'body',
+                          'quaternion_integrator', 'multi_bodies', 'multi_bodies_functions', 'stochastic_forcing',
+                          'utils', 'Lubrication', 'many_bodyMCMC', 'boomerang', 'sphere', 'forces_numba',
+                          'forces_pycuda', 'forces_cpp', 'HydroGrid', 'calculateConcentration', 'visit',
+                          'plot_velocity_field', 'multi_bodies_utilities', 'periodic_mobility', 'stkfmm')
+# The published module paths this package provides for override files and drivers (tests/test_layout.py).
+PUBLISHED_FACES = ('mobility.mobility', 'general_application_utils', 'read_input', 'quaternion_integrator.quaternion',
+                   'multi_bodies_functions', 'articulated.articulated', 'constraint.constraint')
+
+
 def import_user_file(path):
     """Import the user's override file; returns (hook name -> function, notes for the log).
 
@@ -438,6 +450,11 @@ def import_user_file(path):
         line = (', line %d' % frames[-1].lineno) if frames else ''
         if isinstance(err, ImportError) and getattr(err, 'name', None):
             missing = err.name.split('.')[0]
+            if missing in PUBLISHED_TREE_MODULES:
+                raise UserInputError('%s%s: the user file imports %s, a module of the published code\'s own tree '
+                                     '(not a package to install); this package offers the published faces %s and '
+                                     'not this one (doc/overrides.md); remove the import or use the package\'s '
+                                     'equivalent' % (path, line, err.name, ', '.join(PUBLISHED_FACES)))
             raise UserInputError('%s%s: the user file imports %s, which is not installed; pip install %s or remove '
                                  'the import' % (path, line, missing, missing))
         raise UserInputError('%s%s: importing the user-defined functions raised %s: %s; fix the file or remove it '
