@@ -100,11 +100,16 @@ def is_usable(backend):
 
 
 def usable_names():
-    """Implementation names (with and without _no_wall) that can run on this machine."""
+    """Implementation names that run on this machine: every domain form (wall, ``_no_wall``, ``_free_surface``)
+    that a backend which loads here provides, and the aliases (``numba``) of those backends."""
     names = []
-    for backend in _BACKEND_MODULES:
-        if backend in _loaded or (backend not in _failures and is_usable(backend)):
-            names += [backend, backend + '_no_wall']
+    for base in list(_BACKEND_MODULES) + list(_ALIASES):
+        backend = _ALIASES.get(base, base)
+        if not (backend in _loaded or (backend not in _failures and is_usable(backend))):
+            continue
+        module = _loaded[backend]
+        names += [base + suffix for suffix, domain in sorted(DOMAIN_SUFFIXES, key=lambda pair: len(pair[0]))
+                  if hasattr(module, '%s_mobility_trans_times_force' % domain)]
     return names
 
 

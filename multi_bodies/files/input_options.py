@@ -250,11 +250,29 @@ UNSUPPORTED_FEATURES = {
                                               'hydrodynamic_radius'),
 }
 UNSUPPORTED_LATER_OPTIONS = tuple(name for names in UNSUPPORTED_FEATURES.values() for name in names)
+# Where each missing feature is covered, or why it is not (the second half of every refusal of a later feature).
+FEATURE_STATUS = {
+    "HydroGrid's snapshots of the concentration cells": 'the package computes S(k) and F(k, t) with the HydroGrid '
+                                                        'options, not the cell snapshots; see doc/analysis.md',
+    'lubrication corrections (the Lubrication solver)': 'the lubrication schemes read Lub_Cut, firm_delta and '
+                                                        'repulsion_strength_firm, not the options of the later '
+                                                        'confined solvers; see doc/lubrication.md',
+    'a solver of a later published version': 'not available: see doc/examples.md for the published folders',
+}
 
 
 def unsupported_feature(name):
     """The feature of a later published version that option ``name`` belongs to."""
     return next(feature for feature, names in UNSUPPORTED_FEATURES.items() if name in names)
+
+
+def later_feature_refusal(where, what, feature, status=None):
+    """The one form of every refusal of a later-version feature: ``where: what is F, a feature of a later published
+    version that this package does not have (status); remove it``.  ``status``: where it is covered or why not
+    (default ``FEATURE_STATUS[feature]``)."""
+    return ('%s: %s belongs to %s, a feature of a later version of the published code that this package does not '
+            'have (%s); remove it' % (where, what, feature, FEATURE_STATUS.get(feature, '') if status is None
+                                      else status))
 
 ArticulatedSpec = namedtuple('ArticulatedSpec', ['list_vertex_file', 'clones_file', 'const_file', 'ID', 'where'])
 ArticulatedSpec.__doc__ = """One ``articulated`` line (doc/articulated.md): the ``.list_vertex``, ``.clones`` and
@@ -491,11 +509,8 @@ def parse_input_text(text, input_file='<input>', program=None):
                                                where))
             continue
         if name in UNSUPPORTED_LATER_OPTIONS:
-            raise UserInputError(
-                "%s: option '%s' is unsupported here: it belongs to %s, a feature of a later version of the "
-                "published code that this package does not have; remove the line (see doc/options.md for the "
-                "options we support)"
-                % (where, name, unsupported_feature(name)))
+            raise UserInputError(later_feature_refusal(where, "option '%s' (unsupported here)" % name,
+                                                       unsupported_feature(name)))
         if name not in OPTION_TABLE:
             close = difflib.get_close_matches(name, list(OPTION_TABLE) + ['structure', 'obstacle'], n=1)
             hint = " (did you mean '%s'?)" % close[0] if close else ''

@@ -360,7 +360,30 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))
     check_start(options, system, types)
+    warning = slow_dense_warning(options, system.blobs_name, body_arrays.blob_offsets)
+    if warning:
+        log(warning)
     return RunSetup(hooks, bodies, types, body_arrays, system)
+
+
+# Largest body whose dense blob mobility the python backend builds in seconds (3n x 3n: n = 1,000 gives 3,000 x
+# 3,000 from Python pair loops; the published Pillars folder's 1,684-blob body took 75 s per step).
+DENSE_PYTHON_BLOBS = 1000
+
+
+def slow_dense_warning(options, blobs_name, blob_offsets):
+    """The ``warning:`` line for a ``python`` dense mobility of a body of more than DENSE_PYTHON_BLOBS blobs, or None.
+
+    ``blob_offsets`` (Nb + 1,): the first blob of every body (the last entry: the number of blobs).
+    """
+    largest = int(np.max(np.diff(blob_offsets))) if len(blob_offsets) > 1 else 0
+    if not blobs_name.startswith('python') or largest <= DENSE_PYTHON_BLOBS:
+        return None
+    return ('warning: %s: mobility_blobs_implementation %s builds the dense mobility of a body of %d blobs in Python '
+            '(more than about %d blobs: minutes per build, and the preconditioner rebuilds it every step); use '
+            'C++%s, or ask the advisor (python advise.py --input-file %s) for the fastest backends here'
+            % (options.where('mobility_blobs_implementation'), blobs_name, largest, DENSE_PYTHON_BLOBS,
+               blobs_name[len('python'):], os.path.basename(options.input_file)))
 
 
 def start_output(options):
