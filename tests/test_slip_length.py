@@ -154,3 +154,34 @@ def test_turned_body_and_preconditioners():
     # the icosahedral shell is not a sphere: turning it changes the drag by its discretisation error only
     assert abs(speeds[1][2] - speeds[0][2]) < 1e-3 * abs(speeds[0][2])
     assert np.max(np.abs(speeds[1][3:])) < 1e-6
+
+
+@pytest.mark.parametrize('change, fragment', [
+    ('scheme stochastic_first_order_RFD\nkT 1', 'cannot move slip-length bodies'),
+    ('scheme deterministic_forward_euler_dense_algebra', 'cannot move slip-length bodies'),
+    ('mobility_vector_prod_implementation python\nmobility_blobs_implementation python', 'no wall images'),
+])
+def test_refused_runs_say_why_in_one_line(reference_dir, tmp_path, change, fragment):
+    """Slip lengths with a stochastic or dense scheme, or with a wall: a one-line UserInputError before the run."""
+    import shutil
+    from multi_bodies.files.input_options import parse_input_text
+    from multi_bodies.run.run_setup import prepare
+    from utils import UserInputError
+    base = reference_dir / PHORETIC / 'Structures'
+    for name in ('shell_N_162_Rg_1_Rh_1_0530.vertex', 'blob.clones', 'shell_N_162_Rg_1_slip_length_1e+03.slip_length'):
+        shutil.copy(base / name, tmp_path / name)
+    text = ('scheme deterministic_forward_euler\ndt 0.01\nn_steps 1\neta 1\ng 1\nblob_radius 0.137952242127634\n'
+            'mobility_vector_prod_implementation python_no_wall\nmobility_blobs_implementation python_no_wall\n'
+            'structure shell_N_162_Rg_1_Rh_1_0530.vertex blob.clones shell_N_162_Rg_1_slip_length_1e+03.slip_length\n'
+            'output_name run\n')
+    options = parse_input_text(text + change + '\n', str(tmp_path / 'in.dat'), 'dynamic')
+    import os
+    here = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        with pytest.raises(UserInputError) as err:
+            prepare(options, 'dynamics', log=lambda line: None)
+    finally:
+        os.chdir(here)
+    message = str(err.value)
+    assert fragment in message and '\n' not in message, message
