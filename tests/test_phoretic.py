@@ -202,3 +202,29 @@ def test_janus_sphere_self_diffusiophoresis(tmp_path):
     np.savetxt(folder / 'shell.Laplace', janus_laplace_table(icosahedral_shell(42), (0, 0, 1), (0, 1, 1)))
     model = _model_of(folder, 'input.dat')
     assert abs(model.deterministic_velocities(model.start_configuration).velocities[0, 2] - speeds[0]) < 1e-8
+
+
+def test_bad_phoretic_input_names_file_line_and_fix(tmp_path):
+    """Ten background numbers, a short .Laplace row, a wrong row count, a second structure line without a .Laplace
+    file: each a UserInputError naming where and what to do."""
+    from utils import UserInputError
+    _shell_files(tmp_path, 42, 0.0, 1.0, 1.0, (0, 0, 5), (0.0,))
+    good = (tmp_path / 'input.dat').read_text()
+
+    def error_of(text):
+        (tmp_path / 'bad.dat').write_text(text)
+        with pytest.raises(UserInputError) as err:
+            _model_of(tmp_path, 'bad.dat')
+        return str(err.value)
+    message = error_of(good.replace('background_Laplace 0.0', 'background_Laplace ' + ' 1' * 10))
+    assert 'bad.dat, line' in message and 'one to nine numbers' in message
+    rows = (tmp_path / 'shell.Laplace').read_text().splitlines()
+    (tmp_path / 'short.Laplace').write_text('\n'.join(rows[:5] + [' '.join(rows[5].split()[:6])] + rows[6:]) + '\n')
+    message = error_of(good.replace('shell.vertex shell.clones shell.Laplace', 'shell.vertex shell.clones short.Laplace'))
+    assert 'short.Laplace, line 6' in message and '7 numbers' in message
+    (tmp_path / 'few.Laplace').write_text('\n'.join(rows[:30]) + '\n')
+    message = error_of(good.replace('shell.vertex shell.clones shell.Laplace', 'shell.vertex shell.clones few.Laplace'))
+    assert 'few.Laplace' in message and 'shell.vertex has 42 blobs' in message
+    (tmp_path / 'other.clones').write_text('1\n5 0 5 1 0 0 0\n')
+    message = error_of(good + 'structure shell.vertex other.clones\n')
+    assert 'no .Laplace file' in message and 'bad.dat, line' in message
