@@ -2,6 +2,7 @@
 unchanged with this package's multi_bodies.py, their trajectories equal to the published ones; their missing files
 get a clear message; the generators write the published .Laplace and .slip_length files (doc/phoretic.md)."""
 import importlib.util
+import re
 import shutil
 import subprocess
 import sys
@@ -117,3 +118,22 @@ def test_concentration_and_vtk_outputs(reference_dir, published_copy):
     (folder / 'in.dat').write_text((folder / 'inputfile.dat').read_text() + '\nsave_concentration True\n')
     result = _run(folder, 'in.dat')
     assert result.returncode == 2 and 'save_concentration' in result.stderr and 'no structure line' in result.stderr
+
+
+def test_phoretic_restart_continues_exactly(published_copy):
+    """4 steps in one run and 2 + 2 steps with initial_step 2 write the same .config byte for byte (the concentration
+    warm start is in the restart record)."""
+    folder = published_copy / 'examples' / 'chiral_phoretic_particle'
+    text = (folder / 'inputfile_chiral_phoretic_particle.dat').read_text()
+    full = re.sub(r'(?m)^dt .*$', 'dt 0.5', re.sub(r'(?m)^n_save .*$', 'n_save 2', re.sub(r'(?m)^n_steps .*$',
+                                                                                        'n_steps 4', text)))
+    runs = {'whole': full.replace('run_chiral', 'whole_chiral'),
+            'first': re.sub(r'(?m)^n_steps .*$', 'n_steps 2', full.replace('run_chiral', 'part_chiral')),
+            'rest': re.sub(r'(?m)^initial_step.*$', 'initial_step 2', full.replace('run_chiral', 'part_chiral'))}
+    for name, content in runs.items():
+        (folder / (name + '.dat')).write_text(content)
+        result = _run(folder, name + '.dat')
+        assert result.returncode == 0, result.stderr
+    whole = (folder / 'data/whole_chiral_phoretic_particle.two_sprinklers.config').read_bytes()
+    parts = (folder / 'data/part_chiral_phoretic_particle.two_sprinklers.config').read_bytes()
+    assert whole == parts and len(whole.splitlines()) == 9
