@@ -137,3 +137,28 @@ def test_phoretic_restart_continues_exactly(published_copy):
     whole = (folder / 'data/whole_chiral_phoretic_particle.two_sprinklers.config').read_bytes()
     parts = (folder / 'data/part_chiral_phoretic_particle.two_sprinklers.config').read_bytes()
     assert whole == parts and len(whole.splitlines()) == 9
+
+
+def test_static_mobility_problem_of_the_published_inputs(reference_dir, published_copy):
+    """multi_bodies_utilities.py with scheme mobility on the FreeSlip and chiral inputs: the body velocities of the
+    published probes (FreeSlip 1e-8, chiral 1e-10 relative); plot_velocity_field is refused with slip lengths."""
+    utilities = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies_utilities.py')
+    cases = (('FreeSlip', 'inputfile.dat', 'run', 'run.probe.npz', 1e-8),
+             ('chiral_phoretic_particle', 'inputfile_chiral_phoretic_particle.dat', 'data/run_chiral_phoretic_particle',
+              'data/run_chiral_phoretic_particle.probe.npz', 1e-10))
+    for name, input_name, output, probe, tolerance in cases:
+        folder = published_copy / 'examples' / name
+        (folder / 'data').mkdir(exist_ok=True)
+        text = re.sub(r'(?m)^scheme .*$', 'scheme mobility', (folder / input_name).read_text())
+        (folder / 'static.dat').write_text(text)
+        result = subprocess.run([sys.executable, utilities, '--input-file', 'static.dat'], cwd=folder,
+                                capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stderr
+        velocities = np.loadtxt(folder / (output + '.velocities.dat')).reshape(-1, 6)
+        published = np.load(reference_dir / PUBLISHED / 'examples' / name / probe)['step0_velocities']
+        assert np.max(np.abs(velocities - published)) < tolerance * np.max(np.abs(published)), name
+    (folder.parent / 'FreeSlip' / 'field.dat').write_text(
+        (folder.parent / 'FreeSlip' / 'static.dat').read_text() + '\nplot_velocity_field -2 2 3 -2 2 3 5 6 2\n')
+    result = subprocess.run([sys.executable, utilities, '--input-file', 'field.dat'], cwd=folder.parent / 'FreeSlip',
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and 'plot_velocity_field is not available' in result.stderr

@@ -103,6 +103,7 @@ class SlipLengthProblem:
 
     def __init__(self, rigid, normals, slip_lengths, weights):
         self.rigid = rigid
+        self.r_vectors = rigid.r_vectors  # (N, 3) lab-frame blob positions
         self.normals = np.asarray(normals, dtype=float).reshape(-1, 3)
         self.weights = np.asarray(weights, dtype=float).reshape(-1)
         self.slip_lengths = np.asarray(slip_lengths, dtype=float).reshape(-1)

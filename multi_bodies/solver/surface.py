@@ -135,6 +135,10 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
         if options.scheme not in SLIP_LENGTH_SCHEMES:
             raise UserInputError('%s: scheme %s cannot move slip-length bodies; use one of %s (doc/phoretic.md)'
                                  % (options.where('scheme'), options.scheme, ', '.join(SLIP_LENGTH_SCHEMES)))
+        if getattr(options, 'plot_velocity_field', None) is not None:
+            raise UserInputError('%s: plot_velocity_field is not available with slip-length bodies (the flow of their '
+                                 'surface slip, a double layer, is not in it); remove the option'
+                                 % options.where('plot_velocity_field'))
         if hydrodynamic_wall:
             raise UserInputError('%s: slip-length bodies need a no-wall mobility (the double layer of the slip-length '
                                  'problem has no wall images); use mobility_vector_prod_implementation and '
