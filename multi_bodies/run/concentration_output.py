@@ -56,12 +56,13 @@ class AlsoWriteConcentration:
     def __init__(self, snapshot_writer, options, model):
         self.snapshot_writer, self.model = snapshot_writer, model
         self.path = options.output_name + '.concentration'
-        if options.initial_step == 0:
+        phoretic = model.surface is not None and model.surface.phoretic is not None
+        if options.initial_step == 0 and phoretic:  # without phoretic bodies the option is ignored (warned)
             open(self.path, 'w').close()
 
     def save(self, step, locations, orientations, *args, **kwargs):
         result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
-        if not kwargs.get('stop'):
+        if not kwargs.get('stop') and self.model.surface is not None and self.model.surface.phoretic is not None:
             with open(self.path, 'a') as f:
                 f.write(concentration_block(self.model, Configuration(locations, orientations)))
         return result

@@ -25,7 +25,7 @@ import numpy as np
 
 from multi_bodies.files.surface_files import read_laplace_file, read_slip_length_file
 from multi_bodies.solver import phoretic, slip_length
-from utils import UserInputError
+from utils import UserInputError, warn_user
 
 SLIP_LENGTH_SCHEMES = ('deterministic_forward_euler', 'deterministic_adams_bashforth', 'deterministic_midpoint',
                        'mobility')
@@ -99,8 +99,8 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
     laplace = [s.laplace_file for s in specs]
     lengths = [s.slip_length_file for s in specs]
     if getattr(options, 'save_concentration', False) and not any(laplace):
-        raise UserInputError('%s: save_concentration writes the solute of phoretic bodies, but no structure line has '
-                             'a .Laplace file; remove the option or add the files' % options.where('save_concentration'))
+        warn_user('%s: save_concentration is ignored: it writes the solute of phoretic bodies, but no structure line '
+                  'has a .Laplace file; remove the option or add the files' % options.where('save_concentration'))
     if not any(laplace) and not any(lengths):
         return None
     if options.articulated:
