@@ -140,8 +140,8 @@ def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_lengt
     a : sphere radius; eta : viscosity; cutoff : pair cutoff in units of a (``Lub_Cut``, default 4.5);
     periodic_length : (3,) box (0: not periodic); wall : True above a no-slip wall at z = 0, False in free
     space (no wall term); firm_delta : gap clamp in units of a (``firm_delta``, the published
-    ``debye_cut``; default 1e-4); handover : ``'published'`` (the hook for a smooth blend between
-    formulas; see :mod:`lubrication.resistance`).
+    ``debye_cut``; default 1e-4); handover : ``'published'`` or ``'smooth'`` (the input option
+    ``lubrication_handover``; see :mod:`lubrication.resistance`).
     """
     locations, a, eta, cutoff, L = check_geometry(locations, a, eta, cutoff, periodic_length)
     firm_delta = resistance.check_firm_delta(firm_delta)
@@ -152,6 +152,9 @@ def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_lengt
     pattern = _BlockPattern(n, neighbours.pairs)
     pair_sup = resistance.pair_resistance_sup(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta, handover)
     pair_mb = resistance.pair_resistance_blob_model(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta)
+    if handover != 'published':  # the pair terms tapered to zero at the cutoff
+        taper = resistance.cutoff_taper(neighbours.r_over_a, cutoff, handover)[:, None, None]
+        pair_sup, pair_mb = taper * pair_sup, taper * pair_mb
     wall_sup = wall_mb = None
     if wall and n:
         h = locations[:, 2] / a

@@ -54,7 +54,8 @@ class LubricationSettings(namedtuple('LubricationSettings', [
 
     a : sphere radius; eta : viscosity; wall : a no-slip wall at z = 0; cutoff : ``Lub_Cut`` (units of a);
     periodic_length : (3,) box; firm_delta : gap clamp (units of a); implementation : far-field backend name
-    (None: C++ when built); handover : ``'published'``; near_field_root : ``'cholesky'`` or ``'lanczos'``;
+    (None: C++ when built); handover : ``'published'`` or ``'smooth'`` (:mod:`lubrication.resistance`);
+    near_field_root : ``'cholesky'`` or ``'lanczos'``;
     rfd_delta : RFD step (length units, or units of a with ``rfd_scaled_by_a``).
     """
 

@@ -106,7 +106,7 @@ class LubricationProblem:
     firm_delta : gap clamp in units of a (default 1e-4).
     implementation : far-field blob products ('python', 'C++', 'pycuda'; None: C++ when built).
     matrices : :data:`lubrication.assembly.LubricationMatrices` already built at ``locations`` (else built).
-    handover : ``'published'`` (see :mod:`lubrication.resistance`).
+    handover : ``'published'`` or ``'smooth'`` (the switches between formulas; :mod:`lubrication.resistance`).
 
     Protocol of ``multi_bodies.solver.body_solver.solve``: ``size`` (6N), ``operator`` (``x + M Delta_R x``),
     ``prepare_rhs`` (unchanged), ``solution(x)`` -> ``SolutionParts(None, velocities (N, 6), None)``.

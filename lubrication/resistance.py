@@ -20,9 +20,17 @@ The gap clamp ``firm_delta`` (the published ``debye_cut``, default 1e-4): a gap 
 below ``firm_delta`` is evaluated at ``firm_delta``, so overlapping spheres get a large but finite
 resistance.
 
-Hand-over between formulas (``handover``): only ``'published'`` (the published switches at
-``r = 2.006``, ``2.1``, table ends, and ``h = 1.01``, ``1.1``, ``10.018``, with their jumps of a few per
-cent) is implemented.  The argument is the hook for a smooth blend; any other value is refused.
+Hand-over between formulas (``handover``, the input option ``lubrication_handover``):
+
+* ``'published'`` (default): the published switches at ``r = 2.006``, ``2.1`` and ``h = 1.01``, ``1.1``,
+  with their jumps of a few per cent (X11A 43.81 -> 41.65 at r = 2.006, the wall normal 10.43 -> 10.00 at
+  h = 1.1), and the pair terms ending abruptly at the cutoff.
+* ``'smooth'``: across each switch, over the window of :data:`SMOOTH_WINDOWS`, the blocks are the
+  convex blend ``(1 - w) R_left + w R_right`` with the C1 weight ``w = 3 t^2 - 2 t^3``,
+  ``t = (x - lo) / (hi - lo)`` clipped to [0, 1]; the pair terms (R_sup and R_MB alike) are multiplied by
+  ``1 - w`` over ``[cutoff - CUTOFF_WINDOW, cutoff]``.  Outside the windows the values are the published
+  ones exactly.  A convex blend of two positive semidefinite Delta_R blocks is positive semidefinite,
+  so Delta_R stays so wherever both formulas give it so (tested).
 """
 import numpy as np
 
@@ -31,7 +39,16 @@ from utils import UserInputError
 from . import tables
 
 DEFAULT_FIRM_DELTA = 1e-4
-HANDOVERS = ('published',)
+HANDOVERS = ('published', 'smooth')
+# Windows (lo, hi) of the smooth hand-over, in units of a: chosen where both formulas are defined (the WS
+# table covers r 2.002..2.2, the JO table 2.099..5.001), each a small part of the range of its formulas.
+SMOOTH_WINDOWS = {
+    'near_contact': (2.004, 2.008),   # pair: near-contact asymptotics -> WS mobility table (switch at 2.006)
+    'mobility_table': (2.099, 2.13),  # pair: WS mobility table -> JO resistance table (switch at 2.1)
+    'wall_near': (1.008, 1.012),      # wall Y^a, X^c: lubrication forms -> 2562-blob table (switch at 1.01)
+    'wall_far': (1.09, 1.11),         # wall X^a, Y^b, Y^c: lubrication forms -> 2562-blob table (switch at 1.1)
+}
+CUTOFF_WINDOW = 0.25                  # pair terms tapered to zero over [cutoff - 0.25, cutoff]
 
 # Switches of the published pair resistance R_sup (Lubrication_Class.cc ResistPairSup)
 NEAR_CONTACT_END = 2.0 + 0.006 - 1e-8   # r <= this: near-contact asymptotic forms (Townsend 2018)
@@ -48,8 +65,26 @@ ZETA_3 = 1.2020569                      # Riemann zeta(3), as published
 def check_handover(handover):
     """Raise UserInputError unless ``handover`` is one this package implements."""
     if handover not in HANDOVERS:
-        raise UserInputError('lubrication handover %r is not available; implemented: %s (the published switches '
-                             'between formulas)' % (handover, ', '.join(HANDOVERS)))
+        raise UserInputError('lubrication_handover %r is not available; use published (the published switches '
+                             'between formulas, the default) or smooth (a C1 blend across each switch)'
+                             % (handover,))
+
+
+def smooth_weight(x, window):
+    """The C1 weight ``3 t^2 - 2 t^3``, ``t = (x - lo) / (hi - lo)`` clipped to [0, 1]: (n,) for x (n,)."""
+    lo, hi = window
+    t = np.clip((np.asarray(x, dtype=float) - lo) / (hi - lo), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def cutoff_taper(r, cutoff, handover='published'):
+    """Factor (n,) of the pair terms at distances r (n,) (units of a): 1 (published) or, smooth,
+    ``1 - w`` over ``[cutoff - CUTOFF_WINDOW, cutoff]`` (1 below, 0 at the cutoff)."""
+    check_handover(handover)
+    r = np.asarray(r, dtype=float).reshape(-1)
+    if handover == 'published':
+        return np.ones_like(r)
+    return 1.0 - smooth_weight(r, (cutoff - CUTOFF_WINDOW, cutoff))
 
 
 def check_firm_delta(firm_delta):
@@ -163,11 +198,14 @@ def pair_resistance_sup(r, r_hat, factors, firm_delta=DEFAULT_FIRM_DELTA, handov
     Published branches, after the gap clamp: ``r <= 2.006`` near-contact asymptotics
     (:func:`near_contact_scalars`); ``2.006 < r <= 2.1`` the two-sphere mobility table
     ``mob_scalars_WS.txt``, assembled as a 12 x 12 mobility and inverted; beyond, the Jeffrey-Onishi
-    resistance table ``res_scalars_JO.txt`` (edge row past r = 5.001).
+    resistance table ``res_scalars_JO.txt`` (edge row past r = 5.001).  ``handover='smooth'``: the three
+    blended across :data:`SMOOTH_WINDOWS` ``near_contact`` and ``mobility_table``.
     """
     check_handover(handover)
     r = clamp_gap(r, 2.0, firm_delta)
     r_hat = np.asarray(r_hat, dtype=float).reshape(-1, 3)
+    if handover == 'smooth':
+        return _pair_resistance_sup_smooth(r, r_hat, factors)
     R = np.empty((r.shape[0], 12, 12))
     near = r <= NEAR_CONTACT_END
     middle = ~near & (r <= MOBILITY_TABLE_END)
@@ -175,11 +213,32 @@ def pair_resistance_sup(r, r_hat, factors, firm_delta=DEFAULT_FIRM_DELTA, handov
     if np.any(near):
         R[near] = pair_blocks(r_hat[near], *near_contact_scalars(r[near]), factors)
     if np.any(middle):
-        mobility_factors = tuple(1.0 / f for f in factors)
-        inverse = np.linalg.inv(pair_blocks(r_hat[middle], *table_pair_scalars('WS', r[middle]), mobility_factors))
-        R[middle] = 0.5 * (inverse + np.swapaxes(inverse, 1, 2))  # exactly symmetric (the inverse is, to rounding)
+        R[middle] = _mobility_table_resistance(r[middle], r_hat[middle], factors)
     if np.any(far):
         R[far] = pair_blocks(r_hat[far], *table_pair_scalars('JO', r[far]), factors)
+    return R
+
+
+def _mobility_table_resistance(r, r_hat, factors):
+    mobility_factors = tuple(1.0 / f for f in factors)
+    inverse = np.linalg.inv(pair_blocks(r_hat, *table_pair_scalars('WS', r), mobility_factors))
+    return 0.5 * (inverse + np.swapaxes(inverse, 1, 2))  # exactly symmetric (the inverse is, to rounding)
+
+
+def _pair_resistance_sup_smooth(r, r_hat, factors):
+    """``(1 - w1) R_near + w1 (1 - w2) R_WS + w2 R_JO`` (w1, w2 the weights of the two windows)."""
+    w1 = smooth_weight(r, SMOOTH_WINDOWS['near_contact'])
+    w2 = smooth_weight(r, SMOOTH_WINDOWS['mobility_table'])
+    R = np.zeros((r.shape[0], 12, 12))
+    near, middle, far = w1 < 1, (w1 > 0) & (w2 < 1), w2 > 0
+    if np.any(near):
+        R[near] += (1.0 - w1[near])[:, None, None] * pair_blocks(r_hat[near], *near_contact_scalars(r[near]),
+                                                                 factors)
+    if np.any(middle):
+        R[middle] += (w1[middle] * (1.0 - w2[middle]))[:, None, None] * _mobility_table_resistance(
+            r[middle], r_hat[middle], factors)
+    if np.any(far):
+        R[far] += w2[far][:, None, None] * pair_blocks(r_hat[far], *table_pair_scalars('JO', r[far]), factors)
     return R
 
 
@@ -217,7 +276,8 @@ def wall_scalars_sup(h, firm_delta=DEFAULT_FIRM_DELTA, handover='published'):
     inverted analytically (``1/X^a``, ``Y^c / (Y^a Y^c - Y^b^2)``, ...); beyond its top, ``X^a = 1 - 9/(8h)``,
     ``Y^a = 1 - 9/(16h)``, ``Y^b = 0``, ``X^c = Y^c = 3/4``; below its bottom the first row.  Near the wall
     the published lubrication forms (Cox and Brenner 1967; Goldman, Cox and Brenner 1967) replace the
-    table: X^a for h <= 1.1, Y^a for h <= 1.01, Y^b for h <= 1.1, X^c for h <= 1.01, Y^c for h <= 1.1.
+    table: X^a for h <= 1.1, Y^a for h <= 1.01, Y^b for h <= 1.1, X^c for h <= 1.01, Y^c for h <= 1.1
+    (``handover='smooth'``: blended across :data:`SMOOTH_WINDOWS` ``wall_near`` and ``wall_far``).
     """
     check_handover(handover)
     h = clamp_gap(h, 1.0, firm_delta)
@@ -237,11 +297,19 @@ def wall_scalars_sup(h, firm_delta=DEFAULT_FIRM_DELTA, handover='published'):
     near_coupling = (4.0 / 3.0) * ((0.1 * log_eps + 0.1895) - 0.4576 * eps)
     near_normal_rotation = (4.0 / 3.0) * (ZETA_3 - 3.0 * (np.pi * np.pi / 6.0 - 1.0) * eps)
     near_parallel_rotation = (4.0 / 3.0) * (-0.4 * log_eps + 0.3817 + 1.4578 * eps)
-    RXa = np.where(h > WALL_NORMAL_END, 1.0 / Xa, near_normal)
-    RYa = np.where(h > WALL_PARALLEL_END, Yc / denominator, near_parallel)
-    RYb = np.where(h > WALL_COUPLING_END, -Yb / denominator, near_coupling)
-    RXc = np.where(h > WALL_NORMAL_ROTATION_END, 1.0 / Xc, near_normal_rotation)
-    RYc = np.where(h > WALL_PARALLEL_ROTATION_END, Ya / denominator, near_parallel_rotation)
+    if handover == 'smooth':
+        w_near, w_far = smooth_weight(h, SMOOTH_WINDOWS['wall_near']), smooth_weight(h, SMOOTH_WINDOWS['wall_far'])
+        RXa = (1.0 - w_far) * near_normal + w_far * (1.0 / Xa)
+        RYa = (1.0 - w_near) * near_parallel + w_near * (Yc / denominator)
+        RYb = (1.0 - w_far) * near_coupling + w_far * (-Yb / denominator)
+        RXc = (1.0 - w_near) * near_normal_rotation + w_near * (1.0 / Xc)
+        RYc = (1.0 - w_far) * near_parallel_rotation + w_far * (Ya / denominator)
+    else:
+        RXa = np.where(h > WALL_NORMAL_END, 1.0 / Xa, near_normal)
+        RYa = np.where(h > WALL_PARALLEL_END, Yc / denominator, near_parallel)
+        RYb = np.where(h > WALL_COUPLING_END, -Yb / denominator, near_coupling)
+        RXc = np.where(h > WALL_NORMAL_ROTATION_END, 1.0 / Xc, near_normal_rotation)
+        RYc = np.where(h > WALL_PARALLEL_ROTATION_END, Ya / denominator, near_parallel_rotation)
     return np.stack((RXa - 1.0, RYa - 1.0, RYb, np.maximum(RXc - 4.0 / 3.0, 0.0),
                      np.maximum(RYc - 4.0 / 3.0, 0.0)), axis=1)
 

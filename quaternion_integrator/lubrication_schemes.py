@@ -15,7 +15,8 @@ corrections of :mod:`lubrication` (doc/lubrication.md).
 Every body must be one blob (a sphere of radius ``blob_radius``, e.g. a ``.vertex`` file with the single
 line ``0 0 0``), without slip.  Options: ``Lub_Cut`` (pair cutoff, units of a), ``firm_delta`` (gap clamp,
 units of a), ``repulsion_strength_firm`` (the examples' firm pair repulsion, added to the forces when
-not 0; :mod:`lubrication.firm_repulsion`), ``kT``, ``rf_delta`` (the RFD step, absolute as published),
+not 0; :mod:`lubrication.firm_repulsion`), ``lubrication_handover`` (``published`` or ``smooth``,
+:mod:`lubrication.resistance`), ``kT``, ``rf_delta`` (the RFD step, absolute as published),
 ``solver_tolerance``; the wall or not from ``mobility_vector_prod_implementation`` (``*_no_wall``).
 Forces and torques are the run's (``multi_bodies_functions`` and the user's hooks).
 
@@ -44,6 +45,7 @@ class LubricationScheme(StochasticScheme):
         self.cutoff = float(options.Lub_Cut)
         self.firm_delta = float(options.firm_delta)
         self.firm_strength = float(options.repulsion_strength_firm)
+        self.handover = options.lubrication_handover
 
     def wall_and_backend(self, work):
         """(wall, far-field backend name) of the run: from ``mobility_vector_prod_implementation``."""
@@ -56,7 +58,7 @@ class LubricationScheme(StochasticScheme):
         return brownian.lubrication_settings(work.blob_radius, work.eta, wall=wall,
                                              cutoff=self.cutoff, periodic_length=work.periodic_length,
                                              firm_delta=self.firm_delta, implementation=name,
-                                             rfd_delta=self.delta)
+                                             handover=self.handover, rfd_delta=self.delta)
 
     def check_spheres(self, work):
         """UserInputError unless every body is one blob, all of radius ``blob_radius``, without slip."""

@@ -242,7 +242,7 @@ def test_isolated_spheres_are_left_to_the_far_field():
     ({'firm_delta': -1e-3}, 'firm_delta'),
     ({'firm_delta': 'small'}, 'firm_delta'),
     ({'cutoff': 0.0}, 'Lub_Cut'),
-    ({'handover': 'smooth'}, 'handover'),
+    ({'handover': 'blended'}, 'handover'),
     ({'periodic_length': (1.0, 2.0)}, 'periodic_length'),
 ])
 def test_bad_options_are_refused_with_their_name(options, words):
