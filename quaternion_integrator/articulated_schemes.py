@@ -31,6 +31,12 @@ class ArticulatedScheme(Scheme):
     name = None
     single_blobs = False
 
+    def step_event(self, work, t):
+        """The published ``Constraint.tumbling_event(t)`` of a user's override, at the start of every step."""
+        articulated = work.articulated
+        if articulated is not None and articulated.step_event is not None:
+            articulated.step_event(t)
+
     def articulated_set(self, work):
         if work.articulated is None:
             raise UserInputError("scheme %s needs articulated bodies: add an 'articulated <file.list_vertex> "
@@ -67,6 +73,7 @@ class ArticulatedForwardEuler(ArticulatedScheme):
 
     def advance(self, work, configuration, step_index, rng=None):
         t = step_index * self.dt
+        self.step_event(work, t)
         U = self.constrained_velocities(work, configuration, t)
         _check_finite(U, step_index, self.name)
         new = self.half_or_full(work, configuration, U, self.dt, t + self.dt, configuration)
@@ -79,6 +86,7 @@ class ArticulatedMidpoint(ArticulatedScheme):
 
     def advance(self, work, configuration, step_index, rng=None):
         t = step_index * self.dt
+        self.step_event(work, t)
         U = self.constrained_velocities(work, configuration, t)
         _check_finite(U, step_index, self.name)
         middle = self.half_or_full(work, configuration, U, 0.5 * self.dt, t + 0.5 * self.dt, configuration)

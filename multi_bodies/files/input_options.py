@@ -629,16 +629,12 @@ def check_value(name, value, where=None, program=None):
 
 
 def check_articulated(options):
-    """Articulated bodies need an articulated scheme, and an articulated scheme needs articulated bodies."""
+    """Articulated bodies need an articulated scheme (an articulated scheme moves plain bodies too, as published)."""
     lines = options.articulated
     if lines and options.scheme not in ARTICULATED_SCHEMES + STATIC_SCHEMES:
         raise UserInputError("%s: scheme '%s' cannot move articulated bodies (the 'articulated' line %s); use %s"
                              % (options.where('scheme'), options.scheme, lines[0].where,
                                 ', '.join(ARTICULATED_SCHEMES)))
-    if options.scheme in ARTICULATED_SCHEMES and not lines:
-        raise UserInputError("%s: scheme '%s' moves articulated bodies, but the file has no 'articulated "
-                             "<file.list_vertex> <file.clones> <file.const>' line" % (options.where('scheme'),
-                                                                                      options.scheme))
 
 
 def check_hydrogrid(options, program=None):

@@ -34,7 +34,7 @@ import numpy as np
 import utils
 from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
 from multi_bodies.solver import physics as mbf
-from multi_bodies.solver import user_hooks
+from multi_bodies.solver import published_joints, user_hooks
 from multi_bodies.files.input_options import STATIC_SCHEMES, check_options  # noqa: F401 (STATIC_SCHEMES re-exported)
 from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
@@ -164,8 +164,8 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
     """
     from multi_bodies.solver import articulated as art
     specs = options.articulated
-    if not specs:
-        return None
+    if not specs:  # an articulated scheme moves plain bodies with no joint, as the published code does
+        return art.ArticulatedSet() if options.scheme.startswith('articulated_') else None
     articulated = art.ArticulatedSet()
     for spec in specs:
         names = art.read_list_vertex_file(spec.list_vertex_file, spec.where)
@@ -337,6 +337,13 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
                                     restart_record=restart_record)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
+    if articulated is not None:
+        if getattr(hooks, 'published_constraint_class', None) is not None:
+            try:
+                published_joints.attach(articulated, hooks.published_constraint_class)
+            except user_hooks.UserFunctionError as err:
+                raise utils.UserInputError(str(err))
+        articulated.check_extras()
     body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if articulated is not None
                                    else [count for _, count in types], per_body_slip=script != 'mcmc')
     fixed = [spec for spec in all_structure_specs(options) if spec.obstacle or spec.velocity_file is not None]

@@ -103,7 +103,8 @@ Restored = namedtuple('Restored', ['configuration', 'nonlinear_iterations'])
 Restored.__doc__ = """Result of :meth:`ArticulatedSet.restore`: the Configuration with the joints restored and the
 residual evaluations of its nonlinear correction (the published ``nonlinear_iterations_count`` adds them)."""
 
-ConstFile = namedtuple('ConstFile', ['num_bodies', 'bodies', 'links', 'expressions', 'path'])
+ConstFile = namedtuple('ConstFile', ['num_bodies', 'bodies', 'links', 'expressions', 'path', 'extras'],
+                       defaults=(None,))
 ConstFile.__doc__ = """A ``.const`` file: ``num_bodies``; ``bodies`` (Nc, 2) int (p, q); ``links`` (Nc, 6) the
 body-frame vectors ``[l_p, l_q]`` (length units); ``expressions``: per joint None (passive) or 12 functions of t
 (``l_p, l_q, dl_p/dt, dl_q/dt``); ``path``."""
@@ -147,10 +148,10 @@ def read_const_file(path, where):
                              % (where, path, num_constraints, len(lines) - 2))
     bodies = np.zeros((num_constraints, 2), dtype=int)
     links = np.zeros((num_constraints, 6))
-    expressions = []
+    expressions, extras = [], []
     for c, (number, words) in enumerate(lines[2:]):
         at = '%s, line %d' % (path, number)
-        if len(words) not in (8, 20):
+        if len(words) < 8:
             raise UserInputError('%s: a constraint line has 8 numbers (body_p body_q l_p l_q), optionally followed '
                                  'by 12 expressions of t (l_p l_q dl_p/dt dl_q/dt); got %d fields'
                                  % (at, len(words)))
@@ -164,8 +165,11 @@ def read_const_file(path, where):
                                  'the value' % (at, LARGEST_LINK))
         if np.any(bodies[c] < 0) or np.any(bodies[c] >= num_bodies):
             raise UserInputError('%s: body indices must be between 0 and %d' % (at, num_bodies - 1))
-        expressions.append(None if len(words) == 8 else [compile_expression(w, at) for w in words[8:]])
-    return ConstFile(num_bodies, bodies, links, expressions, path)
+        # other extra fields are the published constraint_extra of a user's Constraint.update_links override
+        # (checked by :meth:`ArticulatedSet.check_extras` once the overrides are known)
+        expressions.append([compile_expression(w, at) for w in words[8:]] if len(words) == 20 else None)
+        extras.append((tuple(words[8:]), at) if len(words) not in (8, 20) else None)
+    return ConstFile(num_bodies, bodies, links, expressions, path, extras)
 
 
 # ---------------------------------------------------------------------------------------------- geometry
@@ -232,12 +236,24 @@ class ArticulatedSet:
         self.bodies = np.zeros((0, 2), dtype=int)
         self.reference_links = np.zeros((0, 6))
         self.expressions = []
+        self.extras = []  # per constraint: (fields, where) of a published constraint_extra, or None
         self.groups = []
         self.link_override = None  # callable (t, links (Nc, 6)) -> (links, rates) or None (user hook)
+        self.step_event = None  # callable (t) called at the start of every step, or None (published tumbling_event)
 
     @property
     def num_constraints(self):
         return self.bodies.shape[0]
+
+    def check_extras(self):
+        """Refuse extra ``.const`` fields that no user ``Constraint.update_links`` reads (the published faces)."""
+        if self.link_override is None:
+            for extra in self.extras:
+                if extra is not None:
+                    raise UserInputError(
+                        '%s: a constraint line has 8 numbers (body_p body_q l_p l_q), optionally followed by 12 '
+                        'expressions of t (l_p l_q dl_p/dt dl_q/dt); got %d fields (other extra fields are read '
+                        'only by a Constraint.update_links of user_defined_functions.py)' % (extra[1], 8 + len(extra[0])))
 
     def add(self, const, first_body, num_copies):
         """Add ``num_copies`` articulated bodies of the :data:`ConstFile` ``const`` from global body ``first_body``."""
@@ -248,6 +264,7 @@ class ArticulatedSet:
             self.bodies = np.concatenate((self.bodies, const.bodies + start))
             self.reference_links = np.concatenate((self.reference_links, const.links))
             self.expressions.extend(const.expressions)
+            self.extras.extend(const.extras if const.extras is not None else [None] * len(const.expressions))
             self.groups.append(ArticulatedBody(np.arange(start, start + n), np.arange(c0, self.num_constraints),
                                                const.bodies))
 

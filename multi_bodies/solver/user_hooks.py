@@ -184,6 +184,7 @@ class PhysicsHooks:
         self.postprocess = mbf.postprocess
         self.calc_blob_blob_forces_pycuda = None
         self.body_body_of_bodies = None  # published calc_body_body_forces_torques_python (bodies, r_vectors)
+        self.published_constraint_class = None  # the user's patched constraint.constraint.Constraint, or None
         self.pycuda_file = None
         self.overridden = []
         self.sources = []
@@ -259,6 +260,14 @@ class PhysicsHooks:
             self.body_body_of_bodies = body_body_of_bodies
             self._replaced('calc_body_body_forces_torques_python', function,
                            '(bodies, r_vectors) -> (2 Nb, 3), with body_body_force_torque_implementation python')
+        if 'published Constraint' in found:
+            self.published_constraint_class = found['published Constraint']
+            self.notes.append('%s patches the published Constraint class (%s): the joints take their links from '
+                              'its update_links%s' % (path, ', '.join(sorted(
+                                  name for name, value in vars(self.published_constraint_class).items()
+                                  if callable(value) and getattr(value, '__module__', '') != 'constraint.constraint')),
+                                  ' and every step calls its tumbling_event(t)' if hasattr(
+                                      self.published_constraint_class, 'tumbling_event') else ''))
         for name in ('preprocess', 'postprocess'):
             if name in found:
                 function = found[name]
@@ -410,6 +419,9 @@ PUBLISHED_TREE_MODULES = ('mobility', 'articulated', 'constraint', 'general_appl
                           'utils', 'Lubrication', 'many_bodyMCMC', 'boomerang', 'sphere', 'forces_numba',
                           'forces_pycuda', 'forces_cpp', 'HydroGrid', 'calculateConcentration', 'visit',
                           'plot_velocity_field', 'multi_bodies_utilities', 'periodic_mobility', 'stkfmm')
+# The published faces of the joints (constraint/, articulated/ at the repository root) and where they live.
+JOINT_FACE_MODULES = ('constraint', 'constraint.constraint', 'articulated', 'articulated.articulated')
+FACE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # The published module paths this package provides for override files and drivers (tests/test_layout.py).
 PUBLISHED_FACES = ('mobility.mobility', 'general_application_utils', 'read_input', 'quaternion_integrator.quaternion',
                    'multi_bodies_functions', 'articulated.articulated', 'constraint.constraint')
@@ -433,7 +445,15 @@ def import_user_file(path):
     before_copy = _public_callables(copy)
     this_before = sys.modules.get(PACKAGE_MODULE_NAME)
     before_this = _public_callables(this_before) if this_before is not None else dict(before_copy)
-    saved = {name: sys.modules.get(name) for name in ('multi_bodies_functions', 'user_defined_functions')}
+    # the published faces of the joints are imported afresh for each file, so one run's patches of their classes
+    # never reach another run in the same process
+    saved = {name: sys.modules.get(name) for name in ('multi_bodies_functions', 'user_defined_functions')
+             + JOINT_FACE_MODULES}
+    for name in JOINT_FACE_MODULES:
+        sys.modules.pop(name, None)
+    added_root = FACE_ROOT not in sys.path and importlib.util.find_spec('constraint') is None
+    if added_root:  # an editable install made before the faces existed does not map them
+        sys.path.append(FACE_ROOT)
     module_name = os.path.splitext(os.path.basename(path))[0]
     spec = importlib.util.spec_from_file_location(module_name, path)
     module = importlib.util.module_from_spec(spec)
@@ -460,6 +480,9 @@ def import_user_file(path):
         raise UserInputError('%s%s: importing the user-defined functions raised %s: %s; fix the file or remove it '
                              'from the run directory' % (path, line, type(err).__name__, err))
     finally:
+        published_constraint = getattr(sys.modules.get('constraint.constraint'), 'Constraint', None)
+        if added_root:
+            sys.path.remove(FACE_ROOT)
         for name, value in saved.items():
             if value is None:
                 sys.modules.pop(name, None)
@@ -478,6 +501,10 @@ def import_user_file(path):
     defaults = set(map(id, before_copy.values())) | set(map(id, before_this.values())) | \
         set(map(id, _public_callables(mbf).values()))
     found, notes = {}, []
+    if published_constraint is not None and any(getattr(value, '__module__', 'constraint.constraint') !=
+                                                 'constraint.constraint' for value in vars(published_constraint).values()
+                                                 if callable(value)):
+        found['published Constraint'] = published_constraint  # patched by the file: the joints use it
     for name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS:
         candidates = []
         for where, table in (('multi_bodies_functions.%s = ...' % name, rebound_copy),
