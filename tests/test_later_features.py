@@ -41,7 +41,7 @@ def test_every_later_option_is_refused_in_one_form_with_its_status(name):
     assert '(%s)' % FEATURE_STATUS[feature] in message and message.endswith('remove it')
 
 
-@pytest.mark.parametrize('line', ['from mobility import not_here as mob', 'import articulated.articulated',
+@pytest.mark.parametrize('line', ['from mobility import not_here as mob', 'import articulated.not_a_published_module',
                                   'from Lubrication import Lubrication_Class'])
 def test_a_published_module_path_is_not_sent_to_pip(tmp_path, line):
     (tmp_path / 'user_defined_functions.py').write_text(line + '\n')
