@@ -15,6 +15,9 @@ its cost per step on this machine:
   the gaps against the blob radius (and, on request, a coarsened model);
 * ``wall``: the body mobility with and without the wall;
 * ``rollers``: multiblob against single-blob roller spheres;
+* ``lubrication``: on scenes of spheres of one radius, 1 blob, 1 blob with lubrication and resolved
+  shells at the smallest pair and wall gaps, from the chart of doc/lubrication_accuracy.md
+  (``advisor_lubrication``);
 * ``solver``: one dense solve against one preconditioned GMRES solve;
 * ``backend``: one ``M f`` on every usable backend;
 * ``dt``: the time step: stability, no crossing of the wall or of bodies, and its error measured
@@ -50,6 +53,7 @@ from multi_bodies.solver import body_solver
 
 from multi_bodies.advice import advisor_physics
 from multi_bodies.advice.advisor_resolution import ResolutionMeasurements
+from multi_bodies.advice.advisor_lubrication import LubricationMeasurements
 from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
 from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
@@ -79,7 +83,7 @@ from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exporte
 
 
 # ------------------------------------------------------------------ the advisor
-class Advisor(ResolutionMeasurements, AdvisorReport):
+class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
     """Measures every choice for one scene; see the module docstring.
 
     Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
@@ -104,6 +108,9 @@ class Advisor(ResolutionMeasurements, AdvisorReport):
         self.backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
         self.iterations = None
         self.product_seconds = {}  # (backend, wall) -> (seconds of one M f of the scene, blobs)
+        self.lubrication_lines = []  # input lines of the lubrication topic's model change (advisor_lubrication)
+        self.lubrication_files = []  # vertex files those lines name
+        self.lubrication_alternative = False  # True: those lines are a cheaper alternative to the model lines
 
     def blob_gaps(self):
         """Distance of every blob to the closest blob of another body, (N,), computed once."""
@@ -157,7 +164,8 @@ class Advisor(ResolutionMeasurements, AdvisorReport):
         """
         steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
                  ('resolution', self.measure_resolution), ('wall', self.measure_wall),
-                 ('rollers', self.measure_rollers), ('dt', self.measure_dt),
+                 ('rollers', self.measure_rollers), ('lubrication', self.measure_lubrication),
+                 ('dt', self.measure_dt),
                  ('scope', self.keep_to_program), ('check', self.keep_physics), ('dt bounds', self.recommend_dt)]
         for index, (name, step) in enumerate(steps):
             self.log('advise: [%d/%d] %s ...' % (index + 1, len(steps), name))

@@ -19,7 +19,8 @@ class AdvisorReport:
                             for c in self.choices],
                 'recommendation': dict(self.recommendation),
                 'check': getattr(self, 'check', None),
-                'dt_bound': getattr(self, 'dt_bound', None)}
+                'dt_bound': getattr(self, 'dt_bound', None),
+                'lubrication_lines': list(getattr(self, 'lubrication_lines', []))}
 
     def report(self):
         """Text report: a table per choice, the notes, the recommendation and the input lines to change."""
@@ -40,7 +41,7 @@ class AdvisorReport:
                     '' if structure['nearest_gap'] is None else
                     ', nearest pair at %.4g R' % (structure['nearest_gap'] / sphere['radius']))
                 if sphere else 'not a sphere'))
-        for topic in ('resolution', 'wall', 'rollers', 'solver', 'backend', 'dt'):
+        for topic in ('resolution', 'wall', 'rollers', 'lubrication', 'solver', 'backend', 'dt'):
             rows = [c for c in self.choices if c.topic == topic]
             if not rows:
                 continue
@@ -62,17 +63,23 @@ class AdvisorReport:
         if self.notes:
             lines += ['', '## notes', ''] + ['- ' + n for n in self.notes]
         lines += ['', '## recommendation', '']
-        if not self.recommendation:
-            lines.append('The input already uses the cheapest adequate choices measured here: no line to change.')
-        else:
+        if self.recommendation:
             lines.append('Change these input lines:')
             lines.append('')
             lines += ['    ' + line for line in recommendation_lines(self.recommendation)]
+        elif not getattr(self, 'lubrication_lines', None):
+            lines.append('The input already uses the cheapest adequate choices measured here: no line to change.')
+        if getattr(self, 'lubrication_lines', None):
+            lines += ['', 'Cheaper with lubrication (lubrication topic; instead of the model lines above, not run '
+                      'through the check):' if getattr(self, 'lubrication_alternative', False)
+                      else 'Sphere model (lubrication topic):', '']
+            lines += ['    ' + line for line in self.lubrication_lines]
         return '\n'.join(lines) + '\n'
 
     def recommends_file(self, path):
         """True when a recommended structure line names the vertex file ``path``."""
-        return any(k.startswith('structure:') and v.split()[0] == path for k, v in self.recommendation.items())
+        return path in getattr(self, 'lubrication_files', ()) or any(
+            k.startswith('structure:') and v.split()[0] == path for k, v in self.recommendation.items())
 
     def write(self):
         """Write ``output_name.advice.json``, the recommended vertex files; returns the JSON path."""
