@@ -8,9 +8,9 @@ Bodies: icosahedral unit shells (``--blobs`` blobs, a = half the blob
 spacing, outward unit normals, weights 4 pi / n) on a square lattice of
 spacing 3 at height 5 with random orientations, no wall.  Each body emits
 (alpha = 1), reacts (k = 0.5) and has surface mobility 1; for the slip-length
-solve every blob has slip length ``--slip-length`` (1e3, the published FreeSlip value; at slip lengths of
-the order of the body size the published formulation needs hundreds of iterations).  Columns (seconds, wall time, one core
-of a shared machine; GMRES iterations in brackets):
+solve every blob has slip length ``--slip-length`` (1e3, the published FreeSlip
+value).  Columns (seconds, wall time, one core of a shared machine; GMRES
+iterations in brackets):
 
 * ``mobility``: preconditioner set-up and GMRES of the rigid problem under a unit force (no slip);
 * ``laplace``: the concentration solve (unpreconditioned GMRES(200), no set-up);

@@ -75,7 +75,8 @@ def _shell_files(directory, n, reaction, emitting, mobility_value, location, bac
     with open(directory / 'input.dat', 'w') as f:
         f.write('scheme deterministic_forward_euler\ndt 0.01\nn_steps 1\nblob_radius %r\neta 1\ng 0\n'
                 'mobility_vector_prod_implementation %s\nmobility_blobs_implementation %s\ndomain %s\n'
-                'repulsion_strength_wall 0\nrepulsion_strength 0\nbackground_Laplace %s\nstructure shell.vertex shell.clones shell.Laplace\noutput_name out/run\n%s'
+                'repulsion_strength_wall 0\nrepulsion_strength 0\nbackground_Laplace %s\n'
+                'structure shell.vertex shell.clones shell.Laplace\noutput_name out/run\n%s'
                 % (a, implementation, implementation, domain, ' '.join('%r' % float(b) for b in background), extra))
     return _model_of(directory, 'input.dat')
 
@@ -83,7 +84,8 @@ def _shell_files(directory, n, reaction, emitting, mobility_value, location, bac
 def test_wall_images_equal_the_mirror_pair(tmp_path):
     """Method of images: one emitting, reacting sphere above the no-flux wall has the concentrations of the sphere and
     its mirror image in free space (upper sphere's blobs), to the solver tolerance."""
-    model = _shell_files(tmp_path, 42, 0.5, 1.0, 1.0, (0.3, -0.2, 1.6), (0.2, 0.1, 0.3, 0.0, 0.05), domain='single_wall')
+    model = _shell_files(tmp_path, 42, 0.5, 1.0, 1.0, (0.3, -0.2, 1.6), (0.2, 0.1, 0.3, 0.0, 0.05),
+                         domain='single_wall')
     q = model.start_configuration
     problem, result = model.surface.solve_concentrations(model, q)
     assert problem.wall
@@ -220,10 +222,11 @@ def test_bad_phoretic_input_names_file_line_and_fix(tmp_path):
     assert 'bad.dat, line' in message and 'one to nine numbers' in message
     rows = (tmp_path / 'shell.Laplace').read_text().splitlines()
     (tmp_path / 'short.Laplace').write_text('\n'.join(rows[:5] + [' '.join(rows[5].split()[:6])] + rows[6:]) + '\n')
-    message = error_of(good.replace('shell.vertex shell.clones shell.Laplace', 'shell.vertex shell.clones short.Laplace'))
+    line = 'shell.vertex shell.clones shell.Laplace'
+    message = error_of(good.replace(line, 'shell.vertex shell.clones short.Laplace'))
     assert 'short.Laplace, line 6' in message and '7 numbers' in message
     (tmp_path / 'few.Laplace').write_text('\n'.join(rows[:30]) + '\n')
-    message = error_of(good.replace('shell.vertex shell.clones shell.Laplace', 'shell.vertex shell.clones few.Laplace'))
+    message = error_of(good.replace(line, 'shell.vertex shell.clones few.Laplace'))
     assert 'few.Laplace' in message and 'shell.vertex has 42 blobs' in message
     (tmp_path / 'other.clones').write_text('1\n5 0 5 1 0 0 0\n')
     message = error_of(good + 'structure shell.vertex other.clones\n')

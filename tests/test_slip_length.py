@@ -140,11 +140,13 @@ def test_turned_body_and_preconditioners():
     for q in ([1.0, 0, 0, 0], [0.18651688, -0.19597346, 0.9500471, 0.15561606]):
         body = Body(np.zeros(3), np.array(q) / np.linalg.norm(q), reference, a)
         arrays = bodies_to_arrays([body], [1])
-        problem = sl.slip_length_problem(arrays, arrays.configuration, mobility.mobility_vector_product('python_no_wall'),
+        product = mobility.mobility_vector_product('python_no_wall')
+        problem = sl.slip_length_problem(arrays, arrays.configuration, product,
                                          1.0, a, np.zeros(3), normals, lengths, weights)
         runs = {}
         for kind in ('double_layer', 'published'):
-            pc = sl.SlipLengthPreconditioner(arrays, arrays.configuration, mobility.blob_mobility_matrix('python_no_wall'),
+            dense = mobility.blob_mobility_matrix('python_no_wall')
+            pc = sl.SlipLengthPreconditioner(arrays, arrays.configuration, dense,
                                              1.0, a, normals, lengths, weights, kind=kind)
             runs[kind] = body_solver.solve(problem, problem.rhs(None, force), pc, tolerance=1e-10, restart=300)
         assert runs['double_layer'].iterations <= 2

@@ -25,8 +25,11 @@ importable)::
     python -m multi_bodies.files.structure_generators boomerang --arm-blobs 7 --spacing 0.3 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators rod --blobs 10 --spacing 0.5 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators blob --output multi_bodies/Structures
-    python -m multi_bodies.files.structure_generators janus-laplace --vertex multi_bodies/Structures/shell_N_42_Rg_0_8912_Rh_1.vertex --emitting-front 1 --emitting-back 0 --output multi_bodies/Structures
-    python -m multi_bodies.files.structure_generators slip-length --vertex multi_bodies/Structures/shell_N_162_Rg_0_9497_Rh_1.vertex --slip-length 1000 --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators janus-laplace \\
+        --vertex multi_bodies/Structures/shell_N_42_Rg_0_8912_Rh_1.vertex --emitting-front 1 --emitting-back 0 \\
+        --output multi_bodies/Structures
+    python -m multi_bodies.files.structure_generators slip-length \\
+        --vertex multi_bodies/Structures/shell_N_162_Rg_0_9497_Rh_1.vertex --slip-length 1000 --output multi_bodies/Structures
     python -m multi_bodies.files.structure_generators lattice --nx 2 --ny 2 --spacing 5 --height 1 --name four_rollers --output multi_bodies/Structures
 
 Each command prints the file it wrote and the blob radius to use with it.

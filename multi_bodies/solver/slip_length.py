@@ -195,8 +195,8 @@ class SlipLengthPreconditioner:
     """Block-diagonal preconditioner of :class:`SlipLengthProblem`: each body alone, solved exactly.
 
     normals : (N, 3) body-frame normals (turned with the bodies at ``configuration`` here); slip_lengths,
-    weights : (N,).  ``kind='double_layer'`` (the default): per body, with ``B_k = I/2 + D_k`` (the body's own double layer,
-    dense) and ``A_k = M_k + B_k Xi_k P_k`` (LU inverse), applied to ``y = [y1; y2; y3]``::
+    weights : (N,).  ``kind='double_layer'`` (the default): per body, with ``B_k = I/2 + D_k`` (the body's
+    own double layer, dense) and ``A_k = M_k + B_k Xi_k P_k`` (LU inverse), applied to ``y = [y1; y2; y3]``::
 
         U = -S_k^+ (y2 + K^T A^-1 (y1 + B y3)),  S_k = K^T A^-1 B K,
         lambda = A^-1 (y1 + B y3 + B K U),        u = y3 - Xi P lambda,

@@ -108,7 +108,8 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
                              "'articulated' line or the surface files" % options.articulated[0].where)
     if 'rollers' in options.scheme:
         raise UserInputError('%s: scheme %s moves single-blob rollers, which have no surface; remove the .Laplace and '
-                             '.slip_length files or use a rigid-body scheme' % (options.where('scheme'), options.scheme))
+                             '.slip_length files or use a rigid-body scheme'
+                             % (options.where('scheme'), options.scheme))
     surface = Surface()
     if any(laplace):
         missing = [s for s in specs if s.laplace_file is None]
