@@ -199,6 +199,11 @@ class LubricationMeasurements:
             self.notes.append('lubrication: the lines of the resolution and rollers topics (%s) are dropped: %s'
                               % (', '.join(key.split(':')[0] for key in dropped), reason))
 
+    def set_lubrication_options(self):
+        """The lubrication options (``LUBRICATION_OPTIONS``) the input sets."""
+        options = self.scene.options
+        return [name for name in LUBRICATION_OPTIONS if options.is_set(name)]
+
     def lubrication_change(self, model, target_scheme, radius, blobs_now):
         """Input lines (strings) that switch the input to ``model`` with ``target_scheme``."""
         options = self.scene.options
@@ -207,7 +212,7 @@ class LubricationMeasurements:
             lines.append('%-40s %s' % ('scheme', target_scheme))
         blobs = tables.model_blobs(model)
         if model_kind(target_scheme) == 'multiblob':
-            for name in LUBRICATION_OPTIONS:
+            for name in self.set_lubrication_options():
                 lines.append('remove the line %s (the multiblob schemes refuse it)' % name)
             shell, blob_radius = tables.shell_blobs(blobs, radius)
             for structure in self.scene.structures:
@@ -220,7 +225,7 @@ class LubricationMeasurements:
         else:
             if model == '1 blob' and model_kind(options.scheme) == 'lubrication':
                 lines += ['remove the line %s (the roller schemes do not use it)' % name
-                          for name in LUBRICATION_OPTIONS]
+                          for name in self.set_lubrication_options()]
             if model == '1 blob' and model_kind(options.scheme) == 'lubrication' \
                     and options.scheme != 'lubrication_trapezoidal_rollers':
                 lines.append('%-40s %s' % ('free_kinematics', 'True'))
