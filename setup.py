@@ -79,6 +79,14 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
+        'lubrication._lubrication_cpp',
+        ['lubrication/cpp/lubrication_module.cpp'],
+        # serial (no OpenMP: it did not pay); no fused multiply-adds, so the blocks equal the NumPy fallback's
+        extra_compile_args=[arg for arg in compile_args if arg != '-fopenmp' and not arg.startswith('-ffp-contract')]
+        + ['-ffp-contract=off'],
+        cxx_std=17,
+    ),
+    Pybind11Extension(
         'body._rigid_cpp',
         ['body/cpp/rigid_module.cpp'],
         extra_compile_args=compile_args,

@@ -8,6 +8,15 @@ for each far-field backend asked.
     python benchmarks/bench_lubrication.py                          # 8 x 8 and 16 x 16, C++ far field
     python benchmarks/bench_lubrication.py --sides 8 16 32 --implementations python C++
     python benchmarks/bench_lubrication.py --steps --sides 8 16       # trapezoidal steps, near-field roots
+    python benchmarks/bench_lubrication.py --breakdown --sides 8 16   # where a step's time goes, both assemblies
+    python benchmarks/bench_lubrication.py --breakdown --sides 64 --repeats 1 --assembly compiled
+
+With ``--breakdown``: one trapezoidal step (Lanczos root) timed, under cProfile, split into the assembly of
+R_sup, R_MB and Delta_R (``assembly.resistance_matrices``), the sparse LU of the preconditioner (SuperLU),
+the far-field products (the compiled blob products), the sparse products and triangular solves, and the
+rest (Python: GMRES and Lanczos bookkeeping, array copies).  ``--assembly`` picks the assembly path
+(``compiled``: the C++ kernels of ``lubrication/cpp/`` when built, ``python``: the NumPy fallback,
+``both``: one after the other, each with the assembly alone timed too).
 
 With ``--steps``: the median wall time of one stochastic trapezoidal step
 (``lubrication.integrators.trapezoidal_step``: forces, noise, predictor, far-field RFD, corrector) with the
@@ -24,7 +33,7 @@ import time
 
 import numpy as np
 
-from lubrication import assembly, brownian, integrators, problem as lub_problem
+from lubrication import assembly, brownian, compiled, integrators, problem as lub_problem
 from multi_bodies.solver.body_solver import solve
 
 RADIUS, ETA, TOLERANCE = 1.0155, 1e-3, 1e-8
@@ -88,13 +97,76 @@ def main_steps(args):
                     counts['lanczos_iterations'], counts['factorisations'], 1e3 * t_root, products))
 
 
+def breakdown_rows(side, repeats):
+    """(N, step seconds (median of the un-profiled runs), {part: seconds per step under cProfile})."""
+    import cProfile
+    import pstats
+    locations = lattice(side)
+    orientations = np.tile([1.0, 0.0, 0.0, 0.0], (locations.shape[0], 1))
+    settings = brownian.lubrication_settings(RADIUS, ETA)
+    rng = np.random.default_rng(3)
+
+    def step():
+        return integrators.trapezoidal_step(settings, locations, orientations, settle, KT, DT, rng, STEP_TOLERANCE)
+    step()
+    t_step, _ = median_time(step, repeats)
+    profiler = cProfile.Profile()
+    profiler.enable()
+    for _ in range(repeats):
+        step()
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats
+    total = sum(value[3] for key, value in stats.items() if key[2] == 'trapezoidal_step')
+
+    def builtin(*names):  # own time of compiled functions whose name holds one of names
+        return sum(value[2] for key, value in stats.items() if key[0] == '~' and any(n in key[2] for n in names))
+    seconds = {'assembly': sum(value[3] for key, value in stats.items() if key[2] == 'resistance_matrices'),
+               'sparse LU': builtin('gstrf'),
+               'far field': builtin('_mobility_cpp.product'),
+               'sparse products, solves': builtin('csr_matvec', 'bsr_matvec', "'solve' of 'SuperLU'")}
+    seconds['rest (Python)'] = total - sum(seconds.values())
+    return locations.shape[0], t_step, {part: value / repeats for part, value in seconds.items()}
+
+
+def main_breakdown(args):
+    """For each side and each assembly path (one after the other): the assembly alone (median of 10 or more
+    calls, unprofiled), the median step, and the step's parts under cProfile (seconds per step)."""
+    paths = ('python', 'compiled') if args.assembly == 'both' else (args.assembly,)
+    print('%6s %9s %12s %9s %10s %10s %10s %12s %14s' % ('N', 'assembly', 'assembly ms', 'step s', 'assembly',
+                                                         'sparse LU', 'far field', 'sparse/solves', 'rest (Python)'))
+    for side in args.sides:
+        locations = lattice(side)
+        for path in paths:
+            compiled.use_compiled(path == 'compiled')
+            if path == 'compiled' and not compiled.in_use():
+                print('%6d %9s (not built)' % (side * side, path))
+                continue
+            t_assembly, _ = median_time(lambda: assembly.resistance_matrices(locations, RADIUS, ETA),
+                                        max(10, args.repeats))
+            n, t_step, parts = breakdown_rows(side, args.repeats)
+            print('%6d %9s %12.2f %9.3f %10.3f %10.3f %10.3f %12.3f %14.3f' % (
+                n, path, 1e3 * t_assembly, t_step, parts['assembly'], parts['sparse LU'], parts['far field'],
+                parts['sparse products, solves'], parts['rest (Python)']))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--sides', type=int, nargs='+', default=[8, 16])
     parser.add_argument('--implementations', nargs='+', default=['C++'])
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--steps', action='store_true', help='time trapezoidal steps and near-field roots')
+    parser.add_argument('--breakdown', action='store_true', help="where a trapezoidal step's time goes")
+    parser.add_argument('--assembly', choices=('compiled', 'python', 'both'), default=None,
+                        help='the C++ assembly when built (compiled), the NumPy fallback (python), or both one after '
+                             'the other (the default of --breakdown)')
     args = parser.parse_args()
+    if args.assembly is None:
+        args.assembly = 'both' if args.breakdown else 'compiled'
+    compiled.use_compiled(args.assembly != 'python')
+    print('assembly:', args.assembly if args.assembly == 'both' else
+          'compiled (C++)' if compiled.in_use() else 'NumPy')
+    if args.breakdown:
+        return main_breakdown(args)
     if args.steps:
         return main_steps(args)
     print('%6s %6s %10s %12s %10s %10s %5s %s' % ('N', 'pairs', 'far field', 'assembly ms', 'factor ms',

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from body.geometry import minimum_image
 from utils import UserInputError
 
-from . import resistance
+from . import compiled, resistance
 
 DEFAULT_CUTOFF = 4.5  # centre distance in units of a (the published Lub_Cut default)
 
@@ -132,23 +132,8 @@ class _BlockPattern:
         return matrix
 
 
-def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
-                        firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
-    """R_sup, R_MB and Delta_R = R_sup - R_MB of spheres at ``locations``: a :data:`LubricationMatrices`.
-
-    locations : (N, 3) sphere centres (length units; the wall, if any, is the plane z = 0);
-    a : sphere radius; eta : viscosity; cutoff : pair cutoff in units of a (``Lub_Cut``, default 4.5);
-    periodic_length : (3,) box (0: not periodic); wall : True above a no-slip wall at z = 0, False in free
-    space (no wall term); firm_delta : gap clamp in units of a (``firm_delta``, the published
-    ``debye_cut``; default 1e-4); handover : ``'published'`` or ``'smooth'`` (the input option
-    ``lubrication_handover``; see :mod:`lubrication.resistance`).
-    """
-    locations, a, eta, cutoff, L = check_geometry(locations, a, eta, cutoff, periodic_length)
-    firm_delta = resistance.check_firm_delta(firm_delta)
-    resistance.check_handover(handover)
-    n = locations.shape[0]
-    factors = resistance.resistance_factors(eta, a)
-    neighbours = neighbour_pairs(locations, a, cutoff, L)
+def _numpy_matrices(n, neighbours, locations, a, wall, factors, firm_delta, handover, cutoff):
+    """(R_sup, R_MB, Delta_R) CSR by NumPy: the reference of the compiled assembly and its fallback."""
     pattern = _BlockPattern(n, neighbours.pairs)
     pair_sup = resistance.pair_resistance_sup(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta, handover)
     pair_mb = resistance.pair_resistance_blob_model(neighbours.r_over_a, neighbours.r_hat, factors, firm_delta)
@@ -162,8 +147,34 @@ def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_lengt
         wall_mb = resistance.wall_resistance_blob_model(h, factors, firm_delta)
     blocks_sup = pattern.blocks(pair_sup, wall_sup)
     blocks_mb = pattern.blocks(pair_mb, wall_mb)
-    R_sup, R_MB = pattern.csr(blocks_sup), pattern.csr(blocks_mb)
-    Delta_R = pattern.csr(blocks_sup - blocks_mb)
+    return pattern.csr(blocks_sup), pattern.csr(blocks_mb), pattern.csr(blocks_sup - blocks_mb)
+
+
+def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
+                        firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+    """R_sup, R_MB and Delta_R = R_sup - R_MB of spheres at ``locations``: a :data:`LubricationMatrices`.
+
+    locations : (N, 3) sphere centres (length units; the wall, if any, is the plane z = 0);
+    a : sphere radius; eta : viscosity; cutoff : pair cutoff in units of a (``Lub_Cut``, default 4.5);
+    periodic_length : (3,) box (0: not periodic); wall : True above a no-slip wall at z = 0, False in free
+    space (no wall term); firm_delta : gap clamp in units of a (``firm_delta``, the published
+    ``debye_cut``; default 1e-4); handover : ``'published'`` or ``'smooth'`` (the input option
+    ``lubrication_handover``; see :mod:`lubrication.resistance`).  Built by the compiled kernels
+    (:mod:`lubrication.compiled`) when the extension is built, else by NumPy (:func:`_numpy_matrices`).
+    """
+    locations, a, eta, cutoff, L = check_geometry(locations, a, eta, cutoff, periodic_length)
+    firm_delta = resistance.check_firm_delta(firm_delta)
+    resistance.check_handover(handover)
+    n = locations.shape[0]
+    factors = resistance.resistance_factors(eta, a)
+    neighbours = neighbour_pairs(locations, a, cutoff, L)
+    if compiled.in_use():
+        R_sup, R_MB, Delta_R = compiled.matrices(n, neighbours.pairs, neighbours.r_over_a, neighbours.r_hat,
+                                                 locations[:, 2] / a if wall and n else None, factors, firm_delta,
+                                                 handover, cutoff)
+    else:
+        R_sup, R_MB, Delta_R = _numpy_matrices(n, neighbours, locations, a, wall, factors, firm_delta, handover,
+                                               cutoff)
     has_neighbour = np.zeros(n, dtype=bool)
     has_neighbour[neighbours.pairs.reshape(-1)] = True
     isolated = ~has_neighbour

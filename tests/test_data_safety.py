@@ -440,6 +440,31 @@ def driven_scene(folder, **options):
     return folder
 
 
+def surface_scene(folder, kind, **options):
+    """A 12-blob sphere in free space with a surface file: ``kind`` 'Laplace' (a Janus sphere in a background
+    gradient, forward Euler) or 'slip_length' (slip length 0.5, sedimenting, forward Euler)."""
+    from multi_bodies.files import structure_generators as gen
+    from run_scenes import set_options
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    blobs, radius, _ = gen.calibrated_shell(12)
+    np.savetxt(folder / 'shell.vertex', blobs, header=str(len(blobs)), comments='')
+    (folder / 'a.clones').write_text('1\n0 0 5.0 1 0 0 0\n')
+    if kind == 'Laplace':
+        table = gen.janus_laplace_table(blobs, front=(1.0, 1.0, 1.0), back=(1.0, 0.0, 2.0))
+        values = dict(background_Laplace='0 1 0 0', g=0.0)
+    else:
+        table = gen.slip_length_table(blobs, 0.5)
+        values = {}
+    gen.write_surface_table(folder / ('shell.' + kind), table, 'surface file of the fingerprint test')
+    values = dict(COMMON, scheme='deterministic_forward_euler', blob_radius=radius,
+                  mobility_blobs_implementation='python_no_wall', mobility_vector_prod_implementation='python_no_wall',
+                  blob_blob_force_implementation='None', domain='no_wall', **values)
+    values.update(options)
+    (folder / 'input.dat').write_text(set_options('structure shell.vertex a.clones shell.%s' % kind, **values))
+    return folder
+
+
 def run_dynamic(folder):
     from run_scenes import run_in_process
     return run_in_process('dynamic', folder, 'input.dat')
@@ -587,6 +612,9 @@ FILE_EDITS = {  # kind -> (scene, edit before the restart)
     'clones': ('driven', _edit('a.clones', '0 0 2.0', '0 0 2.2')),
     'force': ('driven', _edit('b.velocity', '0.2 0 0', '0.3 0 0')),  # placeholder, replaced below
     'random_state': ('driven', None),
+    'Laplace': ('Laplace', _edit('shell.Laplace', 'surface file of the fingerprint test', 'an edited header')),
+    'slip_length': ('slip_length', _edit('shell.slip_length', 'surface file of the fingerprint test',
+                                         'an edited header')),
 }
 
 
@@ -597,6 +625,9 @@ def test_the_restart_fingerprint_covers_every_file_kind(twelve_steps, tmp_path):
     chain = articulated_scene(tmp_path / 'chain', n_steps=12)
     assert run_dynamic(chain)[0] == 0
     bases = {'driven': twelve_steps, 'articulated': chain}
+    for kind in ('Laplace', 'slip_length'):
+        bases[kind] = surface_scene(tmp_path / ('base_' + kind), kind, n_steps=12)
+        assert run_dynamic(bases[kind])[0] == 0, kind
     edits = dict(FILE_EDITS)
     edits['force'] = ('driven', lambda folder: (folder / 'forces.dat').write_text('1 0 0 0 0 0\n2 0 0 0 0 0\n'))
     edits['random_state'] = ('driven', lambda folder: shutil.copy(folder / 'other.random_state',

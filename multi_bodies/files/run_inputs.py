@@ -28,6 +28,8 @@ FILE_KINDS = {
     'list_vertex': True,    # vertex files of the bodies of an articulated line
     'const': True,          # joints of an articulated line (and their expressions of t)
     'override': True,       # user_defined_functions.py and the other override sources of the run directory
+    'Laplace': True,        # phoretic bodies: normals, reaction and emitting rates, surface mobilities, weights
+    'slip_length': True,    # partial-slip surfaces: normals, slip lengths, weights
     'clones': 'read at step 0 only: a restart reads the saved snapshot instead (checked against its record)',
     'force': 'read by the static problems only (force_file of scheme mobility), never by a run that restarts',
     'random_state': 'read at step 0 only: a restart continues the generator state of its record',
@@ -64,8 +66,12 @@ def restart_inputs(options, directory):
         found.append(('vertex', spec.vertex_file))
         if spec.slip_file is not None:
             found.append(('slip', spec.slip_file))
-        if getattr(spec, 'velocity_file', None) is not None:
+        if spec.velocity_file is not None:
             found.append(('velocity', spec.velocity_file))
+        if spec.laplace_file is not None:  # phoretic bodies: normals, rates, mobilities, weights
+            found.append(('Laplace', spec.laplace_file))
+        if spec.slip_length_file is not None:  # partial-slip surfaces: normals, slip lengths, weights
+            found.append(('slip_length', spec.slip_length_file))
     for spec in options.articulated:
         found.append(('list_vertex', spec.list_vertex_file))
         found.append(('const', spec.const_file))
