@@ -90,21 +90,22 @@ def test_bacteria_constant_angular_velocity_equals_the_published_run(tmp_path, m
 @needs_numexpr
 def test_bacteria_constant_torque_follows_the_published_run(tmp_path, monkeypatch):
     """Constant torque between body and flagellum (the published override, unchanged) with two passive joints on
-    the flagellum axis (a hinge).  The nonlinear correction of each step is then not unique (a rotation of each
-    body about the hinge axis leaves the residuals unchanged), so its component along the hinge depends on the
-    path of the least-squares correction, where ours and the published code's differ (with SciPy 1.10.1, the
-    published code's version, the difference is the same 2.6e-5, so it is not SciPy's version): the corrections
-    are at most 8e-5 rad per step
-    here, so after 8 steps the trajectories agree to 8 x 8e-5 ~ 6e-4 (observed 2.6e-5); the first step, with the
-    start configuration exact, agrees to 1e-8.  The joints hold to nonlinear_solver_tolerance at every step."""
+    the flagellum axis (a hinge).  Measured against the published run: 9.5e-9 after one step (a rotation of the
+    whole bacterium about y by 5e-9 rad), 3.8e-6 after two (the flagellum's spin about the hinge axis, 7.7e-6
+    rad) and 2.6e-5 after 8; 105 residual evaluations of the nonlinear corrections against the published 79.
+    Not explained yet (issue 30): the differences do not change with solver_tolerance (1e-8 to 1e-13) or
+    nonlinear_solver_tolerance (1e-8 to 1e-12), nor with the rank threshold of the redundant hinge joint (its
+    singular value is 1e-16), and both runs move by 5e-13 when the start moves by 1e-12, so a step of ours
+    differs systematically from the published step.  The bounds below are those measurements (with margin);
+    the issue's goal is 1e-8 over every step.  The joints hold to nonlinear_solver_tolerance at every step."""
     folder = copy_example(tmp_path, 'bacteria')
     options = run_example(folder, 'inputfile_bacteria_constant_torque.dat', monkeypatch)
     ours = read_frames('run_constant_torque.bacteria_constant_torque.config')
     published = read_frames(os.path.join(PUBLISHED, 'examples', 'bacteria',
                                          'run_constant_torque.bacteria_constant_torque.config'))
     assert ours.shape == published.shape
-    assert np.max(np.abs(ours[1] - published[1])) < 1e-7
-    assert np.max(np.abs(ours - published)) < 6e-4
+    assert np.max(np.abs(ours[1] - published[1])) < 1e-8
+    assert np.max(np.abs(ours - published)) < 3e-5
     # the torque turns the flagellum: a rotation much larger than the tolerance above
     assert abs(ours[-1, 1, 6]) > 0.5
     assert np.all(joint_residuals(options, ours, options.dt, options.n_save) < options.nonlinear_solver_tolerance)
