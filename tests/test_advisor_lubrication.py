@@ -8,14 +8,18 @@ the reference folder is present, the published two-sphere tables of resolved sph
 chart's own functions (one source: what the chart prints is what the advisor reads).
 """
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from multi_bodies.advice import advisor, advisor_lubrication, lubrication_models, lubrication_tables
+from multi_bodies.files.input_options import read_input_file
 from multi_bodies.files.snapshots import write_clones_file
 from multi_bodies.files.structure_files import write_vertex_file
 
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REFERENCE_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'reference',
                                 'lubrication', 'tables')
 # VALIDATION.md §2.1: exact sphere-wall mobilities at h/R = 1.01 and 1.2: (mu_par, mu_perp), 1/(6 pi eta R).
@@ -126,6 +130,17 @@ def test_dense_pair_of_shells_gets_lubrication(tmp_path, monkeypatch):
     assert 'Sphere model (lubrication topic' in report
     # the resolution topic's shell (pair errors are skipped by --quick) is not recommended alongside
     assert not any(key.startswith('structure') or key == 'blob_radius' for key in result.recommendation)
+    # applied, the input runs with the lubrication scheme
+    result.write()
+    text = advisor_lubrication.apply_lubrication_lines(open(name).read(), lines)
+    with open('applied.dat', 'w') as f:
+        f.write(text)
+    options = read_input_file('applied.dat')
+    assert options.scheme == 'lubrication_trapezoidal' and options.g == pytest.approx(12.0)
+    run = subprocess.run([sys.executable, os.path.join(REPO, 'multi_bodies', 'multi_bodies.py'), '--input-file',
+                          'applied.dat'], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=REPO),
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
 
 
 def test_lubrication_input_at_contact_keeps_its_model(tmp_path, monkeypatch):
@@ -158,6 +173,8 @@ def test_dilute_lubrication_scene_gets_single_blobs(tmp_path, monkeypatch):
     lines = result.lubrication_lines
     assert any(line.split() == ['scheme', 'stochastic_trapezoidal_rollers'] for line in lines)
     assert any(line.startswith('remove the line Lub_Cut') for line in lines)
+    applied = advisor_lubrication.apply_lubrication_lines(open(name).read(), lines)
+    assert 'Lub_Cut' not in applied and 'free_kinematics True' in applied
     # negative control: at 0.1 % the single blob no longer meets the target (wall 0.1028 %), lubrication
     # (wall 0.03 %) does and is the input's own model: no change
     strict = advisor.advise(name, accuracy=0.001, quick=True)

@@ -241,10 +241,37 @@ class LubricationMeasurements:
                 lines.append('%-40s %.12g' % ('blob_radius', radius))
         g = float(getattr(options, 'g', 0.0) or 0.0)
         if g and blobs != blobs_now:
-            lines.append('%-40s %.12g   (g is per blob: %d -> %d blobs a sphere; the wall and pair repulsions act '
-                         'per blob too: re-tune them for the new model)' % ('g', g * blobs_now / blobs, blobs_now,
-                                                                            blobs))
+            lines.append('%-40s %.12g   # g is per blob: %d -> %d blobs a sphere; the wall and pair repulsions '
+                         'act per blob too: re-tune them for the new model' % ('g', g * blobs_now / blobs, blobs_now,
+                                                                               blobs))
         return lines
+
+
+def apply_lubrication_lines(text, lines):
+    """Input text with the lubrication topic's ``lines`` applied.
+
+    ``name value`` lines replace the option's line (or are appended); ``structure`` lines replace the
+    structure lines in order; ``remove the line NAME ...`` deletes the option's line.
+    """
+    removed = {line.split()[3] for line in lines if line.startswith('remove the line ')}
+    options = [line.split('#', 1)[0].split(None, 1) for line in lines if not line.startswith('remove the line ')]
+    structures = [' '.join(words) for words in options if words[0] == 'structure']
+    values = {words[0]: words[1].strip() for words in options if words[0] != 'structure'}
+    out, done, structure_index = [], set(), 0
+    for raw in text.splitlines():
+        words = raw.split('#', 1)[0].split()
+        name = words[0] if words else None
+        if name in removed:
+            continue
+        if name == 'structure' and structure_index < len(structures):
+            raw = structures[structure_index]
+            structure_index += 1
+        elif name in values:
+            raw = '%s %s' % (name, values[name])
+            done.add(name)
+        out.append(raw)
+    out += ['%s %s' % (name, value) for name, value in values.items() if name not in done]
+    return '\n'.join(out) + '\n'
 
 
 def _percent(value):
