@@ -631,6 +631,11 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
             self.add('dt', None, 'bound %s: dt <= %.4g' % (bound, value), None, None, None, options.dt <= value,
                      reason + ('; BINDS' if bound == name else ''))
         self.dt_bound = dict(dt=float(limit), binds=name, bounds={b: float(v) for b, v, _ in bounds}, speed=speed)
+        if scheme.startswith('lubrication_'):
+            self.notes.append('dt: the bounds above are those of the far-field model (one blob per sphere without '
+                              'lubrication, which moves the spheres faster near contact); no dt is recommended for '
+                              'a lubrication scheme (the input dt = %g is kept)' % options.dt)
+            return
         if not np.isfinite(limit):
             self.notes.append('dt: no bound applies (no force moves the bodies and no stiffness was found)')
             return

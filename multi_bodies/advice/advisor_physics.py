@@ -78,9 +78,10 @@ def scope(recommendation, options, program):
             del recommendation[key]
             notes.append('scope: %s dropped: scheme %s builds dense blocks and does not use the blob vector product'
                          % (name, scheme))
-        elif name == 'mobility_blobs_implementation' and 'rollers' in scheme:
+        elif name == 'mobility_blobs_implementation' and ('rollers' in scheme or scheme.startswith('lubrication_')):
             del recommendation[key]
-            notes.append('scope: %s dropped: the roller schemes use the blob vector product only' % name)
+            notes.append('scope: %s dropped: the %s schemes use the blob vector product only'
+                         % (name, 'lubrication' if scheme.startswith('lubrication_') else 'roller'))
         elif name in OPTION_TABLE and name != 'scheme' and OPTION_TABLE[name].used_by \
                 and not is_used(name, program, scheme):
             del recommendation[key]
