@@ -123,7 +123,7 @@ def test_radial_dist_test_brownian_pair_correlation_equals_the_monte_carlo_one(t
     """dt 0.25 (the value the published input's comment gives beside the shipped dt 1), 20 steps (5 s: a
     roller diffuses about 1.4 um, seven Debye lengths): the g(r) of the last frame against the shipped Monte
     Carlo g(r); measured chi-square 110 over 90 bins (bound 157).  Negative control: kT ten times larger, the
-    same steps (measured chi-square > 1,000).  (At the shipped dt 1 the step is too large for the repulsion:
+    same steps (measured chi-square 150,595).  (At the shipped dt 1 the step is too large for the repulsion:
     pairs overlap and the chi-square is 1,250 after 5 steps; see doc/analysis.md.)"""
     chi2 = {}
     for name, kT in (('published', 0.0041419464), ('hot', 0.041419464)):
