@@ -202,6 +202,20 @@ def _noise(settings, problem, kT, dt, rng, tolerance, counts):
     return noise
 
 
+def _step_start(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
+                matrices):
+    """What every step computes first at the start configuration: (counts, locations (N, 3), orientations (N, 4),
+    the problem there, force_torque (N, 6), torques (or None), the Brownian increment (6N,))."""
+    counts = new_counts()
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
+    problem = counted_problem(settings, locations, counts, matrices)
+    force_torque, torques = _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap,
+                                    counts)
+    noise = _noise(settings, problem, kT, dt, rng, tolerance, counts)
+    return counts, locations, orientations, problem, force_torque, torques, noise
+
+
 def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8, omega=None,
                      torque_cap=None, matrices=None, rfd=True):
     """One step of the published stochastic trapezoidal scheme (module note): a :data:`StepResult`.
@@ -213,13 +227,8 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
     if already built; rfd : False leaves out the far-field drift term ``D_M`` (a negative control: the
     equilibrium is then wrong).
     """
-    counts = new_counts()
-    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
-    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    problem = counted_problem(settings, locations, counts, matrices)
-    force_torque, torques = _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap,
-                                    counts)
-    noise = _noise(settings, problem, kT, dt, rng, tolerance, counts)
+    counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
+        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices)
     predictor = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts)
     mid_locations, mid_orientations = _moved(locations, orientations, predictor, dt)
     wall, jump = _rejection(settings, locations, mid_locations)
@@ -247,13 +256,8 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
 def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8,
                         omega=None, torque_cap=None, matrices=None):
     """One Euler-Maruyama step ``q + dt (M_lub F + U_B + kT div M_lub)`` (RFD drift): a :data:`StepResult`."""
-    counts = new_counts()
-    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
-    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    problem = counted_problem(settings, locations, counts, matrices)
-    force_torque, torques = _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap,
-                                    counts)
-    noise = _noise(settings, problem, kT, dt, rng, tolerance, counts)
+    counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
+        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices)
     velocities = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts)
     if kT > 0:
         velocities = velocities + thermal_drift(settings, locations, rng.standard_normal(problem.size), kT,
