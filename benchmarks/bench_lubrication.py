@@ -28,24 +28,14 @@ Scene: radius a = 1.0155 (the published rollers), eta = 1e-3, a square lattice o
 1.2 a, jittered by 0.1 a in x and y (seed 1); random forces and torques (seed 2); tolerance 1e-8.
 """
 import argparse
-import statistics
-import time
 
 import numpy as np
 
+from bench_forces import median_time  # the benchmarks' one timer (median of repeats)
 from lubrication import assembly, brownian, compiled, integrators, problem as lub_problem
 from multi_bodies.solver.body_solver import solve
 
 RADIUS, ETA, TOLERANCE = 1.0155, 1e-3, 1e-8
-
-
-def median_time(function, repeats):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = function()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
 
 
 def lattice(side, spacing=2.3, height=1.2):
