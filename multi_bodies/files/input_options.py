@@ -207,6 +207,8 @@ OPTION_TABLE = {
     'firm_delta': _option('float', 1e-4, ('lubrication',), Range(0, 1, True, True, fix='a gap in radii, e.g. 1e-4')),
     'repulsion_strength_firm': _option('float', 0.0, ('lubrication',)),
     'lubrication_handover': _option('str', 'published', ('lubrication',), Choice(('published', 'smooth'))),
+    # the GMRES preconditioner (doc/preconditioners.md): iterates differ only within solver_tolerance
+    'preconditioner': _option('str', 'neighbours', SD, Choice(('neighbours', 'block_diagonal'))),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),

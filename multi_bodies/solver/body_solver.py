@@ -400,6 +400,16 @@ class BlockDiagonalPreconditioner:
         """``L^{-T} v``; vector (3N,)."""
         return self._blockwise(vector, self.inverse_cholesky_factors, transpose=True, lower=True)
 
+    def blob_blocks(self):
+        """The blob-blob blocks of the inverse, per structure type (nb, 3n, 3n).
+
+        ``Q_k = M_k^{-1} - M_k^{-1} K_k N_k K_k^T M_k^{-1}``: the blob forces of body ``k`` alone, free of
+        net force and torque, that a blob velocity field ``s_k`` gives (``apply`` of ``[s; 0]``).
+        """
+        return [M_inv - np.matmul(np.matmul(M_inv_K, N), np.swapaxes(M_inv_K, 1, 2))
+                for M_inv, M_inv_K, N in zip(self.inverse_mobilities, self.inverse_mobility_times_K,
+                                             self.body_mobilities)]
+
     def apply(self, x):
         """Apply the preconditioner to ``x = [s (3N); f (6 Nb)]``; returns the same layout."""
         x = np.ascontiguousarray(x, dtype=float).reshape(-1)

@@ -37,8 +37,12 @@ from body.geometry import Quaternion
 from multi_bodies.solver import body_solver, obstacles, rollers, user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
+from multi_bodies.solver.neighbour_preconditioner import NeighbourPreconditioner
 from stochastic_forcing import lanczos_square_root
 from utils import SimulationStopped, UserInputError
+
+# the GMRES preconditioners (option ``preconditioner``; doc/preconditioners.md)
+PRECONDITIONERS = ('neighbours', 'block_diagonal')
 
 NO_WALL = '_no_wall'
 
@@ -126,7 +130,7 @@ class Model:
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
                  check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
-                 pycuda_blob_blob_forces=None, surface=None):
+                 pycuda_blob_blob_forces=None, surface=None, preconditioner='neighbours'):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -178,6 +182,9 @@ class Model:
         set_(self, 'slip_function_bodies', slip_function_bodies)
         set_(self, 'slip_functions', bool(slip_function_bodies))
         set_(self, 'surface', surface)
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError('preconditioner %r: one of %s' % (preconditioner, ', '.join(PRECONDITIONERS)))
+        set_(self, 'preconditioner', preconditioner)
         set_(self, 'has_slip', self.slip_functions or bool(np.any(body_arrays.reference_slip))
              or (surface is not None and surface.phoretic is not None))
         # Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
@@ -353,16 +360,26 @@ class Model:
                                            self.blob_radius, self.periodic_length)
 
     def build_preconditioner(self, configuration):
-        """Block-diagonal preconditioner (and Lanczos factors) at ``configuration``."""
+        """The GMRES preconditioner (and the Lanczos factors) at ``configuration``.
+
+        ``preconditioner`` ``neighbours`` (the default): the block-diagonal one corrected for the couplings of
+        neighbouring bodies (:class:`NeighbourPreconditioner`); ``block_diagonal``: every body alone (the
+        published one).  The Lanczos factors are the block-diagonal ones either way.
+        """
         if self.surface is not None and self.surface.has_slip_length:
             return self.surface.slip_length_preconditioner(self, configuration)
         if self.has_fixed_bodies:
-            return obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
+            base = obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
                                                  self.blob_radius, stacked_mobility=self.stacked_mobility,
                                                  fixed=self.fixed_bodies)
-        return body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
-                                                       self.eta, self.blob_radius,
-                                                       stacked_mobility=self.stacked_mobility)
+        else:
+            base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
+                                                           self.eta, self.blob_radius,
+                                                           stacked_mobility=self.stacked_mobility)
+        if self.preconditioner == 'block_diagonal' or self.num_bodies < 2:
+            return base
+        return NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
+                                       periodic_length=self.periodic_length)
 
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
               what='the mobility problem'):
@@ -645,4 +662,4 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
                  articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
                  check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces,
-                 surface=surface)
+                 surface=surface, preconditioner=options.preconditioner)

@@ -138,6 +138,14 @@ class MixedPreconditioner(BlockDiagonalPreconditioner):
         self.fixed = np.zeros(body_arrays.num_bodies, dtype=bool) if fixed is None \
             else np.asarray(fixed, dtype=bool).reshape(-1).copy()
 
+    def blob_blocks(self):
+        """As the base class, with ``Q_k = M_k^{-1}`` for a prescribed body (its velocity is not unknown)."""
+        blocks = super().blob_blocks()
+        for (bodies, _), Q, M_inv in zip(self.body_arrays.type_slices, blocks, self.inverse_mobilities):
+            selected = np.flatnonzero(self.fixed[bodies])
+            Q[selected] = M_inv[selected]
+        return blocks
+
     def apply(self, x):
         """The free blocks as the base class; prescribed body k: ``lambda_k = M_k^{-1} s_k``, ``F_k = f_k + K_k^T lambda_k``."""
         out = super().apply(x)

@@ -1,0 +1,216 @@
+"""GMRES iterations, passes over the blob pairs and seconds per step with each GMRES preconditioner.
+
+For every scene and scheme, the same steps (same seed) are taken with ``preconditioner block_diagonal``
+(every body alone, the published preconditioner) and ``neighbours`` (the default: the block-diagonal one
+corrected for the couplings of neighbouring bodies, doc/preconditioners.md), their steps alternating so that
+a drift of the machine's speed touches both alike.  Printed per run: GMRES iterations per solve (from the
+run's counters), ``M f`` passes per step (counted as in bench_dynamics.py), seconds per step (median), and
+the ratios neighbours / block_diagonal.
+
+Scenes (C++ backends, solver_tolerance 1e-8):
+
+* ``dilute``: 100 boomerangs (15 blobs, a = 0.25) on a square grid of spacing 4 at z = 2.5, random
+  orientations (bench_dynamics.py's scene);
+* ``packed``: 100 boomerangs at half that spacing (2); their heights are drawn in [1.5, 6] and orientations
+  redrawn until no two blobs of different bodies overlap (at z = 2.5 they cannot all fit);
+* ``boomerangs_1000``: 1,000 boomerangs as in ``dilute``;
+* ``rollers_1000``: 1,000 single-blob bodies of radius 0.5 at z = 1.5 on a grid of spacing 2 (the rigid
+  problem: a single blob has three unknown velocities, its torque-free rotation is undetermined);
+* ``pillars``: 16 fixed pillars (48-blob cylinders of radius 0.6, height 4, prescribed zero velocity: the
+  obstacle problem) among 84 12-blob spheres of radius 0.5;
+* ``articulated``: 4 bacteria of benchmarks/bench_articulated.py (42-blob shells) joined to their
+  flagella, ``articulated_deterministic_midpoint``.
+
+    python benchmarks/bench_preconditioner.py [--scenes dilute packed ...] [--steps 3]
+"""
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from bench_dynamics import boomerang_system, count_products  # noqa: E402
+from body.body import Body, bodies_to_arrays  # noqa: E402
+from body.geometry import rotation_matrices  # noqa: E402
+from multi_bodies.files.input_options import options_with  # noqa: E402
+from multi_bodies.files.structure_generators import boomerang, icosahedral_shell  # noqa: E402
+from multi_bodies.solver import user_hooks  # noqa: E402
+from multi_bodies.solver.model import Model  # noqa: E402
+from quaternion_integrator.schemes import make_scheme  # noqa: E402
+
+PUBLISHED_100 = {'stochastic_Slip_Trapz': 2.0, 'deterministic_adams_bashforth': 1.35}
+PHYSICS = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, repulsion_strength=1.0,
+               debye_length=1.0, periodic_length=np.zeros(3), blob_mass=1.0)
+
+
+def model_of(bodies, blob_radius):
+    physics = dict(PHYSICS, blob_radius=blob_radius)
+    return Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0,
+                 blob_radius, 1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='C++')
+
+
+def packed_boomerangs(num=100, spacing=2.0, seed=1, heights=(1.5, 6.0), tries=20000):
+    """Boomerangs on a grid of ``spacing``, no two blobs of different bodies closer than two radii."""
+    from scipy.spatial.distance import cdist
+    rng = np.random.default_rng(seed)
+    side = int(np.ceil(np.sqrt(num)))
+    reference = boomerang()
+    placed, bodies = [], []
+    for k in range(num):
+        for _ in range(tries):
+            centre = np.array([spacing * (k % side), spacing * (k // side), rng.uniform(*heights)])
+            q = rng.normal(size=4)
+            q /= np.linalg.norm(q)
+            r = centre + reference @ rotation_matrices(q[None])[0].T
+            if r[:, 2].min() >= 0.5 and (not placed or cdist(r, np.concatenate(placed)).min() >= 0.5):
+                break
+        else:
+            raise RuntimeError('could not place boomerang %d' % k)
+        placed.append(r)
+        body = Body(centre, q, reference, 0.25)
+        body.ID = 'boomerang'
+        body.body_length = body.calc_body_length()
+        bodies.append(body)
+    return model_of(bodies, 0.25)
+
+
+def rollers(num=1000, spacing=2.0):
+    side = int(np.ceil(np.sqrt(num)))
+    bodies = []
+    for k in range(num):
+        body = Body([spacing * (k % side), spacing * (k // side), 1.5], [1.0, 0, 0, 0], np.zeros((1, 3)), 0.5)
+        body.ID = 'roller'
+        body.body_length = 1.0
+        bodies.append(body)
+    return model_of(bodies, 0.5)
+
+
+def pillars(num_pillars=16, num_spheres=84, seed=3):
+    rng = np.random.default_rng(seed)
+    angles = 2 * np.pi * np.arange(6) / 6
+    cylinder = np.array([[0.6 * np.cos(t + 0.5 * (z % 2)), 0.6 * np.sin(t + 0.5 * (z % 2)), 0.5 * z - 1.75]
+                         for z in range(8) for t in angles])
+    sphere = icosahedral_shell(12)
+    sphere = 0.5 * sphere / np.max(np.linalg.norm(sphere, axis=1))
+    bodies = []
+    side = int(np.sqrt(num_pillars))
+    for k in range(num_pillars):
+        body = Body([4.0 * (k % side), 4.0 * (k // side), 2.5], [1.0, 0, 0, 0], cylinder, 0.25)
+        body.ID = 'pillar'
+        body.body_length = body.calc_body_length()
+        body.prescribed_velocity = np.zeros(6)
+        bodies.append(body)
+    placed = 0
+    while placed < num_spheres:
+        centre = np.array([rng.uniform(-1.5, 4.0 * side - 2.5), rng.uniform(-1.5, 4.0 * side - 2.5),
+                           rng.uniform(1.0, 4.0)])
+        nearest = min(np.linalg.norm(b.location[:2] - centre[:2]) if b.ID == 'pillar'
+                      else np.linalg.norm(b.location - centre) for b in bodies)
+        if nearest < 1.5:
+            continue
+        body = Body(centre, [1.0, 0, 0, 0], sphere, 0.25)
+        body.ID = 'sphere'
+        body.body_length = body.calc_body_length()
+        bodies.append(body)
+        placed += 1
+    return model_of(bodies, 0.25)
+
+
+def articulated(folder):
+    from bench_articulated import COMMON, write_files
+    from multi_bodies.files.input_options import parse_input_text
+    from multi_bodies.run.run_setup import prepare
+    write_files(folder, 4, 42)
+    here = os.getcwd()
+    os.chdir(folder)
+    try:
+        text = ('scheme articulated_deterministic_midpoint\n%s\narticulated bacteria.list_vertex bacteria.clones '
+                'bacteria.const\n' % COMMON)
+        options = parse_input_text(text, 'bench.dat', 'dynamic')
+        return prepare(options, 'dynamics', log=lambda *a: None).system, options
+    finally:
+        os.chdir(here)
+
+
+SCENES = {
+    'dilute': (lambda: boomerang_system(100, 'C++'), ('deterministic_adams_bashforth', 'stochastic_Slip_Trapz')),
+    'packed': (packed_boomerangs, ('deterministic_adams_bashforth', 'stochastic_Slip_Trapz')),
+    'boomerangs_1000': (lambda: boomerang_system(1000, 'C++'), ('deterministic_adams_bashforth',)),
+    'rollers_1000': (rollers, ('deterministic_adams_bashforth',)),
+    'pillars': (pillars, ('deterministic_adams_bashforth',)),
+    'articulated': (None, ('articulated_deterministic_midpoint',)),
+}
+
+
+def run(model, scheme_name, steps, options=None):
+    """{preconditioner: (iterations per solve, passes per step, seconds per step)} for ``steps`` steps."""
+    options = options if options is not None else options_with(kT=1.0, rf_delta=1e-3, update_PC=1)
+    dt = float(options.dt) if options.dt else 0.01
+    results = {}
+    runs = {}
+    for name in ('block_diagonal', 'neighbours'):
+        timed = model.replace(preconditioner=name)
+        counted, counter = count_products(timed)
+        scheme = make_scheme(scheme_name, dt, options)
+        runs[name] = [timed, scheme, scheme.init(timed, timed.start_configuration), np.random.default_rng(3),
+                      counted, scheme.init(counted, counted.start_configuration), np.random.default_rng(3), counter]
+    seconds = {name: [] for name in runs}
+    for step in range(steps + 1):
+        for name, r in runs.items():
+            timed, scheme, state, rng = r[:4]
+            start = time.perf_counter()
+            r[2] = scheme.step(timed, state, rng)
+            if step:  # the first step is a warm-up (and the Euler start of multistep schemes)
+                seconds[name].append(time.perf_counter() - start)
+    for name, r in runs.items():
+        counted, state, rng, counter = r[4], r[5], r[6], r[7]
+        scheme = r[1]
+        state = scheme.step(counted, state, rng)
+        first, passes_before = state.counters, sum(counter.counts.values())
+        for _ in range(steps):
+            state = scheme.step(counted, state, rng)
+        counts = state.counters
+        solves = (counts.deterministic_solves + counts.stochastic_solves
+                  - first.deterministic_solves - first.stochastic_solves)
+        iterations = counts.gmres_iterations - first.gmres_iterations
+        passes = (sum(counter.counts.values()) - passes_before) / steps
+        results[name] = (iterations / max(solves, 1), passes, float(np.median(seconds[name])))
+    return results
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--scenes', nargs='+', default=list(SCENES), choices=list(SCENES))
+    parser.add_argument('--steps', type=int, default=3)
+    args = parser.parse_args(argv)
+    print('%-16s %-36s %9s %9s %6s %9s %9s %6s %9s %9s %6s %6s' % (
+        'scene', 'scheme', 'it/solve', 'it/solve', 'ratio', 'passes', 'passes', 'ratio', 's/step', 's/step',
+        'ratio', 'pub'))
+    print('%-16s %-36s %9s %9s %6s %9s %9s %6s %9s %9s %6s %6s' % (
+        '', '', 'block', 'neigh', '', 'block', 'neigh', '', 'block', 'neigh', '', 'x'))
+    for scene in args.scenes:
+        make, schemes = SCENES[scene]
+        with tempfile.TemporaryDirectory() as folder:
+            options = None
+            if scene == 'articulated':
+                model, options = articulated(folder)
+            else:
+                model = make()
+            for scheme_name in schemes:
+                steps = 1 if scene == 'boomerangs_1000' else args.steps
+                r = run(model, scheme_name, steps, options)
+                (ib, pb, sb), (i_n, pn, sn) = r['block_diagonal'], r['neighbours']
+                published = PUBLISHED_100.get(scheme_name) if scene == 'dilute' else None
+                print('%-16s %-36s %9.1f %9.1f %6.2f %9.1f %9.1f %6.2f %9.4f %9.4f %6.2f %6s' % (
+                    scene, scheme_name, ib, i_n, i_n / ib, pb, pn, pn / pb, sb, sn, sn / sb,
+                    '%.1f' % (published / sn) if published else '-'), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
