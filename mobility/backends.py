@@ -183,6 +183,22 @@ def blob_mobility_matrix(name):
             'free_surface': module.free_surface_fluid_mobility}[domain]
 
 
+def blob_cross_blocks(name):
+    """``f(r_i (P, ni, 3), r_j (P, nj, 3), eta, a) -> (P, 3ni, 3nj)`` (or None where it cannot) for ``name``.
+
+    The cross blocks of the dense blob mobility of pairs of bodies (the neighbour preconditioner's); only
+    the compiled backend builds them (other backends return None: take them from the stacked matrices).
+    """
+    backend, domain = split_domain(name)
+    if backend == 'pycuda':
+        return None
+    module = load_backend(backend)
+    function = getattr(module, 'cross_blocks', None)
+    if function is None:
+        return None
+    return lambda r_i, r_j, eta, a: function(r_i, r_j, eta, a, domain)
+
+
 def source_target_product(name):
     """Return ``f(source (Ns,3), target (Nt,3), force (3Ns,), radius_source, radius_target, eta,
     periodic_length=(0,0,0)) -> (3Nt,)`` (velocity at targets) for ``name``."""

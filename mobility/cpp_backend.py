@@ -68,6 +68,22 @@ def _dense(r_vectors, eta, a, periodic_length, wall):
     return _ext.dense_trans_trans(r, float(eta), a, _L(periodic_length), domain == 'single_wall')
 
 
+def cross_blocks(r_i, r_j, eta, a, domain):
+    """Cross blocks of the blob mobility of pairs of bodies: r_i (P, ni, 3), r_j (P, nj, 3) -> (P, 3ni, 3nj).
+
+    Block p couples the blobs of r_i[p] (rows) with those of r_j[p] (columns), one radius ``a``, no periodic
+    images; domain 'single_wall' or 'no_wall'.  None when the compiled kernel cannot build them (another
+    domain, per-blob radii): the caller then takes them from the stacked dense matrices.
+    """
+    radius = np.asarray(a, dtype=np.float64)
+    if domain not in ('single_wall', 'no_wall') or radius.size != 1 or not hasattr(_ext, 'dense_trans_trans_cross'):
+        return None
+    r_i, r_j = np.asarray(r_i, dtype=np.float64), np.asarray(r_j, dtype=np.float64)
+    return _ext.dense_trans_trans_cross(np.ascontiguousarray(r_i.reshape(-1, 3)),
+                                        np.ascontiguousarray(r_j.reshape(-1, 3)), r_i.shape[0], float(eta),
+                                        float(radius.reshape(-1)[0]), domain == 'single_wall')
+
+
 def single_wall_fluid_mobility(r_vectors, eta, a, periodic_length=(0, 0, 0)):
     """Dense Rotne-Prager-Blake mobility with the wall regularisation: (N, 3) -> (3N, 3N),
     or a stack of bodies (nb, n, 3) -> (nb, 3n, 3n)."""

@@ -156,7 +156,7 @@ def test_krylov_iterations_of_the_obstacle_problem_halve():
     for body in bodies[::3]:
         body.prescribed_velocity = np.zeros(6)  # obstacles held still
     fixed = Model(bodies, bodies_to_arrays(bodies), model.hooks, model.physics, 1.0, 0.25, 1e-8,
-                  vector_product_name='C++', blobs_name='C++')
+                  vector_product_name='C++', blobs_name='C++', preconditioner='neighbours')
     assert fixed.has_fixed_bodies
     configuration = fixed.start_configuration
     problem = fixed.mobility_problem(configuration)
@@ -169,3 +169,58 @@ def test_krylov_iterations_of_the_obstacle_problem_halve():
     assert np.abs(block.velocities - neighbours.velocities).max() < 1e-6 * np.abs(block.velocities).max()
     assert neighbours.iterations < block.iterations
 
+
+
+def test_neighbour_product_is_the_dense_mobility_of_the_neighbour_pairs(monkeypatch):
+    """The compiled pair product and its NumPy fallback equal the dense blob mobility restricted to the
+    blocks of the neighbour pairs (both orders of each pair), and nothing else."""
+    import multi_bodies.solver.neighbour_preconditioner as neighbour_module
+    model = boomerang_model(grid(9, 2.8), seed=7)
+    configuration = model.start_configuration
+    pc = model.build_preconditioner(configuration)
+    assert pc.pairs.size
+    M = dense_saddle_matrix(model, configuration)[:3 * model.num_blobs, :3 * model.num_blobs]
+    blob_body = np.repeat(model.arrays.blob_body_index, 3)
+    near = np.zeros((model.num_bodies, model.num_bodies), dtype=bool)
+    near[pc.pairs[:, 0], pc.pairs[:, 1]] = near[pc.pairs[:, 1], pc.pairs[:, 0]] = True
+    expected_matrix = np.where(near[np.ix_(blob_body, blob_body)], M, 0.0)
+    forces = np.random.default_rng(2).standard_normal(3 * model.num_blobs)
+    compiled = pc.neighbour_product(forces)
+    assert np.abs(compiled - expected_matrix @ forces).max() < 1e-12 * np.abs(M).max() * np.abs(forces).sum()
+    monkeypatch.setattr(neighbour_module, '_preconditioner_cpp', None)
+    assert np.allclose(pc.neighbour_product(forces), compiled, rtol=0, atol=1e-13)
+
+
+def test_small_bodies_are_neighbours_only_when_they_nearly_touch():
+    """The gap of a pair is also bounded by the smaller body length: single blobs (rollers, body length 2a)
+    1.2 radii apart are neighbours, 2.4 radii apart are not (8 radii would make them all neighbours)."""
+    def rollers(gap_in_radii):
+        bodies = []
+        for k in range(4):
+            body = Body([k * (2.0 + gap_in_radii) * 0.5, 0.0, 2.0], [1.0, 0, 0, 0], np.zeros((1, 3)), 0.5)
+            body.ID = 'roller'
+            body.body_length = 1.0
+            bodies.append(body)
+        return Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'),
+                     dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, repulsion_strength=1.0,
+                          debye_length=1.0, periodic_length=np.zeros(3), blob_radius=0.5, blob_mass=1.0),
+                     1.0, 0.5, 1e-8, vector_product_name='C++', blobs_name='C++', preconditioner='neighbours')
+    close, apart = rollers(1.2), rollers(2.4)
+    assert close.build_preconditioner(close.start_configuration).pairs.tolist() == [[0, 1], [1, 2], [2, 3]]
+    assert apart.build_preconditioner(apart.start_configuration).pairs.size == 0
+
+
+def test_auto_builds_the_correction_only_where_it_is_cheap():
+    """preconditioner auto: the correction where the neighbour pairs' blob pairs are at most
+    AUTO_MAX_COST_RATIO of all blob pairs (100 boomerangs 4 apart: 0.01), the base preconditioner where they
+    are more (16 boomerangs 2.6 apart: every body has neighbours)."""
+    from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO
+    sparse = boomerang_model(grid(100, 4.0), seed=1, preconditioner='auto')
+    dense = boomerang_model(grid(16, 2.6), seed=6, preconditioner='auto')
+    sparse_pc = sparse.build_preconditioner(sparse.start_configuration)
+    dense_pc = dense.build_preconditioner(dense.start_configuration)
+    assert sparse_pc.cost_ratio <= AUTO_MAX_COST_RATIO < dense_pc.cost_ratio
+    assert sparse_pc.pairs.size and sparse_pc.has_neighbours
+    assert dense_pc.pairs.size == 0 and not dense_pc.has_neighbours
+    forced = dense.replace(preconditioner='neighbours').build_preconditioner(dense.start_configuration)
+    assert forced.pairs.size

@@ -655,6 +655,50 @@ Array dense_trans_trans_stack(const Array &r, long bodies, double eta, double a,
   return M;
 }
 
+// The cross blocks of pairs of bodies: block p (3 ni, 3 nj) couples the ni blobs of r_i[p] (rows) with the nj
+// blobs of r_j[p] (columns), one radius a, free space or wall, no periodic images (the neighbour preconditioner
+// places the partner at its minimum image).  They are the off-diagonal blocks of dense_trans_trans_stack of the
+// pairs, at a quarter of its work (half when ni << nj).
+template <bool Wall>
+void fill_cross(const Blobs &bi, const Blobs &bj, std::size_t pairs, std::size_t ni, std::size_t nj, double factor,
+                double *M) {
+  const std::size_t cols = 3 * nj, size = 9 * ni * nj;
+#pragma omp parallel for schedule(static) if (worth_threads(pairs, size))
+  for (std::size_t p = 0; p < pairs; ++p) {
+    double block[9];
+    double *out = M + p * size;
+    for (std::size_t i = 0; i < ni; ++i) {
+      const std::size_t I = p * ni + i;
+      for (std::size_t j = 0; j < nj; ++j) {
+        const std::size_t J = p * nj + j;
+        rmb::trans_trans_block<Wall>(bi.x[I] - bj.x[J], bi.y[I] - bj.y[J], bi.z[I] - bj.z[J], bi.z[I], bj.z[J],
+                                     block);
+        const double f = factor * bi.damping[I] * bj.damping[J];
+        for (int r = 0; r < 3; ++r)
+          for (int q = 0; q < 3; ++q) out[(3 * i + r) * cols + 3 * j + q] = block[3 * r + q] * f;
+      }
+    }
+  }
+}
+
+Array dense_trans_trans_cross(const Array &r_i, const Array &r_j, long pairs, double eta, double a, bool wall) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t rows_i = count_rows(r_i, "r_i"), rows_j = count_rows(r_j, "r_j");
+  if (pairs <= 0 || rows_i % static_cast<std::size_t>(pairs) != 0 || rows_j % static_cast<std::size_t>(pairs) != 0)
+    throw std::invalid_argument("r_i and r_j must hold the same number of blobs for every pair");
+  const std::size_t P = static_cast<std::size_t>(pairs), ni = rows_i / P, nj = rows_j / P;
+  const Blobs bi = make_blobs(r_i, nullptr, std::vector<double>(rows_i, a), a, wall, "r_i");
+  const Blobs bj = make_blobs(r_j, nullptr, std::vector<double>(rows_j, a), a, wall, "r_j");
+  Array M({static_cast<py::ssize_t>(P), static_cast<py::ssize_t>(3 * ni), static_cast<py::ssize_t>(3 * nj)});
+  double *m = M.mutable_data();
+  const double factor = 1.0 / (8.0 * M_PI * eta * a);
+  {
+    py::gil_scoped_release release;
+    wall ? fill_cross<true>(bi, bj, P, ni, nj, factor, m) : fill_cross<false>(bi, bj, P, ni, nj, factor, m);
+  }
+  return M;
+}
+
 // Dense (3N, 3N) matrix of a product whose pair formula is `pair(i, j, shift, e, u)` (u += B_ij e): each
 // 3x3 block from the pair formula applied to the three unit vectors, so that the matrix and the product
 // share one formula.  Periodic images are summed as in the products.
@@ -744,6 +788,9 @@ PYBIND11_MODULE(_mobility_cpp, m) {
   m.def("dense_trans_trans_stack", &dense_trans_trans_stack, py::arg("r_vectors"), py::arg("bodies"),
         py::arg("eta"), py::arg("a"), py::arg("periodic_length"), py::arg("wall"),
         "Dense trans-trans blocks (nb, 3n, 3n) of nb bodies of n blobs each, r (nb n, 3)");
+  m.def("dense_trans_trans_cross", &dense_trans_trans_cross, py::arg("r_i"), py::arg("r_j"), py::arg("pairs"),
+        py::arg("eta"), py::arg("a"), py::arg("wall"),
+        "Cross blocks (P, 3ni, 3nj) of the blob mobility between the blobs r_i (P ni, 3) and r_j (P nj, 3) of P pairs");
   m.def("dense_trans_trans", &dense_trans_trans, py::arg("r_vectors"), py::arg("eta"), py::arg("a"),
         py::arg("periodic_length"), py::arg("wall"), "Dense (3N, 3N) blob mobility.");
   m.def("source_target_domain", &source_target_domain, py::arg("source"), py::arg("target"), py::arg("force"),

@@ -208,7 +208,7 @@ OPTION_TABLE = {
     'repulsion_strength_firm': _option('float', 0.0, ('lubrication',)),
     'lubrication_handover': _option('str', 'published', ('lubrication',), Choice(('published', 'smooth'))),
     # the GMRES preconditioner (doc/preconditioners.md): iterates differ only within solver_tolerance
-    'preconditioner': _option('str', 'neighbours', SD, Choice(('neighbours', 'block_diagonal'))),
+    'preconditioner': _option('str', 'auto', SD, Choice(('auto', 'neighbours', 'block_diagonal'))),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),

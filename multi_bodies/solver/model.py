@@ -37,12 +37,12 @@ from body.geometry import Quaternion
 from multi_bodies.solver import body_solver, obstacles, rollers, user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
-from multi_bodies.solver.neighbour_preconditioner import NeighbourPreconditioner
+from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
 from stochastic_forcing import lanczos_square_root
 from utils import SimulationStopped, UserInputError
 
 # the GMRES preconditioners (option ``preconditioner``; doc/preconditioners.md)
-PRECONDITIONERS = ('neighbours', 'block_diagonal')
+PRECONDITIONERS = ('auto', 'neighbours', 'block_diagonal')
 
 NO_WALL = '_no_wall'
 
@@ -130,7 +130,7 @@ class Model:
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
                  check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
-                 pycuda_blob_blob_forces=None, surface=None, preconditioner='neighbours'):
+                 pycuda_blob_blob_forces=None, surface=None, preconditioner='auto'):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -362,9 +362,10 @@ class Model:
     def build_preconditioner(self, configuration):
         """The GMRES preconditioner (and the Lanczos factors) at ``configuration``.
 
-        ``preconditioner`` ``neighbours`` (the default): the block-diagonal one corrected for the couplings of
-        neighbouring bodies (:class:`NeighbourPreconditioner`); ``block_diagonal``: every body alone (the
-        published one).  The Lanczos factors are the block-diagonal ones either way.
+        ``preconditioner`` ``neighbours``: the block-diagonal one corrected for the couplings of neighbouring
+        bodies (:class:`NeighbourPreconditioner`); ``auto`` (the default): the same where its build costs at
+        most ``AUTO_MAX_COST_RATIO`` of an ``M f`` product, else the block-diagonal one; ``block_diagonal``:
+        every body alone (the published one).  The Lanczos factors are the block-diagonal ones either way.
         """
         if self.surface is not None and self.surface.has_slip_length:
             return self.surface.slip_length_preconditioner(self, configuration)
@@ -379,7 +380,9 @@ class Model:
         if self.preconditioner == 'block_diagonal' or self.num_bodies < 2:
             return base
         return NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
-                                       periodic_length=self.periodic_length)
+                                       periodic_length=self.periodic_length, body_lengths=self.body_lengths,
+                                       cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
+                                       max_cost_ratio=AUTO_MAX_COST_RATIO if self.preconditioner == 'auto' else None)
 
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
               what='the mobility problem'):

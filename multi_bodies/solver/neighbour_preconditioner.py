@@ -18,10 +18,10 @@ other.  ``T_i^{-1}`` is applied to first order in ``W_i = sum_j O_ij Q_j O_ji`` 
 with ``(I - W_i Q_i)^{-1} ~ I``): ``T_i^{-1} s ~ z + P_i^{-1} [W_i z_lambda; 0]`` with ``z = P_i^{-1} s``.
 The exact Woodbury factor gave the same GMRES iteration counts in every scene measured, at the cost of a
 batched solve; and only the pairs closer than ``strong_gap`` need their terms in ``W_i`` (the others enter
-through the right-hand side alone, at the same iteration counts).  So the base preconditioner is used as it is (any body kind it handles) and only the
-``(3 n_i, 3 n_i)`` matrices ``W_i`` and the pair blocks ``O_ij`` are stored.  One application costs three
-applications of the base preconditioner and one product with the neighbour blocks (a few percent of a
-full ``M f`` pass).
+through the right-hand side alone, at the same iteration counts).  So the base preconditioner is used as it
+is (any body kind it handles) and only the ``(3 n_i, 3 n_i)`` matrices ``W_i`` and the pair blocks ``O_ij``
+are stored.  One application costs three applications of the base preconditioner and one product with the
+neighbour blocks (a compiled loop that reads every pair block once).
 
 The Lanczos noise keeps the base preconditioner's Cholesky factors (SPEC decision 1): only the GMRES
 preconditioner changes, and GMRES converges to the same solution within ``solver_tolerance``.
@@ -31,17 +31,30 @@ import scipy.sparse.linalg as spla
 
 from multi_bodies.solver.body_solver import blob_radius_argument
 
+try:
+    from multi_bodies.solver import _preconditioner_cpp
+except ImportError:  # pragma: no cover - the compiled kernels are built by the install
+    _preconditioner_cpp = None
+
 # Blob surfaces of two bodies closer than this many (largest) blob radii make them neighbours; closer than
 # the second, their second-order terms W enter too (measured: doc/preconditioners.md).
 DEFAULT_GAP_IN_RADII = 8.0
 DEFAULT_STRONG_GAP_IN_RADII = 2.0
+# preconditioner auto: the correction is built only when the blob pairs of the neighbour pairs are at most this
+# fraction of all blob pairs (sum n_i n_j over the pairs / N^2), the ratio of its build cost to one M f product.
+# Measured (doc/preconditioners.md): a step was faster with the correction at 0.0096 (100 boomerangs) and 0.0009
+# (1,000), slower at 0.033 (packed boomerangs), 0.039 (pillars) and 0.063 (articulated bacteria).
+AUTO_MAX_COST_RATIO = 0.02
 
 
-def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_length=(0.0, 0.0, 0.0)):
+def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_length=(0.0, 0.0, 0.0),
+                    body_lengths=None):
     """Pairs of bodies whose blobs come within ``gap`` of each other (surface to surface).
 
     r_vectors (N, 3), blob_body_index (N,), radii (N,) blob radii, locations (Nb, 3) body locations,
-    gap : float (length), periodic_length (3,) (0: not periodic; periodic directions use the minimum image).
+    gap : float (length), periodic_length (3,) (0: not periodic; periodic directions use the minimum image),
+    body_lengths (Nb,) or None: a pair's gap must also be below the smaller of its two body lengths (small
+    bodies, single blobs above all, feel their neighbours only when they nearly touch).
     Returns (pairs (P, 2) int with ``i < j``, shifts (P, 3): the image displacement added to body ``j``'s
     blobs so that they sit next to body ``i``'s, gaps (P,): the smallest surface-to-surface distance).
     """
@@ -55,6 +68,8 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
     wrapped = r_vectors.copy()
     periodic = L > 0
     wrapped[:, periodic] = np.mod(wrapped[:, periodic], L[periodic])
+    if body_lengths is not None and np.size(body_lengths):
+        gap = min(gap, float(np.max(body_lengths)))  # no pair can be farther apart than that
     reach = 2.0 * float(radii.max()) + gap
     if np.any(periodic) and np.any(reach >= 0.5 * L[periodic]):
         periodic_box = None  # the box is too small for a minimum image of blob pairs: no periodic pairs
@@ -80,35 +95,27 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
     if periodic_box is not None:
         difference -= periodic_box * np.round(difference / np.where(periodic_box > 0, periodic_box, 1.0))
     surface = np.linalg.norm(difference, axis=1) - radii[a] - radii[b]
-    close = surface < gap
-    body_a, body_b = body_a[close], body_b[close]
-    first, second = np.minimum(body_a, body_b), np.maximum(body_a, body_b)
-    if first.size == 0:
+    limit = gap
+    if body_lengths is not None:
+        lengths = np.asarray(body_lengths, dtype=float).reshape(-1)
+        limit = np.minimum(gap, np.minimum(lengths[body_a], lengths[body_b]))
+    close = surface < limit
+    body_a, body_b, surface = body_a[close], body_b[close], surface[close]
+    if body_a.size == 0:
         return np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros(0)
-    pairs, pair_of = np.unique(np.stack((first, second), axis=1), axis=0, return_inverse=True)
-    pair_gaps = np.full(pairs.shape[0], np.inf)
-    np.minimum.at(pair_gaps, pair_of.reshape(-1), surface[close])
+    # one integer key per body pair (i < j); the smallest gap of each pair
+    keys = np.minimum(body_a, body_b).astype(np.int64) * num_bodies + np.maximum(body_a, body_b)
+    order = np.lexsort((surface, keys))
+    keys, surface = keys[order], surface[order]
+    first = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+    pairs = np.stack(np.divmod(keys[first], num_bodies), axis=1)
+    pair_gaps = surface[first]
     shifts = np.zeros((pairs.shape[0], 3))
     if pairs.size and np.any(periodic):
         locations = np.asarray(locations, dtype=float).reshape(-1, 3)
         centre_difference = locations[pairs[:, 1]] - locations[pairs[:, 0]]
         shifts[:, periodic] = -L[periodic] * np.round(centre_difference[:, periodic] / L[periodic])
     return pairs.astype(int), shifts, pair_gaps
-
-
-def _single_type_near_field(i, j, O, num_bodies):
-    """The neighbour blocks of bodies of one structure type as a sparse block matrix (3N, 3N).
-
-    i, j (P,) the pairs' bodies (i < j), O (P, 3n, 3n) the blocks ``O_ij`` (``O_ji = O_ij^T``).
-    """
-    import scipy.sparse as sp
-    heads = np.concatenate((i, j))
-    tails = np.concatenate((j, i))
-    blocks = np.concatenate((O, np.swapaxes(O, 1, 2)))
-    order = np.lexsort((tails, heads))
-    indptr = np.concatenate(([0], np.cumsum(np.bincount(heads, minlength=num_bodies))))
-    size = num_bodies * O.shape[1]
-    return sp.bsr_matrix((np.ascontiguousarray(blocks[order]), tails[order], indptr), shape=(size, size))
 
 
 class NeighbourPreconditioner:
@@ -127,6 +134,14 @@ class NeighbourPreconditioner:
         DEFAULT_GAP_IN_RADII blob radii); their coupling enters to first order.
     strong_gap : float, the distance below which the pair's second-order terms ``W`` enter too (None:
         DEFAULT_STRONG_GAP_IN_RADII blob radii).
+    body_lengths : (Nb,) or None, the bodies' length scales (``Model.body_lengths``): a pair is a neighbour
+        pair only when its gap is also below the smaller body's length.
+    cross_blocks : callable ``f(r_i (P, ni, 3), r_j (P, nj, 3), eta, a) -> (P, 3ni, 3nj)`` or None (returning
+        None where it cannot): the pair blocks without the bodies' own blocks (``mobility.blob_cross_blocks``);
+        None takes them from ``stacked_mobility`` of the pairs (four times the work).
+    max_cost_ratio : float or None, build the correction only when ``sum over the pairs of n_i n_j / N^2`` is at
+        most this (``preconditioner auto``); otherwise it is the base preconditioner (``pairs`` then empty and
+        ``cost_ratio`` says why).  None: always.
     exact_woodbury : bool, apply ``T_i^{-1}`` exactly (``G_i = (I - W_i Q_i)^{-1} W_i``, a batched solve)
         instead of to first order; then two bodies alone are preconditioned by the exact inverse.
 
@@ -136,7 +151,7 @@ class NeighbourPreconditioner:
     """
 
     def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
-                 strong_gap=None, exact_woodbury=False):
+                 strong_gap=None, exact_woodbury=False, body_lengths=None, cross_blocks=None, max_cost_ratio=None):
         self.base = base
         arrays = base.body_arrays
         configuration = base.configuration
@@ -149,48 +164,54 @@ class NeighbourPreconditioner:
             strong_gap = DEFAULT_STRONG_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
         self.gap, self.strong_gap = float(gap), float(strong_gap)
         self.pairs, shifts, gaps = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
-                                             self.gap, periodic_length)
+                                                   self.gap, periodic_length, body_lengths)
         self.num_blobs = arrays.num_blobs
         offsets = arrays.blob_offsets
+        sizes = np.diff(offsets)
+        pair_blobs = np.sum(sizes[self.pairs[:, 0]] * sizes[self.pairs[:, 1]])
+        self.cost_ratio = float(pair_blobs) / max(self.num_blobs, 1) ** 2
+        if max_cost_ratio is not None and self.cost_ratio > max_cost_ratio:
+            self.pairs, shifts, gaps = self.pairs[:0], shifts[:0], gaps[:0]
         # every body's structure type and index within it; Q: the blob-blob blocks of the base inverse
         body_type = np.zeros(arrays.num_bodies, dtype=int)
         local = np.zeros(arrays.num_bodies, dtype=int)
         for t, (bodies, _) in enumerate(arrays.type_slices):
             body_type[bodies] = t
             local[bodies] = np.arange(bodies.stop - bodies.start)
+        self.has_neighbours = bool(self.pairs.size)
+        size = base.operator.shape[0]
+        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
+        self.G = []
+        if not self.has_neighbours:
+            return  # every body alone: the base preconditioner
         Q = base.blob_blocks()
         W = [np.zeros_like(blocks) for blocks in Q]
-        self.groups = []  # (rows_i (P, 3 n_i), rows_j (P, 3 n_j), O (P, 3 n_i, 3 n_j)), pairs of two types
-        self.near_field = None  # the neighbour blocks as one sparse matrix (one structure type)
-        if self.pairs.size:
-            num_types = len(Q)
-            keys = body_type[self.pairs[:, 0]] * num_types + body_type[self.pairs[:, 1]]
-            for key in np.unique(keys):
-                chosen = np.flatnonzero(keys == key)
-                i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
-                t_i, t_j = divmod(int(key), num_types)
-                n_i, n_j = arrays.type_blobs[t_i], arrays.type_blobs[t_j]
-                blobs_i = offsets[i][:, None] + np.arange(n_i)[None, :]
-                blobs_j = offsets[j][:, None] + np.arange(n_j)[None, :]
-                stacked = np.concatenate((r_vectors[blobs_i], r_vectors[blobs_j] + shifts[chosen][:, None, :]),
-                                         axis=1)
-                if np.ptp(radii) > 0:
-                    radius = np.concatenate((radii[blobs_i], radii[blobs_j]), axis=1)
-                else:
-                    radius = float(radii[0])
-                O = np.ascontiguousarray(stacked_mobility(stacked, eta, radius)[:, :3 * n_i, 3 * n_i:])
-                # the second-order terms W_i = sum_j O_ij Q_j O_ji of the strongly coupled pairs only
-                strong = np.flatnonzero(gaps[chosen] < self.strong_gap)
-                if strong.size:
-                    O_s, O_sT, i_s, j_s = O[strong], np.swapaxes(O[strong], 1, 2), i[strong], j[strong]
-                    np.add.at(W[t_i], local[i_s], np.matmul(np.matmul(O_s, Q[t_j][local[j_s]]), O_sT))
-                    np.add.at(W[t_j], local[j_s], np.matmul(np.matmul(O_sT, Q[t_i][local[i_s]]), O_s))
-                if num_types == 1:
-                    self.near_field = _single_type_near_field(i, j, O, arrays.num_bodies)
-                    continue
-                rows_i = (3 * offsets[i])[:, None] + np.arange(3 * n_i)[None, :]
-                rows_j = (3 * offsets[j])[:, None] + np.arange(3 * n_j)[None, :]
-                self.groups.append((rows_i, rows_j, O))
+        num_types = len(Q)
+        keys = body_type[self.pairs[:, 0]] * num_types + body_type[self.pairs[:, 1]]
+        for key in np.unique(keys):
+            chosen = np.flatnonzero(keys == key)
+            i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
+            t_i, t_j = divmod(int(key), num_types)
+            n_i, n_j = arrays.type_blobs[t_i], arrays.type_blobs[t_j]
+            blobs_i = offsets[i][:, None] + np.arange(n_i)[None, :]
+            blobs_j = offsets[j][:, None] + np.arange(n_j)[None, :]
+            r_i, r_j = r_vectors[blobs_i], r_vectors[blobs_j] + shifts[chosen][:, None, :]
+            O = None
+            if cross_blocks is not None and np.ptp(radii) == 0:
+                O = cross_blocks(r_i, r_j, eta, float(radii[0]))
+            if O is None:  # the off-diagonal blocks of the stacked matrices of the pairs
+                radius = np.concatenate((radii[blobs_i], radii[blobs_j]), axis=1) if np.ptp(radii) > 0 \
+                    else float(radii[0])
+                O = np.ascontiguousarray(stacked_mobility(np.concatenate((r_i, r_j), axis=1), eta,
+                                                          radius)[:, :3 * n_i, 3 * n_i:])
+            # the second-order terms W_i = sum_j O_ij Q_j O_ji of the strongly coupled pairs only
+            strong = np.flatnonzero(gaps[chosen] < self.strong_gap)
+            if strong.size:
+                O_s, O_sT, i_s, j_s = O[strong], np.swapaxes(O[strong], 1, 2), i[strong], j[strong]
+                np.add.at(W[t_i], local[i_s], np.matmul(np.matmul(O_s, Q[t_j][local[j_s]]), O_sT))
+                np.add.at(W[t_j], local[j_s], np.matmul(np.matmul(O_sT, Q[t_i][local[i_s]]), O_s))
+            self.groups.append(((3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64), O))
         # T_i^{-1} to first order in W_i: G_i = W_i (zero for a body without neighbours).  The exact
         # (I - W_i Q_i)^{-1} W_i costs a batched solve and gave the same GMRES iterations in every scene measured.
         self.G = W
@@ -200,9 +221,6 @@ class NeighbourPreconditioner:
                 identity = np.eye(W_type.shape[1])[None, :, :]
                 self.G.append(np.linalg.solve(identity - np.matmul(W_type, Q_type), W_type) if W_type.size
                               else W_type)
-        self.has_neighbours = bool(self.pairs.size)
-        size = base.operator.shape[0]
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
 
     def __getattr__(self, name):
         # everything else (Cholesky factors for Lanczos, body mobilities, configuration...) is the base's
@@ -212,9 +230,14 @@ class NeighbourPreconditioner:
 
     def neighbour_product(self, blob_forces):
         """``O_near lambda``: blob velocities (3N,) of blob forces (3N,) through the neighbour blocks only."""
-        forces = np.asarray(blob_forces, dtype=float).reshape(-1)
-        out = self.near_field @ forces if self.near_field is not None else np.zeros_like(forces)
-        for rows_i, rows_j, O in self.groups:
+        forces = np.ascontiguousarray(blob_forces, dtype=float).reshape(-1)
+        out = np.zeros_like(forces)
+        for first_i, first_j, O in self.groups:
+            if _preconditioner_cpp is not None:
+                _preconditioner_cpp.pair_product(O, first_i, first_j, forces, out)
+                continue
+            rows_i = first_i[:, None] + np.arange(O.shape[1])[None, :]
+            rows_j = first_j[:, None] + np.arange(O.shape[2])[None, :]
             np.add.at(out, rows_i, np.matmul(O, forces[rows_j][:, :, None])[:, :, 0])
             np.add.at(out, rows_j, np.matmul(forces[rows_i][:, None, :], O)[:, 0, :])
         return out

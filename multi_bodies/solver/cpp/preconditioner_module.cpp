@@ -86,6 +86,41 @@ void block_product(const Array &blocks, const Array &x, Out &out, long start, bo
   for (long k = 0; k < nb; ++k) block_times(B + k * m * m, m, xp + k * m, yp + k * m, transpose, lower);
 }
 
+// The coupling of pairs of bodies: for pair p, out[i_p : i_p + mi] += O_p x[j_p : j_p + mj] and
+// out[j_p : j_p + mj] += O_p^T x[i_p : i_p + mi] (O (P, mi, mj); i, j the pairs' first unknowns).  Each
+// block is read once for both products (the neighbour preconditioner's near-field product).
+void pair_product(const Array &O, const py::array_t<long long, py::array::c_style | py::array::forcecast> &first,
+                  const py::array_t<long long, py::array::c_style | py::array::forcecast> &second, const Array &x,
+                  Out &out) {
+  if (O.ndim() != 3) throw std::invalid_argument("O must have shape (P, mi, mj)");
+  const long P = O.shape(0), mi = O.shape(1), mj = O.shape(2);
+  if (first.size() != P || second.size() != P) throw std::invalid_argument("one first unknown per pair");
+  if (out.size() != x.size()) throw std::invalid_argument("out and x must have the same size");
+  const long long *fi = first.data(), *fj = second.data();
+  for (long p = 0; p < P; ++p) {
+    check_range(static_cast<long>(fi[p]), mi, x.size(), "a pair's first body");
+    check_range(static_cast<long>(fj[p]), mj, x.size(), "a pair's second body");
+  }
+  const double *Op = O.data(), *xp = x.data();
+  double *yp = out.mutable_data();
+  if (xp == yp) throw std::invalid_argument("out must not be x");
+  py::gil_scoped_release release;
+  for (long p = 0; p < P; ++p) {
+    const double *B = Op + p * mi * mj, *xi = xp + fi[p], *xj = xp + fj[p];
+    double *yi = yp + fi[p], *yj = yp + fj[p];
+    for (long r = 0; r < mi; ++r) {
+      const double *row = B + r * mj;
+      double sum = 0.0;
+      const double xr = xi[r];
+      for (long c = 0; c < mj; ++c) {
+        sum += row[c] * xj[c];
+        yj[c] += row[c] * xr;
+      }
+      yi[r] += sum;
+    }
+  }
+}
+
 // The exact inverse of each body's saddle-point block [[M_k, -K_k], [-K_k^T, 0]] applied to
 // [s_k; f_k] (s_k at blob_start + k 3n, f_k at body_start + 6 k):
 //   lambda~ = M_k^{-1} s_k,  U_k = -N_k (f_k + K_k^T lambda~),  lambda_k = lambda~ + (M_k^{-1} K_k) U_k.
@@ -171,6 +206,8 @@ PYBIND11_MODULE(_preconditioner_cpp, m) {
   m.def("block_product", &block_product, py::arg("blocks"), py::arg("x"), py::arg("out"), py::arg("start"),
         py::arg("transpose") = false, py::arg("lower") = false,
         "out[start + k m : start + (k + 1) m] = B_k x[...] (B_k^T with transpose; lower: read the lower triangle)");
+  m.def("pair_product", &pair_product, py::arg("O"), py::arg("first"), py::arg("second"), py::arg("x"),
+        py::arg("out"), "out[i_p:] += O_p x[j_p:], out[j_p:] += O_p^T x[i_p:] for every pair p (added to out).");
   m.def("saddle_block_inverse", &saddle_block_inverse, py::arg("M_inv"), py::arg("M_inv_K"), py::arg("K"),
         py::arg("N"), py::arg("x"), py::arg("out"), py::arg("blob_start"), py::arg("body_start"),
         "Each body's exact saddle-point inverse applied to [s; f] of x, written into out");
