@@ -211,8 +211,8 @@ def test_small_bodies_are_neighbours_only_when_they_nearly_touch():
 
 
 def test_auto_builds_the_correction_only_where_it_is_cheap():
-    """preconditioner auto: the correction where the neighbour pairs' blob pairs are at most
-    AUTO_MAX_COST_RATIO of all blob pairs (100 boomerangs 4 apart: 0.01), the base preconditioner where they
+    """preconditioner auto: the correction where the candidate pairs' blob pairs are at most
+    AUTO_MAX_COST_RATIO of all blob pairs (100 boomerangs 4 apart: 0.034), the base preconditioner where they
     are more (16 boomerangs 2.6 apart: every body has neighbours)."""
     from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO
     sparse = boomerang_model(grid(100, 4.0), seed=1, preconditioner='auto')

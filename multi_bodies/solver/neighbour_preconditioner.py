@@ -40,82 +40,113 @@ except ImportError:  # pragma: no cover - the compiled kernels are built by the 
 # the second, their second-order terms W enter too (measured: doc/preconditioners.md).
 DEFAULT_GAP_IN_RADII = 8.0
 DEFAULT_STRONG_GAP_IN_RADII = 2.0
-# preconditioner auto: the correction is built only when the blob pairs of the neighbour pairs are at most this
-# fraction of all blob pairs (sum n_i n_j over the pairs / N^2), the ratio of its build cost to one M f product.
-# Measured (doc/preconditioners.md): a step was faster with the correction at 0.0096 (100 boomerangs) and 0.0009
-# (1,000), slower at 0.033 (packed boomerangs), 0.039 (pillars) and 0.063 (articulated bacteria).
-AUTO_MAX_COST_RATIO = 0.02
+# preconditioner auto: the correction is built only when the candidate pairs (bodies whose bounding spheres come
+# within the gap) hold at most this fraction of all blob pairs (sum n_i n_j / N^2), an estimate of the ratio of
+# its build cost to one M f product known before any blob distance is computed.  Measured (doc/preconditioners.md):
+# a step was faster with the correction at 0.034 (100 boomerangs) and 0.0038 (1,000), slower at 0.086 (pillars),
+# 0.12 (packed boomerangs) and 0.15 (articulated bacteria).
+AUTO_MAX_COST_RATIO = 0.06
+
+
+def _no_pairs():
+    return np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros(0)
+
+
+def candidate_pairs(r_vectors, blob_offsets, radii, locations, gap, periodic_length=(0.0, 0.0, 0.0),
+                    body_lengths=None):
+    """Pairs of bodies whose bounding spheres come within the pair's gap limit (body-level search).
+
+    r_vectors (N, 3) with each body's blobs contiguous (``blob_offsets`` (Nb + 1,)), radii (N,), locations
+    (Nb, 3), gap (length), periodic_length (3,), body_lengths (Nb,) or None (the limit of a pair is
+    ``min(gap, smaller body length)``).  Returns (pairs (P, 2) with ``i < j``, shifts (P, 3): the image
+    displacement added to body ``j``'s blobs (periodic directions), limits (P,)).  In a periodic box a pair
+    that meets through two images is listed twice, with each shift.
+    """
+    from scipy.spatial import cKDTree
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    num_bodies = locations.shape[0]
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    periodic = L > 0
+    offsets = np.asarray(blob_offsets)
+    sizes = np.diff(offsets)
+    if num_bodies < 2 or np.any(sizes == 0):
+        return _no_pairs()
+    body_of_blob = np.repeat(np.arange(num_bodies), sizes)
+    # bounding radius of every body about its location (blob surfaces included)
+    bounding = np.maximum.reduceat(np.linalg.norm(r_vectors - locations[body_of_blob], axis=1) + radii,
+                                   offsets[:-1])
+    lengths = np.full(num_bodies, np.inf) if body_lengths is None else np.asarray(body_lengths, float).reshape(-1)
+    reach = 2.0 * float(bounding.max()) + min(gap, float(lengths.max()))
+    # the periodic images to search: every combination of -L, 0, L in the periodic directions (a pair may meet
+    # through two images in a small box: it is then two pairs, whose couplings add)
+    centres = locations.copy()
+    centres[:, periodic] = np.mod(centres[:, periodic], L[periodic])
+    wrap = centres - locations
+    steps = [np.array([-1.0, 0.0, 1.0]) if periodic[k] else np.zeros(1) for k in range(3)]
+    images = np.stack(np.meshgrid(*steps, indexing='ij'), axis=-1).reshape(-1, 3) * np.where(periodic, L, 0.0)
+    tree = cKDTree(centres)
+    found = []
+    for image in images:
+        if not np.any(image):
+            pairs = tree.query_pairs(reach, output_type='ndarray')
+        else:
+            near = tree.query_ball_point(centres + image, reach)
+            counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=num_bodies)
+            pairs = np.stack((np.concatenate([np.asarray(n, dtype=np.int64) for n in near] or [np.zeros(0, int)]),
+                              np.repeat(np.arange(num_bodies), counts)), axis=1) if counts.sum() else \
+                np.zeros((0, 2), dtype=np.int64)
+        pairs = pairs[pairs[:, 0] < pairs[:, 1]]  # i < j; the opposite image gives the reversed pairs
+        found.append((pairs, np.broadcast_to(image, (pairs.shape[0], 3))))
+    pairs = np.concatenate([f[0] for f in found]).astype(int)
+    image = np.concatenate([f[1] for f in found])
+    if pairs.size == 0:
+        return _no_pairs()
+    i, j = pairs[:, 0], pairs[:, 1]
+    shifts = wrap[j] - wrap[i] + image  # added to body j's blobs (as given) to sit next to body i's
+    limits = np.minimum(gap, np.minimum(lengths[i], lengths[j]))
+    keep = np.linalg.norm(locations[j] + shifts - locations[i], axis=1) < bounding[i] + bounding[j] + limits
+    pairs, shifts, limits = pairs[keep], shifts[keep], limits[keep]
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    return pairs[order], shifts[order], limits[order]
 
 
 def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_length=(0.0, 0.0, 0.0),
-                    body_lengths=None):
+                    body_lengths=None, candidates=None):
     """Pairs of bodies whose blobs come within ``gap`` of each other (surface to surface).
 
-    r_vectors (N, 3), blob_body_index (N,), radii (N,) blob radii, locations (Nb, 3) body locations,
-    gap : float (length), periodic_length (3,) (0: not periodic; periodic directions use the minimum image),
-    body_lengths (Nb,) or None: a pair's gap must also be below the smaller of its two body lengths (small
-    bodies, single blobs above all, feel their neighbours only when they nearly touch).
+    r_vectors (N, 3), blob_body_index (N,) (each body's blobs contiguous), radii (N,) blob radii, locations
+    (Nb, 3) body locations, gap : float (length), periodic_length (3,) (0: not periodic; periodic directions
+    use the minimum image of the body locations), body_lengths (Nb,) or None: a pair's gap must also be below
+    the smaller of its two body lengths (small bodies, single blobs above all, feel their neighbours only when
+    they nearly touch); candidates: the result of :func:`candidate_pairs` (None: computed here).
     Returns (pairs (P, 2) int with ``i < j``, shifts (P, 3): the image displacement added to body ``j``'s
     blobs so that they sit next to body ``i``'s, gaps (P,): the smallest surface-to-surface distance).
     """
-    from scipy.spatial import cKDTree
     r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (r_vectors.shape[0],))
-    L = np.asarray(periodic_length, dtype=float).reshape(3)
-    num_bodies = np.asarray(locations).reshape(-1, 3).shape[0]
-    if num_bodies < 2 or r_vectors.shape[0] == 0:
-        return np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros(0)
-    wrapped = r_vectors.copy()
-    periodic = L > 0
-    wrapped[:, periodic] = np.mod(wrapped[:, periodic], L[periodic])
-    if body_lengths is not None and np.size(body_lengths):
-        gap = min(gap, float(np.max(body_lengths)))  # no pair can be farther apart than that
-    reach = 2.0 * float(radii.max()) + gap
-    if np.any(periodic) and np.any(reach >= 0.5 * L[periodic]):
-        periodic_box = None  # the box is too small for a minimum image of blob pairs: no periodic pairs
-    else:
-        periodic_box = np.where(periodic, L, 0.0) if np.any(periodic) else None
-    if periodic_box is not None:
-        # cKDTree's periodic box needs every coordinate: a large box in the open directions
-        span = np.ptp(wrapped, axis=0) + 4 * reach + 1.0
-        box = np.where(periodic, L, span * 4.0)
-        shifted = wrapped - np.where(periodic, 0.0, wrapped.min(axis=0) - span)
-        tree = cKDTree(shifted, boxsize=box)
-    else:
-        shifted = r_vectors
-        tree = cKDTree(shifted)
-    blob_pairs = tree.query_pairs(reach, output_type='ndarray')
-    if blob_pairs.size == 0:
-        return np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros(0)
-    a, b = blob_pairs[:, 0], blob_pairs[:, 1]
-    body_a, body_b = blob_body_index[a], blob_body_index[b]
-    different = body_a != body_b
-    a, b, body_a, body_b = a[different], b[different], body_a[different], body_b[different]
-    difference = shifted[b] - shifted[a]
-    if periodic_box is not None:
-        difference -= periodic_box * np.round(difference / np.where(periodic_box > 0, periodic_box, 1.0))
-    surface = np.linalg.norm(difference, axis=1) - radii[a] - radii[b]
-    limit = gap
-    if body_lengths is not None:
-        lengths = np.asarray(body_lengths, dtype=float).reshape(-1)
-        limit = np.minimum(gap, np.minimum(lengths[body_a], lengths[body_b]))
-    close = surface < limit
-    body_a, body_b, surface = body_a[close], body_b[close], surface[close]
-    if body_a.size == 0:
-        return np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros(0)
-    # one integer key per body pair (i < j); the smallest gap of each pair
-    keys = np.minimum(body_a, body_b).astype(np.int64) * num_bodies + np.maximum(body_a, body_b)
-    order = np.lexsort((surface, keys))
-    keys, surface = keys[order], surface[order]
-    first = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
-    pairs = np.stack(np.divmod(keys[first], num_bodies), axis=1)
-    pair_gaps = surface[first]
-    shifts = np.zeros((pairs.shape[0], 3))
-    if pairs.size and np.any(periodic):
-        locations = np.asarray(locations, dtype=float).reshape(-1, 3)
-        centre_difference = locations[pairs[:, 1]] - locations[pairs[:, 0]]
-        shifts[:, periodic] = -L[periodic] * np.round(centre_difference[:, periodic] / L[periodic])
-    return pairs.astype(int), shifts, pair_gaps
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    blob_body_index = np.asarray(blob_body_index)
+    offsets = np.searchsorted(blob_body_index, np.arange(locations.shape[0] + 1))
+    if candidates is None:
+        candidates = candidate_pairs(r_vectors, offsets, radii, locations, gap, periodic_length, body_lengths)
+    pairs, shifts, limits = candidates
+    if pairs.size == 0:
+        return _no_pairs()
+    sizes = np.diff(offsets)
+    gaps = np.empty(pairs.shape[0])
+    keys = sizes[pairs[:, 0]] * (int(sizes.max()) + 1) + sizes[pairs[:, 1]]
+    for key in np.unique(keys):  # the blob distances of the candidates, by stacks of equal sizes
+        chosen = np.flatnonzero(keys == key)
+        i, j = pairs[chosen, 0], pairs[chosen, 1]
+        blobs_i = offsets[i][:, None] + np.arange(sizes[i[0]])[None, :]
+        blobs_j = offsets[j][:, None] + np.arange(sizes[j[0]])[None, :]
+        partners = r_vectors[blobs_j] + shifts[chosen][:, None, :]
+        difference = partners[:, None, :, :] - r_vectors[blobs_i][:, :, None, :]
+        surface = np.sqrt(np.einsum('pabk,pabk->pab', difference, difference)) \
+            - radii[blobs_i][:, :, None] - radii[blobs_j][:, None, :]
+        gaps[chosen] = surface.reshape(chosen.size, -1).min(axis=1)
+    close = gaps < limits
+    return pairs[close].astype(int), shifts[close], gaps[close]
 
 
 class NeighbourPreconditioner:
@@ -139,9 +170,9 @@ class NeighbourPreconditioner:
     cross_blocks : callable ``f(r_i (P, ni, 3), r_j (P, nj, 3), eta, a) -> (P, 3ni, 3nj)`` or None (returning
         None where it cannot): the pair blocks without the bodies' own blocks (``mobility.blob_cross_blocks``);
         None takes them from ``stacked_mobility`` of the pairs (four times the work).
-    max_cost_ratio : float or None, build the correction only when ``sum over the pairs of n_i n_j / N^2`` is at
-        most this (``preconditioner auto``); otherwise it is the base preconditioner (``pairs`` then empty and
-        ``cost_ratio`` says why).  None: always.
+    max_cost_ratio : float or None, build the correction only when ``sum of n_i n_j / N^2`` over the candidate
+        pairs (:func:`candidate_pairs`) is at most this (``preconditioner auto``); otherwise it is the base
+        preconditioner (``pairs`` then empty and ``cost_ratio`` says why).  None: always.
     exact_woodbury : bool, apply ``T_i^{-1}`` exactly (``G_i = (I - W_i Q_i)^{-1} W_i``, a batched solve)
         instead of to first order; then two bodies alone are preconditioned by the exact inverse.
 
@@ -163,15 +194,18 @@ class NeighbourPreconditioner:
         if strong_gap is None:
             strong_gap = DEFAULT_STRONG_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
         self.gap, self.strong_gap = float(gap), float(strong_gap)
-        self.pairs, shifts, gaps = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
-                                                   self.gap, periodic_length, body_lengths)
         self.num_blobs = arrays.num_blobs
         offsets = arrays.blob_offsets
         sizes = np.diff(offsets)
-        pair_blobs = np.sum(sizes[self.pairs[:, 0]] * sizes[self.pairs[:, 1]])
-        self.cost_ratio = float(pair_blobs) / max(self.num_blobs, 1) ** 2
+        candidates = candidate_pairs(r_vectors, offsets, radii, configuration.locations, self.gap,
+                                     periodic_length, body_lengths)
+        # the candidates' share of the blob pairs: the cost of the correction against one M f product
+        candidate_blobs = np.sum(sizes[candidates[0][:, 0]] * sizes[candidates[0][:, 1]])
+        self.cost_ratio = float(candidate_blobs) / max(self.num_blobs, 1) ** 2
         if max_cost_ratio is not None and self.cost_ratio > max_cost_ratio:
-            self.pairs, shifts, gaps = self.pairs[:0], shifts[:0], gaps[:0]
+            candidates = _no_pairs()
+        self.pairs, shifts, gaps = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
+                                                   self.gap, periodic_length, body_lengths, candidates=candidates)
         # every body's structure type and index within it; Q: the blob-blob blocks of the base inverse
         body_type = np.zeros(arrays.num_bodies, dtype=int)
         local = np.zeros(arrays.num_bodies, dtype=int)
