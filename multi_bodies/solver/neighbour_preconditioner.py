@@ -134,17 +134,23 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
         return _no_pairs()
     sizes = np.diff(offsets)
     gaps = np.empty(pairs.shape[0])
+    uniform = bool(np.ptp(radii) == 0)
     keys = sizes[pairs[:, 0]] * (int(sizes.max()) + 1) + sizes[pairs[:, 1]]
     for key in np.unique(keys):  # the blob distances of the candidates, by stacks of equal sizes
         chosen = np.flatnonzero(keys == key)
         i, j = pairs[chosen, 0], pairs[chosen, 1]
         blobs_i = offsets[i][:, None] + np.arange(sizes[i[0]])[None, :]
         blobs_j = offsets[j][:, None] + np.arange(sizes[j[0]])[None, :]
-        partners = r_vectors[blobs_j] + shifts[chosen][:, None, :]
-        difference = partners[:, None, :, :] - r_vectors[blobs_i][:, :, None, :]
-        surface = np.sqrt(np.einsum('pabk,pabk->pab', difference, difference)) \
-            - radii[blobs_i][:, :, None] - radii[blobs_j][:, None, :]
-        gaps[chosen] = surface.reshape(chosen.size, -1).min(axis=1)
+        # squared distances |a|^2 + |b|^2 - 2 a.b by one batched product, about body i's location (small numbers)
+        origin = locations[i][:, None, :]
+        own, partners = r_vectors[blobs_i] - origin, r_vectors[blobs_j] + shifts[chosen][:, None, :] - origin
+        squared = (np.einsum('pak,pak->pa', own, own)[:, :, None] + np.einsum('pbk,pbk->pb', partners, partners)[
+            :, None, :] - 2.0 * np.matmul(own, np.swapaxes(partners, 1, 2)))
+        if uniform:
+            gaps[chosen] = np.sqrt(np.maximum(squared.reshape(chosen.size, -1).min(axis=1), 0.0)) - 2.0 * radii[0]
+        else:
+            surface = np.sqrt(np.maximum(squared, 0.0)) - radii[blobs_i][:, :, None] - radii[blobs_j][:, None, :]
+            gaps[chosen] = surface.reshape(chosen.size, -1).min(axis=1)
     close = gaps < limits
     return pairs[close].astype(int), shifts[close], gaps[close]
 
