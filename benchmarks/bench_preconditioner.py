@@ -18,7 +18,7 @@ Scenes (C++ backends, solver_tolerance 1e-8):
 * ``rollers_1000``: 1,000 single-blob bodies of radius 0.5 at z = 1.5 on a grid of spacing 2 (the rigid
   problem: a single blob has three unknown velocities, its torque-free rotation is undetermined);
 * ``pillars``: 16 fixed pillars (48-blob cylinders of radius 0.6, height 4, prescribed zero velocity: the
-  obstacle problem) among 84 12-blob spheres of radius 0.5;
+  obstacle problem) among 84 12-blob spheres of radius 0.5, no two blobs overlapping;
 * ``articulated``: 4 bacteria of benchmarks/bench_articulated.py (42-blob shells) joined to their
   flagella, ``articulated_deterministic_midpoint``.
 
@@ -111,9 +111,9 @@ def pillars(num_pillars=16, num_spheres=84, seed=3):
     while placed < num_spheres:
         centre = np.array([rng.uniform(-1.5, 4.0 * side - 2.5), rng.uniform(-1.5, 4.0 * side - 2.5),
                            rng.uniform(1.0, 4.0)])
-        nearest = min(np.linalg.norm(b.location[:2] - centre[:2]) if b.ID == 'pillar'
-                      else np.linalg.norm(b.location - centre) for b in bodies)
-        if nearest < 1.5:
+        # no blob overlaps: a sphere's blobs reach 0.75 from its centre, a pillar's 0.85 from its axis
+        if any(np.linalg.norm(b.location[:2] - centre[:2]) < 0.85 + 0.75 + 0.1 if b.ID == 'pillar'
+               else np.linalg.norm(b.location - centre) < 1.5 + 0.1 for b in bodies):
             continue
         body = Body(centre, [1.0, 0, 0, 0], sphere, 0.25)
         body.ID = 'sphere'

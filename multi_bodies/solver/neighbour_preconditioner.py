@@ -43,7 +43,7 @@ DEFAULT_STRONG_GAP_IN_RADII = 2.0
 # preconditioner auto: the correction is built only when the candidate pairs (bodies whose bounding spheres come
 # within the gap) hold at most this fraction of all blob pairs (sum n_i n_j / N^2), an estimate of the ratio of
 # its build cost to one M f product known before any blob distance is computed.  Measured (doc/preconditioners.md):
-# a step was faster with the correction at 0.034 (100 boomerangs) and 0.0038 (1,000), slower at 0.086 (pillars),
+# a step was faster with the correction at 0.034 (100 boomerangs) and 0.0038 (1,000), slower at 0.087 (pillars),
 # 0.12 (packed boomerangs) and 0.15 (articulated bacteria).
 AUTO_MAX_COST_RATIO = 0.06
 
