@@ -410,6 +410,15 @@ class BlockDiagonalPreconditioner:
                 for M_inv, M_inv_K, N in zip(self.inverse_mobilities, self.inverse_mobility_times_K,
                                              self.body_mobilities)]
 
+    def blob_body_blocks(self):
+        """The body-row blocks of the inverse's blob columns, per structure type (nb, 6, 3n).
+
+        ``-N_k K_k^T M_k^{-1}``: the velocities of body ``k`` alone that a blob velocity field ``s_k`` gives
+        (the body part of ``apply`` of ``[s; 0]``).
+        """
+        return [-np.matmul(N, np.swapaxes(M_inv_K, 1, 2))
+                for M_inv_K, N in zip(self.inverse_mobility_times_K, self.body_mobilities)]
+
     def apply(self, x):
         """Apply the preconditioner to ``x = [s (3N); f (6 Nb)]``; returns the same layout."""
         x = np.ascontiguousarray(x, dtype=float).reshape(-1)

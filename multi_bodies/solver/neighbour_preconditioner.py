@@ -19,9 +19,10 @@ with ``(I - W_i Q_i)^{-1} ~ I``): ``T_i^{-1} s ~ z + P_i^{-1} [W_i z_lambda; 0]`
 The exact Woodbury factor gave the same GMRES iteration counts in every scene measured, at the cost of a
 batched solve; and only the pairs closer than ``strong_gap`` need their terms in ``W_i`` (the others enter
 through the right-hand side alone, at the same iteration counts).  So the base preconditioner is used as it
-is (any body kind it handles) and only the ``(3 n_i, 3 n_i)`` matrices ``W_i`` and the pair blocks ``O_ij``
-are stored.  One application costs three applications of the base preconditioner and one product with the
-neighbour blocks (a compiled loop that reads every pair block once).
+is (any body kind it handles); the pair blocks ``O_ij`` and, for the bodies with a close neighbour,
+``P_i^{-1} [W_i; 0]`` are stored.  One application costs two applications of the base preconditioner, one
+product with the neighbour blocks (a compiled loop that reads every pair block once) and one with those
+stored blocks.
 
 The Lanczos noise keeps the base preconditioner's Cholesky factors (SPEC decision 1): only the GMRES
 preconditioner changes, and GMRES converges to the same solution within ``solver_tolerance``.
@@ -222,7 +223,7 @@ class NeighbourPreconditioner:
         size = base.operator.shape[0]
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
         self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
-        self.G = []
+        self.second_order = []
         if not self.has_neighbours:
             return  # every body alone: the base preconditioner
         Q = base.blob_blocks()
@@ -254,13 +255,24 @@ class NeighbourPreconditioner:
             self.groups.append(((3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64), O))
         # T_i^{-1} to first order in W_i: G_i = W_i (zero for a body without neighbours).  The exact
         # (I - W_i Q_i)^{-1} W_i costs a batched solve and gave the same GMRES iterations in every scene measured.
-        self.G = W
+        G = W
         if exact_woodbury:
-            self.G = []
-            for W_type, Q_type in zip(W, Q):
-                identity = np.eye(W_type.shape[1])[None, :, :]
-                self.G.append(np.linalg.solve(identity - np.matmul(W_type, Q_type), W_type) if W_type.size
-                              else W_type)
+            G = [np.linalg.solve(np.eye(W_type.shape[1])[None, :, :] - np.matmul(W_type, Q_type), W_type)
+                 if W_type.size else W_type for W_type, Q_type in zip(W, Q)]
+        # the second-order term P_i^{-1} [G_i z_i; 0] of the bodies with a G_i: its blob rows (Q_i G_i) and body
+        # rows (the base's response to a blob field, times G_i), applied to z_i in one product each
+        self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blob block (k, 3n, 3n), body block (k, 6, 3n))
+        n3 = 3 * self.num_blobs
+        for (bodies, _), G_type, Q_type, V_type in zip(arrays.type_slices, G, Q, base.blob_body_blocks()):
+            coupled = np.flatnonzero(np.any(G_type != 0.0, axis=(1, 2))) if G_type.size else np.zeros(0, int)
+            if coupled.size == 0:
+                continue
+            body = bodies.start + coupled
+            m = G_type.shape[1]
+            blob_rows = (3 * offsets[body])[:, None] + np.arange(m)[None, :]
+            body_rows = (n3 + 6 * body)[:, None] + np.arange(6)[None, :]
+            self.second_order.append((blob_rows, body_rows, np.matmul(Q_type[coupled], G_type[coupled]),
+                                      np.matmul(V_type[coupled], G_type[coupled])))
 
     def __getattr__(self, name):
         # everything else (Cholesky factors for Lanczos, body mobilities, configuration...) is the base's
@@ -292,6 +304,8 @@ class NeighbourPreconditioner:
         s = x.copy()
         s[:n3] -= self.neighbour_product(y[:n3])
         z = self.base.apply(s)
-        c = np.zeros_like(x)
-        c[:n3] = self.base._blockwise(z[:n3], self.G)
-        return z + self.base.apply(c)
+        for blob_rows, body_rows, blob_block, body_block in self.second_order:
+            z_i = z[blob_rows][:, :, None]
+            z[blob_rows] += np.matmul(blob_block, z_i)[:, :, 0]
+            z[body_rows] += np.matmul(body_block, z_i)[:, :, 0]
+        return z

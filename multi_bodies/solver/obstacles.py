@@ -146,6 +146,14 @@ class MixedPreconditioner(BlockDiagonalPreconditioner):
             Q[selected] = M_inv[selected]
         return blocks
 
+    def blob_body_blocks(self):
+        """As the base class, with the constraint force-torque ``K_k^T M_k^{-1}`` for a prescribed body."""
+        blocks = super().blob_body_blocks()
+        for (bodies, _), B, M_inv_K in zip(self.body_arrays.type_slices, blocks, self.inverse_mobility_times_K):
+            selected = np.flatnonzero(self.fixed[bodies])
+            B[selected] = np.swapaxes(M_inv_K[selected], 1, 2)
+        return blocks
+
     def apply(self, x):
         """The free blocks as the base class; prescribed body k: ``lambda_k = M_k^{-1} s_k``, ``F_k = f_k + K_k^T lambda_k``."""
         out = super().apply(x)
