@@ -162,8 +162,9 @@ class NeighbourPreconditioner:
     Parameters
     ----------
     base : body_solver.BlockDiagonalPreconditioner (or a subclass: obstacles.MixedPreconditioner)
-        Built at the same configuration.  It must provide ``apply`` and ``blob_blocks()`` (the blob-blob
-        blocks ``Q_k`` of its inverse, per structure type (nb, 3n, 3n)).
+        Built at the same configuration.  It must provide ``apply``, ``blob_blocks()`` (the blob-blob blocks
+        ``Q_k`` of its inverse, per structure type (nb, 3n, 3n)) and ``blob_body_blocks()`` (the body rows of
+        its blob columns, (nb, 6, 3n)).
     stacked_mobility : callable ``f(r (npairs, n, 3), eta, a) -> (npairs, 3n, 3n)`` (the backend's dense
         blocks, those the base preconditioner is built from).
     eta, blob_radius : float (blob_radius: or per-blob radii through the base's body arrays)
@@ -223,7 +224,7 @@ class NeighbourPreconditioner:
         size = base.operator.shape[0]
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
         self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
-        self.second_order = []
+        self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blocks (k, 3n, 3n) and (k, 6, 3n))
         if not self.has_neighbours:
             return  # every body alone: the base preconditioner
         Q = base.blob_blocks()
@@ -261,7 +262,6 @@ class NeighbourPreconditioner:
                  if W_type.size else W_type for W_type, Q_type in zip(W, Q)]
         # the second-order term P_i^{-1} [G_i z_i; 0] of the bodies with a G_i: its blob rows (Q_i G_i) and body
         # rows (the base's response to a blob field, times G_i), applied to z_i in one product each
-        self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blob block (k, 3n, 3n), body block (k, 6, 3n))
         n3 = 3 * self.num_blobs
         for (bodies, _), G_type, Q_type, V_type in zip(arrays.type_slices, G, Q, base.blob_body_blocks()):
             coupled = np.flatnonzero(np.any(G_type != 0.0, axis=(1, 2))) if G_type.size else np.zeros(0, int)
