@@ -151,6 +151,8 @@ class StepWork:
         ``concentration_guess`` (``multi_bodies.solver.surface``); None for other runs."""
         from multi_bodies.solver.surface import warm_solute
         solved, self.concentration_guess = warm_solute(self.model, configuration, self.concentration_guess)
+        if solved is not None:
+            self.count(laplace_iterations=solved[1].iterations)
         return solved
 
     def forces_and_slip(self, configuration):

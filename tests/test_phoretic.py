@@ -161,6 +161,33 @@ def test_concentrations_are_warm_started_from_the_previous_step(reference_dir):
     np.testing.assert_array_equal(restored.concentration_guess, state.concentration_guess)
 
 
+def test_concentration_iterations_are_counted_in_info(reference_dir, monkeypatch):
+    """The run's counters add up the GMRES iterations of every concentration solve of the steps (counted here
+    by wrapping the solve), ``.info`` writes them as laplace_iterations_count for phoretic runs only, and a
+    restart record gives them back."""
+    from multi_bodies.solver.counters import Counters
+    from quaternion_integrator.schemes import make_scheme
+    model = _model_of(reference_dir / EXAMPLES / 'chiral_phoretic_particle', 'inputfile_chiral_phoretic_particle.dat')
+    seen = []
+    solve = type(model.surface).solve_concentrations
+
+    def counted(self, *args, **kwargs):
+        problem, result = solve(self, *args, **kwargs)
+        seen.append(result.iterations)
+        return problem, result
+    monkeypatch.setattr(type(model.surface), 'solve_concentrations', counted)
+    scheme = make_scheme('deterministic_adams_bashforth', 0.5)
+    state = scheme.init(model, model.start_configuration)
+    for _ in range(3):
+        state = scheme.step(model, state, None)
+    assert len(seen) >= 3 and all(n > 0 for n in seen)
+    assert state.counters.laplace_iterations == sum(seen)
+    info = state.counters.info(phoretic=True)
+    assert info['laplace_iterations_count'] == sum(seen)
+    assert Counters.from_info(info) == state.counters
+    assert 'laplace_iterations_count' not in state.counters.info()
+
+
 @pytest.mark.parametrize('name', ['stochastic_EM', 'stochastic_first_order_RFD', 'stochastic_adams_bashforth'])
 def test_stochastic_schemes_use_the_solute_slip(reference_dir, name):
     """At kT = 0 a first-order stochastic scheme moves the chiral sprinklers as deterministic forward Euler (the

@@ -102,8 +102,11 @@ class DynamicRun:
                 'counters': self.counters(state)}
 
     def counters(self, state):
-        """The run's counters for ``.info`` and the restart records (articulated: the nonlinear count too)."""
-        return state.counters.info(articulated=self.system.articulated is not None)
+        """The run's counters for ``.info`` and the restart records (articulated: the nonlinear count too;
+        phoretic bodies: the concentration solves' GMRES iterations)."""
+        surface = self.system.surface
+        return state.counters.info(articulated=self.system.articulated is not None,
+                                   phoretic=surface is not None and surface.phoretic is not None)
 
     def write_info(self, state, extra_lines=()):
         run_output.write_info(self.options.output_name + '.info', self.counters(state), extra_lines)

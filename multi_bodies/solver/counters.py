@@ -27,13 +27,15 @@ class Counters:
     deterministic_solves: int = 0
     stochastic_solves: int = 0
     nonlinear_iterations: int = 0       # residual evaluations of the joints' nonlinear correction
+    laplace_iterations: int = 0         # GMRES iterations of the phoretic bodies' concentration solves
 
     def plus(self, **increments):
         """New counters with ``increments`` (field name -> int) added."""
         return replace(self, **{name: getattr(self, name) + int(value) for name, value in increments.items()})
 
-    def info(self, articulated=False):
-        """Name -> int for ``.info`` and the restart records (``nonlinear_iterations_count`` with joints)."""
+    def info(self, articulated=False, phoretic=False):
+        """Name -> int for ``.info`` and the restart records (``nonlinear_iterations_count`` with joints,
+        ``laplace_iterations_count`` with phoretic bodies)."""
         counts = {'invalid_configuration_count': self.invalid_configurations,
                   'deterministic_iterations_count': self.gmres_iterations,
                   'stochastic_iterations_count': self.lanczos_iterations,
@@ -44,6 +46,8 @@ class Counters:
                   'lanczos_not_converged_count': self.lanczos_not_converged}
         if articulated:
             counts['nonlinear_iterations_count'] = self.nonlinear_iterations
+        if phoretic:
+            counts['laplace_iterations_count'] = self.laplace_iterations
         return counts
 
     @classmethod
@@ -60,7 +64,8 @@ class Counters:
                    lanczos_not_converged=count('lanczos_not_converged_count'),
                    deterministic_solves=count('deterministic_solves_count'),
                    stochastic_solves=count('noise_and_rfd_solves_count'),
-                   nonlinear_iterations=count('nonlinear_iterations_count'))
+                   nonlinear_iterations=count('nonlinear_iterations_count'),
+                   laplace_iterations=count('laplace_iterations_count'))
 
 
 COUNTER_NAMES = tuple(field.name for field in fields(Counters))
