@@ -24,6 +24,10 @@ is (any body kind it handles); the pair blocks ``O_ij`` and, for the bodies with
 product with the neighbour blocks (a compiled loop that reads every pair block once) and one with those
 stored blocks.
 
+Bodies of prescribed motion (obstacles) have unknown net forces, which couple at long range; their rigid
+modes are coupled exactly by a small Galerkin system (:class:`_ObstacleCoarseCorrection`), also where no
+pair is a neighbour.
+
 The Lanczos noise keeps the base preconditioner's Cholesky factors (SPEC decision 1): only the GMRES
 preconditioner changes, and GMRES converges to the same solution within ``solver_tolerance``.
 """
@@ -156,6 +160,77 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
     return pairs[close].astype(int), shifts[close], gaps[close]
 
 
+# the obstacles' coarse correction is built for at most this many bodies of prescribed motion (a dense 6F x 6F
+# system; its pair blocks grow as F^2)
+MAX_COARSE_OBSTACLES = 200
+
+
+class _ObstacleCoarseCorrection:
+    """The couplings of the rigid modes of bodies of prescribed motion (obstacles), solved together.
+
+    An obstacle's net force and torque are unknowns (the constraint rows do not fix them), so its blob forces
+    couple to the other obstacles' at long range (1/r), beyond any neighbour gap.  With ``Phi_k = M_k^{-1} K_k``
+    (the blob forces of obstacle ``k`` alone moving rigidly) the Galerkin matrix of those modes is
+    ``E_kl = Phi_k^T M_kl Phi_l`` (``E_kk = R_k = K_k^T M_k^{-1} K_k``); the base preconditioner inverts its
+    diagonal.  The correction adds ``Phi (E^{-1} - diag(R_k)^{-1}) Phi^T s`` to the obstacles' blob forces
+    (and ``K_k^T`` of it to their constraint force-torque rows), so that the preconditioner is exact on those
+    modes.  Measured (doc/preconditioners.md): 16 pillars among 84 spheres, 23 -> 18 iterations from zero.
+    """
+
+    def __init__(self, base, fixed, r_vectors, radii, eta, stacked_mobility, cross_blocks, periodic_length):
+        arrays = base.body_arrays
+        offsets = arrays.blob_offsets
+        locations = base.configuration.locations
+        L = np.asarray(periodic_length, dtype=float).reshape(3)
+        self.blob_rows, self.body_rows, self.Phi, self.K = [], [], [], []
+        resistances = []
+        for body in fixed:
+            t = next(k for k, (bodies, _) in enumerate(arrays.type_slices) if bodies.start <= body < bodies.stop)
+            local = body - arrays.type_slices[t][0].start
+            Phi = base.inverse_mobility_times_K[t][local]
+            K = base.K[t][local]
+            self.blob_rows.append(np.arange(3 * offsets[body], 3 * offsets[body + 1]))
+            self.body_rows.append(3 * arrays.num_blobs + 6 * body + np.arange(6))
+            self.Phi.append(Phi)
+            self.K.append(K)
+            resistances.append(K.T @ Phi)
+        F = fixed.size
+        E = np.zeros((6 * F, 6 * F))
+        for a in range(F):
+            E[6 * a:6 * a + 6, 6 * a:6 * a + 6] = resistances[a]
+        uniform = bool(np.ptp(radii) == 0)
+        for a in range(F):
+            for b in range(a + 1, F):
+                i, j = fixed[a], fixed[b]
+                r_i = r_vectors[offsets[i]:offsets[i + 1]]
+                shift = np.zeros(3)
+                periodic = L > 0
+                shift[periodic] = -L[periodic] * np.round((locations[j] - locations[i])[periodic] / L[periodic])
+                r_j = r_vectors[offsets[j]:offsets[j + 1]] + shift
+                O = cross_blocks(r_i[None], r_j[None], eta, float(radii[0])) if cross_blocks is not None and uniform \
+                    else None
+                if O is None:
+                    radius = np.concatenate((radii[offsets[i]:offsets[i + 1]], radii[offsets[j]:offsets[j + 1]]))[
+                        None] if not uniform else float(radii[0])
+                    O = stacked_mobility(np.concatenate((r_i, r_j))[None], eta, radius)[:, :r_i.size, r_i.size:]
+                block = self.Phi[a].T @ O[0] @ self.Phi[b]
+                E[6 * a:6 * a + 6, 6 * b:6 * b + 6] = block
+                E[6 * b:6 * b + 6, 6 * a:6 * a + 6] = block.T
+        diagonal = np.zeros_like(E)
+        for a in range(F):
+            diagonal[6 * a:6 * a + 6, 6 * a:6 * a + 6] = np.linalg.pinv(resistances[a], hermitian=True)
+        self.D = np.linalg.pinv(E, hermitian=True) - diagonal
+
+    def add_to(self, x, z):
+        """Add the correction of the input ``x`` (the base's layout) to the output ``z`` in place."""
+        y = np.concatenate([Phi.T @ x[rows] for Phi, rows in zip(self.Phi, self.blob_rows)])
+        c = self.D @ y
+        for a, (Phi, K, blob_rows, body_rows) in enumerate(zip(self.Phi, self.K, self.blob_rows, self.body_rows)):
+            correction = Phi @ c[6 * a:6 * a + 6]
+            z[blob_rows] += correction
+            z[body_rows] += K.T @ correction
+
+
 class NeighbourPreconditioner:
     """The base block-diagonal preconditioner with the couplings of neighbouring bodies (module docstring).
 
@@ -225,8 +300,13 @@ class NeighbourPreconditioner:
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
         self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
         self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blocks (k, 3n, 3n) and (k, 6, 3n))
+        self.obstacles = None
+        fixed = np.flatnonzero(getattr(base, 'fixed', np.zeros(0, dtype=bool)))
+        if 2 <= fixed.size <= MAX_COARSE_OBSTACLES:
+            self.obstacles = _ObstacleCoarseCorrection(base, fixed, r_vectors, radii, eta, stacked_mobility,
+                                                       cross_blocks, periodic_length)
         if not self.has_neighbours:
-            return  # every body alone: the base preconditioner
+            return  # every body alone: the base preconditioner (with the obstacles' coarse correction)
         Q = base.blob_blocks()
         W = [np.zeros_like(blocks) for blocks in Q]
         num_types = len(Q)
@@ -298,14 +378,17 @@ class NeighbourPreconditioner:
         """The preconditioner applied to ``x = [s (3N); f (6Nb) ...]`` (the base preconditioner's layout)."""
         x = np.asarray(x, dtype=float).reshape(-1)
         if not self.has_neighbours:
-            return self.base.apply(x)
-        n3 = 3 * self.num_blobs
-        y = self.base.apply(x)
-        s = x.copy()
-        s[:n3] -= self.neighbour_product(y[:n3])
-        z = self.base.apply(s)
-        for blob_rows, body_rows, blob_block, body_block in self.second_order:
-            z_i = z[blob_rows][:, :, None]
-            z[blob_rows] += np.matmul(blob_block, z_i)[:, :, 0]
-            z[body_rows] += np.matmul(body_block, z_i)[:, :, 0]
+            z = self.base.apply(x)
+        else:
+            n3 = 3 * self.num_blobs
+            y = self.base.apply(x)
+            s = x.copy()
+            s[:n3] -= self.neighbour_product(y[:n3])
+            z = self.base.apply(s)
+            for blob_rows, body_rows, blob_block, body_block in self.second_order:
+                z_i = z[blob_rows][:, :, None]
+                z[blob_rows] += np.matmul(blob_block, z_i)[:, :, 0]
+                z[body_rows] += np.matmul(body_block, z_i)[:, :, 0]
+        if self.obstacles is not None:
+            self.obstacles.add_to(x, z)
         return z
