@@ -423,25 +423,16 @@ def _convert(kind, name, value, where):
         if len(words) != 1 or words[0] not in ('True', 'False'):
             fail('True or False')
         return words[0] == 'True'
-    if kind == 'floats3':
+    if kind in ('floats3', 'floats9'):  # floats9: one to nine numbers (background_Laplace), zero-padded where used
+        what, fewest, most = ('three numbers', 3, 3) if kind == 'floats3' else ('one to nine numbers', 1, 9)
         try:
-            numbers = tuple(finite(w, 'three numbers') for w in words)
+            numbers = tuple(finite(w, what) for w in words)
         except UserInputError:
             raise
         except ValueError:
-            fail('three numbers')
-        if len(numbers) != 3:
-            fail('three numbers')
-        return numbers
-    if kind == 'floats9':  # one to nine numbers (background_Laplace), padded with zeros where used
-        try:
-            numbers = tuple(finite(w, 'one to nine numbers') for w in words)
-        except UserInputError:
-            raise
-        except ValueError:
-            fail('one to nine numbers')
-        if not 1 <= len(numbers) <= 9:
-            fail('one to nine numbers')
+            fail(what)
+        if not fewest <= len(numbers) <= most:
+            fail(what)
         return numbers
     if kind == 'ints2':
         try:
