@@ -44,11 +44,11 @@ if sys.platform != 'win32':
         print('setup.py: the compiler does not accept -fopenmp; building the kernels single-threaded')
 
 HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobility/cpp/openmp_threads.h',
-           'mobility/cpp/fast_exp.h']
+           'mobility/cpp/fast_exp.h', 'mobility/cpp/blob_arrays.h', 'mobility/cpp/dense_matrices.h']
 extensions = [
     Pybind11Extension(
         'mobility._mobility_cpp',
-        ['mobility/cpp/mobility_module.cpp'],
+        ['mobility/cpp/mobility_module.cpp', 'mobility/cpp/dense_matrices.cpp'],
         include_dirs=['mobility/cpp'],
         depends=HEADERS,
         extra_compile_args=compile_args,
