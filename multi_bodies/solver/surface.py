@@ -25,6 +25,7 @@ import numpy as np
 
 from multi_bodies.files.surface_files import read_laplace_file, read_slip_length_file
 from multi_bodies.solver import phoretic, slip_length
+from multi_bodies.solver.laplace_preconditioner import LaplacePreconditioner
 from utils import UserInputError, warn_user
 
 SLIP_LENGTH_SCHEMES = ('deterministic_forward_euler', 'deterministic_adams_bashforth', 'deterministic_midpoint',
@@ -53,11 +54,16 @@ class Surface:
     def solve_concentrations(self, model, configuration, x0=None):
         """(LaplaceProblem, SolveResult) at ``configuration``: the blob concentrations in ``constraint_force_torque``.
 
-        Unpreconditioned GMRES(200) of the model's ``solver_tolerance`` (the published solve) through
-        ``model.solve``; x0 : normalised first guess (N,) or None (zeros, as published).
+        GMRES(200) of the model's ``solver_tolerance`` through ``model.solve``, preconditioned by
+        :class:`laplace_preconditioner.LaplacePreconditioner` (every body alone plus the coarse modes of
+        all bodies) unless the model's ``preconditioner`` is ``block_diagonal`` (the published solves:
+        unpreconditioned); x0 : normalised first guess (N,) or None (zeros, as published).
         """
         problem = self.laplace_problem(model, configuration)
-        result = model.solve(problem, problem.rhs(), None, x0=x0, restart=phoretic.LAPLACE_RESTART,
+        preconditioner = None
+        if model.preconditioner != 'block_diagonal':
+            preconditioner = LaplacePreconditioner(problem, model.arrays.blob_offsets)
+        result = model.solve(problem, problem.rhs(), preconditioner, x0=x0, restart=phoretic.LAPLACE_RESTART,
                              what='the concentration (Laplace) problem')
         return problem, result
 

@@ -12,6 +12,14 @@
 // Layouts (C-contiguous doubles): x, normals (N, 3); densities (N,) or empty (not computed); outputs
 // single, double (N,), dipole, grad (N, 3).
 //
+// laplace_blocks_and_moments: the pieces of the concentration problem's two-level preconditioner
+// (multi_bodies/solver/laplace_preconditioner.py, NumPy reference there), in one pass over the pairs, of the
+// pair kernel of the operator without its 1/2 and its 1/(4 pi):
+//   K_ij = ws_j / r - wd_j (r.n_j) / r^3   (+ the same with the image R, n*; self terms as in layers)
+// * every body's own block K_ij, i and j of body b, written row-major at block_start[b] + (i - o_b) n_b + (j - o_b);
+// * the moments out[i, b, m] = sum over j of body b of K_ij Z_jm (Z (N, m): the coarse modes on every blob).
+// OpenMP over targets i: each thread writes its own rows of both.
+//
 // stokes_double_layer: the regularised Stokes double layer of multi_bodies/solver/slip_length.py
 // (double_layer, the NumPy reference): with r = x_i - x_j, pairs closer than 1e-14 skipped,
 //   (D v)_i = -(3/4 pi) sum_j w_j / r^5 [ (1 - 10 a^2/(3 r^2)) (r.n_j)(r.v_j) r
@@ -21,6 +29,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -130,6 +139,63 @@ py::array_t<double> stokes_double_layer(const Array &x, const Array &normals, co
   return out;
 }
 
+py::tuple laplace_blocks_and_moments(const Array &x, const Array &normals, const Array &ws, const Array &wd,
+                                    const py::array_t<long, py::array::c_style | py::array::forcecast> &offsets,
+                                    const Array &modes, bool wall) {
+  if (x.ndim() != 2 || x.shape(1) != 3) throw std::invalid_argument("x must be (N, 3)");
+  const long N = x.shape(0);
+  if (normals.size() != 3 * N || ws.size() != N || wd.size() != N)
+    throw std::invalid_argument("normals must be (N, 3), ws and wd (N,)");
+  if (offsets.ndim() != 1 || offsets.shape(0) < 1) throw std::invalid_argument("offsets must be (B + 1,)");
+  const long B = offsets.shape(0) - 1;
+  const long *off = offsets.data();
+  if (off[0] != 0 || off[B] != N) throw std::invalid_argument("offsets must start at 0 and end at N");
+  if (modes.ndim() != 2 || modes.shape(0) != N) throw std::invalid_argument("modes must be (N, m)");
+  const long m = modes.shape(1);
+  std::vector<long> body(N), block_start(B + 1, 0);
+  for (long b = 0; b < B; ++b) {
+    if (off[b + 1] < off[b]) throw std::invalid_argument("offsets must not decrease");
+    for (long j = off[b]; j < off[b + 1]; ++j) body[j] = b;
+    block_start[b + 1] = block_start[b] + (off[b + 1] - off[b]) * (off[b + 1] - off[b]);
+  }
+  py::array_t<double> blocks(block_start[B]), moments({N, B, m});
+  const double *X = x.data(), *Nn = normals.data(), *S = ws.data(), *D = wd.data(), *Z = modes.data();
+  double *out_blocks = blocks.mutable_data(), *out_moments = moments.mutable_data();
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      const double *xi = X + 3 * i;
+      double *row = out_moments + i * B * m;
+      for (long k = 0; k < B * m; ++k) row[k] = 0.0;
+      const long bi = body[i];
+      for (long j = 0; j < N; ++j) {
+        const double *xj = X + 3 * j, *nj = Nn + 3 * j;
+        double kernel = 0.0;
+        if (j != i) {
+          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
+          const double inv_r = 1.0 / std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+          kernel += S[j] * inv_r - D[j] * (d[0] * nj[0] + d[1] * nj[1] + d[2] * nj[2]) * inv_r * inv_r * inv_r;
+        }
+        if (wall) {
+          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] + xj[2]};
+          const double inv_r = 1.0 / std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+          kernel += S[j] * inv_r - D[j] * (d[0] * nj[0] + d[1] * nj[1] - d[2] * nj[2]) * inv_r * inv_r * inv_r;
+        }
+        const long bj = body[j];
+        const double *zj = Z + j * m;
+        double *target = row + bj * m;
+        for (long k = 0; k < m; ++k) target[k] += kernel * zj[k];
+        if (bj == bi) {
+          const long n = off[bi + 1] - off[bi];
+          out_blocks[block_start[bi] + (i - off[bi]) * n + (j - off[bi])] = kernel;
+        }
+      }
+    }
+  }
+  return py::make_tuple(blocks, moments);
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_surface_cpp, m) {
@@ -139,4 +205,7 @@ PYBIND11_MODULE(_surface_cpp, m) {
         "(single (N,), double (N,), dipole (N, 3), grad_double (N, 3)); empty densities are not computed");
   m.def("stokes_double_layer", &stokes_double_layer, py::arg("x"), py::arg("normals"), py::arg("weights"),
         py::arg("blob_radius"), py::arg("v"), "(D v) (N, 3): the regularised free-space Stokes double layer");
+  m.def("laplace_blocks_and_moments", &laplace_blocks_and_moments, py::arg("x"), py::arg("normals"),
+        py::arg("single"), py::arg("double_"), py::arg("offsets"), py::arg("modes"), py::arg("wall"),
+        "(blocks (sum n_b^2,), moments (N, B, m)) of the Laplace pair kernel ws/r - wd r.n/r^3 (+ images)");
 }
