@@ -686,7 +686,11 @@ def articulated_problem(model, articulated, configuration, t, force_torque=None,
         force_torque = hooks_force_torque if force_torque is None else force_torque
         slip = hooks_slip if slip is None else slip
     problem = ArticulatedProblem(model.mobility_problem(configuration), articulated, configuration, t)
-    preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
+    if model.preconditioner == 'block_diagonal':  # the published one
+        preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
+    else:  # every articulated body solved exactly as if alone (where it applies)
+        from multi_bodies.solver import articulated_preconditioner
+        preconditioner = articulated_preconditioner.build(problem, model, configuration)
     return problem, problem.rhs(slip, force_torque), preconditioner
 
 
