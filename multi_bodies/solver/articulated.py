@@ -55,6 +55,7 @@ import scipy.sparse.linalg as spla
 
 from body.body import as_configuration
 from body.geometry import rotation_matrices
+from multi_bodies.solver import articulated_preconditioner
 from multi_bodies.solver.body_solver import SolutionParts
 from multi_bodies.files.expressions import parse_expression
 from utils import UserInputError, read_text_file
@@ -686,11 +687,11 @@ def articulated_problem(model, articulated, configuration, t, force_torque=None,
         force_torque = hooks_force_torque if force_torque is None else force_torque
         slip = hooks_slip if slip is None else slip
     problem = ArticulatedProblem(model.mobility_problem(configuration), articulated, configuration, t)
-    if model.preconditioner == 'block_diagonal':  # the published one
-        preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
-    else:  # every articulated body solved exactly as if alone (where it applies)
-        from multi_bodies.solver import articulated_preconditioner
+    preconditioner = None  # every articulated body solved exactly as if alone, where it applies
+    if model.preconditioner != 'block_diagonal':
         preconditioner = articulated_preconditioner.build(problem, model, configuration)
+    if preconditioner is None:  # the published one
+        preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
     return problem, problem.rhs(slip, force_torque), preconditioner
 
 

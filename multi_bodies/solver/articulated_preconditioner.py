@@ -16,8 +16,8 @@ Bodies outside the articulated bodies keep the body preconditioner.  Measured on
 (doc/preconditioners.md): 16 GMRES iterations per solve -> 5.
 
 It applies when every body has a full-rank ``K`` and the articulated bodies are no larger than
-``MAX_GROUP_BLOBS`` blobs (a dense LU of ``(3n)^3 / 3`` flops each); otherwise :func:`build` returns the
-published preconditioner.
+``MAX_GROUP_BLOBS`` blobs (a dense LU of ``(3n)^3 / 3`` flops each); otherwise :func:`build` returns None and
+the published preconditioner is used.
 """
 import numpy as np
 import scipy.linalg
@@ -30,16 +30,15 @@ MAX_GROUP_BLOBS = 600  # a (1,800 + 6k + r)-square LU, about 2e9 flops, per arti
 
 
 def build(problem, model, configuration):
-    """The preconditioner of an ``articulated.ArticulatedProblem`` built by ``model`` at ``configuration``: a
-    :class:`GroupPreconditioner` where it applies, else the published ``articulated.ArticulatedPreconditioner``."""
-    from multi_bodies.solver.articulated import ArticulatedPreconditioner
+    """A :class:`GroupPreconditioner` of an ``articulated.ArticulatedProblem`` built by ``model`` at
+    ``configuration``, or None where it does not apply (the caller then builds the published one)."""
     arrays = model.arrays
     sizes = np.diff(arrays.blob_offsets)
     groups = problem.articulated.groups
     eligible = (problem.projectors is None and type(problem.problem) is MobilityProblem  # no obstacles, no slip
                 and all(sizes[group.body_indices].sum() <= MAX_GROUP_BLOBS for group in groups))
     if not eligible:
-        return ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))
+        return None
     grouped = np.zeros(problem.num_bodies, dtype=bool)
     for group in groups:
         grouped[group.body_indices] = True
