@@ -10,7 +10,7 @@ against the published preconditioner on the same scene).
 import numpy as np
 import pytest
 
-from body.body import Body, bodies_to_arrays
+from body.body import Body, Configuration, bodies_to_arrays
 from multi_bodies.files.structure_generators import boomerang
 from multi_bodies.solver import body_solver, user_hooks
 from multi_bodies.solver.model import Model
@@ -298,3 +298,44 @@ def test_obstacles_rigid_modes_are_coupled_even_without_neighbours():
     assert np.abs(coarse.constraint_force_torque.reshape(-1) - exact[n3:]).max() < 1e-6 * np.abs(exact[n3:]).max()
     assert np.abs(coarse.lambda_blobs.reshape(-1) - exact[:n3]).max() < 1e-6 * np.abs(exact[:n3]).max()
     assert coarse.iterations < block.iterations, (coarse.iterations, block.iterations)
+
+
+@pytest.mark.parametrize('preconditioner', ['block_diagonal', 'auto'])
+def test_obstacles_that_stay_put_are_factored_once_to_the_same_numbers(preconditioner, monkeypatch):
+    """The model keeps the last build's blocks of its bodies of prescribed motion (keyed by their exact
+    positions): a build after the free bodies moved computes the free bodies' blocks only, and its factors,
+    Cholesky factors (Lanczos) and applications equal those of a fresh model's build bit for bit; an obstacle
+    that moved is computed again, and the memo holds no more than one build's obstacles."""
+    model = boomerang_model(grid(9, 3.0), seed=4, preconditioner=preconditioner)
+    bodies = model.bodies
+    for body in bodies[::2]:
+        body.prescribed_velocity = np.zeros(6)
+    model = Model(bodies, bodies_to_arrays(bodies), model.hooks, model.physics, 1.0, 0.25, 1e-8,
+                  vector_product_name='C++', blobs_name='C++', preconditioner=preconditioner)
+    stacks = []
+    saddle_blocks = body_solver._saddle_blocks
+
+    def counted(r_type, *args):
+        stacks.append(r_type.shape[0])
+        return saddle_blocks(r_type, *args)
+    monkeypatch.setattr(body_solver, '_saddle_blocks', counted)
+    start = model.start_configuration
+    model.build_preconditioner(start)
+    assert stacks == [9]
+    locations = start.locations.copy()
+    locations[1::2] += [0.05, -0.02, 0.03]  # the free bodies move
+    moved = Configuration(locations, start.orientations)
+    stacks.clear()
+    again = model.build_preconditioner(moved)
+    assert stacks == [4]  # the 5 obstacles are taken from the memo
+    fresh = model.replace().build_preconditioner(moved)
+    x = np.random.default_rng(0).normal(size=again.operator.shape[0])
+    np.testing.assert_array_equal(again.apply(x), fresh.apply(x))
+    for ours, theirs in zip(again.cholesky_factors, fresh.cholesky_factors):
+        np.testing.assert_array_equal(ours, theirs)
+    locations = moved.locations.copy()
+    locations[0] += [0.1, 0.0, 0.0]  # an obstacle moves (a prescribed velocity)
+    stacks.clear()
+    model.build_preconditioner(Configuration(locations, start.orientations))
+    assert stacks == [5]
+    assert len(model._obstacle_memo['blocks']) == 5

@@ -310,6 +310,10 @@ class BlockDiagonalPreconditioner:
     eta, blob_radius : float
     stacked_mobility : callable ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` or None
         Builds the dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks).
+    memo, memo_bodies : dict and (Nb,) bool, or None
+        The blocks of the bodies of ``memo_bodies`` are looked up in ``memo['blocks']`` (keyed by their exact
+        blob positions, location and radii) and the ones of this build stored there in place of the last
+        build's: bodies that have not moved keep their numbers without computing them again.
 
     Attributes (one entry per structure type; ``nb`` bodies of ``n`` blobs)
     -----------------------------------------------------------------------
@@ -321,9 +325,11 @@ class BlockDiagonalPreconditioner:
     configuration : the configuration it was built at.
     """
 
-    def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None):
+    def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
+                 memo=None, memo_bodies=None):
         self.body_arrays = body_arrays
         self.configuration = as_configuration(configuration)
+        self.memo = memo
         locations = self.configuration.locations
         r_vectors = body_arrays.blob_positions(self.configuration)
         self.inverse_cholesky_factors = []
@@ -332,34 +338,41 @@ class BlockDiagonalPreconditioner:
         self.inverse_mobility_times_K = []
         self.K = []
         self.body_mobilities = []
+        kept = {}
         for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
             nb = bodies.stop - bodies.start
             r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
-            # Building the dense blocks calls the backend once per body (set-up only).
             radius = blob_radius_argument(body_arrays, blob_radius, blobs)
             if np.ndim(radius):
                 radius = np.reshape(radius, (nb, n_blobs))
-            if stacked_mobility is not None:
-                M_blocks = stacked_mobility(r_type, eta, radius)
-            else:
-                M_blocks = np.stack([blob_mobility_matrix(r_body, eta, radius if np.ndim(radius) == 0 else radius[k])
-                                     for k, r_body in enumerate(r_type)])
-            try:
-                L = np.linalg.cholesky(M_blocks)
-                L_inv = lower_triangular_inverse(L)
-                M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
-            except np.linalg.LinAlgError:
-                L = L_inv = None
-                M_inv = np.linalg.inv(M_blocks)
+            # bodies of the memo whose blobs are where they were at the last build keep their blocks (the same
+            # numbers: every block depends on its own body alone); the others are computed in one stack
+            keys, found = [None] * nb, {}
+            blocks_memo = memo.setdefault('blocks', {}) if memo is not None and memo_bodies is not None else None
+            if blocks_memo is not None:
+                for k in np.flatnonzero(memo_bodies[bodies]):
+                    keys[k] = (r_type[k].tobytes(), locations[bodies.start + k].tobytes(),
+                               np.asarray(radius if np.ndim(radius) == 0 else radius[k]).tobytes())
+                    if keys[k] in blocks_memo:
+                        found[k] = blocks_memo[keys[k]]
+            todo = np.array([k for k in range(nb) if k not in found], dtype=int)
+            parts = _saddle_blocks(r_type[todo], locations[bodies][todo],
+                                   radius if np.ndim(radius) == 0 else radius[todo], eta, blob_mobility_matrix,
+                                   stacked_mobility) if todo.size else None
+            if found:
+                parts = _merged_blocks(nb, todo, parts, found)
+            L, L_inv, M_inv, K, M_inv_K, N = parts
+            for k, key in enumerate(keys):
+                if key is not None:
+                    kept[key] = tuple(None if a is None else a[k] for a in parts)
             self.inverse_cholesky_factors.append(L_inv)
-            K = K_matrices(r_type, locations[bodies])
-            M_inv_K = np.matmul(M_inv, K)
-            resistance = np.matmul(np.swapaxes(K, 1, 2), M_inv_K)
             self.cholesky_factors.append(L)
             self.inverse_mobilities.append(M_inv)
             self.inverse_mobility_times_K.append(M_inv_K)
             self.K.append(K)
-            self.body_mobilities.append(body_mobility_from_resistance(resistance))
+            self.body_mobilities.append(N)
+        if memo is not None and memo_bodies is not None:  # memo['blocks'] holds the last build's bodies only
+            memo['blocks'] = kept
         n_blob_unknowns = 3 * body_arrays.num_blobs
         size = n_blob_unknowns + 6 * body_arrays.num_bodies
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
@@ -445,6 +458,49 @@ class BlockDiagonalPreconditioner:
             lambda_out[blobs] = (lambda_tilde + np.matmul(M_inv_K, U)).reshape(-1, 3)
             velocity_out[bodies] = U[:, :, 0]
         return np.concatenate((lambda_out.reshape(-1), velocity_out.reshape(-1)))
+
+
+def _saddle_blocks(r_type, locations, radius, eta, blob_mobility_matrix, stacked_mobility):
+    """(L, L^{-1}, M^{-1}, K, M^{-1} K, N) of a stack of bodies r_type (nb, n, 3) at locations (nb, 3): Cholesky
+    factors (None where Cholesky failed, then a plain inverse), inverse mobilities, K, and body mobilities."""
+    if stacked_mobility is not None:
+        M_blocks = stacked_mobility(r_type, eta, radius)
+    else:  # the backend once per body (set-up only)
+        M_blocks = np.stack([blob_mobility_matrix(r_body, eta, radius if np.ndim(radius) == 0 else radius[k])
+                             for k, r_body in enumerate(r_type)])
+    try:
+        L = np.linalg.cholesky(M_blocks)
+        L_inv = lower_triangular_inverse(L)
+        M_inv = np.matmul(np.swapaxes(L_inv, 1, 2), L_inv)
+    except np.linalg.LinAlgError:
+        L = L_inv = None
+        M_inv = np.linalg.inv(M_blocks)
+    K = K_matrices(r_type, locations)
+    M_inv_K = np.matmul(M_inv, K)
+    resistance = np.matmul(np.swapaxes(K, 1, 2), M_inv_K)
+    return L, L_inv, M_inv, K, M_inv_K, body_mobility_from_resistance(resistance)
+
+
+def _merged_blocks(nb, todo, computed, found):
+    """The six stacks of :func:`_saddle_blocks` of nb bodies: ``computed`` (for the bodies ``todo``, or None) and
+    the memo's ``found`` (body -> its six blocks).  No Cholesky factors if any body has none (as a whole stack
+    whose Cholesky failed)."""
+    first = computed if computed is not None else next(iter(found.values()))
+    merged = []
+    for index, part in enumerate(first):
+        if part is None or any(entry[index] is None for entry in found.values()):
+            merged.append(None)
+            continue
+        shape = part.shape[1:] if computed is not None else part.shape
+        out = np.empty((nb,) + shape)
+        if computed is not None:
+            out[todo] = computed[index]
+        for k, entry in found.items():
+            out[k] = entry[index]
+        merged.append(out)
+    if merged[0] is None or merged[1] is None:
+        merged[0] = merged[1] = None
+    return tuple(merged)
 
 
 def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=GMRES_RESTART,

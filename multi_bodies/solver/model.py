@@ -194,6 +194,10 @@ class Model:
         fixed_bodies, prescribed_velocities = obstacles.fixed_bodies_of(bodies)
         set_(self, 'fixed_bodies', fixed_bodies)
         set_(self, 'prescribed_velocities', prescribed_velocities)
+        # The last preconditioner build's blocks of the bodies of prescribed kinematics, keyed by their exact blob
+        # positions (obstacles.MixedPreconditioner): a memo of numbers that depend on those positions alone, so
+        # obstacles that stay put are factored once; it changes no result, and each model has its own.
+        set_(self, '_obstacle_memo', {})
 
     def __setattr__(self, name, value):
         raise AttributeError('a Model is frozen: %s cannot be assigned after construction (build another with '
@@ -372,7 +376,7 @@ class Model:
         if self.has_fixed_bodies:
             base = obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
                                                  self.blob_radius, stacked_mobility=self.stacked_mobility,
-                                                 fixed=self.fixed_bodies)
+                                                 fixed=self.fixed_bodies, memo=self._obstacle_memo)
         else:
             base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
                                                            self.eta, self.blob_radius,

@@ -195,6 +195,14 @@ class _ObstacleCoarseCorrection:
             self.K.append(K)
             resistances.append(K.T @ Phi)
         F = fixed.size
+        memo = getattr(base, 'memo', None)  # the model's memo of the obstacles (obstacles.MixedPreconditioner)
+        key = None
+        if memo is not None:
+            key = ('coarse', r_vectors[np.concatenate([np.arange(offsets[b], offsets[b + 1]) for b in fixed])].tobytes(),
+                   locations[fixed].tobytes(), radii.tobytes(), L.tobytes(), float(eta))
+            if key in memo.get('coarse', {}):  # the obstacles have not moved since the last build: the same matrix
+                self.D = memo['coarse'][key]
+                return
         E = np.zeros((6 * F, 6 * F))
         for a in range(F):
             E[6 * a:6 * a + 6, 6 * a:6 * a + 6] = resistances[a]
@@ -220,6 +228,8 @@ class _ObstacleCoarseCorrection:
         for a in range(F):
             diagonal[6 * a:6 * a + 6, 6 * a:6 * a + 6] = np.linalg.pinv(resistances[a], hermitian=True)
         self.D = np.linalg.pinv(E, hermitian=True) - diagonal
+        if key is not None:
+            memo['coarse'] = {key: self.D}  # the last build's only
 
     def add_to(self, x, z):
         """Add the correction of the input ``x`` (the base's layout) to the output ``z`` in place."""

@@ -127,16 +127,20 @@ class MixedMobilityProblem(MobilityProblem):
 class MixedPreconditioner(BlockDiagonalPreconditioner):
     """Block-diagonal preconditioner of :class:`MixedMobilityProblem`: exact for each body alone.
 
-    Parameters: those of :class:`body_solver.BlockDiagonalPreconditioner`, then ``fixed`` (Nb,) bool.
-    The Cholesky factors (Lanczos noise) are those of the free problem: ``M`` is the same.
+    Parameters: those of :class:`body_solver.BlockDiagonalPreconditioner`, then ``fixed`` (Nb,) bool and
+    ``memo``: a dict (the model's) in which the blocks of the prescribed bodies are kept from one build to the
+    next, keyed by their exact blob positions, so that obstacles that do not move are factored once (the same
+    numbers; None: no memo).  The Cholesky factors (Lanczos noise) are those of the free problem: ``M`` is the
+    same.
     """
 
     def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
-                 fixed=None):
-        super().__init__(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius,
-                         stacked_mobility=stacked_mobility)
-        self.fixed = np.zeros(body_arrays.num_bodies, dtype=bool) if fixed is None \
+                 fixed=None, memo=None):
+        fixed = np.zeros(body_arrays.num_bodies, dtype=bool) if fixed is None \
             else np.asarray(fixed, dtype=bool).reshape(-1).copy()
+        super().__init__(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius,
+                         stacked_mobility=stacked_mobility, memo=memo, memo_bodies=fixed)
+        self.fixed = fixed
 
     def blob_blocks(self):
         """As the base class, with ``Q_k = M_k^{-1}`` for a prescribed body (its velocity is not unknown)."""
