@@ -125,8 +125,9 @@ def test_too_many_coarse_numbers_drop_the_linear_modes_then_the_coarse_space():
 
 
 def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve(tmp_path, monkeypatch):
-    """``preconditioner block_diagonal`` gives the concentration solve no preconditioner (as published); the
-    default gives it this one, which needs fewer iterations for the same concentrations."""
+    """``preconditioner block_diagonal`` gives the concentration solve no preconditioner (as published);
+    ``neighbours`` gives it this one, which needs fewer iterations for the same concentrations; ``auto`` gives
+    it this one from AUTO_MIN_BLOBS blobs on (here 126 blobs: none, then the threshold lowered: this one)."""
     from multi_bodies.solver import surface as surface_module
     from multi_bodies.solver.model import Model
     seen = []
@@ -151,8 +152,12 @@ def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve
     surface = surface_module.Surface()
     monkeypatch.setattr(surface, 'laplace_problem', lambda model, configuration: problem)
     _, published = surface.solve_concentrations(FakeModel('block_diagonal'), None)
-    _, ours = surface.solve_concentrations(FakeModel('auto'), None)
+    _, ours = surface.solve_concentrations(FakeModel('neighbours'), None)
     assert seen[0] is None and isinstance(seen[1], lp.LaplacePreconditioner)
+    surface.solve_concentrations(FakeModel('auto'), None)
+    monkeypatch.setattr(lp, 'AUTO_MIN_BLOBS', problem.size)
+    surface.solve_concentrations(FakeModel('auto'), None)
+    assert seen[2] is None and isinstance(seen[3], lp.LaplacePreconditioner)
     assert ours.iterations < published.iterations
     c, c_published = ours.constraint_force_torque, published.constraint_force_torque
     assert np.linalg.norm(c - c_published) < 1e-8 * np.linalg.norm(c_published)

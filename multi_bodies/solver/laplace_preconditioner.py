@@ -19,7 +19,8 @@ corrected first (the multiplicative two-level form, Tang, Nabben, Vuik and Erlan
 the work of one product with ``A``.  Measured on Janus spheres above a wall (doc/preconditioners.md): GMRES
 iterations from zero 15 -> 5 (30 spheres of 162 blobs, 2.6 radii apart), against 10 with the blocks alone.
 
-With one body the blocks are ``A`` itself and GMRES converges in one iteration.  When ``A Z`` would hold more
+With one body the blocks are ``A`` itself and GMRES converges in one iteration.  Under ``preconditioner auto``
+the problem is preconditioned from ``AUTO_MIN_BLOBS`` blobs on (below, the build costs more than it saves).  When ``A Z`` would hold more
 than ``MAX_COARSE_ENTRIES`` numbers the linear modes are dropped, and beyond that the coarse space (the blocks
 stay).  Shapes: N blobs, B bodies; vectors (N,).
 """
@@ -35,6 +36,10 @@ except ImportError:  # pragma: no cover - a build without a C++ compiler
 FOUR_PI = 4.0 * np.pi
 MAX_COARSE_ENTRIES = 10_000_000  # numbers of A Z (80 MB): 4 modes for N B <= 2.5e6 (e.g. 100 bodies of 25,000 blobs)
 MODE_CUTOFF = 1e-8  # a body's mode is kept when its singular value is above this fraction of the largest
+# preconditioner auto: the concentration problem is preconditioned from this many blobs on.  Measured (42-blob
+# shells, one solve from zero, build included, benchmarks/bench_phoretic.py): 210 blobs 2.1 ms unpreconditioned
+# against 2.4 ms, 420 blobs 4.1 against 3.6-4.1 ms, 840 blobs 12.5 against 9.5 ms, 4,200 blobs 0.34 against 0.19 s.
+AUTO_MIN_BLOBS = 400
 
 
 def coarse_modes(x, offsets, modes_per_body):

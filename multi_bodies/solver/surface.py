@@ -24,8 +24,7 @@ Which runs are refused, and why:
 import numpy as np
 
 from multi_bodies.files.surface_files import read_laplace_file, read_slip_length_file
-from multi_bodies.solver import phoretic, slip_length
-from multi_bodies.solver.laplace_preconditioner import LaplacePreconditioner
+from multi_bodies.solver import laplace_preconditioner, phoretic, slip_length
 from utils import UserInputError, warn_user
 
 SLIP_LENGTH_SCHEMES = ('deterministic_forward_euler', 'deterministic_adams_bashforth', 'deterministic_midpoint',
@@ -56,13 +55,15 @@ class Surface:
 
         GMRES(200) of the model's ``solver_tolerance`` through ``model.solve``, preconditioned by
         :class:`laplace_preconditioner.LaplacePreconditioner` (every body alone plus the coarse modes of
-        all bodies) unless the model's ``preconditioner`` is ``block_diagonal`` (the published solves:
-        unpreconditioned); x0 : normalised first guess (N,) or None (zeros, as published).
+        all bodies) under the model's ``preconditioner`` ``neighbours``, and under ``auto`` from
+        ``AUTO_MIN_BLOBS`` blobs on; unpreconditioned otherwise (``block_diagonal``: the published solves);
+        x0 : normalised first guess (N,) or None (zeros, as published).
         """
         problem = self.laplace_problem(model, configuration)
         preconditioner = None
-        if model.preconditioner != 'block_diagonal':
-            preconditioner = LaplacePreconditioner(problem, model.arrays.blob_offsets)
+        if model.preconditioner == 'neighbours' or (model.preconditioner == 'auto'
+                                                    and problem.size >= laplace_preconditioner.AUTO_MIN_BLOBS):
+            preconditioner = laplace_preconditioner.LaplacePreconditioner(problem, model.arrays.blob_offsets)
         result = model.solve(problem, problem.rhs(), preconditioner, x0=x0, restart=phoretic.LAPLACE_RESTART,
                              what='the concentration (Laplace) problem')
         return problem, result
