@@ -2,6 +2,7 @@
 articulated body alone is solved in one GMRES iteration, several reach the published preconditioner's solution in
 fewer, and the published preconditioner stays where this one does not apply."""
 import numpy as np
+import pytest
 
 from multi_bodies.solver import articulated as art
 from multi_bodies.solver import articulated_preconditioner as ap
@@ -66,7 +67,8 @@ def test_two_chains_and_a_free_body_converge_in_half_the_iterations(tmp_path, mo
 
 
 def test_the_published_preconditioner_where_the_groups_do_not_apply(tmp_path, monkeypatch):
-    """``preconditioner block_diagonal`` and articulated bodies above MAX_GROUP_BLOBS keep the published one."""
+    """``preconditioner block_diagonal``, articulated bodies above MAX_GROUP_BLOBS, and under ``auto`` LUs that
+    would cost more than AUTO_MAX_PRODUCTS products (``neighbours`` builds them anyway) keep the published one."""
     model = chain_model(tmp_path, monkeypatch)
     q = model.start_configuration
     _, _, default = art.articulated_problem(model, model.articulated, q, 0.0)
@@ -74,6 +76,13 @@ def test_the_published_preconditioner_where_the_groups_do_not_apply(tmp_path, mo
     _, _, published = art.articulated_problem(model.replace(preconditioner='block_diagonal'), model.articulated, q,
                                               0.0)
     assert type(published) is art.ArticulatedPreconditioner
+    cost = ap.lu_cost_in_products([model.num_blobs], model.num_blobs)  # one chain: (3N)^3 / 3 / (40 N^2)
+    assert cost == pytest.approx(27.0 * model.num_blobs / 120.0)
+    monkeypatch.setattr(ap, 'AUTO_MAX_PRODUCTS', 0.99 * cost)
+    _, _, costly = art.articulated_problem(model, model.articulated, q, 0.0)
+    assert type(costly) is art.ArticulatedPreconditioner
+    _, _, anyway = art.articulated_problem(model.replace(preconditioner='neighbours'), model.articulated, q, 0.0)
+    assert isinstance(anyway, ap.GroupPreconditioner)
     monkeypatch.setattr(ap, 'MAX_GROUP_BLOBS', 3 * len(write_chain.__defaults__[-1]) - 1)
-    _, _, large = art.articulated_problem(model, model.articulated, q, 0.0)
+    _, _, large = art.articulated_problem(model.replace(preconditioner='neighbours'), model.articulated, q, 0.0)
     assert type(large) is art.ArticulatedPreconditioner

@@ -16,8 +16,9 @@ Bodies outside the articulated bodies keep the body preconditioner.  Measured on
 (doc/preconditioners.md): 16 GMRES iterations per solve -> 5.
 
 It applies when every body has a full-rank ``K`` and the articulated bodies are no larger than
-``MAX_GROUP_BLOBS`` blobs (a dense LU of ``(3n)^3 / 3`` flops each); otherwise :func:`build` returns None and
-the published preconditioner is used.
+``MAX_GROUP_BLOBS`` blobs (a dense LU of ``(3n)^3 / 3`` flops each), and under ``preconditioner auto`` when the
+LUs cost at most ``AUTO_MAX_PRODUCTS`` ``M f`` products; otherwise :func:`build` returns None and the published
+preconditioner is used.
 """
 import numpy as np
 import scipy.linalg
@@ -27,6 +28,10 @@ from body.body import K_matrices
 from multi_bodies.solver.body_solver import MobilityProblem, blob_radius_argument
 
 MAX_GROUP_BLOBS = 600  # a (1,800 + 6k + r)-square LU, about 2e9 flops, per articulated body and build
+# preconditioner auto: the groups are built when their LUs, sum of (3n)^3 / 3 flops, cost at most this many times
+# the flops of one M f product (about 40 per blob pair, N^2 pairs); a solve saves about 10 products (4 bacteria of
+# 82 blobs: 4.6, 16 -> 5 iterations, built; ten articulated bodies of 600 blobs among 6,000: 13.5, not built)
+AUTO_MAX_PRODUCTS = 10.0
 
 
 def build(problem, model, configuration):
@@ -35,8 +40,11 @@ def build(problem, model, configuration):
     arrays = model.arrays
     sizes = np.diff(arrays.blob_offsets)
     groups = problem.articulated.groups
+    group_blobs = np.array([sizes[group.body_indices].sum() for group in groups], dtype=float)
     eligible = (problem.projectors is None and type(problem.problem) is MobilityProblem  # no obstacles, no slip
-                and all(sizes[group.body_indices].sum() <= MAX_GROUP_BLOBS for group in groups))
+                and np.all(group_blobs <= MAX_GROUP_BLOBS))
+    if model.preconditioner == 'auto':
+        eligible = eligible and lu_cost_in_products(group_blobs, problem.num_blobs) <= AUTO_MAX_PRODUCTS
     if not eligible:
         return None
     grouped = np.zeros(problem.num_bodies, dtype=bool)
@@ -44,6 +52,11 @@ def build(problem, model, configuration):
         grouped[group.body_indices] = True
     body = None if np.all(grouped) else model.build_preconditioner(configuration)
     return GroupPreconditioner(problem, arrays, body, model.stacked_mobility, model.eta, model.blob_radius)
+
+
+def lu_cost_in_products(group_blobs, num_blobs):
+    """The flops of the groups' LUs, ``sum (3n)^3 / 3``, in M f products of ``num_blobs`` blobs (40 per pair)."""
+    return float(np.sum((3.0 * np.asarray(group_blobs, dtype=float)) ** 3) / 3.0) / (40.0 * float(num_blobs) ** 2)
 
 
 class GroupPreconditioner:
