@@ -30,6 +30,7 @@ class ArticulatedScheme(Scheme):
     """Base of the articulated schemes: the constrained solve and the restoration of the joints."""
     name = None
     single_blobs = False
+    extrapolate_guesses = True  # forward Euler: one solve per step; midpoint: two, dt/2 apart
 
     def step_event(self, work, t):
         """The published ``Constraint.tumbling_event(t)`` of a user's override, at the start of every step."""
@@ -46,10 +47,9 @@ class ArticulatedScheme(Scheme):
     def constrained_velocities(self, work, configuration, t):
         """Velocities (Nb, 6) with the joints at ``configuration`` and time ``t`` (counted, warm started)."""
         result = art.articulated_velocities(work.model, self.articulated_set(work), configuration, t,
-                                            x0=work.first_guess, single_blobs=self.single_blobs)
+                                            x0=self.warm_guess(work), single_blobs=self.single_blobs)
         work.record_solve(result)
-        if result.normalised_solution is not None:
-            work.first_guess = result.normalised_solution
+        self.keep_guess(work, result.normalised_solution)
         return result.velocities
 
     def half_or_full(self, work, start, velocities, dt, t_end, centres_from):

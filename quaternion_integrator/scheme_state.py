@@ -23,7 +23,8 @@ from body.body import Configuration
 from multi_bodies.solver.counters import Counters
 
 # The history fields (saved in restart records, SPEC decision 11).
-HISTORY_FIELDS = ('first_guess', 'roller_torque_guess', 'previous_velocities', 'concentration_guess')
+HISTORY_FIELDS = ('first_guess', 'earlier_guesses', 'roller_torque_guess', 'previous_velocities',
+                  'concentration_guess')
 
 
 def _copy(array):
@@ -38,6 +39,8 @@ class RunState:
     step : int, index of the next step (the first step of a run is ``initial_step``)
     counters : Counters
     first_guess : (3N + 6Nb,) or None, normalised solution of the last deterministic solve (SPEC 4.2)
+    earlier_guesses : (k, 3N + 6Nb) or None, k <= 2: those of the solves before it, the latest first (kept by
+        the deterministic schemes whose first guesses are extrapolated, ``Scheme.extrapolate_guesses``)
     roller_torque_guess : (3N,) or None, normalised torque of the last prescribed-spin roller solve
     previous_velocities : (Nb, 6) / (N, 3) or None, the deterministic velocities of the last accepted step
         (Adams-Bashforth schemes)
@@ -52,6 +55,7 @@ class RunState:
     step: int = 0
     counters: Counters = Counters()
     first_guess: Optional[np.ndarray] = None
+    earlier_guesses: Optional[np.ndarray] = None
     roller_torque_guess: Optional[np.ndarray] = None
     previous_velocities: Optional[np.ndarray] = None
     concentration_guess: Optional[np.ndarray] = None
@@ -97,6 +101,7 @@ class StepWork:
         self.model = model
         self.step_index = state.step
         self.first_guess = state.first_guess
+        self.earlier_guesses = state.earlier_guesses
         self.roller_torque_guess = state.roller_torque_guess
         self.previous_velocities = state.previous_velocities
         self.concentration_guess = state.concentration_guess
@@ -196,7 +201,8 @@ class StepWork:
         and ``step``, and ``velocities`` (those the step used, or None)."""
         return replace(start, configuration=configuration, step=int(step),
                        counters=start.counters.plus(**self.increments),
-                       first_guess=self.first_guess, roller_torque_guess=self.roller_torque_guess,
+                       first_guess=self.first_guess, earlier_guesses=self.earlier_guesses,
+                       roller_torque_guess=self.roller_torque_guess,
                        previous_velocities=self.previous_velocities,
                        concentration_guess=self.concentration_guess,
                        preconditioner_step=self.preconditioner_step,

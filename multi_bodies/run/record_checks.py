@@ -224,6 +224,10 @@ def _check_history(history, bodies):
         _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim <= 2
                                    and (value.ndim < 2 or value.shape[0] == bodies)),
                  'state.scheme.%s is not a float array of this run (%s)' % (key, _short(value)))
+    value = history.get('earlier_guesses')
+    _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim == 2
+                               and value.shape[0] <= 2),
+             'state.scheme.earlier_guesses is not one or two flat float arrays (%s)' % _short(value))
 
 
 def _kind(state_or_rng):
