@@ -358,13 +358,13 @@ class BlockDiagonalPreconditioner:
             todo = np.array([k for k in range(nb) if k not in found], dtype=int)
             parts = _saddle_blocks(r_type[todo], locations[bodies][todo],
                                    radius if np.ndim(radius) == 0 else radius[todo], eta, blob_mobility_matrix,
-                                   stacked_mobility) if todo.size else None
+                                   stacked_mobility) if todo.size or not found else None
             if found:
                 parts = _merged_blocks(nb, todo, parts, found)
             L, L_inv, M_inv, K, M_inv_K, N = parts
             for k, key in enumerate(keys):
                 if key is not None:
-                    kept[key] = tuple(None if a is None else a[k] for a in parts)
+                    kept[key] = tuple(None if a is None else a[k].copy() for a in parts)
             self.inverse_cholesky_factors.append(L_inv)
             self.cholesky_factors.append(L)
             self.inverse_mobilities.append(M_inv)
