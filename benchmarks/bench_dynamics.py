@@ -135,8 +135,8 @@ def count_products(model):
         def roller_product(self, kind):
             return counter.wrap(Model.roller_product(self, kind))
 
-        def build_preconditioner(self, configuration):
-            pc = Model.build_preconditioner(self, configuration)
+        def build_preconditioner(self, configuration, solves=1):
+            pc = Model.build_preconditioner(self, configuration, solves=solves)
             apply = pc.apply
 
             def counted_apply(x):

@@ -77,6 +77,10 @@ class StochasticScheme(Scheme):
     """
     dense = False
     pair_products = True  # share passes over the blob pairs between independent products (C++ backend)
+    # GMRES solves a step makes with the step's preconditioner (at least two in every scheme here: the noise or
+    # RFD solves and the deterministic one); ``preconditioner auto`` weighs the neighbour correction's build
+    # against them
+    solves_at_preconditioner = 2
     # A solve whose right-hand side holds this step's Brownian slip starts from zero, not from the last solution:
     # the noise, sqrt(2 kT / dt) M^{1/2} W with a fresh W, dominates the right-hand side, so the last solution
     # is a worse start than zero (100 boomerangs, Slip_Trapz: |b - A x0| = 1.25 |b|) and its residual costs
@@ -105,15 +109,17 @@ class StochasticScheme(Scheme):
     # -------------------------------------------------------------- helpers
     def preconditioner(self, work, step_index, problem):
         """The block-diagonal preconditioner, rebuilt at ``problem`` every ``update_PC`` steps (kept in the
-        run state with the step and configuration it was built at)."""
+        run state with the step and configuration it was built at).  It serves ``solves_at_preconditioner``
+        solves a step for ``update_PC`` steps, which ``preconditioner auto`` weighs its build against."""
         rebuild = work.preconditioner_step is None or (
             step_index % self.update_PC == 0 and work.preconditioner_step != step_index)
+        solves = self.solves_at_preconditioner * self.update_PC
         if rebuild:
-            work.preconditioner = work.build_preconditioner(problem.configuration)
+            work.preconditioner = work.build_preconditioner(problem.configuration, solves=solves)
             work.preconditioner_step = step_index
             work.preconditioner_configuration = problem.configuration
         elif work.preconditioner is None:  # after a restart: the configuration it was built at
-            work.preconditioner = work.build_preconditioner(work.preconditioner_configuration)
+            work.preconditioner = work.build_preconditioner(work.preconditioner_configuration, solves=solves)
         return work.preconditioner
 
     @staticmethod
@@ -428,6 +434,7 @@ class StochasticSlipTrapz(StochasticScheme):
     """
     name = 'stochastic_Slip_Trapz'
     reuse_preconditioner = True
+    solves_at_preconditioner = 3  # the slip RFD's, the predictor's and (reused) the corrector's
 
     def attempt(self, work, step_index, rng, old):
         n3 = 3 * work.num_blobs

@@ -224,6 +224,31 @@ def test_auto_builds_the_correction_only_where_it_is_cheap():
     assert dense_pc.pairs.size == 0 and not dense_pc.has_neighbours
     forced = dense.replace(preconditioner='neighbours').build_preconditioner(dense.start_configuration)
     assert forced.pairs.size
+    # a preconditioner that serves k solves may cost k times as much: built where cost_ratio <= k * the ratio
+    k = int(np.ceil(dense_pc.cost_ratio / AUTO_MAX_COST_RATIO))
+    assert not dense.build_preconditioner(dense.start_configuration, solves=k - 1).pairs.size
+    assert dense.build_preconditioner(dense.start_configuration, solves=k).pairs.size
+
+
+def test_stochastic_schemes_weigh_the_build_against_their_solves(monkeypatch):
+    """A stochastic step asks for the preconditioner with the solves it will make with it: Slip_Trapz 3 a step,
+    the others 2, times update_PC."""
+    from multi_bodies.files.input_options import options_with
+    from quaternion_integrator.schemes import make_scheme
+    model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')
+    asked = []
+    build = Model.build_preconditioner
+
+    def spy(self, configuration, solves=1):
+        asked.append(solves)
+        return build(self, configuration, solves=solves)
+    monkeypatch.setattr(Model, 'build_preconditioner', spy)
+    for name, update, expected in (('stochastic_Slip_Trapz', 1, 3), ('stochastic_Slip_Trapz', 4, 12),
+                                   ('stochastic_EM', 1, 2)):
+        scheme = make_scheme(name, 0.01, options_with(kT=1.0, rf_delta=1e-3, update_PC=update))
+        asked.clear()
+        scheme.step(model, scheme.init(model, model.start_configuration), np.random.default_rng(0))
+        assert asked and asked[0] == expected, (name, update, asked)
 
 
 @pytest.mark.parametrize('backend, radii', [('C++_no_wall', False), ('C++_free_surface', False), ('python', False),

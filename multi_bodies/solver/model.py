@@ -363,13 +363,14 @@ class Model:
         return body_solver.MobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
                                            self.blob_radius, self.periodic_length)
 
-    def build_preconditioner(self, configuration):
+    def build_preconditioner(self, configuration, solves=1):
         """The GMRES preconditioner (and the Lanczos factors) at ``configuration``.
 
         ``preconditioner`` ``neighbours``: the block-diagonal one corrected for the couplings of neighbouring
         bodies (:class:`NeighbourPreconditioner`); ``auto`` (the default): the same where its build costs at
-        most ``AUTO_MAX_COST_RATIO`` of an ``M f`` product, else the block-diagonal one; ``block_diagonal``:
-        every body alone (the published one).  The Lanczos factors are the block-diagonal ones either way.
+        most ``solves * AUTO_MAX_COST_RATIO`` of an ``M f`` product (``solves``: how many solves the caller
+        will make with it), else the block-diagonal one; ``block_diagonal``: every body alone (the published
+        one).  The Lanczos factors are the block-diagonal ones either way.
         """
         if self.surface is not None and self.surface.has_slip_length:
             return self.surface.slip_length_preconditioner(self, configuration)
@@ -386,7 +387,8 @@ class Model:
         return NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
                                        periodic_length=self.periodic_length, body_lengths=self.body_lengths,
                                        cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
-                                       max_cost_ratio=AUTO_MAX_COST_RATIO if self.preconditioner == 'auto' else None)
+                                       max_cost_ratio=AUTO_MAX_COST_RATIO * max(1, int(solves))
+                                       if self.preconditioner == 'auto' else None)
 
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
               what='the mobility problem'):
