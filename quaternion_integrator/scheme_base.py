@@ -143,9 +143,9 @@ class Scheme:
 
     def extrapolates(self, work):
         """True when this step's deterministic solves start from extrapolated guesses: a scheme of equally spaced
-        solves (``extrapolate_guesses``) and a model whose ``preconditioner`` is not ``block_diagonal`` (the
-        published solves, which start from the last solution)."""
-        return self.extrapolate_guesses and getattr(work.model, 'preconditioner', 'block_diagonal') != 'block_diagonal'
+        solves (``extrapolate_guesses``) and a model without ``published_solves`` (``preconditioner
+        block_diagonal``: the published solves start from the last solution)."""
+        return self.extrapolate_guesses and not getattr(work.model, 'published_solves', True)
 
     def warm_guess(self, work):
         """The first guess of the next deterministic solve (normalised, or None for zeros).

@@ -688,7 +688,7 @@ def articulated_problem(model, articulated, configuration, t, force_torque=None,
         slip = hooks_slip if slip is None else slip
     problem = ArticulatedProblem(model.mobility_problem(configuration), articulated, configuration, t)
     preconditioner = None  # every articulated body solved exactly as if alone, where it applies
-    if model.preconditioner != 'block_diagonal':
+    if not model.published_solves:
         preconditioner = articulated_preconditioner.build(problem, model, configuration)
     if preconditioner is None:  # the published one
         preconditioner = ArticulatedPreconditioner(problem, model.build_preconditioner(configuration))

@@ -363,6 +363,13 @@ class Model:
         return body_solver.MobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
                                            self.blob_radius, self.periodic_length)
 
+    @property
+    def published_solves(self):
+        """True under ``preconditioner block_diagonal``: every solve as published (block-diagonal and articulated
+        Schur preconditioners, the concentration problem unpreconditioned, warm starts from the last solution);
+        False under ``auto`` and ``neighbours`` (doc/preconditioners.md)."""
+        return self.preconditioner == 'block_diagonal'
+
     def build_preconditioner(self, configuration, solves=1):
         """The GMRES preconditioner (and the Lanczos factors) at ``configuration``.
 
@@ -382,7 +389,7 @@ class Model:
             base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
                                                            self.eta, self.blob_radius,
                                                            stacked_mobility=self.stacked_mobility)
-        if self.preconditioner == 'block_diagonal' or self.num_bodies < 2:
+        if self.published_solves or self.num_bodies < 2:
             return base
         return NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
                                        periodic_length=self.periodic_length, body_lengths=self.body_lengths,
