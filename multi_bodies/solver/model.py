@@ -34,7 +34,7 @@ import numpy as np
 import mobility
 from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
 from body.geometry import Quaternion
-from multi_bodies.solver import body_solver, obstacles, rollers, user_hooks
+from multi_bodies.solver import body_solver, corotated_preconditioner, obstacles, rollers, user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
@@ -406,8 +406,13 @@ class Model:
         is ``solver_tolerance``; what: the problem's name in the message of a failure.
         Returns body_solver.SolveResult (with its ``iterations``: nothing is counted here); raises
         SimulationStopped when GMRES does not converge.
+
+        A preconditioner built where the bodies were oriented otherwise is applied turned with them
+        (``corotated_preconditioner``), except under ``published_solves``.
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
+        if not self.published_solves:
+            preconditioner = corotated_preconditioner.following(problem, preconditioner, self.arrays.blob_body_index)
         result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
                                    print_residual=self.print_residual)
         if not result.converged:
