@@ -26,6 +26,14 @@ from quaternion_integrator.scheme_state import RunState, StepWork
 from utils import SimulationStopped, UserInputError
 
 
+# A kept preconditioner (Scheme.kept_preconditioner) is built anew after a solve that took this many GMRES
+# iterations more than the fewest since its build (measured on 100 boomerangs, doc/preconditioners.md).
+KEPT_WEAR_ITERATIONS = 2
+# ``preconditioner auto`` weighs a kept preconditioner's build against the solves the last one served, at most
+# this many: the neighbour pairs' memory grows with the weight, what they save does not.
+KEPT_SOLVES_WEIGHED = 4
+
+
 class InvalidConfiguration(SimulationStopped):
     """A step put a blob centre below the wall; ``step`` and ``bodies`` (indices) say where."""
 
@@ -98,6 +106,9 @@ class Scheme:
     # The deterministic solves of the scheme are equally spaced in time (forward Euler, Adams-Bashforth: dt;
     # midpoint: dt/2), so their first guess may be extrapolated from the last three solutions (first_guess)
     extrapolate_guesses = False
+    # The scheme's deterministic solves (rigid_velocities) keep their preconditioner from solve to solve while it
+    # serves, under preconditioner auto and neighbours (kept_preconditioner); the published solves rebuild it
+    keep_preconditioner = False
 
     def __init__(self, dt):
         if not dt > 0:
@@ -136,10 +147,53 @@ class Scheme:
         return result
 
     def rigid_velocities(self, work, configuration, preconditioner=None):
-        """Velocities (Nb, 6) at ``configuration`` under its forces and slip (iterative, warm started)."""
+        """Velocities (Nb, 6) at ``configuration`` under its forces and slip (iterative, warm started; with the
+        kept preconditioner where the scheme keeps one, else one built at ``configuration``)."""
+        kept = preconditioner is None and self.keeps_preconditioner(work)
+        if kept:
+            preconditioner = self.kept_preconditioner(work, configuration)
         result = work.deterministic_velocities(configuration, preconditioner=preconditioner, x0=self.warm_guess(work))
         self.keep_guess(work, result.normalised_solution)
+        if kept:
+            self.served(work, result.iterations)
         return result.velocities
+
+    def keeps_preconditioner(self, work):
+        """True when this step's deterministic solves keep their preconditioner (``keep_preconditioner``) and the
+        model does not make the published solves (``preconditioner block_diagonal`` rebuilds it at every solve)."""
+        return self.keep_preconditioner and not getattr(work.model, 'published_solves', True)
+
+    def kept_preconditioner(self, work, configuration):
+        """The preconditioner the deterministic solves keep: the one in the run state, else one built here.
+
+        A preconditioner built at one configuration serves the next solves too, turned with the bodies
+        (``multi_bodies.solver.corotated_preconditioner``), until :meth:`served` finds that it has worn (doc
+        preconditioners.md, kept preconditioners).  The build is weighed (``preconditioner auto``) against the
+        solves the last kept one served, at most ``KEPT_SOLVES_WEIGHED`` (that many for the first one).  After a restart the preconditioner is
+        built again at the configuration it was built at, with the same weight, so the run repeats bit for bit.
+        """
+        solves = KEPT_SOLVES_WEIGHED if work.preconditioner_lifetime is None else \
+            min(work.preconditioner_lifetime, KEPT_SOLVES_WEIGHED)
+        if work.preconditioner_configuration is None or work.preconditioner_solves is None:
+            work.preconditioner = work.build_preconditioner(configuration, solves=solves)
+            work.preconditioner_configuration = configuration
+            work.preconditioner_solves, work.preconditioner_fewest = 0, None
+        elif work.preconditioner is None:  # a restart: the run state holds where it was built, not the object
+            work.preconditioner = work.build_preconditioner(work.preconditioner_configuration, solves=solves)
+        return work.preconditioner
+
+    @staticmethod
+    def served(work, iterations):
+        """Count a solve of ``iterations`` GMRES iterations with the kept preconditioner; when it took
+        ``KEPT_WEAR_ITERATIONS`` more than the fewest since the build, the next solve builds a new one."""
+        solves = work.preconditioner_solves + 1
+        fewest = iterations if work.preconditioner_fewest is None else min(work.preconditioner_fewest, iterations)
+        if iterations >= fewest + KEPT_WEAR_ITERATIONS:
+            work.preconditioner_lifetime = solves
+            work.preconditioner = work.preconditioner_configuration = None
+            work.preconditioner_solves = work.preconditioner_fewest = None
+            return
+        work.preconditioner_solves, work.preconditioner_fewest = solves, fewest
 
     def extrapolates(self, work):
         """True when this step's deterministic solves start from extrapolated guesses: a scheme of equally spaced

@@ -25,6 +25,8 @@ from multi_bodies.solver.counters import Counters
 # The history fields (saved in restart records, SPEC decision 11).
 HISTORY_FIELDS = ('first_guess', 'earlier_guesses', 'roller_torque_guess', 'previous_velocities',
                   'concentration_guess')
+# The counts of the preconditioner the deterministic schemes keep (ints or None, saved in restart records too).
+KEPT_PRECONDITIONER_COUNTS = ('preconditioner_solves', 'preconditioner_fewest', 'preconditioner_lifetime')
 
 
 def _copy(array):
@@ -46,7 +48,12 @@ class RunState:
         (Adams-Bashforth schemes)
     concentration_guess : (N,) or None, normalised blob concentrations of the last solute solve (phoretic bodies)
     preconditioner_step : int or None, the step at which the preconditioner of the stochastic schemes
-        was built; preconditioner_configuration : the Configuration it was built at
+        was built; preconditioner_configuration : the Configuration it was built at (the stochastic schemes', or
+        the one the deterministic schemes keep, ``Scheme.kept_preconditioner``)
+    preconditioner_solves : int or None, solves the kept deterministic preconditioner has served (None: none kept);
+        preconditioner_fewest : int or None, the fewest GMRES iterations of those solves;
+        preconditioner_lifetime : int or None, solves the one kept before it served (``auto`` weighs the next
+        build against them)
     preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
     velocities : the velocities the last step used (not saved)
     last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
@@ -61,6 +68,9 @@ class RunState:
     concentration_guess: Optional[np.ndarray] = None
     preconditioner_step: Optional[int] = None
     preconditioner_configuration: Optional[Configuration] = None
+    preconditioner_solves: Optional[int] = None
+    preconditioner_fewest: Optional[int] = None
+    preconditioner_lifetime: Optional[int] = None
     preconditioner: Any = None
     velocities: Optional[np.ndarray] = None
     last_iterations: int = 0
@@ -69,7 +79,8 @@ class RunState:
         """What a restart record saves of the scheme (copies): a dict of arrays, ints and None."""
         history = {name: _copy(getattr(self, name)) for name in HISTORY_FIELDS}
         history['invalid_configurations'] = self.counters.invalid_configurations
-        history['preconditioner_step'] = self.preconditioner_step
+        for name in KEPT_PRECONDITIONER_COUNTS + ('preconditioner_step',):
+            history[name] = getattr(self, name)
         history['preconditioner_configuration'] = None if self.preconditioner_configuration is None \
             else self.preconditioner_configuration.copy_arrays()
         return history
@@ -79,9 +90,10 @@ class RunState:
         if not history:
             return self
         saved = history.get('preconditioner_configuration')
-        step = history.get('preconditioner_step')
         changes = {name: _copy(history.get(name)) for name in HISTORY_FIELDS}
-        changes.update(preconditioner_step=None if step is None else int(step),
+        for name in KEPT_PRECONDITIONER_COUNTS + ('preconditioner_step',):
+            changes[name] = None if history.get(name) is None else int(history[name])
+        changes.update(
                        preconditioner_configuration=None if saved is None else Configuration(*saved),
                        preconditioner=None,
                        counters=replace(self.counters,
@@ -108,6 +120,8 @@ class StepWork:
         self.pending_previous = None
         self.preconditioner_step = state.preconditioner_step
         self.preconditioner_configuration = state.preconditioner_configuration
+        for name in KEPT_PRECONDITIONER_COUNTS:
+            setattr(self, name, getattr(state, name))
         self.preconditioner = state.preconditioner
         self.last_iterations = state.last_iterations
         self.start_counters = state.counters
@@ -208,4 +222,5 @@ class StepWork:
                        preconditioner_step=self.preconditioner_step,
                        preconditioner_configuration=self.preconditioner_configuration,
                        preconditioner=self.preconditioner, velocities=velocities,
-                       last_iterations=self.last_iterations)
+                       last_iterations=self.last_iterations,
+                       **{name: getattr(self, name) for name in KEPT_PRECONDITIONER_COUNTS})

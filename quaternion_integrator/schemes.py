@@ -42,6 +42,7 @@ class DeterministicForwardEuler(Scheme):
     """``x += U dt``, ``q = from_rotation(w dt) q`` with U from the iterative mobility solve."""
     name = 'deterministic_forward_euler'
     extrapolate_guesses = True  # one solve per step (midpoint: two, dt/2 apart)
+    keep_preconditioner = True
 
     def velocities(self, work, configuration):
         return self.rigid_velocities(work, configuration)

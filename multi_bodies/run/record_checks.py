@@ -210,7 +210,9 @@ def _check_history(history, bodies):
     if history is None:
         return
     _require(isinstance(history, dict), 'state.scheme is a %s, not a table' % type(history).__name__)
-    for key, optional in (('invalid_configurations', False), ('preconditioner_step', True)):
+    for key, optional in (('invalid_configurations', False), ('preconditioner_step', True),
+                          ('preconditioner_solves', True), ('preconditioner_fewest', True),
+                          ('preconditioner_lifetime', True)):
         _require(key not in history or (optional and history[key] is None) or _is_int(history[key]),
                  'state.scheme.%s is %s, not an integer >= 0' % (key, _short(history.get(key))))
     saved = history.get('preconditioner_configuration')
