@@ -461,8 +461,8 @@ class Model:
     def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None):
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
 
-        preconditioner : one built at ``configuration`` when None (the deterministic schemes rebuild it
-        every step, as the published code does); x0 : normalised first guess.
+        preconditioner : one built at ``configuration`` when None (the published solves rebuild it at
+        every solve; under ``auto`` and ``neighbours`` the deterministic schemes pass the one they keep); x0 : normalised first guess.
         Returns body_solver.SolveResult (``velocities`` (Nb, 6), ``normalised_solution`` for the next guess).
         """
         _, force_torque, slip = self.forces_and_slip(configuration, solute)
