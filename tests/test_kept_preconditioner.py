@@ -15,11 +15,10 @@ from body.body import Configuration
 from body.geometry import rotate_quaternions
 from multi_bodies.run.record_checks import _Bad, _check_history
 from multi_bodies.solver import corotated_preconditioner
-from multi_bodies.solver.model import Model
 from quaternion_integrator import scheme_base
 from quaternion_integrator.scheme_state import RunState
 from quaternion_integrator.schemes import make_scheme
-from test_neighbour_preconditioner import boomerang_model, grid
+from test_neighbour_preconditioner import boomerang_model, count_builds, grid
 
 
 def _turned_and_moved(configuration, seed, angle=0.3, shift=0.2):
@@ -105,17 +104,6 @@ def _run(model, scheme_name, steps, state=None, dt=0.01):
     return scheme, state
 
 
-def _count_builds(monkeypatch):
-    asked = []
-    build = Model.build_preconditioner
-
-    def spy(self, configuration, solves=1):
-        asked.append(solves)
-        return build(self, configuration, solves=solves)
-    monkeypatch.setattr(Model, 'build_preconditioner', spy)
-    return asked
-
-
 @pytest.mark.parametrize('scheme_name, solves_per_step', [('deterministic_adams_bashforth', 1),
                                                           ('deterministic_midpoint', 2)])
 def test_deterministic_solves_keep_their_preconditioner_to_the_same_trajectory(scheme_name, solves_per_step,
@@ -124,7 +112,7 @@ def test_deterministic_solves_keep_their_preconditioner_to_the_same_trajectory(s
     (``block_diagonal``, the negative control, builds one per solve), weighing the first against
     ``KEPT_SOLVES_WEIGHED`` solves, and ends where the published solves end within what solver_tolerance 1e-8
     allows (asserted 1e-6 of the distance travelled)."""
-    asked = _count_builds(monkeypatch)
+    asked = count_builds(monkeypatch)
     model = boomerang_model(grid(16, 4.0), seed=2, preconditioner='auto')
     _, kept = _run(model, scheme_name, 6)
     assert 1 <= len(asked) < 6 * solves_per_step and asked[0] == scheme_base.KEPT_SOLVES_WEIGHED, asked
@@ -156,7 +144,7 @@ def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     assert work.preconditioner is None and work.preconditioner_configuration is None
     assert work.preconditioner_solves is None and work.preconditioner_lifetime == 4
     # the next build is weighed against the solves this one served
-    asked = _count_builds(monkeypatch)
+    asked = count_builds(monkeypatch)
     model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')
     scheme = make_scheme('deterministic_adams_bashforth', 0.01)
     state = RunState(model.start_configuration, preconditioner_lifetime=2)
@@ -172,7 +160,7 @@ def test_restart_with_a_kept_preconditioner_repeats_the_run_bit_for_bit(monkeypa
     from it: the restarted run builds the preconditioner again where the saved one was built, and ends where the
     uninterrupted run ends, to the bit.  A wear margin of 1 and dt 0.1 make builds happen inside the run too."""
     monkeypatch.setattr(scheme_base, 'KEPT_WEAR_ITERATIONS', 1)
-    asked = _count_builds(monkeypatch)
+    asked = count_builds(monkeypatch)
     model = boomerang_model(grid(9, 4.0), seed=3, preconditioner='auto')
     scheme, whole = _run(model, 'deterministic_adams_bashforth', 8, dt=0.1)
     assert len(asked) >= 2, asked  # worn and built anew within the run

@@ -39,6 +39,18 @@ def grid(num, spacing, height=2.5):
     return [[spacing * (k % side), spacing * (k // side), height] for k in range(num)]
 
 
+def count_builds(monkeypatch):
+    """The ``solves`` of every ``Model.build_preconditioner`` call from now on (a list that fills as they come)."""
+    asked = []
+    build = Model.build_preconditioner
+
+    def spy(self, configuration, solves=1):
+        asked.append(solves)
+        return build(self, configuration, solves=solves)
+    monkeypatch.setattr(Model, 'build_preconditioner', spy)
+    return asked
+
+
 def dense_saddle_matrix(model, configuration):
     M, _, K, _ = body_solver.dense_matrices(model.arrays, configuration, model.blob_mobility_matrix, model.eta,
                                              model.blob_radius, inverse=False)
@@ -236,13 +248,7 @@ def test_stochastic_schemes_weigh_the_build_against_their_solves(monkeypatch):
     from multi_bodies.files.input_options import options_with
     from quaternion_integrator.schemes import make_scheme
     model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')
-    asked = []
-    build = Model.build_preconditioner
-
-    def spy(self, configuration, solves=1):
-        asked.append(solves)
-        return build(self, configuration, solves=solves)
-    monkeypatch.setattr(Model, 'build_preconditioner', spy)
+    asked = count_builds(monkeypatch)
     for name, update, expected in (('stochastic_Slip_Trapz', 1, 3), ('stochastic_Slip_Trapz', 4, 12),
                                    ('stochastic_EM', 1, 2)):
         scheme = make_scheme(name, 0.01, options_with(kT=1.0, rf_delta=1e-3, update_PC=update))
