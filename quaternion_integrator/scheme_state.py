@@ -93,8 +93,7 @@ class RunState:
         changes = {name: _copy(history.get(name)) for name in HISTORY_FIELDS}
         for name in KEPT_PRECONDITIONER_COUNTS + ('preconditioner_step',):
             changes[name] = None if history.get(name) is None else int(history[name])
-        changes.update(
-                       preconditioner_configuration=None if saved is None else Configuration(*saved),
+        changes.update(preconditioner_configuration=None if saved is None else Configuration(*saved),
                        preconditioner=None,
                        counters=replace(self.counters,
                                         invalid_configurations=int(history.get('invalid_configurations', 0))))
