@@ -42,7 +42,7 @@ def test_turned_preconditioner_is_the_one_built_at_the_turned_bodies_in_free_spa
     built_at_start = model.build_preconditioner(start)
     built_here = model.build_preconditioner(moved)
     problem = model.mobility_problem(moved)
-    turned = corotated_preconditioner.following(problem, built_at_start, model.arrays.blob_body_index)
+    turned = corotated_preconditioner.following(problem, built_at_start, model.arrays)
     assert isinstance(turned, corotated_preconditioner.CorotatedPreconditioner)
     x = np.random.default_rng(6).normal(size=problem.size)
     exact = built_here.operator.matvec(x)
@@ -65,7 +65,7 @@ def test_turns_about_the_wall_normal_are_exact_above_the_wall():
     moved = Configuration(start.locations + np.array([0.3, -0.2, 0.0]), rotate_quaternions(start.orientations, turns))
     problem = model.mobility_problem(moved)
     turned = corotated_preconditioner.following(problem, model.build_preconditioner(start),
-                                                model.arrays.blob_body_index)
+                                                model.arrays)
     x = np.random.default_rng(7).normal(size=problem.size)
     exact = model.build_preconditioner(moved).operator.matvec(x)
     assert np.linalg.norm(turned.operator.matvec(x) - exact) < 1e-10 * np.linalg.norm(exact)
@@ -93,7 +93,7 @@ def test_published_solves_and_unturned_bodies_use_the_preconditioner_as_built(mo
     auto.solve(problem, problem.rhs(force_torque=np.ones((4, 6))), pc)
     assert isinstance(seen[-1], corotated_preconditioner.CorotatedPreconditioner)
     same = auto.mobility_problem(Configuration(start.locations + 0.1, start.orientations))
-    assert corotated_preconditioner.following(same, pc, model.arrays.blob_body_index) is pc
+    assert corotated_preconditioner.following(same, pc, model.arrays) is pc
 
 
 def _run(model, scheme_name, steps, state=None, dt=0.01):

@@ -149,6 +149,7 @@ def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve
 
         def __init__(self, preconditioner):
             self.preconditioner = preconditioner
+            self.published_solves = preconditioner == 'block_diagonal'  # read by Model.solve
     surface = surface_module.Surface()
     monkeypatch.setattr(surface, 'laplace_problem', lambda model, configuration: problem)
     _, published = surface.solve_concentrations(FakeModel('block_diagonal'), None)

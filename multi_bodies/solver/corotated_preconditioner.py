@@ -82,13 +82,14 @@ class CorotatedPreconditioner:
         return self._turn(np.asarray(self._base_apply(self._turn(x, True)), dtype=float).reshape(-1), False)
 
 
-def following(problem, preconditioner, blob_body_index):
+def following(problem, preconditioner, body_arrays):
     """``preconditioner`` as it applies at ``problem``'s configuration: turned with the bodies
     (:class:`CorotatedPreconditioner`) when it was built where the bodies were oriented otherwise.
 
     Returned unchanged when the problem is not of the rigid layout (rigid and mixed problems; the articulated,
     slip-length and roller problems have others), when the preconditioner does not say where it was built
-    (``configuration``), or when no body has turned since.
+    (``configuration``), or when no body has turned since.  body_arrays : body.body.BodyArrays (its
+    ``blob_body_index``).
     """
     built_at = getattr(preconditioner, 'configuration', None)
     if built_at is None or not isinstance(problem, MobilityProblem) or isinstance(preconditioner,
@@ -97,4 +98,5 @@ def following(problem, preconditioner, blob_body_index):
     before, after = np.asarray(built_at.orientations), np.asarray(problem.orientations)
     if before.shape != after.shape or np.array_equal(before, after):
         return preconditioner
-    return CorotatedPreconditioner(preconditioner, body_turns(built_at, problem.configuration), blob_body_index)
+    return CorotatedPreconditioner(preconditioner, body_turns(built_at, problem.configuration),
+                                   body_arrays.blob_body_index)

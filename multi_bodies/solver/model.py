@@ -412,7 +412,7 @@ class Model:
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
         if not self.published_solves:
-            preconditioner = corotated_preconditioner.following(problem, preconditioner, self.arrays.blob_body_index)
+            preconditioner = corotated_preconditioner.following(problem, preconditioner, self.arrays)
         result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
                                    print_residual=self.print_residual)
         if not result.converged:
