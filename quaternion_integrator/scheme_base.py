@@ -169,8 +169,9 @@ class Scheme:
         A preconditioner built at one configuration serves the next solves too, turned with the bodies
         (``multi_bodies.solver.corotated_preconditioner``), until :meth:`served` finds that it has worn (doc
         preconditioners.md, kept preconditioners).  The build is weighed (``preconditioner auto``) against the
-        solves the last kept one served, at most ``KEPT_SOLVES_WEIGHED`` (that many for the first one).  After a restart the preconditioner is
-        built again at the configuration it was built at, with the same weight, so the run repeats bit for bit.
+        solves the last kept one served, at most ``KEPT_SOLVES_WEIGHED`` (that many for the first one).  After a
+        restart the preconditioner is built again at the configuration it was built at, with the same weight, so
+        the run repeats bit for bit.
         """
         solves = KEPT_SOLVES_WEIGHED if work.preconditioner_lifetime is None else \
             min(work.preconditioner_lifetime, KEPT_SOLVES_WEIGHED)

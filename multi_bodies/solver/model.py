@@ -462,7 +462,8 @@ class Model:
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
 
         preconditioner : one built at ``configuration`` when None (the published solves rebuild it at
-        every solve; under ``auto`` and ``neighbours`` the deterministic schemes pass the one they keep); x0 : normalised first guess.
+        every solve; under ``auto`` and ``neighbours`` the deterministic schemes pass the one they keep);
+        x0 : normalised first guess.
         Returns body_solver.SolveResult (``velocities`` (Nb, 6), ``normalised_solution`` for the next guess).
         """
         _, force_torque, slip = self.forces_and_slip(configuration, solute)
