@@ -23,6 +23,10 @@ Scenes (C++ backends, solver_tolerance 1e-8):
   flagella, ``articulated_deterministic_midpoint``.
 
     python benchmarks/bench_preconditioner.py [--scenes dilute packed ...] [--steps 3]
+
+``--lanczos`` compares instead the two Lanczos factors (option ``lanczos_preconditioner``) under
+``stochastic_Slip_Trapz`` and ``preconditioner auto``: Lanczos iterations, passes and seconds per step in the
+dilute, packed and 1,000-boomerang scenes.
 """
 import argparse
 import os
@@ -149,14 +153,17 @@ SCENES = {
 }
 
 
-def run(model, scheme_name, steps, options=None):
-    """{preconditioner: (iterations per solve, passes per step, seconds per step)} for ``steps`` steps."""
+def run(model, scheme_name, steps, options=None, variants=None):
+    """{variant: (iterations per solve, passes per step, seconds per step, Lanczos iterations per step)} for
+    ``steps`` steps; variants: {name: Model.replace keywords} (None: every GMRES preconditioner)."""
     options = options if options is not None else options_with(kT=1.0, rf_delta=1e-3, update_PC=1)
     dt = float(options.dt) if options.dt else 0.01
+    if variants is None:
+        variants = {name: dict(preconditioner=name) for name in PRECONDITIONERS}
     results = {}
     runs = {}
-    for name in PRECONDITIONERS:
-        timed = model.replace(preconditioner=name)
+    for name, changes in variants.items():
+        timed = model.replace(**changes)
         counted, counter = count_products(timed)
         scheme = make_scheme(scheme_name, dt, options)
         runs[name] = [timed, scheme, scheme.init(timed, timed.start_configuration), np.random.default_rng(3),
@@ -181,15 +188,44 @@ def run(model, scheme_name, steps, options=None):
                   - first.deterministic_solves - first.stochastic_solves)
         iterations = counts.gmres_iterations - first.gmres_iterations
         passes = (sum(counter.counts.values()) - passes_before) / steps
-        results[name] = (iterations / max(solves, 1), passes, float(np.median(seconds[name])))
+        lanczos = (counts.lanczos_iterations - first.lanczos_iterations) / steps
+        results[name] = (iterations / max(solves, 1), passes, float(np.median(seconds[name])), lanczos)
     return results
+
+
+LANCZOS_SCENES = ('dilute', 'packed', 'boomerangs_1000')
+
+
+def lanczos_main(scenes, steps):
+    """The Lanczos factors side by side: stochastic_Slip_Trapz under ``preconditioner auto`` with
+    ``lanczos_preconditioner`` block_diagonal (the published noise) and incomplete_cholesky."""
+    variants = {name: dict(preconditioner='auto', lanczos_preconditioner=name)
+                for name in ('block_diagonal', 'incomplete_cholesky')}
+    print('%-16s %-22s %9s %7s %9s %7s %9s %7s %6s' % (
+        'scene', 'lanczos_preconditioner', 'lanczos', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
+    for scene in scenes:
+        model = SCENES[scene][0]()
+        r = run(model, 'stochastic_Slip_Trapz', 1 if scene == 'boomerangs_1000' else steps, variants=variants)
+        _, pb, sb, lb = r['block_diagonal']
+        for name in variants:
+            _, passes, seconds, lanczos = r[name]
+            published = PUBLISHED_100['stochastic_Slip_Trapz'] if scene == 'dilute' else None
+            print('%-16s %-22s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f %6s' % (
+                scene, name, lanczos, lanczos / lb, passes, passes / pb, seconds, seconds / sb,
+                '%.1f' % (published / seconds) if published else '-'), flush=True)
+    return 0
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--scenes', nargs='+', default=list(SCENES), choices=list(SCENES))
     parser.add_argument('--steps', type=int, default=3)
+    parser.add_argument('--lanczos', action='store_true',
+                        help='compare the Lanczos factors (lanczos_preconditioner) under stochastic_Slip_Trapz '
+                             'instead, in the scenes %s' % ', '.join(LANCZOS_SCENES))
     args = parser.parse_args(argv)
+    if args.lanczos:
+        return lanczos_main([scene for scene in args.scenes if scene in LANCZOS_SCENES], args.steps)
     print('%-16s %-36s %-15s %9s %7s %9s %7s %9s %7s %6s' % (
         'scene', 'scheme', 'preconditioner', 'it/solve', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
     for scene in args.scenes:
@@ -203,9 +239,9 @@ def main(argv=None):
             for scheme_name in schemes:
                 steps = 1 if scene == 'boomerangs_1000' else args.steps
                 r = run(model, scheme_name, steps, options)
-                ib, pb, sb = r['block_diagonal']
+                ib, pb, sb, _ = r['block_diagonal']
                 for name in PRECONDITIONERS:
-                    it, passes, seconds = r[name]
+                    it, passes, seconds, _ = r[name]
                     published = PUBLISHED_100.get(scheme_name) if scene == 'dilute' else None
                     print('%-16s %-36s %-15s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f %6s' % (
                         scene, scheme_name, name, it, it / ib, passes, passes / pb, seconds, seconds / sb,

@@ -209,6 +209,9 @@ OPTION_TABLE = {
     'lubrication_handover': _option('str', 'published', ('lubrication',), Choice(('published', 'smooth'))),
     # the GMRES preconditioner (doc/preconditioners.md): iterates differ only within solver_tolerance
     'preconditioner': _option('str', 'auto', SD, Choice(('auto', 'neighbours', 'block_diagonal'))),
+    # the factor L of Lanczos' L^{-1} M L^{-T} (doc/preconditioners.md): another sample of the same noise, off by default
+    'lanczos_preconditioner': _option('str', 'block_diagonal', ('stochastic',),
+                                      Choice(('block_diagonal', 'incomplete_cholesky'))),
     'update_PC': _option('int', 1, ('stochastic',), Range(1, fix='rebuild the preconditioner every update_PC steps')),
     # a speed option, off (None: solver_tolerance) by default: the tolerance of the noise and RFD sub-solves
     'noise_solver_tolerance': _option('float', None, ('stochastic',),

@@ -34,7 +34,7 @@ import numpy as np
 import mobility
 from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
 from body.geometry import Quaternion
-from multi_bodies.solver import body_solver, corotated_preconditioner, obstacles, rollers, user_hooks
+from multi_bodies.solver import body_solver, corotated_preconditioner, noise_factor, obstacles, rollers, user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
@@ -130,7 +130,8 @@ class Model:
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
                  check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
-                 pycuda_blob_blob_forces=None, surface=None, preconditioner='auto'):
+                 pycuda_blob_blob_forces=None, surface=None, preconditioner='auto',
+                 lanczos_preconditioner='block_diagonal'):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -185,6 +186,10 @@ class Model:
         if preconditioner not in PRECONDITIONERS:
             raise ValueError('preconditioner %r: one of %s' % (preconditioner, ', '.join(PRECONDITIONERS)))
         set_(self, 'preconditioner', preconditioner)
+        if lanczos_preconditioner not in noise_factor.LANCZOS_PRECONDITIONERS:
+            raise ValueError('lanczos_preconditioner %r: one of %s'
+                             % (lanczos_preconditioner, ', '.join(noise_factor.LANCZOS_PRECONDITIONERS)))
+        set_(self, 'lanczos_preconditioner', lanczos_preconditioner)
         set_(self, 'has_slip', self.slip_functions or bool(np.any(body_arrays.reference_slip))
              or (surface is not None and surface.phoretic is not None))
         # Length scale of every body (Nb,) (largest blob distance plus 2a; the RFD scale), fixed structure.
@@ -389,13 +394,20 @@ class Model:
             base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
                                                            self.eta, self.blob_radius,
                                                            stacked_mobility=self.stacked_mobility)
-        if self.published_solves or self.num_bodies < 2:
-            return base
-        return NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
-                                       periodic_length=self.periodic_length, body_lengths=self.body_lengths,
-                                       cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
-                                       max_cost_ratio=AUTO_MAX_COST_RATIO * max(1, int(solves))
-                                       if self.preconditioner == 'auto' else None)
+        built = base
+        if not self.published_solves and self.num_bodies >= 2:
+            built = NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
+                                            periodic_length=self.periodic_length, body_lengths=self.body_lengths,
+                                            cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
+                                            max_cost_ratio=AUTO_MAX_COST_RATIO * max(1, int(solves))
+                                            if self.preconditioner == 'auto' else None)
+        if self.lanczos_preconditioner == 'incomplete_cholesky' and self.num_bodies >= 2:
+            # Lanczos runs on L^{-1} M L^{-T} with this factor instead of the block-diagonal one (noise_factor)
+            built.noise_factor = noise_factor.IncompleteCholeskyNoiseFactor(
+                base, self.stacked_mobility, self.eta, self.blob_radius, periodic_length=self.periodic_length,
+                body_lengths=self.body_lengths, cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
+                neighbours=built if built is not base else None)
+        return built
 
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
               what='the mobility problem'):
@@ -433,9 +445,13 @@ class Model:
         if preconditioner is None:
             matvec, L_mult = problem.M_dot, None
         else:
+            # the factor L: the block-diagonal Cholesky factors, or the incomplete Cholesky factor of
+            # lanczos_preconditioner incomplete_cholesky (any invertible L gives the covariance M)
+            factor_of = getattr(preconditioner, 'noise_factor', None) or preconditioner
+
             def matvec(v):
-                return preconditioner.L_inv_dot(problem.M_dot(preconditioner.L_inv_T_dot(v)))
-            L_mult = preconditioner.L_dot
+                return factor_of.L_inv_dot(problem.M_dot(factor_of.L_inv_T_dot(v)))
+            L_mult = factor_of.L_dot
         result = lanczos_square_root(matvec, z, tolerance, max_iterations=self.lanczos_max_iterations,
                                      factor=factor, L_mult=L_mult, print_residual=self.print_residual)
         self.warn_if_not_converged(result, tolerance)
@@ -684,4 +700,5 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
                  articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
                  check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces,
-                 surface=surface, preconditioner=options.preconditioner)
+                 surface=surface, preconditioner=options.preconditioner,
+                 lanczos_preconditioner=options.lanczos_preconditioner)

@@ -160,6 +160,48 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
     return pairs[close].astype(int), shifts[close], gaps[close]
 
 
+def body_types(body_arrays):
+    """(structure type of every body (Nb,), index of every body within its type (Nb,))."""
+    body_type = np.zeros(body_arrays.num_bodies, dtype=int)
+    local = np.zeros(body_arrays.num_bodies, dtype=int)
+    for t, (bodies, _) in enumerate(body_arrays.type_slices):
+        body_type[bodies] = t
+        local[bodies] = np.arange(bodies.stop - bodies.start)
+    return body_type, local
+
+
+def pair_blocks(body_arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobility, cross_blocks, body_type=None):
+    """The blob mobility blocks ``M_ij`` of body pairs, by groups of pairs of the same two structure types.
+
+    r_vectors (N, 3), radii (N,), pairs (P, 2) and shifts (P, 3) as :func:`neighbour_pairs` returns them;
+    stacked_mobility and cross_blocks as :class:`NeighbourPreconditioner` takes them; body_type (Nb,) or None.
+    Yields (chosen (p,): the group's rows of ``pairs``, t_i, t_j: the two types, O (p, 3 n_i, 3 n_j): rows of
+    body ``pairs[chosen, 0]``'s blobs, columns of ``pairs[chosen, 1]``'s, shifted by ``shifts``).
+    """
+    if body_type is None:
+        body_type = body_types(body_arrays)[0]
+    offsets = body_arrays.blob_offsets
+    num_types = len(body_arrays.type_blobs)
+    keys = body_type[pairs[:, 0]] * num_types + body_type[pairs[:, 1]]
+    for key in np.unique(keys):
+        chosen = np.flatnonzero(keys == key)
+        i, j = pairs[chosen, 0], pairs[chosen, 1]
+        t_i, t_j = divmod(int(key), num_types)
+        n_i, n_j = body_arrays.type_blobs[t_i], body_arrays.type_blobs[t_j]
+        blobs_i = offsets[i][:, None] + np.arange(n_i)[None, :]
+        blobs_j = offsets[j][:, None] + np.arange(n_j)[None, :]
+        r_i, r_j = r_vectors[blobs_i], r_vectors[blobs_j] + shifts[chosen][:, None, :]
+        O = None
+        if cross_blocks is not None and np.ptp(radii) == 0:
+            O = cross_blocks(r_i, r_j, eta, float(radii[0]))
+        if O is None:  # the off-diagonal blocks of the stacked matrices of the pairs
+            radius = np.concatenate((radii[blobs_i], radii[blobs_j]), axis=1) if np.ptp(radii) > 0 \
+                else float(radii[0])
+            O = np.ascontiguousarray(stacked_mobility(np.concatenate((r_i, r_j), axis=1), eta,
+                                                      radius)[:, :3 * n_i, 3 * n_i:])
+        yield chosen, t_i, t_j, O
+
+
 # the obstacles' coarse correction is built for at most this many bodies of prescribed motion (a dense 6F x 6F
 # system; its pair blocks grow as F^2)
 MAX_COARSE_OBSTACLES = 200
@@ -299,16 +341,14 @@ class NeighbourPreconditioner:
             candidates = _no_pairs()
         self.pairs, shifts, gaps = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
                                                    self.gap, periodic_length, body_lengths, candidates=candidates)
+        self.pair_gaps = gaps
         # every body's structure type and index within it; Q: the blob-blob blocks of the base inverse
-        body_type = np.zeros(arrays.num_bodies, dtype=int)
-        local = np.zeros(arrays.num_bodies, dtype=int)
-        for t, (bodies, _) in enumerate(arrays.type_slices):
-            body_type[bodies] = t
-            local[bodies] = np.arange(bodies.stop - bodies.start)
+        body_type, local = body_types(arrays)
         self.has_neighbours = bool(self.pairs.size)
         size = base.operator.shape[0]
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
         self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
+        self.pair_groups = []  # (rows of pairs (P,), O): the same blocks, by the pairs they belong to
         self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blocks (k, 3n, 3n) and (k, 6, 3n))
         self.obstacles = None
         fixed = np.flatnonzero(getattr(base, 'fixed', np.zeros(0, dtype=bool)))
@@ -322,24 +362,9 @@ class NeighbourPreconditioner:
         # the second-order terms are kept for the free bodies only: those of bodies of prescribed motion changed
         # no iteration count measured (16 pillars among 84 spheres: 14 either way) and cost most of the build
         second_order = ~np.asarray(getattr(base, 'fixed', np.zeros(arrays.num_bodies, dtype=bool)), dtype=bool)
-        num_types = len(Q)
-        keys = body_type[self.pairs[:, 0]] * num_types + body_type[self.pairs[:, 1]]
-        for key in np.unique(keys):
-            chosen = np.flatnonzero(keys == key)
+        for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs, shifts, eta, stacked_mobility,
+                                               cross_blocks, body_type):
             i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
-            t_i, t_j = divmod(int(key), num_types)
-            n_i, n_j = arrays.type_blobs[t_i], arrays.type_blobs[t_j]
-            blobs_i = offsets[i][:, None] + np.arange(n_i)[None, :]
-            blobs_j = offsets[j][:, None] + np.arange(n_j)[None, :]
-            r_i, r_j = r_vectors[blobs_i], r_vectors[blobs_j] + shifts[chosen][:, None, :]
-            O = None
-            if cross_blocks is not None and np.ptp(radii) == 0:
-                O = cross_blocks(r_i, r_j, eta, float(radii[0]))
-            if O is None:  # the off-diagonal blocks of the stacked matrices of the pairs
-                radius = np.concatenate((radii[blobs_i], radii[blobs_j]), axis=1) if np.ptp(radii) > 0 \
-                    else float(radii[0])
-                O = np.ascontiguousarray(stacked_mobility(np.concatenate((r_i, r_j), axis=1), eta,
-                                                          radius)[:, :3 * n_i, 3 * n_i:])
             # the second-order terms W_i = sum_j O_ij Q_j O_ji of the strongly coupled pairs only
             strong = gaps[chosen] < self.strong_gap
             for first, second, side in ((i, j, False), (j, i, True)):  # W of the first body of the pair
@@ -350,6 +375,7 @@ class NeighbourPreconditioner:
                     np.add.at(W[t_first], local[first[use]],
                               np.matmul(np.matmul(O_s, Q[t_second][local[second[use]]]), np.swapaxes(O_s, 1, 2)))
             self.groups.append(((3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64), O))
+            self.pair_groups.append((chosen, O))
         # T_i^{-1} to first order in W_i: G_i = W_i (zero for a body without neighbours).  The exact
         # (I - W_i Q_i)^{-1} W_i costs a batched solve and gave the same GMRES iterations in every scene measured.
         G = W

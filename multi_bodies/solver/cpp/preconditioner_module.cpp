@@ -14,6 +14,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -199,6 +200,95 @@ Array lower_triangular_inverse(const Array &blocks) {
   return result;
 }
 
+
+// A block lower-triangular matrix L over the bodies (the incomplete Cholesky factor of the noise,
+// multi_bodies/solver/noise_factor.py) applied to a vector: mode 0 out = L x, mode 1 out = L^{-1} x,
+// mode 2 out = L^{-T} x.  Body b's unknowns are x[starts[b] : starts[b + 1]] (m_b of them); its diagonal
+// block is diag[diag_offsets[b] : + m_b m_b] (row-major; L_bb for mode 0, L_bb^{-1} for modes 1 and 2,
+// both lower triangular); the strictly lower blocks of block row i are p = row_ptr[i] .. row_ptr[i + 1] - 1,
+// in block column cols[p] < i, (m_i, m_cols[p]) row-major at blocks[block_offsets[p]].
+using Index = py::array_t<long long, py::array::c_style | py::array::forcecast>;
+
+inline void general_times(const double *B, long rows, long cols, const double *x, double *y, double sign,
+                          bool transpose) {
+  // y += sign B x (B (rows, cols)) or y += sign B^T x (x of rows, y of cols)
+  if (!transpose) {
+    for (long r = 0; r < rows; ++r) {
+      const double *row = B + r * cols;
+      double s = 0.0;
+#pragma omp simd reduction(+ : s)
+      for (long c = 0; c < cols; ++c) s += row[c] * x[c];
+      y[r] += sign * s;
+    }
+  } else {
+    for (long r = 0; r < rows; ++r) {
+      const double *row = B + r * cols;
+      const double xr = sign * x[r];
+#pragma omp simd
+      for (long c = 0; c < cols; ++c) y[c] += row[c] * xr;
+    }
+  }
+}
+
+void block_lower_apply(int mode, const Index &starts, const Index &diag_offsets, const Array &diag,
+                       const Index &row_ptr, const Index &cols, const Index &block_offsets, const Array &blocks,
+                       const Array &x, Out &out) {
+  if (mode < 0 || mode > 2) throw std::invalid_argument("mode is 0 (L x), 1 (L^-1 x) or 2 (L^-T x)");
+  const long nb = static_cast<long>(starts.size()) - 1;
+  if (nb < 0 || diag_offsets.size() != nb || row_ptr.size() != nb + 1)
+    throw std::invalid_argument("starts (nb + 1), diag_offsets (nb) and row_ptr (nb + 1) disagree");
+  if (cols.size() != block_offsets.size()) throw std::invalid_argument("one column per lower block");
+  if (out.size() != x.size()) throw std::invalid_argument("out and x must have the same size");
+  const long long *st = starts.data(), *dof = diag_offsets.data(), *rp = row_ptr.data(), *cl = cols.data(),
+                  *bof = block_offsets.data();
+  if (st[0] != 0 || st[nb] != x.size()) throw std::invalid_argument("starts must run from 0 to the vector's size");
+  if (rp[0] != 0 || rp[nb] != cols.size()) throw std::invalid_argument("row_ptr must run from 0 to len(cols)");
+  for (long b = 0; b < nb; ++b) {
+    const long m = static_cast<long>(st[b + 1] - st[b]);
+    if (m < 0 || dof[b] < 0 || dof[b] + m * m > diag.size()) throw std::invalid_argument("a diagonal block runs past diag");
+    for (long long p = rp[b]; p < rp[b + 1]; ++p) {
+      if (cl[p] < 0 || cl[p] >= b) throw std::invalid_argument("a lower block is not left of the diagonal");
+      const long mk = static_cast<long>(st[cl[p] + 1] - st[cl[p]]);
+      if (bof[p] < 0 || bof[p] + m * mk > blocks.size()) throw std::invalid_argument("a lower block runs past blocks");
+    }
+  }
+  const double *D = diag.data(), *B = blocks.data(), *xp = x.data();
+  double *yp = out.mutable_data();
+  if (xp == yp) throw std::invalid_argument("out must not be x");
+  py::gil_scoped_release release;
+  long largest = 0;
+  for (long b = 0; b < nb; ++b) largest = std::max(largest, static_cast<long>(st[b + 1] - st[b]));
+  std::vector<double> scratch(static_cast<std::size_t>(largest));
+  if (mode == 0) {  // y_i = L_ii x_i + sum_k L_ik x_k
+    for (long i = 0; i < nb; ++i) {
+      const long m = static_cast<long>(st[i + 1] - st[i]);
+      block_times(D + dof[i], m, xp + st[i], yp + st[i], false, true);
+      for (long long p = rp[i]; p < rp[i + 1]; ++p)
+        general_times(B + bof[p], m, static_cast<long>(st[cl[p] + 1] - st[cl[p]]), xp + st[cl[p]], yp + st[i], 1.0,
+                      false);
+    }
+  } else if (mode == 1) {  // forward: y_i = L_ii^{-1} (x_i - sum_k L_ik y_k)
+    for (long i = 0; i < nb; ++i) {
+      const long m = static_cast<long>(st[i + 1] - st[i]);
+      for (long r = 0; r < m; ++r) scratch[r] = xp[st[i] + r];
+      for (long long p = rp[i]; p < rp[i + 1]; ++p)
+        general_times(B + bof[p], m, static_cast<long>(st[cl[p] + 1] - st[cl[p]]), yp + st[cl[p]], scratch.data(),
+                      -1.0, false);
+      block_times(D + dof[i], m, scratch.data(), yp + st[i], false, true);
+    }
+  } else {  // backward: y_i = L_ii^{-T} (x_i - sum_{j > i} L_ji^T y_j), the rows j pushing their terms left
+    for (long e = 0; e < x.size(); ++e) yp[e] = xp[e];
+    for (long i = nb - 1; i >= 0; --i) {
+      const long m = static_cast<long>(st[i + 1] - st[i]);
+      for (long r = 0; r < m; ++r) scratch[r] = yp[st[i] + r];
+      block_times(D + dof[i], m, scratch.data(), yp + st[i], true, true);
+      for (long long p = rp[i]; p < rp[i + 1]; ++p)
+        general_times(B + bof[p], m, static_cast<long>(st[cl[p] + 1] - st[cl[p]]), yp + st[i], yp + st[cl[p]], -1.0,
+                      true);
+    }
+  }
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_preconditioner_cpp, m) {
@@ -213,4 +303,7 @@ PYBIND11_MODULE(_preconditioner_cpp, m) {
         "Each body's exact saddle-point inverse applied to [s; f] of x, written into out");
   m.def("lower_triangular_inverse", &lower_triangular_inverse, py::arg("blocks"),
         "L^{-1} (nb, m, m) of lower-triangular blocks with a positive diagonal");
+  m.def("block_lower_apply", &block_lower_apply, py::arg("mode"), py::arg("starts"), py::arg("diag_offsets"),
+        py::arg("diag"), py::arg("row_ptr"), py::arg("cols"), py::arg("block_offsets"), py::arg("blocks"), py::arg("x"),
+        py::arg("out"), "A block lower-triangular L over the bodies applied to x: mode 0 L x, 1 L^-1 x, 2 L^-T x");
 }

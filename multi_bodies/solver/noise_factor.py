@@ -1,0 +1,230 @@
+"""The incomplete Cholesky factor of the blob mobility: a Lanczos preconditioner that sees the neighbours.
+
+The Brownian slip of the iterative schemes is ``M^{1/2} z`` by Lanczos on ``L^{-1} M L^{-T}`` times ``L``
+(SPEC decision 1): for any invertible ``L`` the result ``L (L^{-1} M L^{-T})^{1/2} z`` has covariance
+``L L^{-1} M L^{-T} L^T = M`` exactly, and Lanczos needs fewer iterations the closer ``L L^T`` is to ``M``.
+The published ``L`` is block diagonal: each body's own Cholesky factor ``L_k L_k^T = M_kk``.  This module
+adds the couplings of neighbouring bodies (those whose blobs come within 2 blob radii: the closest of the
+neighbour pairs of the GMRES preconditioner) by a block incomplete Cholesky factorisation with no fill
+(IC(0)) over the bodies:
+
+    L_kk L_kk^T = M_kk - sum_{l < k} L_kl L_kl^T,
+    L_ik = (M_ik - sum_{l < k} L_il L_kl^T) L_kk^{-T}   (i > k a neighbour of k; the sums over neighbours),
+
+so ``L L^T`` equals ``M`` on the diagonal blocks and on the neighbour blocks.  Where a Schur complement
+``M_kk - sum L_kl L_kl^T`` is not positive definite (the factorisation can break down for matrices that are
+not diagonally dominant), body ``k``'s row keeps its diagonal block alone (``L_kk L_kk^T = M_kk``); ``L``
+stays invertible, so the covariance stays ``M``; ``breakdowns`` counts those rows.
+
+It is an option (``lanczos_preconditioner incomplete_cholesky``), off by default: the noise of a given
+``z`` is another sample of the same distribution, so a published ``.random_state`` no longer repeats the
+published trajectory (doc/preconditioners.md has its measured effect on the iterations, the time and the
+statistics).
+
+Layout: body ``b``'s unknowns are ``x[3 o_b : 3 o_{b+1}]`` with ``o`` the bodies' blob offsets; every block is
+dense.  Applications use the compiled ``_preconditioner_cpp.block_lower_apply`` (a NumPy loop otherwise).
+"""
+import numpy as np
+
+from multi_bodies.solver.body_solver import blob_radius_argument, lower_triangular_inverse
+from multi_bodies.solver.neighbour_preconditioner import neighbour_pairs, pair_blocks
+
+try:
+    from multi_bodies.solver import _preconditioner_cpp
+except ImportError:  # pragma: no cover - the compiled kernels are built by the install
+    _preconditioner_cpp = None
+
+LANCZOS_PRECONDITIONERS = ('block_diagonal', 'incomplete_cholesky')
+# Bodies whose blobs come within this many (largest) blob radii of each other enter the factor.  Measured
+# (doc/preconditioners.md), Lanczos iterations at 1e-8 and factor build against one M f product: 100 boomerangs
+# 21 -> 13 (2 radii), 13 (4), 12 (6), 11 (8), builds 1.1, 1.4, 1.9, 3.6 products; packed at half the spacing
+# 25 -> 20, 19, 20, 19, builds 1.8, 4.4, 6.0, 7.9 products.  2 radii saves the most time in both.
+NOISE_GAP_IN_RADII = 2.0
+
+
+def incomplete_cholesky(own_factors, own_inverses, pair_blocks_by_pair):
+    """Block IC(0) of a symmetric positive definite matrix given by its blocks (module docstring).
+
+    own_factors, own_inverses : lists (Nb) of the lower-triangular Cholesky factors ``C_b`` of the diagonal
+        blocks (``C_b C_b^T = M_bb``) and of their inverses;
+    pair_blocks_by_pair : dict ``(i, j) -> M_ij`` with ``i < j`` ((m_i, m_j) arrays), the blocks kept.
+    Returns (diagonal factors: list of lower-triangular (m_b, m_b) ``L_bb``, their inverses, rows: list of
+    dicts ``{k: L_ik}`` with ``k < i``, breakdowns: the number of rows that kept their diagonal block alone).
+    A body with no neighbour before it keeps its own factor (``L_bb = C_b``).
+    """
+    num = len(own_factors)
+    later = [[] for _ in range(num)]  # later[k]: the neighbours i > k of k, ascending
+    for (i, j) in sorted(pair_blocks_by_pair):
+        later[i].append(j)
+    rows = [dict() for _ in range(num)]
+    factors, inverses = list(own_factors), list(own_inverses)
+    breakdowns = 0
+    for k in range(num):
+        row_k = rows[k]
+        if row_k:  # the Schur complement M_kk - sum_l L_kl L_kl^T
+            schur = own_factors[k] @ own_factors[k].T
+            for block in row_k.values():
+                schur -= block @ block.T
+            try:
+                factor = np.linalg.cholesky(schur)
+            except np.linalg.LinAlgError:
+                factor = None
+            if factor is not None and np.all(np.diag(factor) > 0.0):
+                factors[k] = factor
+                inverses[k] = lower_triangular_inverse(factor[None])[0]
+            else:
+                row_k.clear()  # this row keeps its own block alone: L stays invertible
+                breakdowns += 1
+        inverse_T = inverses[k].T
+        for i in later[k]:
+            coupling = pair_blocks_by_pair[(k, i)].T.copy()  # M_ik
+            row_i = rows[i]
+            for l in row_k.keys() & row_i.keys():
+                coupling -= row_i[l] @ row_k[l].T
+            row_i[k] = coupling @ inverse_T  # L_ik = (M_ik - sum L_il L_kl^T) L_kk^{-T}
+    return factors, inverses, rows, breakdowns
+
+
+class BlockLowerFactor:
+    """A block lower-triangular ``L`` over the bodies, applied as ``L x``, ``L^{-1} x`` and ``L^{-T} x``.
+
+    starts (Nb + 1,): every body's first unknown (3 times its first blob); factors: the diagonal blocks
+    ``L_bb`` (lower triangular, positive diagonal); rows: list of dicts ``{k: L_ik}`` (k < i); inverses: the
+    ``L_bb^{-1}`` (None: computed here).  Vectors are (3N,) (blob velocities or forces).
+    """
+
+    def __init__(self, starts, factors, rows, inverses=None):
+        self.starts = np.asarray(starts, dtype=np.int64)
+        num = self.starts.size - 1
+        sizes = np.diff(self.starts)
+        self.diag_offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if num else \
+            np.zeros(0, np.int64)
+        self.diag = np.concatenate([np.asarray(f, float).reshape(-1) for f in factors]) if num else np.zeros(0)
+        if inverses is None:
+            inverses = [lower_triangular_inverse(np.asarray(f, float)[None])[0] for f in factors]
+        self.diag_inverse = np.concatenate([d.reshape(-1) for d in inverses]) if num else np.zeros(0)
+        self.row_ptr = np.zeros(num + 1, dtype=np.int64)
+        cols, offsets, flat = [], [], []
+        position = 0
+        for i, row in enumerate(rows):
+            for k in sorted(row):
+                cols.append(k)
+                offsets.append(position)
+                flat.append(np.ascontiguousarray(row[k], dtype=float).reshape(-1))
+                position += flat[-1].size
+            self.row_ptr[i + 1] = len(cols)
+        self.cols = np.asarray(cols, dtype=np.int64)
+        self.block_offsets = np.asarray(offsets, dtype=np.int64)
+        self.blocks = np.concatenate(flat) if flat else np.zeros(0)
+        self.num_lower_blocks = len(cols)
+
+    def _apply(self, mode, x):
+        x = np.ascontiguousarray(x, dtype=float).reshape(-1)
+        if x.size != self.starts[-1]:
+            raise ValueError('a vector of %d unknowns for a factor of %d' % (x.size, self.starts[-1]))
+        out = np.zeros_like(x)
+        if _preconditioner_cpp is not None and hasattr(_preconditioner_cpp, 'block_lower_apply'):
+            _preconditioner_cpp.block_lower_apply(mode, self.starts, self.diag_offsets,
+                                                  self.diag if mode == 0 else self.diag_inverse, self.row_ptr,
+                                                  self.cols, self.block_offsets, self.blocks, x, out)
+            return out
+        return self._apply_numpy(mode, x, out)
+
+    def _diagonal(self, b, inverse):
+        m = self.starts[b + 1] - self.starts[b]
+        source = self.diag_inverse if inverse else self.diag
+        return source[self.diag_offsets[b]:self.diag_offsets[b] + m * m].reshape(m, m)
+
+    def _lower(self, p, i):
+        k = self.cols[p]
+        m_i, m_k = self.starts[i + 1] - self.starts[i], self.starts[k + 1] - self.starts[k]
+        return k, self.blocks[self.block_offsets[p]:self.block_offsets[p] + m_i * m_k].reshape(m_i, m_k)
+
+    def _apply_numpy(self, mode, x, out):
+        """The same three products as the compiled loop (for a build without the compiled module)."""
+        s = self.starts
+        num = s.size - 1
+        if mode == 0:
+            for i in range(num):
+                out[s[i]:s[i + 1]] = self._diagonal(i, False) @ x[s[i]:s[i + 1]]
+                for p in range(self.row_ptr[i], self.row_ptr[i + 1]):
+                    k, block = self._lower(p, i)
+                    out[s[i]:s[i + 1]] += block @ x[s[k]:s[k + 1]]
+        elif mode == 1:
+            for i in range(num):
+                t = x[s[i]:s[i + 1]].copy()
+                for p in range(self.row_ptr[i], self.row_ptr[i + 1]):
+                    k, block = self._lower(p, i)
+                    t -= block @ out[s[k]:s[k + 1]]
+                out[s[i]:s[i + 1]] = self._diagonal(i, True) @ t
+        else:
+            out[:] = x
+            for i in range(num - 1, -1, -1):
+                out[s[i]:s[i + 1]] = self._diagonal(i, True).T @ out[s[i]:s[i + 1]]
+                for p in range(self.row_ptr[i], self.row_ptr[i + 1]):
+                    k, block = self._lower(p, i)
+                    out[s[k]:s[k + 1]] -= block.T @ out[s[i]:s[i + 1]]
+        return out
+
+    def L_dot(self, vector):
+        """``L x``: (3N,) -> (3N,)."""
+        return self._apply(0, vector)
+
+    def L_inv_dot(self, vector):
+        """``L^{-1} x``: (3N,) -> (3N,)."""
+        return self._apply(1, vector)
+
+    def L_inv_T_dot(self, vector):
+        """``L^{-T} x``: (3N,) -> (3N,)."""
+        return self._apply(2, vector)
+
+
+class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
+    """The block IC(0) factor of the blob mobility over neighbouring bodies (module docstring).
+
+    Parameters
+    ----------
+    base : body_solver.BlockDiagonalPreconditioner (or a subclass), built at the configuration: its bodies'
+        Cholesky factors give the diagonal blocks ``M_bb = L_b L_b^T``.
+    stacked_mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks : as
+        :class:`neighbour_preconditioner.NeighbourPreconditioner` takes them.
+    gap : float or None, the neighbour gap (surface to surface, length; None: NOISE_GAP_IN_RADII blob radii).
+    neighbours : a NeighbourPreconditioner built on ``base`` with at least that gap, or None: its pairs closer
+        than ``gap`` and their blocks are taken instead of computed again.
+
+    ``pairs`` (P, 2) holds the neighbour pairs whose blocks enter, ``breakdowns`` the rows that kept their
+    diagonal block alone.
+    """
+
+    def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0),
+                 body_lengths=None, cross_blocks=None, gap=None, neighbours=None):
+        arrays = base.body_arrays
+        configuration = base.configuration
+        r_vectors = arrays.blob_positions(configuration)
+        radii = np.broadcast_to(np.asarray(blob_radius_argument(arrays, blob_radius), dtype=float),
+                                (arrays.num_blobs,))
+        if gap is None:
+            gap = NOISE_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
+        by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
+        own_factors = [L for t in by_start for L in base.cholesky_factors[t]]  # in the order of the bodies
+        own_inverses = [L for t in by_start for L in base.inverse_cholesky_factors[t]]
+        if neighbours is not None and neighbours.gap >= float(gap) and neighbours.pairs.size:
+            # the neighbour pairs of the GMRES preconditioner that are close enough, with their blocks
+            close = neighbours.pair_gaps < float(gap)
+            self.pairs = neighbours.pairs[close]
+            renumbered = np.cumsum(close) - 1
+            groups = [(renumbered[chosen[close[chosen]]], O[close[chosen]]) for chosen, O in neighbours.pair_groups]
+        else:
+            self.pairs, shifts, _ = neighbour_pairs(r_vectors, arrays.blob_body_index, radii,
+                                                    configuration.locations, float(gap), periodic_length, body_lengths)
+            groups = [(chosen, O) for chosen, _, _, O in pair_blocks(
+                arrays, r_vectors, radii, self.pairs, shifts, eta, stacked_mobility, cross_blocks)] \
+                if self.pairs.size else []
+        by_pair = {}
+        if self.pairs.size:
+            for chosen, O in groups:
+                for (i, j), block in zip(map(tuple, self.pairs[chosen]), O):
+                    # a pair that meets through two periodic images couples through both
+                    by_pair[(i, j)] = by_pair[(i, j)] + block if (i, j) in by_pair else block
+        factors, inverses, rows, self.breakdowns = incomplete_cholesky(own_factors, own_inverses, by_pair)
+        super().__init__(3 * np.asarray(arrays.blob_offsets), factors, rows, inverses)
