@@ -27,10 +27,11 @@ from utils import SimulationStopped, UserInputError
 
 
 # A kept preconditioner (Scheme.kept_preconditioner) is built anew after a solve that took this many GMRES
-# iterations more than the fewest since its build (measured on 100 boomerangs, doc/preconditioners.md).
-KEPT_WEAR_ITERATIONS = 2
-# ``preconditioner auto`` weighs a kept preconditioner's build against the solves the last one served, at most
-# this many: the neighbour pairs' memory grows with the weight, what they save does not.
+# iterations more than the fewest since its build (measured, doc/preconditioners.md: 1 instead of 2 took packed
+# boomerangs from 5.0 to 4.25 iterations per Adams-Bashforth solve and changed no other scene at dt 0.01).
+KEPT_WEAR_ITERATIONS = 1
+# ``preconditioner auto`` weighs a kept preconditioner's build against the solves the last one served before it
+# wore, at most this many: the neighbour pairs' memory grows with the weight, what they save does not.
 KEPT_SOLVES_WEIGHED = 4
 
 
@@ -169,7 +170,8 @@ class Scheme:
         A preconditioner built at one configuration serves the next solves too, turned with the bodies
         (``multi_bodies.solver.corotated_preconditioner``), until :meth:`served` finds that it has worn (doc
         preconditioners.md, kept preconditioners).  The build is weighed (``preconditioner auto``) against the
-        solves the last kept one served, at most ``KEPT_SOLVES_WEIGHED`` (that many for the first one).  After a
+        solves the last kept one served before it wore (at least 1), at most ``KEPT_SOLVES_WEIGHED`` (that many
+        for the first one).  After a
         restart the preconditioner is built again at the configuration it was built at, with the same weight, so
         the run repeats bit for bit.
         """
@@ -186,11 +188,12 @@ class Scheme:
     @staticmethod
     def served(work, iterations):
         """Count a solve of ``iterations`` GMRES iterations with the kept preconditioner; when it took
-        ``KEPT_WEAR_ITERATIONS`` more than the fewest since the build, the next solve builds a new one."""
+        ``KEPT_WEAR_ITERATIONS`` more than the fewest since the build, the next solve builds a new one, weighed
+        against the solves before this one (``preconditioner_lifetime``)."""
         solves = work.preconditioner_solves + 1
         fewest = iterations if work.preconditioner_fewest is None else min(work.preconditioner_fewest, iterations)
         if iterations >= fewest + KEPT_WEAR_ITERATIONS:
-            work.preconditioner_lifetime = solves
+            work.preconditioner_lifetime = max(1, solves - 1)  # the solves it served before it wore
             work.preconditioner = work.preconditioner_configuration = None
             work.preconditioner_solves = work.preconditioner_fewest = None
             return

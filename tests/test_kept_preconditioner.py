@@ -129,8 +129,8 @@ def test_deterministic_solves_keep_their_preconditioner_to_the_same_trajectory(s
 
 def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     """The served counts: the fewest iterations are remembered; a solve with KEPT_WEAR_ITERATIONS more ends the
-    preconditioner (the next solve builds one, weighed against the solves it served, at most
-    KEPT_SOLVES_WEIGHED); one more than the fewest does not."""
+    preconditioner (the next solve builds one, weighed against the solves it served before the worn one, at
+    most KEPT_SOLVES_WEIGHED); fewer more than the fewest does not."""
     class Work:
         preconditioner, preconditioner_configuration = object(), object()
         preconditioner_solves, preconditioner_fewest, preconditioner_lifetime = 0, None, None
@@ -142,7 +142,7 @@ def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     assert work.preconditioner is not None
     scheme_base.Scheme.served(work, 4 + wear)
     assert work.preconditioner is None and work.preconditioner_configuration is None
-    assert work.preconditioner_solves is None and work.preconditioner_lifetime == 4
+    assert work.preconditioner_solves is None and work.preconditioner_lifetime == 3
     # the next build is weighed against the solves this one served
     asked = count_builds(monkeypatch)
     model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')
