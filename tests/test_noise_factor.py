@@ -227,11 +227,11 @@ def clustered_run(lanczos_preconditioner, n_steps=250, seed=501):
     averages of (h, cos theta, cos^2 theta) (averaged over the cluster's bodies), their exact values, the
     per-cluster ratio of squared one-step displacements to 2 kT dt tr N_tt, and the neighbour pairs of the
     first factor."""
-    from body.body import Body, bodies_to_arrays, rotation_matrices
+    from body.body import Body, bodies_to_arrays
     from multi_bodies import multi_bodies_functions as mbf
     from multi_bodies.files import structure_generators as gen
     from multi_bodies.solver.model import Model
-    from test_stochastic import BOOM_A, ETA, KT, Opts, boomerang_keywords, boomerang_quadrature
+    from test_stochastic import BOOM_A, ETA, Opts, boomerang_keywords, boomerang_quadrature, brownian_averages
     clusters, per_cluster, every = 10, 3, 10
     reference = gen.boomerang(spacing=2 * BOOM_A)
     pool, weights, h_grid, cdf, exact = boomerang_quadrature(reference)
@@ -254,24 +254,9 @@ def clustered_run(lanczos_preconditioner, n_steps=250, seed=501):
     first_pairs = noise_factor.IncompleteCholeskyNoiseFactor(
         system.build_preconditioner(system.start_configuration), system.stacked_mobility, ETA, BOOM_A).pairs
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
-    noise = np.random.default_rng(seed + 1)
-    sums = np.zeros((n, 3))
-    squared, predicted = np.zeros(n), np.zeros(n)
-    state = scheme.init(system, system.start_configuration)
-    for step in range(n_steps):
-        if step % every == 0:
-            N = system.dense_matrices(state.configuration)[3]
-            predicted += 2.0 * KT * scheme.dt * np.array([np.trace(N[6 * b:6 * b + 3, 6 * b:6 * b + 3])
-                                                          for b in range(n)])
-            before = state.configuration.locations.copy()
-        state = scheme.step(system, state, noise)
-        if step % every == 0:
-            squared += np.sum((state.configuration.locations - before) ** 2, axis=1)
-        c = rotation_matrices(state.configuration.orientations)[:, 2, 2]
-        sums += np.column_stack((state.configuration.locations[:, 2], c, c ** 2))
-    per_body = sums / n_steps
+    per_body, motion = brownian_averages(system, scheme, np.random.default_rng(seed + 1), n_steps, every)
     by_cluster = per_body.reshape(clusters, per_cluster, 3).mean(axis=1)
-    motion = (squared / predicted).reshape(clusters, per_cluster).mean(axis=1)
+    motion = motion.reshape(clusters, per_cluster).mean(axis=1)
     return by_cluster, np.array(exact), motion, first_pairs
 
 

@@ -667,22 +667,30 @@ def boomerang_brownian():
     system = Model(bodies, bodies_to_arrays(bodies, [n_bodies]), mbf.load_user_hooks('/nonexistent'),
                    boomerang_keywords(), ETA, BOOM_A, 1e-4, vector_product_name=CPP, blobs_name=CPP)
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
-    rng = np.random.default_rng(402)
+    per_body, motion = brownian_averages(system, scheme, np.random.default_rng(402), n_steps)
+    return per_body, exact, motion
+
+
+def brownian_averages(system, scheme, rng, n_steps, every=BOOM_MOTION_EVERY):
+    """Run ``n_steps`` of ``scheme`` from the model's start; returns per-body time averages of (h, cos theta,
+    cos^2 theta) (Nb, 3) and, per body, the squared one-step displacements of every ``every``-th step summed
+    over their expectation ``2 kT dt tr N_tt`` at the step's start (N dense)."""
+    n_bodies = system.num_bodies
     sums = np.zeros((n_bodies, 3))
     squared, predicted = np.zeros(n_bodies), np.zeros(n_bodies)
     state = scheme.init(system, system.start_configuration)
     for step in range(n_steps):
-        if step % BOOM_MOTION_EVERY == 0:  # E[|dr|^2 | state] = 2 kT dt tr N_tt(state) + O(dt^2), N from here
+        if step % every == 0:  # E[|dr|^2 | state] = 2 kT dt tr N_tt(state) + O(dt^2), N from here
             N = system.dense_matrices(state.configuration)[3]
             blocks = np.array([np.trace(N[6 * b:6 * b + 3, 6 * b:6 * b + 3]) for b in range(n_bodies)])
             predicted += 2.0 * KT * scheme.dt * blocks
             before = state.configuration.locations.copy()
         state = scheme.step(system, state, rng)
-        if step % BOOM_MOTION_EVERY == 0:
+        if step % every == 0:
             squared += np.sum((state.configuration.locations - before) ** 2, axis=1)
         c = rotation_matrices(state.configuration.orientations)[:, 2, 2]
         sums += np.column_stack((state.configuration.locations[:, 2], c, c ** 2))
-    return sums / n_steps, exact, squared / predicted
+    return sums / n_steps, squared / predicted
 
 
 @pytest.mark.slow

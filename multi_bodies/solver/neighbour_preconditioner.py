@@ -160,6 +160,14 @@ def neighbour_pairs(r_vectors, blob_body_index, radii, locations, gap, periodic_
     return pairs[close].astype(int), shifts[close], gaps[close]
 
 
+def blobs_of(base, blob_radius):
+    """(body arrays, configuration, blob positions (N, 3), blob radii (N,)) of a preconditioner ``base``."""
+    arrays = base.body_arrays
+    configuration = base.configuration
+    radii = np.broadcast_to(np.asarray(blob_radius_argument(arrays, blob_radius), dtype=float), (arrays.num_blobs,))
+    return arrays, configuration, arrays.blob_positions(configuration), radii
+
+
 def body_types(body_arrays):
     """(structure type of every body (Nb,), index of every body within its type (Nb,))."""
     body_type = np.zeros(body_arrays.num_bodies, dtype=int)
@@ -319,11 +327,7 @@ class NeighbourPreconditioner:
     def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
                  strong_gap=None, exact_woodbury=False, body_lengths=None, cross_blocks=None, max_cost_ratio=None):
         self.base = base
-        arrays = base.body_arrays
-        configuration = base.configuration
-        r_vectors = arrays.blob_positions(configuration)
-        radii = np.broadcast_to(np.asarray(blob_radius_argument(arrays, blob_radius), dtype=float),
-                                (arrays.num_blobs,))
+        arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
         if gap is None:
             gap = DEFAULT_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
         if strong_gap is None:

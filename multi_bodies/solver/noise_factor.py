@@ -26,8 +26,8 @@ dense.  Applications use the compiled ``_preconditioner_cpp.block_lower_apply`` 
 """
 import numpy as np
 
-from multi_bodies.solver.body_solver import blob_radius_argument, lower_triangular_inverse
-from multi_bodies.solver.neighbour_preconditioner import neighbour_pairs, pair_blocks
+from multi_bodies.solver.body_solver import lower_triangular_inverse
+from multi_bodies.solver.neighbour_preconditioner import blobs_of, neighbour_pairs, pair_blocks
 
 try:
     from multi_bodies.solver import _preconditioner_cpp
@@ -198,11 +198,7 @@ class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
 
     def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0),
                  body_lengths=None, cross_blocks=None, gap=None, neighbours=None):
-        arrays = base.body_arrays
-        configuration = base.configuration
-        r_vectors = arrays.blob_positions(configuration)
-        radii = np.broadcast_to(np.asarray(blob_radius_argument(arrays, blob_radius), dtype=float),
-                                (arrays.num_blobs,))
+        arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
         if gap is None:
             gap = NOISE_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
         by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
