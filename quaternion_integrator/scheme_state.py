@@ -27,6 +27,14 @@ HISTORY_FIELDS = ('first_guess', 'earlier_guesses', 'roller_torque_guess', 'prev
                   'concentration_guess')
 # The counts of the preconditioner the deterministic schemes keep (ints or None, saved in restart records too).
 KEPT_PRECONDITIONER_COUNTS = ('preconditioner_solves', 'preconditioner_fewest', 'preconditioner_lifetime')
+# The same of the concentration problem's preconditioner that phoretic runs keep (StepWork.solute).
+KEPT_CONCENTRATION_COUNTS = ('concentration_preconditioner_solves', 'concentration_preconditioner_fewest')
+# A kept concentration preconditioner is built anew after a solve that took this many GMRES iterations more than the
+# fewest since its build (measured, doc/preconditioners.md: the same iterations as a fresh one, 25 % less time).
+CONCENTRATION_WEAR_ITERATIONS = 1
+# what a StepWork copies from its RunState and back, besides the named fields
+KEPT_STATE = KEPT_PRECONDITIONER_COUNTS + KEPT_CONCENTRATION_COUNTS + ('concentration_preconditioner_configuration',
+                                                                        'concentration_preconditioner')
 
 
 def _copy(array):
@@ -54,6 +62,10 @@ class RunState:
         preconditioner_fewest : int or None, the fewest GMRES iterations of those solves;
         preconditioner_lifetime : int or None, solves the one kept before it served (``auto`` weighs the next
         build against them)
+    concentration_preconditioner_configuration : the Configuration where the concentration problem's kept
+        preconditioner was built (phoretic runs under ``preconditioner auto`` or ``neighbours``), or None;
+        concentration_preconditioner_solves, concentration_preconditioner_fewest : its solves and fewest GMRES
+        iterations, as for the deterministic one; concentration_preconditioner : the object (a cache: not saved)
     preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
     velocities : the velocities the last step used (not saved)
     last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
@@ -72,6 +84,10 @@ class RunState:
     preconditioner_fewest: Optional[int] = None
     preconditioner_lifetime: Optional[int] = None
     preconditioner: Any = None
+    concentration_preconditioner_configuration: Optional[Configuration] = None
+    concentration_preconditioner_solves: Optional[int] = None
+    concentration_preconditioner_fewest: Optional[int] = None
+    concentration_preconditioner: Any = None
     velocities: Optional[np.ndarray] = None
     last_iterations: int = 0
 
@@ -79,22 +95,24 @@ class RunState:
         """What a restart record saves of the scheme (copies): a dict of arrays, ints and None."""
         history = {name: _copy(getattr(self, name)) for name in HISTORY_FIELDS}
         history['invalid_configurations'] = self.counters.invalid_configurations
-        for name in KEPT_PRECONDITIONER_COUNTS + ('preconditioner_step',):
+        for name in KEPT_PRECONDITIONER_COUNTS + KEPT_CONCENTRATION_COUNTS + ('preconditioner_step',):
             history[name] = getattr(self, name)
-        history['preconditioner_configuration'] = None if self.preconditioner_configuration is None \
-            else self.preconditioner_configuration.copy_arrays()
+        for name in ('preconditioner_configuration', 'concentration_preconditioner_configuration'):
+            where = getattr(self, name)
+            history[name] = None if where is None else where.copy_arrays()
         return history
 
     def with_history(self, history):
         """This state continued from a saved :meth:`history` (None or empty: unchanged)."""
         if not history:
             return self
-        saved = history.get('preconditioner_configuration')
         changes = {name: _copy(history.get(name)) for name in HISTORY_FIELDS}
-        for name in KEPT_PRECONDITIONER_COUNTS + ('preconditioner_step',):
+        for name in KEPT_PRECONDITIONER_COUNTS + KEPT_CONCENTRATION_COUNTS + ('preconditioner_step',):
             changes[name] = None if history.get(name) is None else int(history[name])
-        changes.update(preconditioner_configuration=None if saved is None else Configuration(*saved),
-                       preconditioner=None,
+        for name in ('preconditioner_configuration', 'concentration_preconditioner_configuration'):
+            saved = history.get(name)
+            changes[name] = None if saved is None else Configuration(*saved)
+        changes.update(preconditioner=None, concentration_preconditioner=None,
                        counters=replace(self.counters,
                                         invalid_configurations=int(history.get('invalid_configurations', 0))))
         return replace(self, **changes)
@@ -119,7 +137,7 @@ class StepWork:
         self.pending_previous = None
         self.preconditioner_step = state.preconditioner_step
         self.preconditioner_configuration = state.preconditioner_configuration
-        for name in KEPT_PRECONDITIONER_COUNTS:
+        for name in KEPT_STATE:
             setattr(self, name, getattr(state, name))
         self.preconditioner = state.preconditioner
         self.last_iterations = state.last_iterations
@@ -168,10 +186,47 @@ class StepWork:
         """Phoretic runs: the concentration solve at ``configuration`` warm started from (and into)
         ``concentration_guess`` (``multi_bodies.solver.surface``); None for other runs."""
         from multi_bodies.solver.surface import warm_solute
-        solved, self.concentration_guess = warm_solute(self.model, configuration, self.concentration_guess)
+        kept = self.kept_concentration_preconditioner(configuration)
+        solved, self.concentration_guess = warm_solute(self.model, configuration, self.concentration_guess,
+                                                       preconditioner=kept)
         if solved is not None:
             self.count(laplace_iterations=solved[1].iterations)
+            if kept is not None:
+                self.concentration_served(solved[1].iterations)
         return solved
+
+    def kept_concentration_preconditioner(self, configuration):
+        """The concentration problem's preconditioner that phoretic runs keep between solves, or None (no
+        phoretic bodies, ``preconditioner block_diagonal``, or solves left unpreconditioned).
+
+        Built at the first solve and after a solve that wore it (``CONCENTRATION_WEAR_ITERATIONS`` more than the
+        fewest since its build); after a restart it is built again where the saved one was built, so the run
+        repeats bit for bit.  It is applied as built (not turned).
+        """
+        surface = self.model.surface
+        if surface is None or surface.phoretic is None or getattr(self.model, 'published_solves', True) \
+                or not surface.preconditions_concentrations(self.model, self.model.num_blobs):
+            return None
+        if self.concentration_preconditioner_configuration is None:
+            self.concentration_preconditioner = surface.concentration_preconditioner(self.model, configuration)
+            self.concentration_preconditioner_configuration = configuration
+            self.concentration_preconditioner_solves, self.concentration_preconditioner_fewest = 0, None
+        elif self.concentration_preconditioner is None:  # a restart: rebuilt where it was built
+            self.concentration_preconditioner = surface.concentration_preconditioner(
+                self.model, self.concentration_preconditioner_configuration)
+        return self.concentration_preconditioner
+
+    def concentration_served(self, iterations):
+        """Count a concentration solve of ``iterations`` GMRES iterations with the kept preconditioner; one that
+        took ``CONCENTRATION_WEAR_ITERATIONS`` more than the fewest since the build ends it."""
+        fewest = iterations if self.concentration_preconditioner_fewest is None else \
+            min(self.concentration_preconditioner_fewest, iterations)
+        if iterations >= fewest + CONCENTRATION_WEAR_ITERATIONS:
+            self.concentration_preconditioner = self.concentration_preconditioner_configuration = None
+            self.concentration_preconditioner_solves = self.concentration_preconditioner_fewest = None
+            return
+        self.concentration_preconditioner_solves += 1
+        self.concentration_preconditioner_fewest = fewest
 
     def forces_and_slip(self, configuration):
         """``model.forces_and_slip`` with the warm-started solute (phoretic runs)."""
@@ -222,4 +277,4 @@ class StepWork:
                        preconditioner_configuration=self.preconditioner_configuration,
                        preconditioner=self.preconditioner, velocities=velocities,
                        last_iterations=self.last_iterations,
-                       **{name: getattr(self, name) for name in KEPT_PRECONDITIONER_COUNTS})
+                       **{name: getattr(self, name) for name in KEPT_STATE})

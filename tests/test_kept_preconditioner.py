@@ -177,3 +177,74 @@ def test_restart_with_a_kept_preconditioner_repeats_the_run_bit_for_bit(monkeypa
     for bad in (-1, 2.5, 'three'):
         with pytest.raises(_Bad):
             _check_history(dict(history, preconditioner_fewest=bad), 9)
+
+
+def janus_model(tmp_path, preconditioner='neighbours'):
+    """Four 42-blob Janus spheres (emitting caps, mobility 1, no background) 2.6 apart above the wall, read from
+    input files as a run reads them; their solute moves them (phoretic slip)."""
+    from multi_bodies.files.structure_generators import icosahedral_shell, janus_laplace_table
+    from test_phoretic import _model_of, _shell_files
+    _shell_files(tmp_path, 42, 0.0, 0.0, 1.0, (0, 0, 3.0), (0.0,), domain='single_wall')
+    np.savetxt(tmp_path / 'shell.Laplace', janus_laplace_table(icosahedral_shell(42), (0, 1, 1), (0, 0, 1)))
+    rng = np.random.default_rng(5)
+    with open(tmp_path / 'shell.clones', 'w') as f:
+        f.write('4\n')
+        for k in range(4):
+            q = rng.normal(size=4)
+            q /= np.linalg.norm(q)
+            f.write('%r %r 3.0 %r %r %r %r\n' % ((2.6 * (k % 2), 2.6 * (k // 2)) + tuple(float(c) for c in q)))
+    return _model_of(tmp_path, 'input.dat').replace(preconditioner=preconditioner)
+
+
+def test_phoretic_runs_keep_the_concentration_preconditioner_and_restart_bit_for_bit(tmp_path, monkeypatch):
+    """Four Janus spheres, forward Euler at dt 0.05: the concentration problem's preconditioner is kept between
+    steps (fewer builds than solves; with a wear margin of 0, the control, one build per solve), the trajectory
+    is the one of a fresh preconditioner at every solve within what solver_tolerance allows (1e-6 of the distance
+    travelled), the record checks accept the saved history, and a restart from it repeats the run bit for bit."""
+    from multi_bodies.solver.surface import Surface
+    from quaternion_integrator import scheme_state
+    builds = []
+    original = Surface.concentration_preconditioner
+
+    def spy(self, model, configuration, problem=None):
+        builds.append(configuration)
+        return original(self, model, configuration, problem)
+    monkeypatch.setattr(Surface, 'concentration_preconditioner', spy)
+    model = janus_model(tmp_path)
+    steps = 6
+    _, kept = _run(model, 'deterministic_forward_euler', steps, dt=0.05)
+    assert kept.counters.laplace_iterations > 0
+    assert 1 <= len(builds) < steps, len(builds)
+    kept_builds = len(builds)
+    monkeypatch.setattr(scheme_state, 'CONCENTRATION_WEAR_ITERATIONS', 0)  # every solve wears it: built anew
+    builds.clear()
+    _, fresh = _run(model, 'deterministic_forward_euler', steps, dt=0.05)
+    assert len(builds) >= steps > kept_builds
+    travelled = np.linalg.norm(fresh.configuration.locations - model.start_configuration.locations)
+    assert travelled > 1e-3
+    assert np.linalg.norm(kept.configuration.locations - fresh.configuration.locations) < 1e-6 * travelled
+    monkeypatch.undo()
+    # restart: half the run, its history through the record checks, the rest
+    scheme, half = _run(model, 'deterministic_forward_euler', steps // 2, dt=0.05)
+    history = half.history()
+    _check_history(history, 4)
+    assert history['concentration_preconditioner_configuration'] is not None
+    restarted = scheme.init(model, half.configuration, half.step, history=history)
+    assert restarted.concentration_preconditioner is None
+    _, rest = _run(model, 'deterministic_forward_euler', steps - steps // 2, state=restarted, dt=0.05)
+    np.testing.assert_array_equal(rest.configuration.locations, kept.configuration.locations)
+    np.testing.assert_array_equal(rest.configuration.orientations, kept.configuration.orientations)
+    # the published solves keep nothing
+    _, published = _run(janus_model(tmp_path, 'block_diagonal'), 'deterministic_forward_euler', 2, dt=0.05)
+    assert published.concentration_preconditioner_configuration is None
+
+
+def test_record_checks_refuse_a_bad_kept_concentration_preconditioner():
+    """A saved history whose concentration preconditioner counts or configuration are not this run's is refused."""
+    good = RunState(Configuration(np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1))))
+    history = good.history()
+    _check_history(history, 2)
+    for key, value in (('concentration_preconditioner_solves', -1), ('concentration_preconditioner_fewest', 'x'),
+                       ('concentration_preconditioner_configuration', [np.zeros((3, 3)), np.zeros((3, 4))])):
+        with pytest.raises(_Bad, match=key):
+            _check_history(dict(history, **{key: value}), 2)

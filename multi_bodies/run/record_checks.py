@@ -212,15 +212,17 @@ def _check_history(history, bodies):
     _require(isinstance(history, dict), 'state.scheme is a %s, not a table' % type(history).__name__)
     for key, optional in (('invalid_configurations', False), ('preconditioner_step', True),
                           ('preconditioner_solves', True), ('preconditioner_fewest', True),
-                          ('preconditioner_lifetime', True)):
+                          ('preconditioner_lifetime', True), ('concentration_preconditioner_solves', True),
+                          ('concentration_preconditioner_fewest', True)):
         _require(key not in history or (optional and history[key] is None) or _is_int(history[key]),
                  'state.scheme.%s is %s, not an integer >= 0' % (key, _short(history.get(key))))
-    saved = history.get('preconditioner_configuration')
-    _require(saved is None or (isinstance(saved, (list, tuple)) and len(saved) == 2
-                               and all(isinstance(a, np.ndarray) and a.dtype.kind == 'f' for a in saved)
-                               and saved[0].shape == (bodies, 3) and saved[1].shape == (bodies, 4)),
-             'state.scheme.preconditioner_configuration is not the locations (%d, 3) and orientations (%d, 4) of '
-             'this run' % (bodies, bodies))
+    for key in ('preconditioner_configuration', 'concentration_preconditioner_configuration'):
+        saved = history.get(key)
+        _require(saved is None or (isinstance(saved, (list, tuple)) and len(saved) == 2
+                                   and all(isinstance(a, np.ndarray) and a.dtype.kind == 'f' for a in saved)
+                                   and saved[0].shape == (bodies, 3) and saved[1].shape == (bodies, 4)),
+                 'state.scheme.%s is not the locations (%d, 3) and orientations (%d, 4) of this run'
+                 % (key, bodies, bodies))
     for key in ('first_guess', 'roller_torque_guess', 'previous_velocities'):
         value = history.get(key)
         _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim <= 2

@@ -50,20 +50,33 @@ class Surface:
         """The concentration problem (phoretic.LaplaceProblem) at ``configuration``."""
         return self.phoretic.problem(model.arrays, configuration)
 
-    def solve_concentrations(self, model, configuration, x0=None):
+    @staticmethod
+    def preconditions_concentrations(model, num_blobs):
+        """True when the concentration solves of ``num_blobs`` blobs are preconditioned: the model's
+        ``preconditioner`` ``neighbours``, or ``auto`` from ``AUTO_MIN_BLOBS`` blobs on (``block_diagonal``:
+        unpreconditioned, as published)."""
+        return model.preconditioner == 'neighbours' or (model.preconditioner == 'auto'
+                                                        and num_blobs >= laplace_preconditioner.AUTO_MIN_BLOBS)
+
+    def concentration_preconditioner(self, model, configuration, problem=None):
+        """The :class:`laplace_preconditioner.LaplacePreconditioner` of the concentration problem at
+        ``configuration`` (``problem``: that problem, if built), or None where the solves are unpreconditioned."""
+        problem = self.laplace_problem(model, configuration) if problem is None else problem
+        if not self.preconditions_concentrations(model, problem.size):
+            return None
+        return laplace_preconditioner.LaplacePreconditioner(problem, model.arrays.blob_offsets)
+
+    def solve_concentrations(self, model, configuration, x0=None, preconditioner=None):
         """(LaplaceProblem, SolveResult) at ``configuration``: the blob concentrations in ``constraint_force_torque``.
 
         GMRES(200) of the model's ``solver_tolerance`` through ``model.solve``, preconditioned by
-        :class:`laplace_preconditioner.LaplacePreconditioner` (every body alone plus the coarse modes of
-        all bodies) under the model's ``preconditioner`` ``neighbours``, and under ``auto`` from
-        ``AUTO_MIN_BLOBS`` blobs on; unpreconditioned otherwise (``block_diagonal``: the published solves);
-        x0 : normalised first guess (N,) or None (zeros, as published).
+        :meth:`concentration_preconditioner` (every body alone plus the coarse modes of all bodies, where the
+        solves are preconditioned); x0 : normalised first guess (N,) or None (zeros, as published);
+        preconditioner : one built elsewhere (kept by a run between solves), or None: built here.
         """
         problem = self.laplace_problem(model, configuration)
-        preconditioner = None
-        if model.preconditioner == 'neighbours' or (model.preconditioner == 'auto'
-                                                    and problem.size >= laplace_preconditioner.AUTO_MIN_BLOBS):
-            preconditioner = laplace_preconditioner.LaplacePreconditioner(problem, model.arrays.blob_offsets)
+        if preconditioner is None:
+            preconditioner = self.concentration_preconditioner(model, configuration, problem)
         result = model.solve(problem, problem.rhs(), preconditioner, x0=x0, restart=phoretic.LAPLACE_RESTART,
                              what='the concentration (Laplace) problem')
         return problem, result
@@ -85,14 +98,14 @@ class Surface:
                                                     self.slip_weights)
 
 
-def warm_solute(model, configuration, guess):
+def warm_solute(model, configuration, guess, preconditioner=None):
     """(solved, next guess) of a step: ``solved`` the (problem, SolveResult) of the concentrations at
     ``configuration`` started from the normalised ``guess`` (N,) or None, or None when the model has no phoretic
-    bodies (then the guess is returned unchanged)."""
+    bodies (then the guess is returned unchanged); preconditioner : a kept one, or None (built here)."""
     surface = model.surface
     if surface is None or surface.phoretic is None:
         return None, guess
-    problem, result = surface.solve_concentrations(model, configuration, x0=guess)
+    problem, result = surface.solve_concentrations(model, configuration, x0=guess, preconditioner=preconditioner)
     return (problem, result), (guess if result.normalised_solution is None else result.normalised_solution)
 
 
