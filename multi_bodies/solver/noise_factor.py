@@ -21,8 +21,12 @@ It is an option (``lanczos_preconditioner incomplete_cholesky``), off by default
 published trajectory (doc/preconditioners.md has its measured effect on the iterations, the time and the
 statistics).
 
+The roller schemes' noise of single blobs (published: Lanczos without a preconditioner) takes the same
+factorisation over 3 x 3 blocks under the option (:func:`single_blob_factor`).
+
 Layout: body ``b``'s unknowns are ``x[3 o_b : 3 o_{b+1}]`` with ``o`` the bodies' blob offsets; every block is
-dense.  Applications use the compiled ``_preconditioner_cpp.block_lower_apply`` (a NumPy loop otherwise).
+dense.  The factorisation and the applications use the compiled ``_preconditioner_cpp``
+(``incomplete_cholesky_blocks``, ``block_lower_apply``; NumPy loops of the same formulas otherwise).
 """
 import numpy as np
 
@@ -40,6 +44,10 @@ LANCZOS_PRECONDITIONERS = ('block_diagonal', 'incomplete_cholesky')
 # 21 -> 13 (2 radii), 13 (4), 12 (6), 11 (8), builds 1.1, 1.4, 1.9, 3.6 products; packed at half the spacing
 # 25 -> 20, 19, 20, 19, builds 1.8, 4.4, 6.0, 7.9 products.  2 radii saves the most time in both.
 NOISE_GAP_IN_RADII = 2.0
+# The same for single blobs (rollers), whose 3 x 3 blocks are cheap: measured on 4,000 rollers above the wall at
+# area fraction 0.4 (stochastic_adams_bashforth_rollers, Lanczos iterations per step and s/step): none (published)
+# 28, 0.60 s; 2 radii 22, 0.55 s; 4 radii 11, 0.43 s; 6 radii 9, 0.45 s; 8 radii 8, 0.44 s.
+ROLLER_NOISE_GAP_IN_RADII = 4.0
 
 
 def incomplete_cholesky(own_factors, own_inverses, pair_blocks_by_pair):
@@ -92,6 +100,21 @@ class BlockLowerFactor:
     ``L_bb`` (lower triangular, positive diagonal); rows: list of dicts ``{k: L_ik}`` (k < i); inverses: the
     ``L_bb^{-1}`` (None: computed here).  Vectors are (3N,) (blob velocities or forces).
     """
+
+    @classmethod
+    def from_arrays(cls, starts, diag, diag_inverse, row_ptr, cols, block_offsets, blocks):
+        """The factor from the flat layout of ``_preconditioner_cpp.block_lower_apply`` (diagonal blocks one after
+        another in body order)."""
+        factor = cls.__new__(cls)
+        factor.starts = np.asarray(starts, dtype=np.int64)
+        sizes = np.diff(factor.starts)
+        factor.diag_offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if sizes.size \
+            else np.zeros(0, np.int64)
+        factor.diag, factor.diag_inverse = np.asarray(diag, float), np.asarray(diag_inverse, float)
+        factor.row_ptr, factor.cols = np.asarray(row_ptr, np.int64), np.asarray(cols, np.int64)
+        factor.block_offsets, factor.blocks = np.asarray(block_offsets, np.int64), np.asarray(blocks, float)
+        factor.num_lower_blocks = factor.cols.size
+        return factor
 
     def __init__(self, starts, factors, rows, inverses=None):
         self.starts = np.asarray(starts, dtype=np.int64)
@@ -179,6 +202,42 @@ class BlockLowerFactor:
         return self._apply(2, vector)
 
 
+def _compiled():
+    return _preconditioner_cpp is not None and hasattr(_preconditioner_cpp, 'incomplete_cholesky_blocks')
+
+
+def _compiled_factor(starts, own, pairs, pair_offsets, pair_data):
+    """(BlockLowerFactor, breakdowns) of ``_preconditioner_cpp.incomplete_cholesky_blocks`` (flat arguments)."""
+    starts = np.asarray(starts, dtype=np.int64)
+    sizes = np.diff(starts)
+    offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if sizes.size else \
+        np.zeros(0, np.int64)
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    *layout, breakdowns = _preconditioner_cpp.incomplete_cholesky_blocks(
+        starts, offsets, np.ascontiguousarray(own, dtype=float).reshape(-1), np.ascontiguousarray(pairs[:, 0]),
+        np.ascontiguousarray(pairs[:, 1]), np.asarray(pair_offsets, dtype=np.int64),
+        np.ascontiguousarray(pair_data, dtype=float).reshape(-1))
+    return BlockLowerFactor.from_arrays(starts, *layout), int(breakdowns)
+
+
+def incomplete_cholesky_factor(starts, own_factors, own_inverses, pair_blocks_by_pair, compiled=True):
+    """(BlockLowerFactor, breakdowns): the block IC(0) of :func:`incomplete_cholesky`, by the compiled loop
+    (``_preconditioner_cpp.incomplete_cholesky_blocks``, the same formulas) where it is built and ``compiled``.
+
+    starts (Nb + 1,): every body's first unknown; own_factors, own_inverses, pair_blocks_by_pair as
+    :func:`incomplete_cholesky` takes them.
+    """
+    if compiled and _compiled():
+        keys = sorted(pair_blocks_by_pair)
+        flat = [np.ascontiguousarray(pair_blocks_by_pair[key], dtype=float).reshape(-1) for key in keys]
+        pair_offsets = np.concatenate(([0], np.cumsum([f.size for f in flat])[:-1])) if flat else np.zeros(0)
+        own = np.concatenate([np.asarray(f, float).reshape(-1) for f in own_factors]) if len(own_factors) else \
+            np.zeros(0)
+        return _compiled_factor(starts, own, keys, pair_offsets, np.concatenate(flat) if flat else np.zeros(0))
+    factors, inverses, rows, breakdowns = incomplete_cholesky(own_factors, own_inverses, pair_blocks_by_pair)
+    return BlockLowerFactor(starts, factors, rows, inverses), breakdowns
+
+
 class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
     """The block IC(0) factor of the blob mobility over neighbouring bodies (module docstring).
 
@@ -222,5 +281,38 @@ class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
                 for (i, j), block in zip(map(tuple, self.pairs[chosen]), O):
                     # a pair that meets through two periodic images couples through both
                     by_pair[(i, j)] = by_pair[(i, j)] + block if (i, j) in by_pair else block
-        factors, inverses, rows, self.breakdowns = incomplete_cholesky(own_factors, own_inverses, by_pair)
-        super().__init__(3 * np.asarray(arrays.blob_offsets), factors, rows, inverses)
+        factor, self.breakdowns = incomplete_cholesky_factor(3 * np.asarray(arrays.blob_offsets), own_factors,
+                                                             own_inverses, by_pair)
+        self.__dict__.update(factor.__dict__)
+
+
+def single_blob_factor(r_vectors, eta, blob_radius, stacked_mobility, cross_blocks=None, gap=None):
+    """The block IC(0) factor of the mobility of single blobs (rollers): (BlockLowerFactor, pairs (P, 2)).
+
+    r_vectors (N, 3); blob_radius a (one radius); the 3 x 3 blocks of blobs whose surfaces come within ``gap``
+    (None: ROLLER_NOISE_GAP_IN_RADII a, centre distances below 2a + gap) and the blobs' own blocks, from
+    ``stacked_mobility`` (and ``cross_blocks`` where it builds them).  No periodic images: a pair coupled only
+    through one is left out (L stays invertible, the covariance M).
+    """
+    from scipy.spatial import cKDTree
+    r = np.ascontiguousarray(r_vectors, dtype=float).reshape(-1, 3)
+    a = float(blob_radius)
+    gap = ROLLER_NOISE_GAP_IN_RADII * a if gap is None else float(gap)
+    own = np.linalg.cholesky(stacked_mobility(r[:, None, :], eta, a))
+    pairs = cKDTree(r).query_pairs(2.0 * a + gap, output_type='ndarray') if r.shape[0] > 1 else np.zeros((0, 2))
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    blocks = np.zeros((0, 3, 3))
+    if pairs.size:
+        blocks = cross_blocks(r[pairs[:, 0]][:, None, :], r[pairs[:, 1]][:, None, :], eta, a) \
+            if cross_blocks is not None else None
+        if blocks is None:
+            blocks = stacked_mobility(np.stack((r[pairs[:, 0]], r[pairs[:, 1]]), axis=1), eta, a)[:, :3, 3:]
+    starts = 3 * np.arange(r.shape[0] + 1)
+    if _compiled():  # the blocks as they are: one (3, 3) block per pair, in the pairs' order
+        factor, _ = _compiled_factor(starts, own, pairs, 9 * np.arange(pairs.shape[0]), blocks)
+    else:
+        factor, _ = incomplete_cholesky_factor(starts, own, lower_triangular_inverse(own),
+                                               dict(zip(map(tuple, pairs.tolist()), blocks)))
+    return factor, pairs
+

@@ -15,6 +15,8 @@ from collections import namedtuple
 import numpy as np
 import scipy.sparse.linalg as spla
 
+import mobility
+from multi_bodies.solver import noise_factor
 from multi_bodies.solver.body_solver import SolutionParts, check_finite
 from stochastic_forcing import displace_positions, lanczos_square_root, rfd
 from utils import UserInputError
@@ -109,15 +111,28 @@ def roller_velocities(model, configuration, torque_guess=None):
 
 
 def roller_noise(model, r_vectors, z, factor):
-    """``factor * M_UF^{1/2} z`` of rollers at blob positions (N, 3) (Lanczos, no preconditioner).
+    """``factor * M_UF^{1/2} z`` of rollers at blob positions (N, 3) by Lanczos.
 
+    No preconditioner, as published; under ``lanczos_preconditioner incomplete_cholesky`` Lanczos runs on
+    ``L^{-1} M_UF L^{-T}`` with ``L`` the block IC(0) factor of the blobs that nearly touch
+    (``noise_factor.single_blob_factor``): the same covariance, another sample, fewer iterations.
     Returns the ``stochastic_forcing.LanczosResult`` with ``noise`` (N, 3) (its count is the caller's).
     """
     product = model.roller_product('trans_times_force')
     a, eta, L = model.blob_radius, model.eta, model.periodic_length
-    result = lanczos_square_root(lambda v: np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1), z,
-                                 model.tolerance, max_iterations=model.lanczos_max_iterations, factor=factor,
-                                 print_residual=model.print_residual)
+
+    def plain(v):
+        return np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1)
+    matvec, L_mult = plain, None
+    if getattr(model, 'lanczos_preconditioner', 'block_diagonal') == 'incomplete_cholesky':
+        lower, _ = noise_factor.single_blob_factor(r_vectors, eta, a, model.stacked_mobility,
+                                                   mobility.blob_cross_blocks(model.blobs_name))
+
+        def matvec(v):
+            return lower.L_inv_dot(plain(lower.L_inv_T_dot(v)))
+        L_mult = lower.L_dot
+    result = lanczos_square_root(matvec, z, model.tolerance, max_iterations=model.lanczos_max_iterations,
+                                 factor=factor, L_mult=L_mult, print_residual=model.print_residual)
     model.warn_if_not_converged(result)
     noise = result.noise.reshape(-1, 3)
     if model.domain == 'in_plane':  # the square root of P M P has zero z rows; Lanczos leaves round-off there

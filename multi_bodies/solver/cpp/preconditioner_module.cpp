@@ -15,6 +15,7 @@
 #include <pybind11/pybind11.h>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -289,6 +290,180 @@ void block_lower_apply(int mode, const Index &starts, const Index &diag_offsets,
   }
 }
 
+
+// Lower Cholesky factor of a dense symmetric (m, m) matrix A (row-major, its lower triangle read) into L
+// (zeros above the diagonal); false when a pivot is not positive (A not positive definite to rounding).
+bool dense_cholesky(const double *A, long m, double *L) {
+  for (long e = 0; e < m * m; ++e) L[e] = 0.0;
+  for (long j = 0; j < m; ++j) {
+    double d = A[j * m + j];
+    for (long c = 0; c < j; ++c) d -= L[j * m + c] * L[j * m + c];
+    if (!(d > 0.0)) return false;
+    const double root = std::sqrt(d);
+    L[j * m + j] = root;
+    for (long i = j + 1; i < m; ++i) {
+      double s = A[i * m + j];
+      for (long c = 0; c < j; ++c) s -= L[i * m + c] * L[j * m + c];
+      L[i * m + j] = s / root;
+    }
+  }
+  return true;
+}
+
+// X = L^{-1} of a lower-triangular (m, m) L with a positive diagonal (column by column forward substitution).
+void dense_lower_inverse(const double *L, long m, double *X) {
+  for (long e = 0; e < m * m; ++e) X[e] = 0.0;
+  for (long j = 0; j < m; ++j) {
+    X[j * m + j] = 1.0 / L[j * m + j];
+    for (long i = j + 1; i < m; ++i) {
+      double s = 0.0;
+      for (long c = j; c < i; ++c) s += L[i * m + c] * X[c * m + j];
+      X[i * m + j] = -s / L[i * m + i];
+    }
+  }
+}
+
+// Block IC(0) (no fill) over the bodies of a symmetric positive definite matrix M given by the Cholesky factors
+// of its diagonal blocks (own, at diag_offsets, C_b C_b^T = M_bb) and its blocks M_ij of the pattern's pairs
+// i < j (pair_i, pair_j, sorted by (i, j); (m_i, m_j) row-major at pair_offsets in pair_blocks), as
+// noise_factor.incomplete_cholesky does in NumPy:
+//   L_kk L_kk^T = M_kk - sum_l L_kl L_kl^T,  L_ik = (M_ik - sum_l L_il L_kl^T) L_kk^{-T},
+// the sums over the l < k in both rows.  A row whose Schur complement is not positive definite keeps C_k and no
+// lower blocks (zeros).  Returns (diag L_bb, diag_inverse L_bb^{-1}, row_ptr, cols, block_offsets, blocks,
+// breakdowns) in the layout of block_lower_apply.
+py::tuple incomplete_cholesky_blocks(const Index &starts, const Index &diag_offsets, const Array &own,
+                                     const Index &pair_i, const Index &pair_j, const Index &pair_offsets,
+                                     const Array &pair_blocks) {
+  const long nb = static_cast<long>(starts.size()) - 1;
+  if (nb < 0 || diag_offsets.size() != nb) throw std::invalid_argument("starts (nb + 1) and diag_offsets (nb) disagree");
+  const long P = static_cast<long>(pair_i.size());
+  if (pair_j.size() != P || pair_offsets.size() != P) throw std::invalid_argument("one i, j and offset per pair");
+  const long long *st = starts.data(), *dof = diag_offsets.data(), *pi = pair_i.data(), *pj = pair_j.data(),
+                  *po = pair_offsets.data();
+  for (long b = 0; b < nb; ++b) {
+    const long m = static_cast<long>(st[b + 1] - st[b]);
+    if (m < 0 || dof[b] < 0 || dof[b] + m * m > own.size()) throw std::invalid_argument("a diagonal block runs past own");
+  }
+  for (long p = 0; p < P; ++p) {
+    if (pi[p] < 0 || pj[p] >= nb || pi[p] >= pj[p]) throw std::invalid_argument("pairs must be 0 <= i < j < nb");
+    if (p && (pi[p] < pi[p - 1] || (pi[p] == pi[p - 1] && pj[p] <= pj[p - 1])))
+      throw std::invalid_argument("pairs must be sorted by (i, j) without repeats");
+    const long mi = static_cast<long>(st[pi[p] + 1] - st[pi[p]]), mj = static_cast<long>(st[pj[p] + 1] - st[pj[p]]);
+    if (po[p] < 0 || po[p] + mi * mj > pair_blocks.size()) throw std::invalid_argument("a pair block runs past pair_blocks");
+  }
+  // rows: the pairs (k, i) give block (i, k) of row i; cols sorted within a row
+  std::vector<long long> row_ptr(static_cast<std::size_t>(nb + 1), 0);
+  for (long p = 0; p < P; ++p) ++row_ptr[pj[p] + 1];
+  for (long b = 0; b < nb; ++b) row_ptr[b + 1] += row_ptr[b];
+  std::vector<long long> cols(static_cast<std::size_t>(P)), source(static_cast<std::size_t>(P)), fill(row_ptr);
+  for (long p = 0; p < P; ++p) {  // pairs sorted by (i, j): within row j the columns i come in increasing order
+    const long long slot = fill[pj[p]]++;
+    cols[slot] = pi[p];
+    source[slot] = p;
+  }
+  std::vector<long long> block_offsets(static_cast<std::size_t>(P)), diag_off(static_cast<std::size_t>(nb));
+  long long position = 0, diag_size = 0;
+  for (long i = 0; i < nb; ++i) {
+    const long mi = static_cast<long>(st[i + 1] - st[i]);
+    diag_off[i] = diag_size;
+    diag_size += mi * mi;
+    for (long long q = row_ptr[i]; q < row_ptr[i + 1]; ++q) {
+      block_offsets[q] = position;
+      position += mi * static_cast<long>(st[cols[q] + 1] - st[cols[q]]);
+    }
+  }
+  Array diag(diag_size), diag_inv(diag_size), blocks(position);
+  double *D = diag.mutable_data(), *Dinv = diag_inv.mutable_data(), *B = blocks.mutable_data();
+  const double *C = own.data(), *PB = pair_blocks.data();
+  // later[k]: the slots (row i > k, column k), in increasing i
+  std::vector<std::vector<long long>> later(static_cast<std::size_t>(nb));
+  for (long i = 0; i < nb; ++i)
+    for (long long q = row_ptr[i]; q < row_ptr[i + 1]; ++q) later[cols[q]].push_back(q);
+  std::vector<long long> row_of(static_cast<std::size_t>(P));
+  for (long i = 0; i < nb; ++i)
+    for (long long q = row_ptr[i]; q < row_ptr[i + 1]; ++q) row_of[q] = i;
+  long breakdowns = 0;
+  {
+    py::gil_scoped_release release;
+    long largest = 0;
+    for (long b = 0; b < nb; ++b) largest = std::max(largest, static_cast<long>(st[b + 1] - st[b]));
+    std::vector<double> S(static_cast<std::size_t>(largest * largest)), T(static_cast<std::size_t>(largest * largest));
+    for (long k = 0; k < nb; ++k) {
+      const long m = static_cast<long>(st[k + 1] - st[k]);
+      const double *Ck = C + dof[k];
+      double *Lk = D + diag_off[k], *Xk = Dinv + diag_off[k];
+      bool own_factor = row_ptr[k] == row_ptr[k + 1];
+      if (!own_factor) {  // S = C_k C_k^T - sum_l L_kl L_kl^T (lower triangle)
+        for (long r = 0; r < m; ++r)
+          for (long c = 0; c <= r; ++c) {
+            double s = 0.0;
+            for (long e = 0; e <= c; ++e) s += Ck[r * m + e] * Ck[c * m + e];
+            S[r * m + c] = s;
+          }
+        for (long long q = row_ptr[k]; q < row_ptr[k + 1]; ++q) {
+          const long ml = static_cast<long>(st[cols[q] + 1] - st[cols[q]]);
+          const double *Lkl = B + block_offsets[q];
+          for (long r = 0; r < m; ++r)
+            for (long c = 0; c <= r; ++c) {
+              double s = 0.0;
+              for (long e = 0; e < ml; ++e) s += Lkl[r * ml + e] * Lkl[c * ml + e];
+              S[r * m + c] -= s;
+            }
+        }
+        if (!dense_cholesky(S.data(), m, Lk)) {
+          own_factor = true;
+          ++breakdowns;
+          for (long long q = row_ptr[k]; q < row_ptr[k + 1]; ++q) {
+            const long ml = static_cast<long>(st[cols[q] + 1] - st[cols[q]]);
+            for (long e = 0; e < m * ml; ++e) B[block_offsets[q] + e] = 0.0;
+          }
+        }
+      }
+      if (own_factor)
+        for (long e = 0; e < m * m; ++e) Lk[e] = Ck[e];
+      dense_lower_inverse(Lk, m, Xk);
+      for (long long q : later[k]) {  // block (i, k): T = M_ik - sum_l L_il L_kl^T; L_ik = T L_kk^{-T}
+        const long i = static_cast<long>(row_of[q]);
+        const long mi = static_cast<long>(st[i + 1] - st[i]);
+        const double *Mki = PB + po[source[q]];  // (m, mi): M_ki, so M_ik = its transpose
+        for (long r = 0; r < mi; ++r)
+          for (long c = 0; c < m; ++c) T[r * m + c] = Mki[c * mi + r];
+        long long a = row_ptr[i], b = row_ptr[k];
+        while (a < row_ptr[i + 1] && b < row_ptr[k + 1] && cols[a] < k) {  // l in both rows, l < k
+          if (cols[a] < cols[b]) {
+            ++a;
+          } else if (cols[b] < cols[a]) {
+            ++b;
+          } else {
+            const long ml = static_cast<long>(st[cols[a] + 1] - st[cols[a]]);
+            const double *Lil = B + block_offsets[a], *Lkl = B + block_offsets[b];
+            for (long r = 0; r < mi; ++r)
+              for (long c = 0; c < m; ++c) {
+                double s = 0.0;
+                for (long e = 0; e < ml; ++e) s += Lil[r * ml + e] * Lkl[c * ml + e];
+                T[r * m + c] -= s;
+              }
+            ++a;
+            ++b;
+          }
+        }
+        double *Lik = B + block_offsets[q];
+        for (long r = 0; r < mi; ++r)  // (T X^T)_rc = sum_e T_re X_ce, X lower triangular: e <= c
+          for (long c = 0; c < m; ++c) {
+            double s = 0.0;
+            for (long e = 0; e <= c; ++e) s += T[r * m + e] * Xk[c * m + e];
+            Lik[r * m + c] = s;
+          }
+      }
+    }
+  }
+  Index row_ptr_out(nb + 1), cols_out(P), offsets_out(P);
+  std::copy(row_ptr.begin(), row_ptr.end(), row_ptr_out.mutable_data());
+  std::copy(cols.begin(), cols.end(), cols_out.mutable_data());
+  std::copy(block_offsets.begin(), block_offsets.end(), offsets_out.mutable_data());
+  return py::make_tuple(diag, diag_inv, row_ptr_out, cols_out, offsets_out, blocks, breakdowns);
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_preconditioner_cpp, m) {
@@ -306,4 +481,7 @@ PYBIND11_MODULE(_preconditioner_cpp, m) {
   m.def("block_lower_apply", &block_lower_apply, py::arg("mode"), py::arg("starts"), py::arg("diag_offsets"),
         py::arg("diag"), py::arg("row_ptr"), py::arg("cols"), py::arg("block_offsets"), py::arg("blocks"), py::arg("x"),
         py::arg("out"), "A block lower-triangular L over the bodies applied to x: mode 0 L x, 1 L^-1 x, 2 L^-T x");
+  m.def("incomplete_cholesky_blocks", &incomplete_cholesky_blocks, py::arg("starts"), py::arg("diag_offsets"),
+        py::arg("own"), py::arg("pair_i"), py::arg("pair_j"), py::arg("pair_offsets"), py::arg("pair_blocks"),
+        "Block IC(0) over the bodies: (diag, diag_inverse, row_ptr, cols, block_offsets, blocks, breakdowns)");
 }
