@@ -25,8 +25,9 @@ Scenes (C++ backends, solver_tolerance 1e-8):
     python benchmarks/bench_preconditioner.py [--scenes dilute packed ...] [--steps 3]
 
 ``--lanczos`` compares instead the two Lanczos factors (option ``lanczos_preconditioner``) under
-``stochastic_Slip_Trapz`` and ``preconditioner auto``: Lanczos iterations, passes and seconds per step in the
-dilute, packed and 1,000-boomerang scenes.
+``preconditioner auto``: Lanczos iterations, passes and seconds per step of ``stochastic_Slip_Trapz`` in the
+dilute, packed and 1,000-boomerang scenes, and of ``stochastic_adams_bashforth_rollers`` for 4,000 rollers
+placed at random at area fraction 0.4 (``rollers_dense``).
 """
 import argparse
 import os
@@ -94,6 +95,31 @@ def rollers(num=1000, spacing=2.0):
         body.body_length = 1.0
         bodies.append(body)
     return model_of(bodies, 0.5)
+
+
+def dense_rollers(num=4000, area_fraction=0.4, radius=0.5, seed=0):
+    """Rollers of ``radius`` placed at random (no two closer than 2.05 radii) in a square at ``area_fraction``,
+    at heights 1.5-1.65 radii, spinning about y (the roller schemes' model: free_kinematics False)."""
+    rng = np.random.default_rng(seed)
+    side = np.sqrt(num * np.pi * radius ** 2 / area_fraction)
+    placed = np.zeros((num, 2))
+    count = 0
+    while count < num:  # random sequential adsorption
+        point = rng.uniform(0.0, side, 2)
+        if count == 0 or np.min(np.sum((placed[:count] - point) ** 2, axis=1)) > (2.05 * radius) ** 2:
+            placed[count] = point
+            count += 1
+    bodies = []
+    for point in placed:
+        body = Body([point[0], point[1], radius * (1.5 + 0.15 * rng.random())], [1.0, 0, 0, 0], np.zeros((1, 3)),
+                    radius)
+        body.ID = 'roller'
+        body.body_length = 1.0
+        bodies.append(body)
+    physics = dict(PHYSICS, blob_radius=radius, debye_length_wall=0.1, debye_length=0.1)
+    return Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, radius,
+                 1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='C++',
+                 omega_one_roller=np.array([0.0, 1.0, 0.0]), free_kinematics=False)
 
 
 def pillars(num_pillars=16, num_spheres=84, seed=3):
@@ -193,19 +219,26 @@ def run(model, scheme_name, steps, options=None, variants=None):
     return results
 
 
-LANCZOS_SCENES = ('dilute', 'packed', 'boomerangs_1000')
+# the scenes of --lanczos: (model maker, scheme)
+LANCZOS_SCENES = {
+    'dilute': (SCENES['dilute'][0], 'stochastic_Slip_Trapz'),
+    'packed': (packed_boomerangs, 'stochastic_Slip_Trapz'),
+    'boomerangs_1000': (SCENES['boomerangs_1000'][0], 'stochastic_Slip_Trapz'),
+    'rollers_dense': (dense_rollers, 'stochastic_adams_bashforth_rollers'),
+}
 
 
 def lanczos_main(scenes, steps):
-    """The Lanczos factors side by side: stochastic_Slip_Trapz under ``preconditioner auto`` with
-    ``lanczos_preconditioner`` block_diagonal (the published noise) and incomplete_cholesky."""
+    """The Lanczos factors side by side under ``preconditioner auto`` with ``lanczos_preconditioner``
+    block_diagonal (the published noise) and incomplete_cholesky: stochastic_Slip_Trapz of the boomerang scenes,
+    stochastic_adams_bashforth_rollers of 4,000 rollers at area fraction 0.4 (``rollers_dense``)."""
     variants = {name: dict(preconditioner='auto', lanczos_preconditioner=name)
                 for name in ('block_diagonal', 'incomplete_cholesky')}
     print('%-16s %-22s %9s %7s %9s %7s %9s %7s %6s' % (
         'scene', 'lanczos_preconditioner', 'lanczos', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
     for scene in scenes:
-        model = SCENES[scene][0]()
-        r = run(model, 'stochastic_Slip_Trapz', 1 if scene == 'boomerangs_1000' else steps, variants=variants)
+        make, scheme_name = LANCZOS_SCENES[scene]
+        r = run(make(), scheme_name, 1 if scene == 'boomerangs_1000' else steps, variants=variants)
         _, pb, sb, lb = r['block_diagonal']
         for name in variants:
             _, passes, seconds, lanczos = r[name]
@@ -218,14 +251,16 @@ def lanczos_main(scenes, steps):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--scenes', nargs='+', default=list(SCENES), choices=list(SCENES))
+    parser.add_argument('--scenes', nargs='+', default=None, choices=sorted(set(SCENES) | set(LANCZOS_SCENES)))
     parser.add_argument('--steps', type=int, default=3)
     parser.add_argument('--lanczos', action='store_true',
                         help='compare the Lanczos factors (lanczos_preconditioner) under stochastic_Slip_Trapz '
                              'instead, in the scenes %s' % ', '.join(LANCZOS_SCENES))
     args = parser.parse_args(argv)
     if args.lanczos:
-        return lanczos_main([scene for scene in args.scenes if scene in LANCZOS_SCENES], args.steps)
+        return lanczos_main([scene for scene in (args.scenes or LANCZOS_SCENES) if scene in LANCZOS_SCENES],
+                            args.steps)
+    args.scenes = [scene for scene in (args.scenes or SCENES) if scene in SCENES]
     print('%-16s %-36s %-15s %9s %7s %9s %7s %9s %7s %6s' % (
         'scene', 'scheme', 'preconditioner', 'it/solve', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
     for scene in args.scenes:
