@@ -22,7 +22,7 @@ import numpy as np
 from body.body import Configuration, as_configuration
 from body.geometry import rotate_quaternions as _rotate_quaternions
 from multi_bodies.solver.counters import Counters
-from quaternion_integrator.scheme_state import RunState, StepWork
+from quaternion_integrator.scheme_state import RunState, StepWork, kept_fewest
 from utils import SimulationStopped, UserInputError
 
 
@@ -191,8 +191,8 @@ class Scheme:
         ``KEPT_WEAR_ITERATIONS`` more than the fewest since the build, the next solve builds a new one, weighed
         against the solves before this one (``preconditioner_lifetime``)."""
         solves = work.preconditioner_solves + 1
-        fewest = iterations if work.preconditioner_fewest is None else min(work.preconditioner_fewest, iterations)
-        if iterations >= fewest + KEPT_WEAR_ITERATIONS:
+        fewest = kept_fewest(work.preconditioner_fewest, iterations, KEPT_WEAR_ITERATIONS)
+        if fewest is None:
             work.preconditioner_lifetime = max(1, solves - 1)  # the solves it served before it wore
             work.preconditioner = work.preconditioner_configuration = None
             work.preconditioner_solves = work.preconditioner_fewest = None

@@ -37,6 +37,14 @@ KEPT_STATE = KEPT_PRECONDITIONER_COUNTS + KEPT_CONCENTRATION_COUNTS + ('concentr
                                                                         'concentration_preconditioner')
 
 
+def kept_fewest(fewest, iterations, margin):
+    """The wear rule of a kept preconditioner: the fewest GMRES iterations since its build after a solve of
+    ``iterations`` (``fewest`` None: the first), or None when that solve took ``margin`` or more above them (the
+    preconditioner has worn: the next solve builds a new one)."""
+    fewest = iterations if fewest is None else min(fewest, iterations)
+    return None if iterations >= fewest + margin else fewest
+
+
 def _copy(array):
     return None if array is None else np.array(array, dtype=float, copy=True)
 
@@ -219,9 +227,8 @@ class StepWork:
     def concentration_served(self, iterations):
         """Count a concentration solve of ``iterations`` GMRES iterations with the kept preconditioner; one that
         took ``CONCENTRATION_WEAR_ITERATIONS`` more than the fewest since the build ends it."""
-        fewest = iterations if self.concentration_preconditioner_fewest is None else \
-            min(self.concentration_preconditioner_fewest, iterations)
-        if iterations >= fewest + CONCENTRATION_WEAR_ITERATIONS:
+        fewest = kept_fewest(self.concentration_preconditioner_fewest, iterations, CONCENTRATION_WEAR_ITERATIONS)
+        if fewest is None:
             self.concentration_preconditioner = self.concentration_preconditioner_configuration = None
             self.concentration_preconditioner_solves = self.concentration_preconditioner_fewest = None
             return

@@ -48,7 +48,7 @@ def random_block_factor(rng):
     rows = [dict() for _ in sizes]
     for i, k in ((1, 0), (2, 1), (3, 0), (3, 2), (4, 1), (4, 3)):
         rows[i][k] = rng.normal(size=(sizes[i], sizes[k]))
-    return noise_factor.BlockLowerFactor(starts, factors, rows)
+    return noise_factor.BlockLowerFactor.from_blocks(starts, factors, rows)
 
 
 def test_block_products_equal_dense_algebra_compiled_and_numpy():
@@ -160,7 +160,7 @@ def test_breakdown_keeps_the_row_alone_and_the_covariance():
     factors, inverses, rows, breakdowns = noise_factor.incomplete_cholesky(
         own, [1.0 / f for f in own], {(0, 1): M[0:1, 1:2], (1, 2): M[1:2, 2:3]})
     assert breakdowns == 1 and rows[2] == {}
-    factor = noise_factor.BlockLowerFactor(np.arange(4), factors, rows, inverses)
+    factor = noise_factor.BlockLowerFactor.from_blocks(np.arange(4), factors, rows, inverses)
     L = dense_blocks(factor)
     assert np.all(np.diag(L) > 0)
     S = sla.solve_triangular(L, sla.solve_triangular(L, M, lower=True).T, lower=True)  # L^-1 M L^-T
@@ -330,7 +330,7 @@ def clustered_run(lanczos_preconditioner, n_steps=250, seed=501):
     system = Model(bodies, bodies_to_arrays(bodies, [n]), mbf.load_user_hooks('/nonexistent'), boomerang_keywords(),
                    ETA, BOOM_A, 1e-4, vector_product_name='C++', blobs_name='C++',
                    lanczos_preconditioner=lanczos_preconditioner)
-    first_pairs = noise_factor.IncompleteCholeskyNoiseFactor(
+    first_pairs = noise_factor.neighbour_noise_factor(
         system.build_preconditioner(system.start_configuration), system.stacked_mobility, ETA, BOOM_A).pairs
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01, Opts())
     per_body, motion = brownian_averages(system, scheme, np.random.default_rng(seed + 1), n_steps, every)

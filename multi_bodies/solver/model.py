@@ -403,7 +403,7 @@ class Model:
                                             if self.preconditioner == 'auto' else None)
         if self.lanczos_preconditioner == 'incomplete_cholesky' and self.num_bodies >= 2:
             # Lanczos runs on L^{-1} M L^{-T} with this factor instead of the block-diagonal one (noise_factor)
-            built.noise_factor = noise_factor.IncompleteCholeskyNoiseFactor(
+            built.noise_factor = noise_factor.neighbour_noise_factor(
                 base, self.stacked_mobility, self.eta, self.blob_radius, periodic_length=self.periodic_length,
                 body_lengths=self.body_lengths, cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
                 neighbours=built if built is not base else None)

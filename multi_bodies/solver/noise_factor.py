@@ -93,53 +93,47 @@ def incomplete_cholesky(own_factors, own_inverses, pair_blocks_by_pair):
     return factors, inverses, rows, breakdowns
 
 
+def _exclusive_cumsum(counts):
+    """Offsets (k,) int64 of consecutive pieces of the given sizes (k,): 0, c0, c0 + c1, ..."""
+    counts = np.asarray(counts, dtype=np.int64).reshape(-1)
+    return np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64) if counts.size else np.zeros(0, np.int64)
+
+
 class BlockLowerFactor:
     """A block lower-triangular ``L`` over the bodies, applied as ``L x``, ``L^{-1} x`` and ``L^{-T} x``.
 
-    starts (Nb + 1,): every body's first unknown (3 times its first blob); factors: the diagonal blocks
-    ``L_bb`` (lower triangular, positive diagonal); rows: list of dicts ``{k: L_ik}`` (k < i); inverses: the
-    ``L_bb^{-1}`` (None: computed here).  Vectors are (3N,) (blob velocities or forces).
+    The flat layout of ``_preconditioner_cpp.block_lower_apply``: starts (Nb + 1,) every body's first unknown
+    (3 times its first blob); diag and diag_inverse: the diagonal blocks ``L_bb`` and ``L_bb^{-1}`` (lower
+    triangular, positive diagonal) one after another in body order; row_ptr (Nb + 1,), cols, block_offsets and
+    blocks: the strictly lower blocks ``L_ik`` of every block row.  :meth:`from_blocks` builds it from lists of
+    blocks.  Vectors are (3N,) (blob velocities or forces).
     """
 
-    @classmethod
-    def from_arrays(cls, starts, diag, diag_inverse, row_ptr, cols, block_offsets, blocks):
-        """The factor from the flat layout of ``_preconditioner_cpp.block_lower_apply`` (diagonal blocks one after
-        another in body order)."""
-        factor = cls.__new__(cls)
-        factor.starts = np.asarray(starts, dtype=np.int64)
-        sizes = np.diff(factor.starts)
-        factor.diag_offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if sizes.size \
-            else np.zeros(0, np.int64)
-        factor.diag, factor.diag_inverse = np.asarray(diag, float), np.asarray(diag_inverse, float)
-        factor.row_ptr, factor.cols = np.asarray(row_ptr, np.int64), np.asarray(cols, np.int64)
-        factor.block_offsets, factor.blocks = np.asarray(block_offsets, np.int64), np.asarray(blocks, float)
-        factor.num_lower_blocks = factor.cols.size
-        return factor
-
-    def __init__(self, starts, factors, rows, inverses=None):
+    def __init__(self, starts, diag, diag_inverse, row_ptr, cols, block_offsets, blocks):
         self.starts = np.asarray(starts, dtype=np.int64)
-        num = self.starts.size - 1
-        sizes = np.diff(self.starts)
-        self.diag_offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if num else \
-            np.zeros(0, np.int64)
-        self.diag = np.concatenate([np.asarray(f, float).reshape(-1) for f in factors]) if num else np.zeros(0)
+        self.diag_offsets = _exclusive_cumsum(np.diff(self.starts) ** 2)
+        self.diag, self.diag_inverse = np.asarray(diag, float), np.asarray(diag_inverse, float)
+        self.row_ptr, self.cols = np.asarray(row_ptr, np.int64), np.asarray(cols, np.int64)
+        self.block_offsets, self.blocks = np.asarray(block_offsets, np.int64), np.asarray(blocks, float)
+        self.num_lower_blocks = self.cols.size
+
+    @classmethod
+    def from_blocks(cls, starts, factors, rows, inverses=None):
+        """The factor of the diagonal blocks ``factors`` (Nb lower-triangular arrays), ``rows`` (list of dicts
+        ``{k: L_ik}``, k < i) and ``inverses`` (the ``L_bb^{-1}``; None: computed here)."""
         if inverses is None:
             inverses = [lower_triangular_inverse(np.asarray(f, float)[None])[0] for f in factors]
-        self.diag_inverse = np.concatenate([d.reshape(-1) for d in inverses]) if num else np.zeros(0)
-        self.row_ptr = np.zeros(num + 1, dtype=np.int64)
-        cols, offsets, flat = [], [], []
-        position = 0
-        for i, row in enumerate(rows):
+        cols, flat, row_ptr = [], [], [0]
+        for row in rows:
             for k in sorted(row):
                 cols.append(k)
-                offsets.append(position)
                 flat.append(np.ascontiguousarray(row[k], dtype=float).reshape(-1))
-                position += flat[-1].size
-            self.row_ptr[i + 1] = len(cols)
-        self.cols = np.asarray(cols, dtype=np.int64)
-        self.block_offsets = np.asarray(offsets, dtype=np.int64)
-        self.blocks = np.concatenate(flat) if flat else np.zeros(0)
-        self.num_lower_blocks = len(cols)
+            row_ptr.append(len(cols))
+
+        def joined(pieces):
+            return np.concatenate([np.asarray(p, float).reshape(-1) for p in pieces]) if len(pieces) else np.zeros(0)
+        return cls(starts, joined(factors), joined(inverses), row_ptr, cols, _exclusive_cumsum([f.size for f in flat]),
+                   joined(flat))
 
     def _apply(self, mode, x):
         x = np.ascontiguousarray(x, dtype=float).reshape(-1)
@@ -209,15 +203,12 @@ def _compiled():
 def _compiled_factor(starts, own, pairs, pair_offsets, pair_data):
     """(BlockLowerFactor, breakdowns) of ``_preconditioner_cpp.incomplete_cholesky_blocks`` (flat arguments)."""
     starts = np.asarray(starts, dtype=np.int64)
-    sizes = np.diff(starts)
-    offsets = np.concatenate(([0], np.cumsum(sizes ** 2)[:-1])).astype(np.int64) if sizes.size else \
-        np.zeros(0, np.int64)
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     *layout, breakdowns = _preconditioner_cpp.incomplete_cholesky_blocks(
-        starts, offsets, np.ascontiguousarray(own, dtype=float).reshape(-1), np.ascontiguousarray(pairs[:, 0]),
-        np.ascontiguousarray(pairs[:, 1]), np.asarray(pair_offsets, dtype=np.int64),
+        starts, _exclusive_cumsum(np.diff(starts) ** 2), np.ascontiguousarray(own, dtype=float).reshape(-1),
+        np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1]), np.asarray(pair_offsets, np.int64),
         np.ascontiguousarray(pair_data, dtype=float).reshape(-1))
-    return BlockLowerFactor.from_arrays(starts, *layout), int(breakdowns)
+    return BlockLowerFactor(starts, *layout), int(breakdowns)
 
 
 def incomplete_cholesky_factor(starts, own_factors, own_inverses, pair_blocks_by_pair, compiled=True):
@@ -230,16 +221,19 @@ def incomplete_cholesky_factor(starts, own_factors, own_inverses, pair_blocks_by
     if compiled and _compiled():
         keys = sorted(pair_blocks_by_pair)
         flat = [np.ascontiguousarray(pair_blocks_by_pair[key], dtype=float).reshape(-1) for key in keys]
-        pair_offsets = np.concatenate(([0], np.cumsum([f.size for f in flat])[:-1])) if flat else np.zeros(0)
+        pair_offsets = _exclusive_cumsum([f.size for f in flat])
         own = np.concatenate([np.asarray(f, float).reshape(-1) for f in own_factors]) if len(own_factors) else \
             np.zeros(0)
         return _compiled_factor(starts, own, keys, pair_offsets, np.concatenate(flat) if flat else np.zeros(0))
     factors, inverses, rows, breakdowns = incomplete_cholesky(own_factors, own_inverses, pair_blocks_by_pair)
-    return BlockLowerFactor(starts, factors, rows, inverses), breakdowns
+    return BlockLowerFactor.from_blocks(starts, factors, rows, inverses), breakdowns
 
 
-class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
-    """The block IC(0) factor of the blob mobility over neighbouring bodies (module docstring).
+def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0),
+                           body_lengths=None, cross_blocks=None, gap=None, neighbours=None):
+    """The block IC(0) factor of the blob mobility over neighbouring bodies (module docstring): a
+    :class:`BlockLowerFactor` with ``pairs`` (P, 2), the neighbour pairs whose blocks enter, and ``breakdowns``,
+    the rows that kept their diagonal block alone.
 
     Parameters
     ----------
@@ -250,40 +244,33 @@ class IncompleteCholeskyNoiseFactor(BlockLowerFactor):
     gap : float or None, the neighbour gap (surface to surface, length; None: NOISE_GAP_IN_RADII blob radii).
     neighbours : a NeighbourPreconditioner built on ``base`` with at least that gap, or None: its pairs closer
         than ``gap`` and their blocks are taken instead of computed again.
-
-    ``pairs`` (P, 2) holds the neighbour pairs whose blocks enter, ``breakdowns`` the rows that kept their
-    diagonal block alone.
     """
-
-    def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0),
-                 body_lengths=None, cross_blocks=None, gap=None, neighbours=None):
-        arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
-        if gap is None:
-            gap = NOISE_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
-        by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
-        own_factors = [L for t in by_start for L in base.cholesky_factors[t]]  # in the order of the bodies
-        own_inverses = [L for t in by_start for L in base.inverse_cholesky_factors[t]]
-        if neighbours is not None and neighbours.gap >= float(gap) and neighbours.pairs.size:
-            # the neighbour pairs of the GMRES preconditioner that are close enough, with their blocks
-            close = neighbours.pair_gaps < float(gap)
-            self.pairs = neighbours.pairs[close]
-            renumbered = np.cumsum(close) - 1
-            groups = [(renumbered[chosen[close[chosen]]], O[close[chosen]]) for chosen, O in neighbours.pair_groups]
-        else:
-            self.pairs, shifts, _ = neighbour_pairs(r_vectors, arrays.blob_body_index, radii,
-                                                    configuration.locations, float(gap), periodic_length, body_lengths)
-            groups = [(chosen, O) for chosen, _, _, O in pair_blocks(
-                arrays, r_vectors, radii, self.pairs, shifts, eta, stacked_mobility, cross_blocks)] \
-                if self.pairs.size else []
-        by_pair = {}
-        if self.pairs.size:
-            for chosen, O in groups:
-                for (i, j), block in zip(map(tuple, self.pairs[chosen]), O):
-                    # a pair that meets through two periodic images couples through both
-                    by_pair[(i, j)] = by_pair[(i, j)] + block if (i, j) in by_pair else block
-        factor, self.breakdowns = incomplete_cholesky_factor(3 * np.asarray(arrays.blob_offsets), own_factors,
-                                                             own_inverses, by_pair)
-        self.__dict__.update(factor.__dict__)
+    arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
+    if gap is None:
+        gap = NOISE_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
+    by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
+    own_factors = [L for t in by_start for L in base.cholesky_factors[t]]  # in the order of the bodies
+    own_inverses = [L for t in by_start for L in base.inverse_cholesky_factors[t]]
+    if neighbours is not None and neighbours.gap >= float(gap) and neighbours.pairs.size:
+        # the neighbour pairs of the GMRES preconditioner that are close enough, with their blocks
+        close = neighbours.pair_gaps < float(gap)
+        pairs = neighbours.pairs[close]
+        renumbered = np.cumsum(close) - 1
+        groups = [(renumbered[chosen[close[chosen]]], O[close[chosen]]) for chosen, O in neighbours.pair_groups]
+    else:
+        pairs, shifts, _ = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
+                                           float(gap), periodic_length, body_lengths)
+        groups = [(chosen, O) for chosen, _, _, O in pair_blocks(
+            arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobility, cross_blocks)] if pairs.size else []
+    by_pair = {}
+    for chosen, O in groups:
+        for (i, j), block in zip(map(tuple, pairs[chosen]), O):
+            # a pair that meets through two periodic images couples through both
+            by_pair[(i, j)] = by_pair[(i, j)] + block if (i, j) in by_pair else block
+    factor, breakdowns = incomplete_cholesky_factor(3 * np.asarray(arrays.blob_offsets), own_factors, own_inverses,
+                                                    by_pair)
+    factor.pairs, factor.breakdowns = pairs, breakdowns
+    return factor
 
 
 def single_blob_factor(r_vectors, eta, blob_radius, stacked_mobility, cross_blocks=None, gap=None):
