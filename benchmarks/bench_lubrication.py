@@ -28,6 +28,7 @@ Scene: radius a = 1.0155 (the published rollers), eta = 1e-3, a square lattice o
 1.2 a, jittered by 0.1 a in x and y (seed 1); random forces and torques (seed 2); tolerance 1e-8.
 """
 import argparse
+import time
 
 import numpy as np
 
@@ -139,6 +140,48 @@ def main_breakdown(args):
                 parts['sparse products, solves'], parts['rest (Python)']))
 
 
+def kept_rows(side, tolerance, dt, omega, steps):
+    """{'published': .., 'kept': ..} of (s/step median, GMRES its/solve, LU/step) over ``steps`` trapezoidal
+    steps from the lattice, the two runs stepping in turn (same seed), after one warm-up step."""
+    settings = brownian.lubrication_settings(RADIUS, ETA)
+    runs = {}
+    for name in ('published', 'kept'):
+        kept = integrators.KeptSolves(settings, tolerance) if name == 'kept' else None
+        runs[name] = dict(locations=lattice(side), orientations=np.tile([1.0, 0.0, 0.0, 0.0], (side * side, 1)),
+                          rng=np.random.default_rng(3), kept=kept, seconds=[], its=0, solves=0, lu=0)
+    for step in range(steps + 1):
+        for name, run in runs.items():
+            start = time.perf_counter()
+            result = integrators.trapezoidal_step(settings, run['locations'], run['orientations'], settle, KT, dt,
+                                                  run['rng'], tolerance, omega=omega, kept=run['kept'])
+            elapsed = time.perf_counter() - start
+            run['locations'], run['orientations'] = result.locations, result.orientations
+            if step:  # the first step builds what the kept run keeps
+                run['seconds'].append(elapsed)
+                run['its'] += result.counts['gmres_iterations']
+                run['solves'] += 2 + (2 if omega is not None else 0)
+                run['lu'] += result.counts['factorisations']
+    return {name: (float(np.median(run['seconds'])), run['its'] / run['solves'], run['lu'] / steps)
+            for name, run in runs.items()}
+
+
+def main_kept(args):
+    """The published solves against the kept ones (lubrication.integrators.KeptSolves): rollers of the lattice
+    settling (kT of the rollers example) with and without a prescribed spin, at two time steps and tolerances."""
+    print('%6s %8s %7s %6s %10s %9s %7s %7s %7s' % ('N', 'tol', 'dt', 'omega', 'solves', 's/step', 'ratio',
+                                                    'its/sv', 'LU/step'))
+    for side in args.sides:
+        for tolerance in (1e-4, 1e-8):
+            for dt in (1e-3, 1e-2):
+                for omega in (None, 12.0):
+                    rows = kept_rows(side, tolerance, dt, omega, args.kept_steps)
+                    for name in ('published', 'kept'):
+                        seconds, its, lu = rows[name]
+                        print('%6d %8.0e %7.0e %6s %10s %9.4f %7.2f %7.2f %7.2f' % (
+                            side * side, tolerance, dt, '-' if omega is None else '%g' % omega, name, seconds,
+                            seconds / rows['published'][0], its, lu), flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--sides', type=int, nargs='+', default=[8, 16])
@@ -146,6 +189,9 @@ def main():
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--steps', action='store_true', help='time trapezoidal steps and near-field roots')
     parser.add_argument('--breakdown', action='store_true', help="where a trapezoidal step's time goes")
+    parser.add_argument('--kept', action='store_true',
+                        help='trapezoidal steps with the published solves and with the kept ones (KeptSolves)')
+    parser.add_argument('--kept-steps', type=int, default=20, help='steps of each run of --kept')
     parser.add_argument('--assembly', choices=('compiled', 'python', 'both'), default=None,
                         help='the C++ assembly when built (compiled), the NumPy fallback (python), or both one after '
                              'the other (the default of --breakdown)')
@@ -159,6 +205,8 @@ def main():
         return main_breakdown(args)
     if args.steps:
         return main_steps(args)
+    if args.kept:
+        return main_kept(args)
     print('%6s %6s %10s %12s %10s %10s %5s %s' % ('N', 'pairs', 'far field', 'assembly ms', 'factor ms',
                                                   'solve ms', 'its', 'residual'))
     for side in args.sides:

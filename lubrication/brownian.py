@@ -167,8 +167,10 @@ class TransposedLubricationProblem:
     def solution(self, x):
         return SolutionParts(None, np.asarray(x, dtype=float).reshape(self.num_bodies, 6), None)
 
-    def preconditioner(self, tolerance=1e-8):
-        forward = self.problem.preconditioner(tolerance)
+    def preconditioner(self, tolerance=1e-8, forward=None):
+        """The transpose of ``forward`` (a :class:`LubricationPreconditioner`; None: the published one at this
+        problem's configuration), a LinearOperator."""
+        forward = self.problem.preconditioner(tolerance) if forward is None else forward
         isolated = forward.isolated_rows
 
         def apply(x):
@@ -220,12 +222,14 @@ def translational_direction(W):
     return W.reshape(-1)
 
 
-def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None):
+def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None, preconditioner=None):
     """``kT div M_lub`` estimated by one random finite difference: (N, 6) velocities (mean over W is the drift).
 
     settings : :class:`LubricationSettings`; locations : (N, 3); W : (6N,) standard Gaussian (only its
     translational parts are used); kT : energy.  Three solves (one transposed, one for the difference) and
-    four far-field products, two assemblies of Delta_R.  ``problem`` at ``locations`` is reused if given.
+    four far-field products, two assemblies of Delta_R.  ``problem`` at ``locations`` is reused if given;
+    ``preconditioner`` (a :class:`LubricationPreconditioner`, e.g. one kept from a configuration nearby) serves
+    both solves, transposed for the first (None: the published one built at ``locations``, twice).
     """
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     if problem is None:
@@ -233,7 +237,8 @@ def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None):
     W = translational_direction(W)
     delta = settings.delta
     transposed = TransposedLubricationProblem(problem)
-    V = solve(transposed, W, transposed.preconditioner(tolerance), tolerance=tolerance).velocities.reshape(-1)
+    V = solve(transposed, W, transposed.preconditioner(tolerance, preconditioner),
+              tolerance=tolerance).velocities.reshape(-1)
     move = W.reshape(-1, 6)[:, :3]
     plus = settings.problem(locations + 0.5 * delta * move)
     minus = settings.problem(locations - 0.5 * delta * move)
@@ -241,7 +246,9 @@ def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None):
     MV = problem.mobility_product(V)
     dDeltaR_MV = (plus.Delta_R @ MV - minus.Delta_R @ MV) / delta
     rhs = kT * problem.rhs(force_torque=-dDeltaR_MV, velocity=dM_V)
-    return solve(problem, rhs, problem.preconditioner(tolerance), tolerance=tolerance).velocities
+    if preconditioner is None:
+        preconditioner = problem.preconditioner(tolerance)
+    return solve(problem, rhs, preconditioner, tolerance=tolerance).velocities
 
 
 def far_field_drift(settings, locations, W, kT):

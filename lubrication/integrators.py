@@ -23,6 +23,10 @@ Method (Sprinkle et al., Soft Matter 16, 7982, 2020; J. Chem. Phys. 147, 244103,
 * :func:`torque_from_omega` - the torques T that, with the given forces, make every sphere turn at the
   prescribed angular velocity (the mixed problem for T and the translational velocities), with an optional
   per-sphere cap ``|T_i| <= torque_cap`` (then those spheres turn slower).
+
+Every step function takes ``kept``: None for the published solves (each builds its preconditioner, a sparse LU,
+at its configuration and starts from zero), or a :class:`KeptSolves` that keeps the preconditioners between
+solves and steps and gives the solves first guesses (the package's schemes under ``preconditioner auto``).
 """
 from collections import namedtuple
 
@@ -31,11 +35,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from body.geometry import rotate_quaternions
-from multi_bodies.solver.body_solver import SolutionParts, solve
+from multi_bodies.solver.body_solver import SolutionParts, kept_fewest, solve
 from stochastic_forcing import lanczos_square_root
 
 from .brownian import NearFieldRoot, brownian_rhs, far_field_drift, thermal_drift
-from .problem import far_field_product
+from .problem import LubricationPreconditioner, far_field_product
 
 StepResult = namedtuple('StepResult', ['locations', 'orientations', 'rejected_wall', 'rejected_jump', 'velocities',
                                        'torques', 'counts'])
@@ -70,10 +74,103 @@ def counted_problem(settings, locations, counts, matrices=None):
     return problem
 
 
-def _solve(problem, rhs, tolerance, counts):
-    preconditioner = problem.preconditioner(tolerance)
-    counts['factorisations'] += preconditioner.factor is not None
-    result = solve(problem, rhs, preconditioner, tolerance=tolerance)
+# A kept lubrication preconditioner is built anew after a predictor solve that took this many GMRES iterations more
+# than the fewest predictor solve since its build (measured, doc/lubrication.md "Solves that remember").
+LUBRICATION_WEAR_ITERATIONS = 1
+
+
+class KeptSolves:
+    """What the lubrication solves of a run keep from solve to solve and step to step (``preconditioner auto``).
+
+    * The preconditioners, built at one configuration and used at the next ones until they wear: the published
+      ``(R_sup + s I)^-1 R_MB`` of :class:`lubrication.LubricationProblem` and the torque problem's
+      :func:`torque_preconditioner`.  Any invertible preconditioner gives the same solution within the
+      tolerance; one built nearby costs no sparse LU.  A predictor solve (every step's first solve of the
+      velocities) that takes ``LUBRICATION_WEAR_ITERATIONS`` more GMRES iterations than the fewest predictor solve
+      since the build ends them: the next solve builds new ones at its configuration.
+    * First guesses: the corrector starts from the predictor's velocities; a torque solve from the last torque
+      solve's solution; at kT = 0 the predictor from the last corrector's velocities.
+
+    built_at : (locations (N, 3), orientations (N, 4)) where the preconditioners were built, or None (none kept);
+    solves, fewest : predictor solves they served and their fewest GMRES iterations (None: none yet);
+    velocity_guess : (6N,) the last corrector's velocities (kT = 0 only) or None;
+    torque_guess : (6N,) the last torque solve's unknowns ``[V T]`` or None.
+    These are what the run state saves (``RunState.preconditioner_configuration``, ``preconditioner_solves``,
+    ``preconditioner_fewest``, ``first_guess``, ``roller_torque_guess``); the objects are a cache
+    (``built``), built again at ``built_at`` after a restart, so a restart repeats the run bit for bit.
+    """
+
+    def __init__(self, settings, tolerance, built_at=None, solves=None, fewest=None, built=None,
+                 velocity_guess=None, torque_guess=None):
+        self.settings, self.tolerance = settings, float(tolerance)
+        self.built_at, self.solves, self.fewest = built_at, solves, fewest
+        self.built = dict(built) if built else {}
+        self.velocity_guess, self.torque_guess = velocity_guess, torque_guess
+
+    def _built(self, name, problem, orientations, counts, start):
+        """The kept preconditioner ``name`` ('velocities' or 'torques'), built where the kept ones are; when none
+        are kept, built at ``problem`` and kept if ``start`` (a step's start configuration, an accepted one),
+        else built for this solve alone (the corrector's predicted configuration is never kept: one gap there
+        closed too far would slow every later solve)."""
+        if self.built_at is None and not start:
+            return self._build(name, problem.matrices, problem, counts)
+        if self.built_at is None:
+            self.built_at = (problem.locations.copy(), np.array(orientations, dtype=float))
+            self.built, self.solves, self.fewest = {'matrices': problem.matrices}, 0, None
+        elif 'matrices' not in self.built:  # a restart: assembled again where they were built
+            self.built['matrices'] = self.settings.matrices(self.built_at[0])
+            counts['assemblies'] += 1
+        if name not in self.built:
+            self.built[name] = self._build(name, self.built['matrices'], problem, counts)
+        return self.built[name]
+
+    def _build(self, name, matrices, problem, counts):
+        counts['factorisations'] += 1
+        if name == 'torques':
+            return torque_preconditioner(matrices.Delta_R, self.settings.eta, self.settings.a)
+        if matrices is problem.matrices:
+            built = problem.preconditioner(self.tolerance)
+        else:
+            built = LubricationPreconditioner(matrices, self.settings.shift(self.tolerance))
+        counts['factorisations'] -= built.factor is None
+        return built
+
+    def preconditioner(self, problem, orientations, counts, start=True):
+        """The kept :class:`lubrication.problem.LubricationPreconditioner` (see :meth:`_built`)."""
+        return self._built('velocities', problem, orientations, counts, start)
+
+    def torque_preconditioner(self, problem, orientations, counts, start=True):
+        """The kept :func:`torque_preconditioner` (see :meth:`_built`)."""
+        return self._built('torques', problem, orientations, counts, start)
+
+    def served(self, iterations):
+        """Count a predictor solve of ``iterations`` GMRES iterations; a worn one ends the kept preconditioners."""
+        fewest = kept_fewest(self.fewest, iterations, LUBRICATION_WEAR_ITERATIONS)
+        if fewest is None:
+            self.built_at, self.built, self.solves, self.fewest = None, {}, None, None
+            return
+        self.solves, self.fewest = self.solves + 1, fewest
+
+
+def _first_guess(guess, rhs):
+    """The solution ``guess`` of ``A x = rhs`` as a first guess of the normalised system (None: zeros)."""
+    norm = float(np.linalg.norm(rhs))
+    return None if guess is None or norm == 0.0 else np.asarray(guess, dtype=float).reshape(-1) / norm
+
+
+def _solve(problem, rhs, tolerance, counts, kept=None, orientations=None, guess=None, predictor=False):
+    """Velocities (N, 6) of ``problem`` for ``rhs``: with ``kept`` None the published solve (a preconditioner built
+    here, from zero); else the kept preconditioner and the first guess ``guess`` (velocities or None); a
+    ``predictor`` solve (at a step's start) may build the kept preconditioner and counts towards its wear."""
+    if kept is None:
+        preconditioner = problem.preconditioner(tolerance)
+        counts['factorisations'] += preconditioner.factor is not None
+        result = solve(problem, rhs, preconditioner, tolerance=tolerance)
+    else:
+        result = solve(problem, rhs, kept.preconditioner(problem, orientations, counts, start=predictor),
+                       x0=_first_guess(guess, rhs), tolerance=tolerance)
+        if predictor:
+            kept.served(result.iterations)
     counts['gmres_iterations'] += result.iterations
     return result.velocities
 
@@ -98,9 +195,6 @@ class TorqueFromOmegaProblem:
         self.problem, self.size, self.num_bodies = problem, problem.size, problem.num_bodies
         self.eta, self.a = eta, a
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
-        n = self.num_bodies
-        self.trans = (np.arange(n)[:, None] * 6 + np.arange(3)).reshape(-1)
-        self.rot = self.trans + 3
 
     def _split(self, x):
         x = np.asarray(x, dtype=float).reshape(-1, 6)
@@ -129,38 +223,57 @@ class TorqueFromOmegaProblem:
         return SolutionParts(None, np.asarray(x, dtype=float).reshape(self.num_bodies, 6), None)
 
     def preconditioner(self):
-        friction = 6.0 * np.pi * self.eta * self.a
-        rotational_mobility = 1.0 / (8.0 * np.pi * self.eta * self.a ** 3)
-        Delta_R = self.problem.Delta_R.tocsr()
-        block = Delta_R[self.trans][:, self.trans] + friction * sp.identity(self.trans.size, format='csr')
-        self.factor = spla.splu(block.tocsc(), permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                                options={'SymmetricMode': True})
-        coupling = Delta_R[self.rot][:, self.trans]
-
-        def apply(r):
-            r = np.asarray(r, dtype=float).reshape(-1)
-            out = np.empty_like(r)
-            velocity = friction * self.factor.solve(r[self.trans])
-            out[self.trans] = velocity
-            out[self.rot] = coupling @ velocity - r[self.rot] / rotational_mobility
-            return out
-        return spla.LinearOperator((self.size, self.size), matvec=apply, dtype=float)
+        """The preconditioner (a LinearOperator) at this problem's configuration (:func:`torque_preconditioner`)."""
+        return torque_preconditioner(self.problem.Delta_R, self.eta, self.a)
 
 
-def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, counts=None):
+def torque_preconditioner(Delta_R, eta, a):
+    """The preconditioner of :class:`TorqueFromOmegaProblem` from the near field ``Delta_R`` (6N, 6N) of some
+    configuration: M replaced by the isolated sphere's mobilities, one sparse LU of ``6 pi eta a I + Delta_R_tt``
+    (as published).  A LinearOperator (6N, 6N)."""
+    size = Delta_R.shape[0]
+    trans = (np.arange(size // 6)[:, None] * 6 + np.arange(3)).reshape(-1)
+    rot = trans + 3
+    friction = 6.0 * np.pi * eta * a
+    rotational_mobility = 1.0 / (8.0 * np.pi * eta * a ** 3)
+    Delta_R = Delta_R.tocsr()
+    block = Delta_R[trans][:, trans] + friction * sp.identity(trans.size, format='csr')
+    factor = spla.splu(block.tocsc(), permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                       options={'SymmetricMode': True})
+    coupling = Delta_R[rot][:, trans]
+
+    def apply(r):
+        r = np.asarray(r, dtype=float).reshape(-1)
+        out = np.empty_like(r)
+        velocity = friction * factor.solve(r[trans])
+        out[trans] = velocity
+        out[rot] = coupling @ velocity - r[rot] / rotational_mobility
+        return out
+    return spla.LinearOperator((size, size), matvec=apply, dtype=float)
+
+
+def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, counts=None, kept=None,
+                      orientations=None, start=True):
     """Torques (N, 3) that hold the angular velocities ``omega`` of spheres under ``forces`` (N, 3).
 
     problem : :class:`lubrication.LubricationProblem` at the configuration; omega : see :func:`omega_vectors`;
     torque_cap : None or a number, the largest torque magnitude per sphere (larger ones are scaled down
-    to it, keeping their direction: those spheres then turn slower than omega).
+    to it, keeping their direction: those spheres then turn slower than omega); kept : a :class:`KeptSolves`
+    (its preconditioner and its last torque solution as first guess, which this solve replaces) or None (the
+    published solve: a preconditioner built here, from zero); orientations (N, 4) with ``kept``; start : the
+    configuration is a step's start (where ``kept`` may build the preconditioner it keeps).
     """
     counts = new_counts() if counts is None else counts
     torque_problem = TorqueFromOmegaProblem(problem, problem.eta, problem.a)
     omega = omega_vectors(omega, problem.num_bodies)
     rhs = torque_problem.rhs(np.asarray(forces, dtype=float).reshape(-1, 3), omega)
-    preconditioner = torque_problem.preconditioner()
-    counts['factorisations'] += 1
-    result = solve(torque_problem, rhs, preconditioner, tolerance=tolerance)
+    if kept is None:
+        result = solve(torque_problem, rhs, torque_problem.preconditioner(), tolerance=tolerance)
+        counts['factorisations'] += 1
+    else:
+        result = solve(torque_problem, rhs, kept.torque_preconditioner(problem, orientations, counts, start),
+                       x0=_first_guess(kept.torque_guess, rhs), tolerance=tolerance)
+        kept.torque_guess = result.velocities.reshape(-1).copy()
     counts['gmres_iterations'] += result.iterations
     torques = result.velocities[:, 3:].copy()
     if torque_cap is not None:
@@ -170,11 +283,13 @@ def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, c
     return torques
 
 
-def _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap, counts):
+def _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap, counts, kept,
+            start=True):
     force_torque = np.array(force_torque_at(locations, orientations), dtype=float).reshape(-1, 6)
     torques = None
     if omega is not None:
-        torques = torque_from_omega(problem, force_torque[:, :3], omega, tolerance, torque_cap, counts)
+        torques = torque_from_omega(problem, force_torque[:, :3], omega, tolerance, torque_cap, counts, kept,
+                                    orientations, start)
         force_torque[:, 3:] = torques
     return force_torque, torques
 
@@ -203,7 +318,7 @@ def _noise(settings, problem, kT, dt, rng, tolerance, counts):
 
 
 def _step_start(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
-                matrices):
+                matrices, kept):
     """What every step computes first at the start configuration: (counts, locations (N, 3), orientations (N, 4),
     the problem there, force_torque (N, 6), torques (or None), the Brownian increment (6N,))."""
     counts = new_counts()
@@ -211,13 +326,13 @@ def _step_start(settings, locations, orientations, force_torque_at, kT, dt, rng,
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     problem = counted_problem(settings, locations, counts, matrices)
     force_torque, torques = _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap,
-                                    counts)
+                                    counts, kept)
     noise = _noise(settings, problem, kT, dt, rng, tolerance, counts)
     return counts, locations, orientations, problem, force_torque, torques, noise
 
 
 def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8, omega=None,
-                     torque_cap=None, matrices=None, rfd=True):
+                     torque_cap=None, matrices=None, rfd=True, kept=None):
     """One step of the published stochastic trapezoidal scheme (module note): a :data:`StepResult`.
 
     settings : :class:`lubrication.brownian.LubricationSettings`; locations (N, 3), orientations (N, 4);
@@ -225,11 +340,14 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
     omega, torque_cap : prescribed rotation (see :func:`torque_from_omega`; the torques are recomputed at
     the predictor's configuration for the corrector); matrices : the near-field matrices at ``locations``
     if already built; rfd : False leaves out the far-field drift term ``D_M`` (a negative control: the
-    equilibrium is then wrong).
+    equilibrium is then wrong); kept : a :class:`KeptSolves` (the solves keep their preconditioners and start
+    from first guesses, which it updates) or None (the published solves).
     """
     counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
-        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices)
-    predictor = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts)
+        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices, kept)
+    guess = kept.velocity_guess if kept is not None and kT <= 0 else None
+    predictor = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
+                       orientations, guess, predictor=True)
     mid_locations, mid_orientations = _moved(locations, orientations, predictor, dt)
     wall, jump = _rejection(settings, locations, mid_locations)
     if settings.wall and np.any(mid_locations[:, 2] <= 0.0):
@@ -240,9 +358,11 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
         counts['far_field_products'] += 2
     mid_problem = counted_problem(settings, mid_locations, counts)
     mid_force_torque, mid_torques = _forces(force_torque_at, mid_problem, mid_locations, mid_orientations, omega,
-                                            tolerance, torque_cap, counts)
+                                            tolerance, torque_cap, counts, kept, start=False)
     corrector = _solve(mid_problem, drift + noise + mid_problem.mobility_product(mid_force_torque.reshape(-1)),
-                       tolerance, counts)
+                       tolerance, counts, kept, mid_orientations, predictor)
+    if kept is not None:
+        kept.velocity_guess = corrector.reshape(-1).copy() if kT <= 0 else None
     velocities = 0.5 * (predictor + corrector)
     if torques is not None:
         torques = 0.5 * (torques + mid_torques)
@@ -254,14 +374,22 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
 
 
 def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8,
-                        omega=None, torque_cap=None, matrices=None):
-    """One Euler-Maruyama step ``q + dt (M_lub F + U_B + kT div M_lub)`` (RFD drift): a :data:`StepResult`."""
+                        omega=None, torque_cap=None, matrices=None, kept=None):
+    """One Euler-Maruyama step ``q + dt (M_lub F + U_B + kT div M_lub)`` (RFD drift): a :data:`StepResult`.
+
+    kept : a :class:`KeptSolves` or None, as for :func:`trapezoidal_step` (its preconditioner serves the drift's
+    solves too; at kT = 0 the solve starts from the last step's velocities)."""
     counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
-        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices)
-    velocities = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts)
+        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices, kept)
+    guess = kept.velocity_guess if kept is not None and kT <= 0 else None
+    velocities = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
+                        orientations, guess, predictor=True)
+    if kept is not None:
+        kept.velocity_guess = velocities.reshape(-1).copy() if kT <= 0 else None
     if kT > 0:
+        preconditioner = None if kept is None else kept.preconditioner(problem, orientations, counts)
         velocities = velocities + thermal_drift(settings, locations, rng.standard_normal(problem.size), kT,
-                                                tolerance, problem)
+                                                tolerance, problem, preconditioner)
         counts['assemblies'] += 2
     new_locations, new_orientations = _moved(locations, orientations, velocities, dt)
     wall, jump = _rejection(settings, locations, new_locations)

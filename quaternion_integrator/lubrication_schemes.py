@@ -81,8 +81,10 @@ class LubricationScheme(StochasticScheme):
                 force_torque[:, :3] += firm_repulsion_forces(locations, work.blob_radius, self.firm_strength,
                                                              self.firm_delta, work.periodic_length)
             return self.add_torques(work, force_torque)
+        kept = self.kept_solves(work, settings)
         step = type(self).step_function(settings, old.locations, old.orientations, force_torque_at, self.kT,
-                                        self.dt, rng, work.tolerance, **self.prescribed_rotation(work))
+                                        self.dt, rng, work.tolerance, kept=kept, **self.prescribed_rotation(work))
+        self.keep(work, kept)
         counts = step.counts
         work.count(gmres_iterations=counts['gmres_iterations'], lanczos_iterations=counts['lanczos_iterations'])
         work.last_iterations = counts['gmres_iterations']
@@ -94,6 +96,31 @@ class LubricationScheme(StochasticScheme):
             return old, np.zeros((work.num_bodies, 6))
         return Configuration(step.locations, step.orientations), step.velocities
 
+
+    @staticmethod
+    def kept_solves(work, settings):
+        """The :class:`lubrication.integrators.KeptSolves` of the run state (``preconditioner auto`` or
+        ``neighbours``), or None: under ``block_diagonal`` every solve is the published one (its preconditioner
+        built at its configuration, from zero).  The run state's fields of the kept preconditioner (where it was
+        built, its solves and fewest iterations, the object as a cache) and its first guesses (``first_guess``:
+        velocities at kT = 0; ``roller_torque_guess``: the torque problem's unknowns) hold them between steps."""
+        if getattr(work.model, 'published_solves', True):
+            return None
+        where = work.preconditioner_configuration
+        return integrators.KeptSolves(
+            settings, work.tolerance, None if where is None else (where.locations, where.orientations),
+            work.preconditioner_solves, work.preconditioner_fewest, work.preconditioner, work.first_guess,
+            work.roller_torque_guess)
+
+    @staticmethod
+    def keep(work, kept):
+        """Put what ``kept`` (a KeptSolves or None) holds after a step back into the step's run state."""
+        if kept is None:
+            return
+        work.preconditioner_configuration = None if kept.built_at is None else Configuration(*kept.built_at)
+        work.preconditioner_solves, work.preconditioner_fewest = kept.solves, kept.fewest
+        work.preconditioner = kept.built or None
+        work.first_guess, work.roller_torque_guess = kept.velocity_guess, kept.torque_guess
 
     def add_torques(self, work, force_torque):
         """Extra torques of the scheme (N, 6) -> (N, 6): none here."""

@@ -529,6 +529,14 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
     return GmresResult(solution, iterations, info == 0, float(np.linalg.norm(residual) / rhs_norm))
 
 
+def kept_fewest(fewest, iterations, margin):
+    """The wear rule of a kept preconditioner: the fewest GMRES iterations since its build after a solve of
+    ``iterations`` (``fewest`` None: the first), or None when that solve took ``margin`` or more above them (the
+    preconditioner has worn: the next solve builds a new one)."""
+    fewest = iterations if fewest is None else min(fewest, iterations)
+    return None if iterations >= fewest + margin else fewest
+
+
 def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
           print_residual=False):
     """Solve ``A x = rhs`` of any problem of the package by preconditioned GMRES: the one solve of the package.
