@@ -170,8 +170,8 @@ class Scheme:
         A preconditioner built at one configuration serves the next solves too, turned with the bodies
         (``multi_bodies.solver.corotated_preconditioner``), until :meth:`served` finds that it has worn (doc
         preconditioners.md, kept preconditioners).  The build is weighed (``preconditioner auto``) against the
-        solves the last kept one served before it wore (at least 1), at most ``KEPT_SOLVES_WEIGHED`` (that many
-        for the first one).  After a
+        solves the last kept one served before it wore (at least 1, at most ``KEPT_SOLVES_WEIGHED``; that many
+        for the first one), averaged with the weight before (:meth:`served`).  After a
         restart the preconditioner is built again at the configuration it was built at, with the same weight, so
         the run repeats bit for bit.
         """
@@ -193,7 +193,11 @@ class Scheme:
         solves = work.preconditioner_solves + 1
         fewest = kept_fewest(work.preconditioner_fewest, iterations, KEPT_WEAR_ITERATIONS)
         if fewest is None:
-            work.preconditioner_lifetime = max(1, solves - 1)  # the solves it served before it wore
+            # the solves it served before it wore, averaged with the last estimate (rounded up): a wear that came
+            # early by the noise of one iteration does not by itself cost the next build its correction
+            lived = min(max(1, solves - 1), KEPT_SOLVES_WEIGHED)
+            last = work.preconditioner_lifetime
+            work.preconditioner_lifetime = lived if last is None else -(-(min(last, KEPT_SOLVES_WEIGHED) + lived) // 2)
             work.preconditioner = work.preconditioner_configuration = None
             work.preconditioner_solves = work.preconditioner_fewest = None
             return

@@ -61,8 +61,8 @@ class RunState:
         the one the deterministic schemes keep, ``Scheme.kept_preconditioner``)
     preconditioner_solves : int or None, solves the kept deterministic preconditioner has served (None: none kept);
         preconditioner_fewest : int or None, the fewest GMRES iterations of those solves;
-        preconditioner_lifetime : int or None, solves the one kept before it served (``auto`` weighs the next
-        build against them)
+        preconditioner_lifetime : int or None, solves the ones kept before it served, the last two averaged
+        (``auto`` weighs the next build against them)
     concentration_preconditioner_configuration : the Configuration where the concentration problem's kept
         preconditioner was built (phoretic runs under ``preconditioner auto`` or ``neighbours``), or None;
         concentration_preconditioner_solves, concentration_preconditioner_fewest : its solves and fewest GMRES

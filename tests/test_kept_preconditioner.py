@@ -130,7 +130,7 @@ def test_deterministic_solves_keep_their_preconditioner_to_the_same_trajectory(s
 def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     """The served counts: the fewest iterations are remembered; a solve with KEPT_WEAR_ITERATIONS more ends the
     preconditioner (the next solve builds one, weighed against the solves it served before the worn one, at
-    most KEPT_SOLVES_WEIGHED); fewer more than the fewest does not."""
+    most KEPT_SOLVES_WEIGHED, averaged with the weight before); fewer more than the fewest does not."""
     class Work:
         preconditioner, preconditioner_configuration = object(), object()
         preconditioner_solves, preconditioner_fewest, preconditioner_lifetime = 0, None, None
@@ -143,6 +143,11 @@ def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     scheme_base.Scheme.served(work, 4 + wear)
     assert work.preconditioner is None and work.preconditioner_configuration is None
     assert work.preconditioner_solves is None and work.preconditioner_lifetime == 3
+    # the next one wears after serving one solve: the weight is the mean of 3 and 1, rounded up
+    work.preconditioner, work.preconditioner_configuration, work.preconditioner_solves = object(), object(), 0
+    for iterations in (4, 4 + wear):
+        scheme_base.Scheme.served(work, iterations)
+    assert work.preconditioner is None and work.preconditioner_lifetime == 2
     # the next build is weighed against the solves this one served
     asked = count_builds(monkeypatch)
     model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')
