@@ -10,6 +10,7 @@ for each far-field backend asked.
     python benchmarks/bench_lubrication.py --steps --sides 8 16       # trapezoidal steps, near-field roots
     python benchmarks/bench_lubrication.py --breakdown --sides 8 16   # where a step's time goes, both assemblies
     python benchmarks/bench_lubrication.py --breakdown --sides 64 --repeats 1 --assembly compiled
+    python benchmarks/bench_lubrication.py --kept --sides 8 16      # published solves against kept ones
 
 With ``--breakdown``: one trapezoidal step (Lanczos root) timed, under cProfile, split into the assembly of
 R_sup, R_MB and Delta_R (``assembly.resistance_matrices``), the sparse LU of the preconditioner (SuperLU),
@@ -23,6 +24,12 @@ With ``--steps``: the median wall time of one stochastic trapezoidal step
 work counted (far-field products, GMRES and Lanczos iterations, sparse LU factorisations, Delta_R
 assemblies), for both near-field roots, and the cost of one ``Delta_R^1/2 W`` by each root (published
 step, measured on 2 cores with its numba far field: 1.38 s for 64 spheres, 2.09 s for 256).
+
+With ``--kept``: 20 trapezoidal steps (``--kept-steps``) from the lattice with the published solves (a sparse LU
+and a zero first guess at every solve) and with the kept ones (``lubrication.integrators.KeptSolves``, what
+``preconditioner auto`` does in ``multi_bodies.py``), the two runs stepping in turn, at tolerances 1e-4 and 1e-8,
+dt 1e-3 and 1e-2, with and without a spin of 12 held by the torques: median seconds per step and the ratio,
+GMRES iterations per solve, sparse LUs per step.
 
 Scene: radius a = 1.0155 (the published rollers), eta = 1e-3, a square lattice of spacing 2.3 a at height
 1.2 a, jittered by 0.1 a in x and y (seed 1); random forces and torques (seed 2); tolerance 1e-8.
