@@ -91,7 +91,7 @@ def test_kept_solves_follow_the_published_solves_with_fewer_factorisations(schem
     assert np.linalg.norm(loose.configuration.locations - published.configuration.locations) > 1e-8 * travelled
 
 
-def test_closed_gaps_wear_the_kept_preconditioner_and_the_next_step_builds_a_fresh_one():
+def test_closed_gaps_wear_the_kept_preconditioner_and_the_next_step_builds_a_fresh_one(monkeypatch):
     """Kept at the lattice of gaps 0.3 (0.2 to the wall), the preconditioner meets the lattice of gaps 0.06
     (0.04): the predictor there takes more iterations than at the build, which ends the kept one; the next step
     builds at its start and its predictor takes exactly the iterations of the published solve there (a fresh
@@ -115,8 +115,8 @@ def test_closed_gaps_wear_the_kept_preconditioner_and_the_next_step_builds_a_fre
                                         1e-8, kept=kept)
     assert kept.built_at is None  # worn: ended
     assert step.counts['factorisations'] == 1  # the corrector's own, not kept
-    fresh = integrators.trapezoidal_step(settings, closed, orientations, weight, 0.05, 1e-4, np.random.default_rng(3),
-                                         1e-8, kept=kept)
+    integrators.trapezoidal_step(settings, closed, orientations, weight, 0.05, 1e-4, np.random.default_rng(3), 1e-8,
+                                 kept=kept)
     assert np.array_equal(kept.built_at[0], closed) and kept.solves == 1
     iterations = []
     original = integrators.solve
@@ -125,12 +125,8 @@ def test_closed_gaps_wear_the_kept_preconditioner_and_the_next_step_builds_a_fre
         result = original(*args, **kwargs)
         iterations.append(result.iterations)
         return result
-    integrators.solve = spy
-    try:
-        integrators.trapezoidal_step(settings, closed, orientations, weight, 0.05, 1e-4, np.random.default_rng(3),
-                                     1e-8)
-    finally:
-        integrators.solve = original
+    monkeypatch.setattr(integrators, 'solve', spy)
+    integrators.trapezoidal_step(settings, closed, orientations, weight, 0.05, 1e-4, np.random.default_rng(3), 1e-8)
     assert kept.fewest == iterations[0] > fewest
 
 
