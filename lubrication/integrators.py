@@ -113,7 +113,7 @@ class KeptSolves:
         else built for this solve alone (the corrector's predicted configuration is never kept: one gap there
         closed too far would slow every later solve)."""
         if self.built_at is None and not start:
-            return self._build(name, problem.matrices, problem, counts)
+            return self._build(name, problem.matrices, counts)
         if self.built_at is None:
             self.built_at = (problem.locations.copy(), np.array(orientations, dtype=float))
             self.built, self.solves, self.fewest = {'matrices': problem.matrices}, 0, None
@@ -121,18 +121,16 @@ class KeptSolves:
             self.built['matrices'] = self.settings.matrices(self.built_at[0])
             counts['assemblies'] += 1
         if name not in self.built:
-            self.built[name] = self._build(name, self.built['matrices'], problem, counts)
+            self.built[name] = self._build(name, self.built['matrices'], counts)
         return self.built[name]
 
-    def _build(self, name, matrices, problem, counts):
-        counts['factorisations'] += 1
+    def _build(self, name, matrices, counts):
+        """The preconditioner ``name`` from the near-field ``matrices`` of some configuration, counted."""
         if name == 'torques':
-            return torque_preconditioner(matrices.Delta_R, self.settings.eta, self.settings.a)
-        if matrices is problem.matrices:
-            built = problem.preconditioner(self.tolerance)
+            built = torque_preconditioner(matrices.Delta_R, self.settings.eta, self.settings.a)
         else:
             built = LubricationPreconditioner(matrices, self.settings.shift(self.tolerance))
-        counts['factorisations'] -= built.factor is None
+        counts['factorisations'] += name == 'torques' or built.factor is not None
         return built
 
     def preconditioner(self, problem, orientations, counts, start=True):

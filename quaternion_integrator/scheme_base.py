@@ -21,8 +21,9 @@ import numpy as np
 
 from body.body import Configuration, as_configuration
 from body.geometry import rotate_quaternions as _rotate_quaternions
+from multi_bodies.solver.body_solver import kept_fewest
 from multi_bodies.solver.counters import Counters
-from quaternion_integrator.scheme_state import RunState, StepWork, kept_fewest
+from quaternion_integrator.scheme_state import RunState, StepWork
 from utils import SimulationStopped, UserInputError
 
 

@@ -20,7 +20,7 @@ from typing import Any, Optional
 import numpy as np
 
 from body.body import Configuration
-from multi_bodies.solver.body_solver import kept_fewest  # noqa: F401 (the schemes' wear rule)
+from multi_bodies.solver.body_solver import kept_fewest
 from multi_bodies.solver.counters import Counters
 
 # The history fields (saved in restart records, SPEC decision 11).
@@ -68,13 +68,13 @@ class RunState:
         concentration_preconditioner_solves, concentration_preconditioner_fewest : its solves and fewest GMRES
         iterations, as for the deterministic one; concentration_preconditioner : the object (a cache: not saved)
     preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
+    velocities : the velocities the last step used (not saved)
+    last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
 
     The lubrication schemes keep their solves' preconditioners in the same fields
     (``lubrication.integrators.KeptSolves``: where they were built, their predictor solves and fewest
     iterations), ``first_guess`` holds their last corrector's velocities (6N,) at kT = 0 and
     ``roller_torque_guess`` the torque problem's last unknowns ``[V T]`` (6N,), both un-normalised.
-    velocities : the velocities the last step used (not saved)
-    last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
     """
     configuration: Configuration
     step: int = 0
