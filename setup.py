@@ -74,6 +74,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._surface_cpp',
         ['multi_bodies/solver/cpp/surface_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        depends=HEADERS,
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,

@@ -16,7 +16,12 @@ iterations in brackets):
 * ``laplace``: the concentration solve (unpreconditioned GMRES(200), no set-up: the published solve);
 * ``laplace_pc``: the same preconditioned as the runs do by default (laplace_preconditioner.py, set-up included);
 * ``laplace+slip``: the concentration solve, its gradient and the phoretic slip;
-* ``slip_length``: preconditioner set-up and GMRES of the slip-length problem under the same force.
+* ``slip_length``: preconditioner set-up and GMRES of the slip-length problem under the same force (every body
+  alone, ``preconditioner block_diagonal``, as published);
+* ``slip_length_nb``: the same with the neighbour correction (``SlipLengthNeighbourPreconditioner``, what
+  ``preconditioner neighbours`` builds, and ``auto`` where the near pairs hold at most a fifth of the blob pairs).
+
+``--spacing`` sets the lattice spacing (default 3: shells 1 apart, surface to surface).
 """
 import argparse
 import os
@@ -24,6 +29,7 @@ import sys
 import time
 
 import numpy as np
+import scipy.spatial  # noqa: F401  (the neighbour search's; imported once per run, so not timed)
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -35,8 +41,8 @@ from multi_bodies.solver.laplace_preconditioner import LaplacePreconditioner  # 
 from multi_bodies.solver.phoretic import LAPLACE_RESTART, PhoreticSurface, lab_normals  # noqa: E402
 
 
-def suspension(count, blobs, seed=0):
-    """(BodyArrays, blob radius, body-frame normals (N, 3), weights (N,)) of ``count`` shells."""
+def suspension(count, blobs, seed=0, spacing=3.0):
+    """(BodyArrays, blob radius, body-frame normals (N, 3), weights (N,)) of ``count`` shells ``spacing`` apart."""
     rng = np.random.default_rng(seed)
     shell = icosahedral_shell(blobs)
     a = 0.5 * smallest_distance(shell)
@@ -44,7 +50,7 @@ def suspension(count, blobs, seed=0):
     bodies = []
     for k in range(count):
         q = rng.normal(size=4)
-        body = Body([3.0 * (k % side), 3.0 * (k // side), 5.0], q / np.linalg.norm(q), shell, a)
+        body = Body([spacing * (k % side), spacing * (k // side), 5.0], q / np.linalg.norm(q), shell, a)
         body.ID = 'shell'
         bodies.append(body)
     arrays = bodies_to_arrays(bodies)
@@ -57,8 +63,8 @@ def timed(function):
     return time.perf_counter() - start, result
 
 
-def measure(count, blobs, implementation, tolerance, slip_length_value=1e3):
-    arrays, a, normals, weights = suspension(count, blobs)
+def measure(count, blobs, implementation, tolerance, slip_length_value=1e3, spacing=3.0):
+    arrays, a, normals, weights = suspension(count, blobs, spacing=spacing)
     q = arrays.configuration
     product = mobility.mobility_vector_product(implementation)
     dense = mobility.blob_mobility_matrix(implementation)
@@ -93,12 +99,16 @@ def measure(count, blobs, implementation, tolerance, slip_length_value=1e3):
 
     lengths = np.full(len(weights), slip_length_value)
 
-    def with_slip_length():
+    def with_slip_length(corrected):
         problem = slip_length.slip_length_problem(arrays, q, product, 1.0, a, np.zeros(3), normals, lengths, weights)
         pc = slip_length.SlipLengthPreconditioner(arrays, q, dense, 1.0, a, normals, lengths, weights)
+        if corrected:
+            pc = slip_length.SlipLengthNeighbourPreconditioner(pc, dense, 1.0, a,
+                                                               cross_blocks=mobility.blob_cross_blocks(implementation))
         return body_solver.solve(problem, problem.rhs(None, force), pc, tolerance=tolerance, restart=300)
-    seconds, result = timed(with_slip_length)
-    row['slip_length'] = (seconds, result.iterations)
+    for name, corrected in (('slip_length', False), ('slip_length_nb', True)):
+        seconds, result = timed(lambda: with_slip_length(corrected))
+        row[name] = (seconds, result.iterations)
     assert lab_normals(arrays, q, normals).shape == normals.shape
     return row
 
@@ -110,12 +120,13 @@ def main(argv=None):
     parser.add_argument('--counts', type=int, nargs='+', default=[1, 10, 100])
     parser.add_argument('--tolerance', type=float, default=1e-8)
     parser.add_argument('--slip-length', type=float, default=1e3, help='slip length of every blob (default 1e3)')
+    parser.add_argument('--spacing', type=float, default=3.0, help='lattice spacing of the unit shells (default 3)')
     args = parser.parse_args(argv)
-    columns = ('mobility', 'laplace', 'laplace_pc', 'laplace+slip', 'slip_length')
+    columns = ('mobility', 'laplace', 'laplace_pc', 'laplace+slip', 'slip_length', 'slip_length_nb')
     print('| bodies | blobs | ' + ' | '.join(columns) + ' |')
     print('|---|---|' + '---|' * len(columns))
     for count in args.counts:
-        row = measure(count, args.blobs, args.implementation, args.tolerance, args.slip_length)
+        row = measure(count, args.blobs, args.implementation, args.tolerance, args.slip_length, args.spacing)
         print('| %d | %d | ' % (count, count * args.blobs)
               + ' | '.join('%.3g s (%d)' % row[c] for c in columns) + ' |', flush=True)
 

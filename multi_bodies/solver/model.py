@@ -378,7 +378,9 @@ class Model:
     def build_preconditioner(self, configuration, solves=1):
         """The GMRES preconditioner (and the Lanczos factors) at ``configuration``.
 
-        ``preconditioner`` ``neighbours``: the block-diagonal one corrected for the couplings of neighbouring
+        Slip-length bodies: every body's own system inverted, corrected for neighbouring bodies under ``auto``
+        and ``neighbours`` (:meth:`Surface.slip_length_preconditioner`).  Other bodies: ``preconditioner``
+        ``neighbours``: the block-diagonal one corrected for the couplings of neighbouring
         bodies (:class:`NeighbourPreconditioner`); ``auto`` (the default): the same where its build costs at
         most ``solves * AUTO_MAX_COST_RATIO`` of an ``M f`` product (``solves``: how many solves the caller
         will make with it), else the block-diagonal one; ``block_diagonal``: every body alone (the published

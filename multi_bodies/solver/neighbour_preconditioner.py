@@ -210,6 +210,26 @@ def pair_blocks(body_arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobil
         yield chosen, t_i, t_j, O
 
 
+def symmetric_pair_product(groups, blob_vector):
+    """``sum over pairs`` of ``O_ij v_j`` (into body i's rows) and ``O_ij^T v_i`` (into body j's): (3N,).
+
+    groups : (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)) of pairs of two structure types, ``first_*`` the
+    first row (3 times the first blob) of each body; blob_vector (3N,).  A compiled loop that reads every block
+    once (``_preconditioner_cpp.pair_product``), NumPy without it.
+    """
+    vector = np.ascontiguousarray(blob_vector, dtype=float).reshape(-1)
+    out = np.zeros_like(vector)
+    for first_i, first_j, O in groups:
+        if _preconditioner_cpp is not None:
+            _preconditioner_cpp.pair_product(O, first_i, first_j, vector, out)
+            continue
+        rows_i = first_i[:, None] + np.arange(O.shape[1])[None, :]
+        rows_j = first_j[:, None] + np.arange(O.shape[2])[None, :]
+        np.add.at(out, rows_i, np.matmul(O, vector[rows_j][:, :, None])[:, :, 0])
+        np.add.at(out, rows_j, np.matmul(vector[rows_i][:, None, :], O)[:, 0, :])
+    return out
+
+
 # the obstacles' coarse correction is built for at most this many bodies of prescribed motion (a dense 6F x 6F
 # system; its pair blocks grow as F^2)
 MAX_COARSE_OBSTACLES = 200
@@ -408,17 +428,7 @@ class NeighbourPreconditioner:
 
     def neighbour_product(self, blob_forces):
         """``O_near lambda``: blob velocities (3N,) of blob forces (3N,) through the neighbour blocks only."""
-        forces = np.ascontiguousarray(blob_forces, dtype=float).reshape(-1)
-        out = np.zeros_like(forces)
-        for first_i, first_j, O in self.groups:
-            if _preconditioner_cpp is not None:
-                _preconditioner_cpp.pair_product(O, first_i, first_j, forces, out)
-                continue
-            rows_i = first_i[:, None] + np.arange(O.shape[1])[None, :]
-            rows_j = first_j[:, None] + np.arange(O.shape[2])[None, :]
-            np.add.at(out, rows_i, np.matmul(O, forces[rows_j][:, :, None])[:, :, 0])
-            np.add.at(out, rows_j, np.matmul(forces[rows_i][:, None, :], O)[:, 0, :])
-        return out
+        return symmetric_pair_product(self.groups, blob_forces)
 
     def apply(self, x):
         """The preconditioner applied to ``x = [s (3N); f (6Nb) ...]`` (the base preconditioner's layout)."""

@@ -27,7 +27,8 @@ sees a wall (``multi_bodies.solver.surface``).
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from body.body import K_matrices
+from body.body import K_dot, K_matrices
+from multi_bodies.solver import neighbour_preconditioner as neighbours
 from multi_bodies.solver.body_solver import MobilityProblem, SolutionParts, blob_radius_argument, spd_inverse
 
 PAIRS_PER_CHUNK = 1 << 19
@@ -167,28 +168,60 @@ class SlipLengthProblem:
         return velocities
 
 
-def double_layer_matrix(x, normals, weights, blob_radius):
-    """Dense ``D`` (3n, 3n) of :func:`double_layer` among blobs x (n, 3) (one body: the preconditioner's blocks).
+def double_layer_blocks(targets, sources, normals, weights, blob_radius, backend=None):
+    """Dense blocks of :func:`double_layer` from the blobs ``sources`` to the points ``targets``.
 
-    Block ``(i, j)``: ``-(3 / 4 pi) w_j / r^5 [ (1 - 10 a^2 / (3 r^2)) (r.n_j) r r^T
-    + (2 a^2 / 3) (r n_j^T + n_j r^T + (r.n_j) I) ]``, zero for ``r < 1e-14``.
+    targets (..., nt, 3); sources, normals (..., ns, 3) and weights (..., ns) of the source blobs (the same
+    leading dimensions: a stack of pairs, or none).  Returns (..., 3 nt, 3 ns): block ``(i, j)`` is
+    ``-(3 / 4 pi) w_j / r^5 [ (1 - 10 a^2 / (3 r^2)) (r.n_j) r r^T + (2 a^2 / 3) (r n_j^T + n_j r^T + (r.n_j) I) ]``
+    with ``r = x_i - x_j``, zero for ``r < 1e-14``.  backend : 'C++' (the compiled pair loop), 'python'
+    (:func:`double_layer_blocks_numpy`, the reference) or None (C++ when built).
     """
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    n = np.asarray(normals, dtype=float).reshape(-1, 3)
-    w = np.asarray(weights, dtype=float).reshape(-1)
+    if backend == 'python' or (backend is None and _surface_cpp is None):
+        return double_layer_blocks_numpy(targets, sources, normals, weights, blob_radius)
+    x_t = np.asarray(targets, dtype=float)
+    x_s = np.asarray(sources, dtype=float)
+    lead = x_t.shape[:-2]
+    if x_s.shape[:-2] != lead:
+        raise ValueError('targets and sources must have the same leading dimensions, got %s and %s'
+                         % (x_t.shape, x_s.shape))
+    nt, ns = x_t.shape[-2], x_s.shape[-2]
+    stack = int(np.prod(lead, dtype=int))
+    blocks = _surface_cpp.stokes_double_layer_blocks(
+        np.ascontiguousarray(x_t.reshape(stack, nt, 3)), np.ascontiguousarray(x_s.reshape(stack, ns, 3)),
+        np.ascontiguousarray(np.asarray(normals, dtype=float).reshape(stack, ns, 3)),
+        np.ascontiguousarray(np.asarray(weights, dtype=float).reshape(stack, ns)), float(blob_radius))
+    return blocks.reshape(lead + (3 * nt, 3 * ns))
+
+
+def double_layer_blocks_numpy(targets, sources, normals, weights, blob_radius):
+    """:func:`double_layer_blocks` in NumPy (the reference of the compiled loop; leading dimensions broadcast)."""
+    x_t = np.asarray(targets, dtype=float)
+    x_s = np.asarray(sources, dtype=float)
+    n = np.asarray(normals, dtype=float)
+    w = np.asarray(weights, dtype=float)
     a2 = float(blob_radius) ** 2
-    r = x[:, None, :] - x[None, :, :]
-    d2 = np.einsum('ijk,ijk->ij', r, r)
+    r = x_t[..., :, None, :] - x_s[..., None, :, :]
+    d2 = np.einsum('...k,...k->...', r, r)
     far = d2 >= SELF_DISTANCE ** 2
     inv_d2 = np.divide(1.0, d2, out=np.zeros_like(d2), where=far)
-    scale = -(3.0 / (4.0 * np.pi)) * w[None, :] * inv_d2 * inv_d2 * np.sqrt(inv_d2)
-    rn = np.einsum('ijk,jk->ij', r, n)
-    nj = np.broadcast_to(n[None, :, :], r.shape)
-    blocks = (((1.0 - (10.0 / 3.0) * a2 * inv_d2) * rn)[:, :, None, None] * r[:, :, :, None] * r[:, :, None, :]
-              + (2.0 / 3.0) * a2 * (r[:, :, :, None] * nj[:, :, None, :] + nj[:, :, :, None] * r[:, :, None, :]
-                                    + rn[:, :, None, None] * np.eye(3)))
-    blocks *= scale[:, :, None, None]
-    return blocks.transpose(0, 2, 1, 3).reshape(3 * x.shape[0], 3 * x.shape[0])
+    scale = -(3.0 / (4.0 * np.pi)) * w[..., None, :] * inv_d2 * inv_d2 * np.sqrt(inv_d2)
+    rn = np.einsum('...ijk,...jk->...ij', r, n)
+    nj = np.broadcast_to(n[..., None, :, :], r.shape)
+    blocks = (((1.0 - (10.0 / 3.0) * a2 * inv_d2) * rn)[..., None, None] * r[..., :, None] * r[..., None, :]
+              + (2.0 / 3.0) * a2 * (r[..., :, None] * nj[..., None, :] + nj[..., :, None] * r[..., None, :]
+                                    + rn[..., None, None] * np.eye(3)))
+    blocks *= scale[..., None, None]
+    nt, ns = r.shape[-3], r.shape[-2]
+    return np.swapaxes(blocks, -3, -2).reshape(r.shape[:-3] + (3 * nt, 3 * ns))
+
+
+def double_layer_matrix(x, normals, weights, blob_radius):
+    """Dense ``D`` (3n, 3n) of :func:`double_layer` among blobs x (n, 3) (one body: the preconditioner's blocks);
+    the blocks of :func:`double_layer_blocks`."""
+    x = np.asarray(x, dtype=float).reshape(-1, 3)
+    return double_layer_blocks(x, x, np.asarray(normals, dtype=float).reshape(-1, 3),
+                               np.asarray(weights, dtype=float).reshape(-1), blob_radius)
 
 
 class SlipLengthPreconditioner:
@@ -219,7 +252,7 @@ class SlipLengthPreconditioner:
         normals = lab_normals(body_arrays, configuration, np.asarray(normals, dtype=float).reshape(-1, 3))
         weights = np.asarray(weights, dtype=float).reshape(-1)
         self.xi = np.asarray(slip_lengths, dtype=float).reshape(-1) / (eta * weights)
-        self.normals = normals
+        self.normals, self.weights, self.configuration = normals, weights, configuration
         self.blocks = []
         for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
             nb = bodies.stop - bodies.start
@@ -257,13 +290,14 @@ class SlipLengthPreconditioner:
         n3, nb6 = 3 * self.body_arrays.num_blobs, 6 * self.body_arrays.num_bodies
         y1, y2, y3 = y[:n3].reshape(-1, 3), y[n3:n3 + nb6].reshape(-1, 6), y[n3 + nb6:].reshape(-1, 3)
         lam, U = np.zeros_like(y1), np.zeros_like(y2)
+        slip_rows = bool(np.any(y3))  # zero in the neighbour correction's second application: half the work
         for (bodies, blobs), block in zip(self.body_arrays.type_slices, self.blocks):
             if block is None:
                 continue
             A_inv, A_inv_B, A_inv_BK, K, S_inv = block
             nb = bodies.stop - bodies.start
             first = A_inv @ y1[blobs].reshape(nb, -1, 1)
-            if self.kind != 'published':
+            if self.kind != 'published' and slip_rows:
                 first = first + A_inv_B @ y3[blobs].reshape(nb, -1, 1)
             U_k = -S_inv @ (y2[bodies][:, :, None] + np.swapaxes(K, 1, 2) @ first)
             lam[blobs] = (first + A_inv_BK @ U_k).reshape(-1, 3)
@@ -271,6 +305,145 @@ class SlipLengthPreconditioner:
         P_lam = lam - self.normals * np.einsum('ij,ij->i', self.normals, lam)[:, None]
         u = y3 - self.xi[:, None] * P_lam
         return np.concatenate((lam.reshape(-1), U.reshape(-1), u.reshape(-1)))
+
+
+# preconditioner auto: the neighbour correction is used when its near pairs (bodies whose bounding spheres come
+# within the gap) hold at most this share of the blob pairs, its cost per application against one product.
+# Measured (doc/preconditioners.md, benchmarks/bench_phoretic.py): a solve was faster at shares 0.03-0.15, as fast
+# at 0.22 and slower at 0.38.
+AUTO_MAX_COST_RATIO = 0.2
+
+
+class SlipLengthNeighbourPreconditioner:
+    """:class:`SlipLengthPreconditioner` corrected for the couplings of neighbouring bodies, to first order.
+
+    With ``A = A_0 + O`` (``A_0`` every body alone, inverted exactly by the base preconditioner ``P``; ``O`` the
+    couplings of different bodies, which enter the first rows only: ``(O x)_i = sum_j M_ij lambda_j - D_ij v_j``
+    with ``v_j = K_j U_j + u_j`` body j's surface velocity) this applies
+
+        z = P (r - O_near P r)
+
+    the first-order elimination of the neighbours' unknowns (one Jacobi sweep on the near field), with
+    ``O_near`` the blocks of the bodies whose blobs come within ``gap`` of each other
+    (``neighbour_preconditioner.neighbour_pairs``).  The star Schur complement's second-order terms, which
+    the rigid problem's :class:`~multi_bodies.solver.neighbour_preconditioner.NeighbourPreconditioner` adds,
+    changed no iteration count measured here (doc/preconditioners.md), so they are left out.
+
+    Parameters
+    ----------
+    base : SlipLengthPreconditioner at the configuration.
+    stacked_mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks, max_cost_ratio :
+        as :class:`~multi_bodies.solver.neighbour_preconditioner.NeighbourPreconditioner` takes them (the pair
+        blocks ``M_ij`` come the same way).  ``D`` is the free-space double layer whatever the domain
+        (:class:`SlipLengthProblem`), so only pairs that meet without a periodic shift get blocks ``D_ij``.
+    gap : float or None (``DEFAULT_GAP_IN_RADII`` blob radii), surface-to-surface distance of neighbours.
+
+    ``pairs`` (P, 2) holds the neighbour pairs (empty: the base preconditioner alone, e.g. when
+    ``cost_ratio`` exceeded ``max_cost_ratio``).
+    """
+
+    def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
+                 body_lengths=None, cross_blocks=None, max_cost_ratio=None, backend=None):
+        if backend not in (None, 'C++', 'python'):
+            raise ValueError("backend must be 'C++', 'python' or None, got %r" % (backend,))
+        self.base = base
+        arrays, configuration, r_vectors, radii = neighbours.blobs_of(base, blob_radius)
+        self.body_arrays, self.configuration, self.r_vectors = arrays, configuration, r_vectors
+        if gap is None:
+            gap = neighbours.DEFAULT_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
+        self.gap = float(gap)
+        self.num_blobs, self.num_bodies = arrays.num_blobs, arrays.num_bodies
+        offsets = arrays.blob_offsets
+        sizes = np.diff(offsets)
+        candidates = neighbours.candidate_pairs(r_vectors, offsets, radii, configuration.locations, self.gap,
+                                                periodic_length, body_lengths)
+        self.cost_ratio = float(np.sum(sizes[candidates[0][:, 0]] * sizes[candidates[0][:, 1]])) / max(
+            self.num_blobs, 1) ** 2
+        if max_cost_ratio is not None and self.cost_ratio > max_cost_ratio:
+            candidates = neighbours._no_pairs()
+        self.pairs, shifts, _ = neighbours.neighbour_pairs(r_vectors, arrays.blob_body_index, radii,
+                                                           configuration.locations, self.gap, periodic_length,
+                                                           body_lengths, candidates=candidates)
+        size = base.operator.shape[0]
+        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.mobility_groups, self.double_layer_groups = [], []
+        normals, weights, a = base.normals, base.weights, float(np.max(radii)) if radii.size else 0.0
+        self.eta, self.blob_radius = float(eta), a
+        unshifted = ~np.any(shifts != 0.0, axis=1)
+        self.has_neighbours = bool(self.pairs.size)
+        # the near field from the positions (compiled, uniform radii), else from stored pair blocks
+        self.on_the_fly = backend != 'python' and _surface_cpp is not None and bool(radii.size) and np.ptp(radii) == 0
+        if backend == 'C++' and not self.on_the_fly:
+            raise RuntimeError('the compiled slip-length near field needs the C++ surface kernels and blobs of one '
+                               'radius')
+        if self.on_the_fly:
+            # every pair in both directions, ordered by target body: (target, partner, shift added to the partner)
+            targets = np.concatenate((self.pairs[:, 0], self.pairs[:, 1]))
+            partners = np.concatenate((self.pairs[:, 1], self.pairs[:, 0]))
+            both_shifts = np.concatenate((shifts, -shifts)).reshape(-1, 3)
+            order = np.argsort(targets, kind='stable')
+            self.partner_lists = (
+                np.searchsorted(targets[order], np.arange(self.num_bodies + 1)).astype(np.int64),
+                partners[order].astype(np.int64), np.ascontiguousarray(both_shifts[order]),
+                np.concatenate((unshifted, unshifted))[order].astype(np.int64))
+            return
+        for chosen, t_i, t_j, O in neighbours.pair_blocks(arrays, r_vectors, radii, self.pairs, shifts, eta,
+                                                          stacked_mobility, cross_blocks):
+            i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
+            first_i, first_j = (3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64)
+            self.mobility_groups.append((first_i, first_j, O))
+            use = np.flatnonzero(unshifted[chosen])
+            if use.size == 0:
+                continue
+            blobs_i = offsets[i[use]][:, None] + np.arange(arrays.type_blobs[t_i])[None, :]
+            blobs_j = offsets[j[use]][:, None] + np.arange(arrays.type_blobs[t_j])[None, :]
+            n3 = 3 * self.num_blobs
+            # the two directions, in the layout of near_field_product: target rows offset by 3N
+            self.double_layer_groups.append((n3 + first_i[use], first_j[use], double_layer_blocks(
+                r_vectors[blobs_i], r_vectors[blobs_j], normals[blobs_j], weights[blobs_j], a)))
+            self.double_layer_groups.append((n3 + first_j[use], first_i[use], double_layer_blocks(
+                r_vectors[blobs_j], r_vectors[blobs_i], normals[blobs_i], weights[blobs_i], a)))
+
+    def __getattr__(self, name):
+        if name == 'base':
+            raise AttributeError(name)
+        return getattr(self.base, name)
+
+    def near_field_product(self, lam, v):
+        """``(O_near x)`` in the first rows (3N,): ``sum_j M_ij lambda_j - D_ij v_j`` over the neighbour pairs.
+
+        lam (N, 3) blob forces; v (N, 3) surface velocities ``K U + u``.
+        """
+        n3 = 3 * self.num_blobs
+        if self.on_the_fly:
+            target_start, partners, shifts, double_layer = self.partner_lists
+            return _surface_cpp.slip_length_near_field(
+                np.ascontiguousarray(self.r_vectors, dtype=float), np.ascontiguousarray(self.base.normals),
+                np.ascontiguousarray(self.base.weights), self.blob_radius, self.eta,
+                np.asarray(self.body_arrays.blob_offsets, dtype=np.int64), target_start, partners, shifts,
+                double_layer, np.ascontiguousarray(lam, dtype=float).reshape(-1, 3),
+                np.ascontiguousarray(v, dtype=float).reshape(-1, 3)).reshape(-1)
+        out = neighbours.symmetric_pair_product(self.mobility_groups, lam)
+        if self.double_layer_groups:
+            # D is not symmetric: each direction of a pair goes through the compiled symmetric pair loop with its
+            # target rows moved past the end of the vector, where the input is zero (so the transposed half adds
+            # nothing) and the output lands apart
+            extended = np.concatenate((-np.asarray(v, dtype=float).reshape(-1), np.zeros(n3)))
+            out = out + neighbours.symmetric_pair_product(self.double_layer_groups, extended)[n3:]
+        return out
+
+    def apply(self, y):
+        """The preconditioner applied to ``y = [y1 (3N); y2 (6Nb); y3 (3N)]`` (the problem's layout)."""
+        y = np.asarray(y, dtype=float).reshape(-1)
+        z = self.base.apply(y)
+        if not self.has_neighbours:
+            return z
+        n3, nb6 = 3 * self.num_blobs, 6 * self.num_bodies
+        lam, U, u = z[:n3].reshape(-1, 3), z[n3:n3 + nb6].reshape(-1, 6), z[n3 + nb6:].reshape(-1, 3)
+        v = K_dot(self.r_vectors, self.configuration.locations, self.body_arrays.blob_body_index, U) + u
+        s = y.copy()
+        s[:n3] -= self.near_field_product(lam, v)
+        return self.base.apply(s)
 
 
 def slip_length_problem(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length,

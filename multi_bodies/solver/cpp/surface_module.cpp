@@ -12,6 +12,21 @@
 // Layouts (C-contiguous doubles): x, normals (N, 3); densities (N,) or empty (not computed); outputs
 // single, double (N,), dipole, grad (N, 3).
 //
+// stokes_double_layer_blocks: the dense blocks of the same double layer from source blobs to targets, for a stack
+// of P pairs (the slip-length neighbour correction, slip_length.py; NumPy reference double_layer_blocks):
+// targets (P, nt, 3), sources and normals (P, ns, 3), weights (P, ns); out (P, 3 nt, 3 ns), its 3x3 block
+// (i, j) = -(3/4 pi) w_j / r^5 [ (1 - 10 a^2/(3 r^2)) (r.n_j) r r^T + (2 a^2/3) (r n_j^T + n_j r^T + (r.n_j) I) ],
+// zero for r < 1e-14.  OpenMP over the rows (pair and target): each thread writes its own rows.
+//
+// slip_length_near_field: the near field of the slip-length neighbour correction computed on the fly
+// (slip_length.SlipLengthNeighbourPreconditioner; the stored-block path there is the reference):
+//   out_i = sum over the partners q of body(i), over the blobs j of body partners[q], of
+//           M(x_i - x_j - shift_q) lam_j - [double_layer_q] D(x_i - x_j) v_j,
+// M the free-space RPY of blobs of radius a (viscosity eta, rpy_trans_trans_coefficients), D the double layer
+// above.  offsets (Nb + 1,) the bodies' first blobs; target_start (Nb + 1,) each body's range of partners
+// (partners (Q,), shifts (Q, 3), double_layer (Q,) 0 or 1).  OpenMP over the target blobs.  It reads only
+// positions, so it costs the share of near pairs of one M f product, not a pass over stored blocks.
+//
 // laplace_blocks_and_moments: the pieces of the concentration problem's two-level preconditioner
 // (multi_bodies/solver/laplace_preconditioner.py, NumPy reference there), in one pass over the pairs, of the
 // pair kernel of the operator without its 1/2 and its 1/(4 pi):
@@ -26,6 +41,8 @@
 //             + (2 a^2/3) ((n_j.v_j) r + (r.v_j) n_j + (r.n_j) v_j) ],  free space only.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+
+#include "blob_pair_kernels.h"  // the free-space RPY of the mobility backends (mobility/cpp)
 
 #include <cmath>
 #include <stdexcept>
@@ -139,6 +156,124 @@ py::array_t<double> stokes_double_layer(const Array &x, const Array &normals, co
   return out;
 }
 
+py::array_t<double> stokes_double_layer_blocks(const Array &targets, const Array &sources, const Array &normals,
+                                               const Array &weights, double a) {
+  if (targets.ndim() != 3 || targets.shape(2) != 3) throw std::invalid_argument("targets must be (P, nt, 3)");
+  if (sources.ndim() != 3 || sources.shape(2) != 3 || sources.shape(0) != targets.shape(0))
+    throw std::invalid_argument("sources must be (P, ns, 3) with the targets' P");
+  const long P = targets.shape(0), nt = targets.shape(1), ns = sources.shape(1);
+  if (normals.size() != P * ns * 3 || weights.size() != P * ns)
+    throw std::invalid_argument("normals must be (P, ns, 3), weights (P, ns)");
+  py::array_t<double> out({P, 3 * nt, 3 * ns});
+  const double *T = targets.data(), *S = sources.data(), *Nn = normals.data(), *W = weights.data();
+  double *O = out.mutable_data();
+  const double a2 = a * a, self2 = 1e-28, factor = -3.0 / (4.0 * M_PI), b = (2.0 / 3.0) * a2;
+  const long row_length = 3 * ns;
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static)
+    for (long pi = 0; pi < P * nt; ++pi) {
+      const long p = pi / nt, i = pi % nt;
+      const double *xi = T + 3 * pi;
+      double *rows = O + (p * 3 * nt + 3 * i) * row_length;  // the three rows of target i
+      for (long j = 0; j < ns; ++j) {
+        const long sj = p * ns + j;
+        const double *xj = S + 3 * sj, *n = Nn + 3 * sj;
+        const double r[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
+        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        double block[3][3] = {{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}};
+        if (r2 >= self2) {
+          const double inv_r2 = 1.0 / r2, scale = factor * W[sj] * inv_r2 * inv_r2 * std::sqrt(inv_r2);
+          const double rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
+          const double radial = (1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn;
+          for (int k = 0; k < 3; ++k)
+            for (int l = 0; l < 3; ++l)
+              block[k][l] = scale * (radial * r[k] * r[l] + b * (r[k] * n[l] + n[k] * r[l] + (k == l ? rn : 0.0)));
+        }
+        for (int k = 0; k < 3; ++k)
+          for (int l = 0; l < 3; ++l) rows[k * row_length + 3 * j + l] = block[k][l];
+      }
+    }
+  }
+  return out;
+}
+
+using Index = py::array_t<long, py::array::c_style | py::array::forcecast>;
+
+py::array_t<double> slip_length_near_field(const Array &x, const Array &normals, const Array &weights, double a,
+                                           double eta, const Index &offsets, const Index &target_start,
+                                           const Index &partners, const Array &shifts, const Index &double_layer,
+                                           const Array &lam, const Array &v) {
+  if (x.ndim() != 2 || x.shape(1) != 3) throw std::invalid_argument("x must be (N, 3)");
+  const long N = x.shape(0);
+  if (normals.size() != 3 * N || weights.size() != N || lam.size() != 3 * N || v.size() != 3 * N)
+    throw std::invalid_argument("normals, lam and v must be (N, 3), weights (N,)");
+  const long B = offsets.shape(0) - 1;
+  if (B < 0 || target_start.shape(0) != B + 1) throw std::invalid_argument("offsets and target_start: (Nb + 1,)");
+  const long *off = offsets.data(), *start = target_start.data(), *partner = partners.data();
+  const long Q = partners.shape(0);
+  if (off[0] != 0 || off[B] != N || start[0] != 0 || start[B] != Q || shifts.size() != 3 * Q ||
+      double_layer.shape(0) != Q)
+    throw std::invalid_argument("offsets must span the blobs, target_start the partners; shifts (Q, 3), "
+                                "double_layer (Q,)");
+  for (long q = 0; q < Q; ++q)
+    if (partner[q] < 0 || partner[q] >= B) throw std::invalid_argument("partners must be body indices");
+  std::vector<long> body(N);
+  for (long b = 0; b < B; ++b)
+    for (long i = off[b]; i < off[b + 1]; ++i) body[i] = b;
+  py::array_t<double> out({N, 3L});
+  const double *X = x.data(), *Nn = normals.data(), *W = weights.data(), *L = lam.data(), *V = v.data();
+  const double *S = shifts.data();
+  const long *dl = double_layer.data();
+  double *O = out.mutable_data();
+  const double a2 = a * a, inv_a = 1.0 / a, mobility_unit = 1.0 / (8.0 * M_PI * eta * a), self2 = 1e-28;
+  const double factor = -3.0 / (4.0 * M_PI), b2 = (2.0 / 3.0) * a2;
+  {
+    py::gil_scoped_release release;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      const double *xi = X + 3 * i;
+      double m0 = 0.0, m1 = 0.0, m2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
+      for (long q = start[body[i]]; q < start[body[i] + 1]; ++q) {
+        const long first = off[partner[q]], last = off[partner[q] + 1];
+        const double tx = (xi[0] - S[3 * q]) * inv_a, ty = (xi[1] - S[3 * q + 1]) * inv_a,
+                     tz = (xi[2] - S[3 * q + 2]) * inv_a;
+#pragma omp simd reduction(+ : m0, m1, m2)
+        for (long j = first; j < last; ++j) {
+          const double rx = tx - X[3 * j] * inv_a, ry = ty - X[3 * j + 1] * inv_a, rz = tz - X[3 * j + 2] * inv_a;
+          const double r2 = rx * rx + ry * ry + rz * rz;
+          double c_iso, c_rr;  // r = 0 (coinciding blobs of two bodies): a zero reciprocal, as the backends
+          rmb::rpy_trans_trans_coefficients(r2, r2 > 0.0 ? 1.0 / std::sqrt(r2) : 0.0, c_iso, c_rr);
+          const double lx = L[3 * j], ly = L[3 * j + 1], lz = L[3 * j + 2];
+          const double rl = c_rr * (rx * lx + ry * ly + rz * lz);
+          m0 += c_iso * lx + rl * rx;
+          m1 += c_iso * ly + rl * ry;
+          m2 += c_iso * lz + rl * rz;
+        }
+        if (!dl[q]) continue;
+#pragma omp simd reduction(+ : d0, d1, d2)
+        for (long j = first; j < last; ++j) {
+          const double rx = xi[0] - X[3 * j], ry = xi[1] - X[3 * j + 1], rz = xi[2] - X[3 * j + 2];
+          const double nx = Nn[3 * j], ny = Nn[3 * j + 1], nz = Nn[3 * j + 2];
+          const double vx = V[3 * j], vy = V[3 * j + 1], vz = V[3 * j + 2];
+          const double r2 = rx * rx + ry * ry + rz * rz;
+          const double inv_r2 = r2 >= self2 ? 1.0 / r2 : 0.0, inv_r5 = inv_r2 * inv_r2 * std::sqrt(inv_r2);
+          const double rn = rx * nx + ry * ny + rz * nz, rv = rx * vx + ry * vy + rz * vz;
+          const double nv = nx * vx + ny * vy + nz * vz;
+          const double c = W[j] * inv_r5, cb = c * b2;
+          const double radial = c * ((1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn * rv + b2 * nv);
+          d0 += radial * rx + cb * (rv * nx + rn * vx);
+          d1 += radial * ry + cb * (rv * ny + rn * vy);
+          d2 += radial * rz + cb * (rv * nz + rn * vz);
+        }
+      }
+      const double m[3] = {m0, m1, m2}, d[3] = {d0, d1, d2};
+      for (int k = 0; k < 3; ++k) O[3 * i + k] = mobility_unit * m[k] - factor * d[k];
+    }
+  }
+  return out;
+}
+
 py::tuple laplace_blocks_and_moments(const Array &x, const Array &normals, const Array &ws, const Array &wd,
                                     const py::array_t<long, py::array::c_style | py::array::forcecast> &offsets,
                                     const Array &modes, bool wall) {
@@ -205,6 +340,13 @@ PYBIND11_MODULE(_surface_cpp, m) {
         "(single (N,), double (N,), dipole (N, 3), grad_double (N, 3)); empty densities are not computed");
   m.def("stokes_double_layer", &stokes_double_layer, py::arg("x"), py::arg("normals"), py::arg("weights"),
         py::arg("blob_radius"), py::arg("v"), "(D v) (N, 3): the regularised free-space Stokes double layer");
+  m.def("stokes_double_layer_blocks", &stokes_double_layer_blocks, py::arg("targets"), py::arg("sources"),
+        py::arg("normals"), py::arg("weights"), py::arg("blob_radius"),
+        "(P, 3 nt, 3 ns): the dense blocks of the double layer from a stack of source blobs to targets");
+  m.def("slip_length_near_field", &slip_length_near_field, py::arg("x"), py::arg("normals"), py::arg("weights"),
+        py::arg("blob_radius"), py::arg("eta"), py::arg("offsets"), py::arg("target_start"), py::arg("partners"),
+        py::arg("shifts"), py::arg("double_layer"), py::arg("lam"), py::arg("v"),
+        "(N, 3): M_near lam - D_near v over the listed body pairs, computed from the positions");
   m.def("laplace_blocks_and_moments", &laplace_blocks_and_moments, py::arg("x"), py::arg("normals"),
         py::arg("single"), py::arg("double_"), py::arg("offsets"), py::arg("modes"), py::arg("wall"),
         "(blocks (sum n_b^2,), moments (N, B, m)) of the Laplace pair kernel ws/r - wd r.n/r^3 (+ images)");
