@@ -382,7 +382,12 @@ class SlipLengthNeighbourPreconditioner:
             partners = np.concatenate((self.pairs[:, 1], self.pairs[:, 0]))
             both_shifts = np.concatenate((shifts, -shifts)).reshape(-1, 3)
             order = np.argsort(targets, kind='stable')
-            self.partner_lists = (
+            # the compiled loop's arguments, made once: positions, normals, weights, radius, eta, body offsets and the
+            # partner lists (its own range of partners per target body, each partner's shift and double-layer flag)
+            self.near_field_arguments = (
+                np.ascontiguousarray(r_vectors, dtype=float), np.ascontiguousarray(normals, dtype=float),
+                np.ascontiguousarray(weights, dtype=float), a, self.eta,
+                np.ascontiguousarray(offsets, dtype=np.int64),
                 np.searchsorted(targets[order], np.arange(self.num_bodies + 1)).astype(np.int64),
                 partners[order].astype(np.int64), np.ascontiguousarray(both_shifts[order]),
                 np.concatenate((unshifted, unshifted))[order].astype(np.int64))
@@ -414,15 +419,11 @@ class SlipLengthNeighbourPreconditioner:
 
         lam (N, 3) blob forces; v (N, 3) surface velocities ``K U + u``.
         """
-        n3 = 3 * self.num_blobs
         if self.on_the_fly:
-            target_start, partners, shifts, double_layer = self.partner_lists
             return _surface_cpp.slip_length_near_field(
-                np.ascontiguousarray(self.r_vectors, dtype=float), np.ascontiguousarray(self.base.normals),
-                np.ascontiguousarray(self.base.weights), self.blob_radius, self.eta,
-                np.asarray(self.body_arrays.blob_offsets, dtype=np.int64), target_start, partners, shifts,
-                double_layer, np.ascontiguousarray(lam, dtype=float).reshape(-1, 3),
+                *self.near_field_arguments, np.ascontiguousarray(lam, dtype=float).reshape(-1, 3),
                 np.ascontiguousarray(v, dtype=float).reshape(-1, 3)).reshape(-1)
+        n3 = 3 * self.num_blobs
         out = neighbours.symmetric_pair_product(self.mobility_groups, lam)
         if self.double_layer_groups:
             # D is not symmetric: each direction of a pair goes through the compiled symmetric pair loop with its
