@@ -67,6 +67,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._preconditioner_cpp',
         ['multi_bodies/solver/cpp/preconditioner_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        depends=HEADERS,
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,

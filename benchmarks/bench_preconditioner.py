@@ -24,6 +24,11 @@ Scenes (C++ backends, solver_tolerance 1e-8):
 
     python benchmarks/bench_preconditioner.py [--scenes dilute packed ...] [--steps 3]
 
+``--near-field`` (scenes: the six above and ``shells``, 25 icosahedral shells of 162 blobs 0.6 apart)
+compares the neighbour correction's near field computed from the blob positions at every
+application (the default with the C++ blob mobility) with stored pair blocks, under ``preconditioner
+neighbours``: GMRES iterations and seconds per step.
+
 ``--lanczos`` compares instead the two Lanczos factors (option ``lanczos_preconditioner``) under
 ``preconditioner auto``: Lanczos iterations, passes and seconds per step of ``stochastic_Slip_Trapz`` in the
 dilute, packed and 1,000-boomerang scenes, and of ``stochastic_adams_bashforth_rollers`` for 4,000 rollers
@@ -153,6 +158,24 @@ def pillars(num_pillars=16, num_spheres=84, seed=3):
     return model_of(bodies, 0.25)
 
 
+def shells(num=25, blobs=162, spacing=2.6, seed=0):
+    """``num`` icosahedral shells of ``blobs`` blobs (unit radius, blob radius half the smallest blob distance) on a
+    square grid of ``spacing`` (0.6 apart surface to surface) at height 1 + 2a + 0.3, random orientations."""
+    from multi_bodies.files.structure_generators import smallest_distance
+    shell = icosahedral_shell(blobs)
+    a = 0.5 * smallest_distance(shell)
+    rng = np.random.default_rng(seed)
+    side = int(np.ceil(np.sqrt(num)))
+    bodies = []
+    for k in range(num):
+        q = rng.normal(size=4)
+        body = Body([spacing * (k % side), spacing * (k // side), 1.3 + 2 * a], q / np.linalg.norm(q), shell, a)
+        body.ID = 'shell'
+        body.body_length = body.calc_body_length()
+        bodies.append(body)
+    return model_of(bodies, a)
+
+
 def articulated(folder):
     from bench_articulated import COMMON, write_files
     from multi_bodies.files.input_options import parse_input_text
@@ -179,9 +202,11 @@ SCENES = {
 }
 
 
-def run(model, scheme_name, steps, options=None, variants=None):
+def run(model, scheme_name, steps, options=None, variants=None, before_step=None):
     """{variant: (iterations per solve, passes per step, seconds per step, Lanczos iterations per step)} for
-    ``steps`` steps; variants: {name: Model.replace keywords} (None: every GMRES preconditioner)."""
+    ``steps`` steps; variants: {name: Model.replace keywords} (None: every GMRES preconditioner);
+    before_step: {name: callable()} called before each step of that variant (None: nothing)."""
+    before_step = before_step or {}
     options = options if options is not None else options_with(kT=1.0, rf_delta=1e-3, update_PC=1)
     dt = float(options.dt) if options.dt else 0.01
     if variants is None:
@@ -198,6 +223,7 @@ def run(model, scheme_name, steps, options=None, variants=None):
     for step in range(steps + 1):
         for name, r in runs.items():
             timed, scheme, state, rng = r[:4]
+            before_step.get(name, lambda: None)()
             start = time.perf_counter()
             r[2] = scheme.step(timed, state, rng)
             if step:  # the first step is a warm-up (and the Euler start of multistep schemes)
@@ -205,6 +231,7 @@ def run(model, scheme_name, steps, options=None, variants=None):
     for name, r in runs.items():
         counted, state, rng, counter = r[4], r[5], r[6], r[7]
         scheme = r[1]
+        before_step.get(name, lambda: None)()
         state = scheme.step(counted, state, rng)
         first, passes_before = state.counters, sum(counter.counts.values())
         for _ in range(steps):
@@ -218,6 +245,9 @@ def run(model, scheme_name, steps, options=None, variants=None):
         results[name] = (iterations / max(solves, 1), passes, float(np.median(seconds[name])), lanczos)
     return results
 
+
+# the scenes of --near-field: the six above and 25 shells of 162 blobs 0.6 apart (pair blocks of 486 x 486)
+NEAR_FIELD_SCENES = dict(SCENES, shells=(shells, ('deterministic_adams_bashforth', 'stochastic_Slip_Trapz')))
 
 # the scenes of --lanczos: (model maker, scheme)
 LANCZOS_SCENES = {
@@ -249,14 +279,54 @@ def lanczos_main(scenes, steps):
     return 0
 
 
+def near_field_main(scenes, steps):
+    """The neighbour correction's near field from the positions (the compiled loop, the default with the C++
+    blob mobility) against stored pair blocks (forced by making ``mobility.compiled_near_field_domain`` return
+    None), under ``preconditioner neighbours``, their steps alternating."""
+    import mobility
+    compiled = mobility.compiled_near_field_domain
+
+    def use(function):
+        return lambda: setattr(mobility, 'compiled_near_field_domain', function)
+    variants = {'positions': dict(preconditioner='neighbours'), 'stored_blocks': dict(preconditioner='neighbours')}
+    hooks = {'positions': use(compiled), 'stored_blocks': use(lambda name: None)}
+    print('%-16s %-36s %-15s %9s %9s %7s' % ('scene', 'scheme', 'near field', 'it/solve', 's/step', 'ratio'))
+    try:
+        for scene in scenes:
+            make, schemes = NEAR_FIELD_SCENES[scene]
+            with tempfile.TemporaryDirectory() as folder:
+                options = None
+                if scene == 'articulated':
+                    model, options = articulated(folder)
+                else:
+                    model = make()
+                for scheme_name in schemes:
+                    r = run(model, scheme_name, 1 if scene == 'boomerangs_1000' else steps, options, variants, hooks)
+                    stored = r['stored_blocks'][2]
+                    for name in variants:
+                        it, _, seconds, _ = r[name]
+                        print('%-16s %-36s %-15s %9.1f %9.4f %7.2f' % (scene, scheme_name, name, it, seconds,
+                                                                      seconds / stored), flush=True)
+    finally:
+        mobility.compiled_near_field_domain = compiled
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--scenes', nargs='+', default=None, choices=sorted(set(SCENES) | set(LANCZOS_SCENES)))
+    parser.add_argument('--scenes', nargs='+', default=None,
+                        choices=sorted(set(NEAR_FIELD_SCENES) | set(LANCZOS_SCENES)))
     parser.add_argument('--steps', type=int, default=3)
     parser.add_argument('--lanczos', action='store_true',
                         help='compare the Lanczos factors (lanczos_preconditioner) under stochastic_Slip_Trapz '
                              'instead, in the scenes %s' % ', '.join(LANCZOS_SCENES))
+    parser.add_argument('--near-field', action='store_true',
+                        help='compare the neighbour correction\'s near field from the positions with stored pair '
+                             'blocks, under preconditioner neighbours')
     args = parser.parse_args(argv)
+    if args.near_field:
+        return near_field_main([scene for scene in (args.scenes or NEAR_FIELD_SCENES) if scene in NEAR_FIELD_SCENES],
+                               args.steps)
     if args.lanczos:
         return lanczos_main([scene for scene in (args.scenes or LANCZOS_SCENES) if scene in LANCZOS_SCENES],
                             args.steps)

@@ -35,12 +35,14 @@ _threads.apply_blas_policy()  # one BLAS thread: its spinning workers slowed the
 from . import python_backend as _python  # noqa: E402
 from .product_names import PRODUCT_KINDS  # noqa: E402
 from .backends import (available_implementations, blob_cross_blocks, blob_mobility_matrix, blob_product,
-                       mobility_vector_product, source_target_product, split_implementation_name, usable_names)
+                       compiled_near_field_domain, mobility_vector_product, source_target_product,
+                       split_implementation_name, usable_names)
 
 __all__ = ['rotne_prager_tensor', 'single_wall_fluid_mobility', 'free_surface_fluid_mobility',
            'free_surface_mobility_trans_times_force', 'free_surface_mobility_source_target',
            'mobility_radii_trans_times_force', 'available_implementations',
-           'blob_cross_blocks', 'blob_mobility_matrix', 'blob_product', 'mobility_vector_product',
+           'blob_cross_blocks', 'blob_mobility_matrix', 'blob_product', 'compiled_near_field_domain',
+           'mobility_vector_product',
            'source_target_product',
            'usable_names']
 

@@ -199,6 +199,13 @@ def blob_cross_blocks(name):
     return lambda r_i, r_j, eta, a: function(r_i, r_j, eta, a, domain)
 
 
+def compiled_near_field_domain(name):
+    """The domain ('single_wall' or 'no_wall') of blobs backend ``name`` when it is the compiled backend, whose
+    blob mobility the neighbour preconditioner's compiled near-field loop reproduces; None otherwise."""
+    backend, domain = split_domain(name)
+    return domain if backend == 'C++' and domain in ('single_wall', 'no_wall') else None
+
+
 def source_target_product(name):
     """Return ``f(source (Ns,3), target (Nt,3), force (3Ns,), radius_source, radius_target, eta,
     periodic_length=(0,0,0)) -> (3Nt,)`` (velocity at targets) for ``name``."""

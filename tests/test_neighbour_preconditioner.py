@@ -17,7 +17,7 @@ from multi_bodies.solver.model import Model
 from multi_bodies.solver.neighbour_preconditioner import NeighbourPreconditioner, neighbour_pairs
 
 
-def boomerang_model(centres, seed=1, periodic_length=(0.0, 0.0, 0.0), preconditioner='neighbours'):
+def boomerang_model(centres, seed=1, periodic_length=(0.0, 0.0, 0.0), preconditioner='neighbours', blobs_name='C++'):
     rng = np.random.default_rng(seed)
     bodies = []
     for centre in centres:
@@ -30,7 +30,7 @@ def boomerang_model(centres, seed=1, periodic_length=(0.0, 0.0, 0.0), preconditi
                    debye_length=1.0, periodic_length=np.asarray(periodic_length, dtype=float), blob_radius=0.25,
                    blob_mass=1.0)
     return Model(bodies, bodies_to_arrays(bodies), user_hooks.load_user_hooks('/nonexistent'), physics, 1.0, 0.25,
-                 1e-8, vector_product_name='C++', blobs_name='C++', blob_blob_name='None',
+                 1e-8, vector_product_name=blobs_name, blobs_name=blobs_name, blob_blob_name='None',
                  periodic_length=periodic_length, preconditioner=preconditioner)
 
 
@@ -183,10 +183,9 @@ def test_krylov_iterations_of_the_obstacle_problem_halve():
 
 
 
-def test_neighbour_product_is_the_dense_mobility_of_the_neighbour_pairs(monkeypatch):
-    """The compiled pair product and its NumPy fallback equal the dense blob mobility restricted to the
-    blocks of the neighbour pairs (both orders of each pair), and nothing else."""
-    import multi_bodies.solver.neighbour_preconditioner as neighbour_module
+def test_neighbour_product_is_the_dense_mobility_of_the_neighbour_pairs():
+    """The near-field product equals the dense blob mobility restricted to the blocks of the neighbour pairs
+    (both orders of each pair), and nothing else (the stored-block paths: the next test)."""
     model = boomerang_model(grid(9, 2.8), seed=7)
     configuration = model.start_configuration
     pc = model.build_preconditioner(configuration)
@@ -199,8 +198,66 @@ def test_neighbour_product_is_the_dense_mobility_of_the_neighbour_pairs(monkeypa
     forces = np.random.default_rng(2).standard_normal(3 * model.num_blobs)
     compiled = pc.neighbour_product(forces)
     assert np.abs(compiled - expected_matrix @ forces).max() < 1e-12 * np.abs(M).max() * np.abs(forces).sum()
-    monkeypatch.setattr(neighbour_module, '_preconditioner_cpp', None)
-    assert np.allclose(pc.neighbour_product(forces), compiled, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize('blobs_name', ['C++', 'C++_no_wall'])
+@pytest.mark.parametrize('periodic_length', [(0.0, 0.0, 0.0), (8.4, 8.4, 0.0)])
+@pytest.mark.parametrize('height', [2.5, 2.1])
+def test_near_field_from_positions_is_the_mobility_of_the_pairs(blobs_name, periodic_length, height, monkeypatch):
+    """The compiled near field computed from the blob positions (the default with the C++ blob mobility)
+    equals the NumPy backend's dense mobility of every neighbour pair (both orders, the partner at its image
+    shift), above a wall and in free space, across periodic boundaries, and with blobs below their radius
+    (height 2.1: the wall regularisation raises and damps them).  The stored-block path, compiled and NumPy,
+    gives the same product and the same preconditioner."""
+    import mobility
+    import multi_bodies.solver.neighbour_preconditioner as neighbour_module
+    model = boomerang_model(grid(9, 2.8, height), seed=7, periodic_length=periodic_length, blobs_name=blobs_name)
+    configuration = model.start_configuration
+    pc = model.build_preconditioner(configuration)
+    assert pc.on_the_fly and pc.pairs.size and not pc.groups
+    r = model.arrays.blob_positions(configuration)
+    assert (height < 2.5) == bool(0.0 < r[:, 2].min() < 0.25)  # the low scene has blobs below their radius
+    pairs, shifts, _ = neighbour_pairs(r, model.arrays.blob_body_index, 0.25, configuration.locations, 2.0,
+                                       np.asarray(periodic_length))
+    assert [tuple(p) for p in pairs] == [tuple(p) for p in pc.pairs]
+    assert bool(np.any(shifts)) == bool(periodic_length[0] > 0)
+    dense = mobility.blob_mobility_matrix('python' + blobs_name[len('C++'):])
+    offsets = model.arrays.blob_offsets
+    forces = np.random.default_rng(2).standard_normal(3 * model.num_blobs)
+    expected = np.zeros_like(forces)
+    for (i, j), shift in zip(pairs, shifts):
+        rows, cols = slice(3 * offsets[i], 3 * offsets[i + 1]), slice(3 * offsets[j], 3 * offsets[j + 1])
+        both = np.concatenate((r[offsets[i]:offsets[i + 1]], r[offsets[j]:offsets[j + 1]] + shift))
+        block = dense(both, model.eta, 0.25)[:rows.stop - rows.start, rows.stop - rows.start:]
+        expected[rows] += block @ forces[cols]
+        expected[cols] += block.T @ forces[rows]
+    scale = np.abs(expected).max()
+    assert np.abs(pc.neighbour_product(forces) - expected).max() < 1e-12 * scale
+    stored = NeighbourPreconditioner(pc.base, model.stacked_mobility, model.eta, model.blob_radius,
+                                     periodic_length=model.periodic_length, body_lengths=model.body_lengths,
+                                     cross_blocks=mobility.blob_cross_blocks(blobs_name))
+    assert not stored.on_the_fly and stored.groups
+    assert np.abs(stored.neighbour_product(forces) - expected).max() < 1e-12 * scale
+    x = np.random.default_rng(3).standard_normal(pc.operator.shape[0])
+    assert np.abs(pc.apply(x) - stored.apply(x)).max() < 1e-12 * np.abs(stored.apply(x)).max()
+    monkeypatch.setattr(neighbour_module, '_preconditioner_cpp', None)  # the NumPy pair product
+    assert np.abs(stored.neighbour_product(forces) - expected).max() < 1e-12 * scale
+
+
+def test_near_field_kernel_refuses_bad_arguments():
+    """The compiled near field checks its arguments (a clear error, not a crash or a wrong sum)."""
+    from multi_bodies.solver import _preconditioner_cpp
+    x, f = np.zeros((4, 3)), np.zeros((4, 3))
+    offsets, starts = np.array([0, 2, 4]), np.array([0, 1, 2])
+    good = dict(x=x, a=0.25, eta=1.0, wall=True, offsets=offsets, target_start=starts, partners=np.array([1, 0]),
+                shifts=np.zeros((2, 3)), forces=f)
+    assert _preconditioner_cpp.rigid_near_field(**good).shape == (4, 3)
+    for change, message in ((dict(partners=np.array([1, 2])), 'body indices'),
+                            (dict(offsets=np.array([0, 2, 3])), 'span the blobs'),
+                            (dict(shifts=np.array([[0, 0, 1.0], [0, 0, -1.0]])), 'x and y'),
+                            (dict(forces=np.zeros((3, 3))), 'forces'), (dict(a=0.0), 'positive')):
+        with pytest.raises(ValueError, match=message):
+            _preconditioner_cpp.rigid_near_field(**dict(good, **change))
 
 
 def test_small_bodies_are_neighbours_only_when_they_nearly_touch():

@@ -14,6 +14,7 @@ from multi_bodies.files.input_options import options_with
 from multi_bodies.solver import noise_factor
 from quaternion_integrator.scheme_state import StepWork
 from quaternion_integrator.schemes import make_scheme
+from multi_bodies.solver.neighbour_preconditioner import neighbour_pairs
 from test_neighbour_preconditioner import boomerang_model
 from test_stochastic import covariance_z_scores, frobenius_statistic, probe_directions
 from utils import UserInputError
@@ -67,13 +68,23 @@ def test_block_products_equal_dense_algebra_compiled_and_numpy():
         factor.L_dot(x[:-1])
 
 
-def test_factor_matches_the_mobility_on_the_diagonal_and_neighbour_blocks():
-    """IC(0): ``L L^T = M`` on every diagonal block and every neighbour block; L is zero off the pattern."""
-    model = close_cluster()
+@pytest.mark.parametrize('preconditioner', ['block_diagonal', 'neighbours'])
+def test_factor_matches_the_mobility_on_the_diagonal_and_neighbour_blocks(preconditioner):
+    """IC(0): ``L L^T = M`` on every diagonal block and every neighbour block; L is zero off the pattern.
+    Under ``neighbours`` the factor takes its pairs and blocks from the GMRES preconditioner, which computes
+    its near field from the positions and stores the blocks of its strongly coupled pairs only."""
+    model = close_cluster(preconditioner=preconditioner)
     configuration = model.start_configuration
     built = model.build_preconditioner(configuration)
+    if preconditioner == 'neighbours':
+        assert built.on_the_fly and built.stored_gap >= 2.0 * model.blob_radius
     factor = built.noise_factor
     assert factor.pairs.shape[0] >= 3 and factor.breakdowns == 0
+    # every pair of bodies whose blobs come within the noise gap, and no other
+    r = model.arrays.blob_positions(configuration)
+    expected = neighbour_pairs(r, model.arrays.blob_body_index, model.blob_radius, configuration.locations,
+                               noise_factor.NOISE_GAP_IN_RADII * model.blob_radius)[0]
+    assert [tuple(p) for p in factor.pairs] == [tuple(p) for p in expected]
     M = model.dense_matrices(configuration, inverse=False)[0]
     L = dense_blocks(factor)
     product = L @ L.T

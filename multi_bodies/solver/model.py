@@ -402,7 +402,8 @@ class Model:
                                             periodic_length=self.periodic_length, body_lengths=self.body_lengths,
                                             cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
                                             max_cost_ratio=AUTO_MAX_COST_RATIO * max(1, int(solves))
-                                            if self.preconditioner == 'auto' else None)
+                                            if self.preconditioner == 'auto' else None,
+                                            near_field_domain=mobility.compiled_near_field_domain(self.blobs_name))
         if self.lanczos_preconditioner == 'incomplete_cholesky' and self.num_bodies >= 2:
             # Lanczos runs on L^{-1} M L^{-T} with this factor instead of the block-diagonal one (noise_factor)
             built.noise_factor = noise_factor.neighbour_noise_factor(

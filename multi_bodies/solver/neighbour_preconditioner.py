@@ -19,10 +19,12 @@ with ``(I - W_i Q_i)^{-1} ~ I``): ``T_i^{-1} s ~ z + P_i^{-1} [W_i z_lambda; 0]`
 The exact Woodbury factor gave the same GMRES iteration counts in every scene measured, at the cost of a
 batched solve; and only the pairs closer than ``strong_gap`` need their terms in ``W_i`` (the others enter
 through the right-hand side alone, at the same iteration counts).  So the base preconditioner is used as it
-is (any body kind it handles); the pair blocks ``O_ij`` and, for the bodies with a close neighbour,
-``P_i^{-1} [W_i; 0]`` are stored.  One application costs two applications of the base preconditioner, one
-product with the neighbour blocks (a compiled loop that reads every pair block once) and one with those
-stored blocks.
+is (any body kind it handles); for the bodies with a close neighbour ``P_i^{-1} [W_i; 0]`` is stored.  One
+application costs two applications of the base preconditioner, one near-field product ``O_near`` and one
+product with those stored blocks.  With the C++ blob mobility (one radius, a wall or free space) the
+near field is computed again from the blob positions at every application by a compiled loop over the
+neighbour pairs' blobs (``_preconditioner_cpp.rigid_near_field``); otherwise the pair blocks ``O_ij`` are
+stored and read once per application (``_preconditioner_cpp.pair_product``).
 
 Bodies of prescribed motion (obstacles) have unknown net forces, which couple at long range; their rigid
 modes are coupled exactly by a small Galerkin system (:class:`_ObstacleCoarseCorrection`), also where no
@@ -336,6 +338,11 @@ class NeighbourPreconditioner:
     max_cost_ratio : float or None, build the correction only when ``sum of n_i n_j / N^2`` over the candidate
         pairs (:func:`candidate_pairs`) is at most this (``preconditioner auto``); otherwise it is the base
         preconditioner (``pairs`` then empty and ``cost_ratio`` says why).  None: always.
+    near_field_domain : 'single_wall', 'no_wall' or None: the domain of the blob mobility (that of
+        ``cross_blocks``, the C++ backend's) when the near field may be computed again from the positions at every
+        application by the compiled loop (``_preconditioner_cpp.rigid_near_field``), storing the pair blocks of
+        the strongly coupled pairs only; None (or blobs of several radii, or no compiled module): every
+        neighbour pair's block is stored.  Both give the same preconditioner to rounding.
     exact_woodbury : bool, apply ``T_i^{-1}`` exactly (``G_i = (I - W_i Q_i)^{-1} W_i``, a batched solve)
         instead of to first order; then two bodies alone are preconditioned by the exact inverse.
 
@@ -345,7 +352,8 @@ class NeighbourPreconditioner:
     """
 
     def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
-                 strong_gap=None, exact_woodbury=False, body_lengths=None, cross_blocks=None, max_cost_ratio=None):
+                 strong_gap=None, exact_woodbury=False, body_lengths=None, cross_blocks=None, max_cost_ratio=None,
+                 near_field_domain=None):
         self.base = base
         arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
         if gap is None:
@@ -379,6 +387,7 @@ class NeighbourPreconditioner:
         if 2 <= fixed.size <= MAX_COARSE_OBSTACLES:
             self.obstacles = _ObstacleCoarseCorrection(base, fixed, r_vectors, radii, eta, stacked_mobility,
                                                        cross_blocks, periodic_length)
+        self.on_the_fly, self.stored_gap = False, self.gap
         if not self.has_neighbours:
             return  # every body alone: the base preconditioner (with the obstacles' coarse correction)
         Q = base.blob_blocks()
@@ -386,8 +395,27 @@ class NeighbourPreconditioner:
         # the second-order terms are kept for the free bodies only: those of bodies of prescribed motion changed
         # no iteration count measured (16 pillars among 84 spheres: 14 either way) and cost most of the build
         second_order = ~np.asarray(getattr(base, 'fixed', np.zeros(arrays.num_bodies, dtype=bool)), dtype=bool)
-        for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs, shifts, eta, stacked_mobility,
-                                               cross_blocks, body_type):
+        # the near field from the positions (compiled, one blob radius, a wall or free space), else from stored
+        # pair blocks; on the fly, blocks are made only for the strongly coupled pairs (their W terms)
+        self.on_the_fly = (near_field_domain in ('single_wall', 'no_wall') and _preconditioner_cpp is not None and
+                           hasattr(_preconditioner_cpp, 'rigid_near_field') and bool(radii.size) and
+                           np.ptp(radii) == 0 and not (near_field_domain == 'single_wall' and np.any(shifts[:, 2])))
+        # pair_groups holds the blocks of every pair closer than stored_gap (noise_factor takes them from here)
+        self.stored_gap = self.strong_gap if self.on_the_fly else self.gap
+        stored = np.flatnonzero(gaps < self.strong_gap) if self.on_the_fly else np.arange(self.pairs.shape[0])
+        if self.on_the_fly:
+            # every pair in both directions, ordered by target body: (target, partner, shift added to the partner)
+            targets = np.concatenate((self.pairs[:, 0], self.pairs[:, 1]))
+            order = np.argsort(targets, kind='stable')
+            self.near_field_arguments = (
+                np.ascontiguousarray(r_vectors, dtype=float), float(radii[0]), float(eta),
+                near_field_domain == 'single_wall', np.ascontiguousarray(offsets, dtype=np.int64),
+                np.searchsorted(targets[order], np.arange(arrays.num_bodies + 1)).astype(np.int64),
+                np.concatenate((self.pairs[:, 1], self.pairs[:, 0]))[order].astype(np.int64),
+                np.ascontiguousarray(np.concatenate((shifts, -shifts)).reshape(-1, 3)[order]))
+        for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs[stored], shifts[stored], eta,
+                                               stacked_mobility, cross_blocks, body_type) if stored.size else ():
+            chosen = stored[chosen]
             i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
             # the second-order terms W_i = sum_j O_ij Q_j O_ji of the strongly coupled pairs only
             strong = gaps[chosen] < self.strong_gap
@@ -398,7 +426,8 @@ class NeighbourPreconditioner:
                     t_first, t_second = (t_j, t_i) if side else (t_i, t_j)
                     np.add.at(W[t_first], local[first[use]],
                               np.matmul(np.matmul(O_s, Q[t_second][local[second[use]]]), np.swapaxes(O_s, 1, 2)))
-            self.groups.append(((3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64), O))
+            if not self.on_the_fly:
+                self.groups.append(((3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64), O))
             self.pair_groups.append((chosen, O))
         # T_i^{-1} to first order in W_i: G_i = W_i (zero for a body without neighbours).  The exact
         # (I - W_i Q_i)^{-1} W_i costs a batched solve and gave the same GMRES iterations in every scene measured.
@@ -428,6 +457,9 @@ class NeighbourPreconditioner:
 
     def neighbour_product(self, blob_forces):
         """``O_near lambda``: blob velocities (3N,) of blob forces (3N,) through the neighbour blocks only."""
+        if self.on_the_fly:
+            return _preconditioner_cpp.rigid_near_field(
+                *self.near_field_arguments, np.ascontiguousarray(blob_forces, dtype=float).reshape(-1, 3)).reshape(-1)
         return symmetric_pair_product(self.groups, blob_forces)
 
     def apply(self, x):

@@ -242,8 +242,9 @@ def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_le
     stacked_mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks : as
         :class:`neighbour_preconditioner.NeighbourPreconditioner` takes them.
     gap : float or None, the neighbour gap (surface to surface, length; None: NOISE_GAP_IN_RADII blob radii).
-    neighbours : a NeighbourPreconditioner built on ``base`` with at least that gap, or None: its pairs closer
-        than ``gap`` and their blocks are taken instead of computed again.
+    neighbours : a NeighbourPreconditioner built on ``base`` that stores the blocks of its pairs up to at least
+        that gap (its ``stored_gap``), or None: its pairs closer than ``gap`` and their blocks are taken instead
+        of computed again.
     """
     arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
     if gap is None:
@@ -251,7 +252,8 @@ def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_le
     by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
     own_factors = [L for t in by_start for L in base.cholesky_factors[t]]  # in the order of the bodies
     own_inverses = [L for t in by_start for L in base.inverse_cholesky_factors[t]]
-    if neighbours is not None and neighbours.gap >= float(gap) and neighbours.pairs.size:
+    if neighbours is not None and getattr(neighbours, 'stored_gap', neighbours.gap) >= float(gap) and \
+            neighbours.pairs.size:
         # the neighbour pairs of the GMRES preconditioner that are close enough, with their blocks
         close = neighbours.pair_gaps < float(gap)
         pairs = neighbours.pairs[close]
