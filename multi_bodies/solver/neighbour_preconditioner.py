@@ -404,15 +404,13 @@ class NeighbourPreconditioner:
         self.stored_gap = self.strong_gap if self.on_the_fly else self.gap
         stored = np.flatnonzero(gaps < self.strong_gap) if self.on_the_fly else np.arange(self.pairs.shape[0])
         if self.on_the_fly:
-            # every pair in both directions, ordered by target body: (target, partner, shift added to the partner)
-            targets = np.concatenate((self.pairs[:, 0], self.pairs[:, 1]))
-            order = np.argsort(targets, kind='stable')
+            # every pair once, under its first body (the pairs are sorted by it): the loop adds both directions
             self.near_field_arguments = (
                 np.ascontiguousarray(r_vectors, dtype=float), float(radii[0]), float(eta),
                 near_field_domain == 'single_wall', np.ascontiguousarray(offsets, dtype=np.int64),
-                np.searchsorted(targets[order], np.arange(arrays.num_bodies + 1)).astype(np.int64),
-                np.concatenate((self.pairs[:, 1], self.pairs[:, 0]))[order].astype(np.int64),
-                np.ascontiguousarray(np.concatenate((shifts, -shifts)).reshape(-1, 3)[order]))
+                np.searchsorted(self.pairs[:, 0], np.arange(arrays.num_bodies + 1)).astype(np.int64),
+                np.ascontiguousarray(self.pairs[:, 1], dtype=np.int64),
+                np.ascontiguousarray(shifts, dtype=float).reshape(-1, 3))
         for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs[stored], shifts[stored], eta,
                                                stacked_mobility, cross_blocks, body_type) if stored.size else ():
             chosen = stored[chosen]

@@ -16,6 +16,7 @@
 // positions instead of stored pair blocks (neighbour_preconditioner.NeighbourPreconditioner; the stored
 // path there is its reference):
 //   out_i = sum over the partners q of body(i), over the blobs j of body partners[q], of M(x_i, x_j + shift_q) f_j,
+//   out_j += M(x_i, x_j + shift_q)^T f_i  (each pair listed once, for its two directions: M is symmetric),
 // M the blob mobility of one radius a of the mobility backends (RPY, and with `wall` the Swan-Brady image
 // terms, heights below a raised to a and the blob's vectors damped by z / a, pair_laws.h), with no periodic
 // images: the shift places the partner.  offsets (Nb + 1,) the bodies' first blobs; target_start (Nb + 1,)
@@ -488,10 +489,15 @@ inline rmb::double8 load8(const double *p) {
   std::memcpy(&v, p, sizeof v);
   return v;
 }
+
+inline void store8(double *p, rmb::double8 v) { std::memcpy(p, &v, sizeof v); }
 #endif
 
 // The sources of every target body gathered into contiguous arrays (positions in units of a, shifted, raised;
 // damped forces), so that the inner loop runs over all of a body's near sources at once (long SIMD loops).
+// Each pair is evaluated once, for both of its directions (the mobility is symmetric): the target's velocity
+// in registers, the source's in an accumulator of its slot, added to the blob's row at the end.  OpenMP over
+// the target bodies, so that a body's slots are written by one thread.
 template <bool Wall>
 void near_field_loop(long B, const double *X, const double *Y, const double *Z, const double *damping,
                      const double *F, const long long *off, const long long *start, const long long *partner,
@@ -503,53 +509,62 @@ void near_field_loop(long B, const double *X, const double *Y, const double *Z, 
     first[b + 1] = first[b] + (count + 7) / 8 * 8;  // whole vectors of eight
   }
   const long long total = first[B];
-  // the padding: sources far away (1e8 radii along x, at height 1) with zero force, which add exactly zero
+  // the padding: sources far away (1e8 radii along x, at height 1) with zero force, which add exactly zero to
+  // the targets; their slots (blob -1) are not added back
   std::vector<double> sx(total, 1e8), sy(total, 0.0), sz(total, 1.0), fx(total, 0.0), fy(total, 0.0),
-      fz(total, 0.0);
+      fz(total, 0.0), ax(total, 0.0), ay(total, 0.0), az(total, 0.0);
+  std::vector<long long> blob(total, -1);
   for (long b = 0; b < B; ++b) {
     long long k = first[b];
     for (long long q = start[b]; q < start[b + 1]; ++q)
       for (long long j = off[partner[q]]; j < off[partner[q] + 1]; ++j, ++k) {
         sx[k] = X[j] + S[3 * q], sy[k] = Y[j] + S[3 * q + 1], sz[k] = Z[j] + S[3 * q + 2];
         fx[k] = F[3 * j], fy[k] = F[3 * j + 1], fz[k] = F[3 * j + 2];
+        blob[k] = j;
       }
   }
-  const long N = off[B];
-  std::vector<long long> body(N);
-  for (long b = 0; b < B; ++b)
-    for (long long i = off[b]; i < off[b + 1]; ++i) body[i] = b;
   const double *SX = sx.data(), *SY = sy.data(), *SZ = sz.data(), *FX = fx.data(), *FY = fy.data(), *FZ = fz.data();
-#pragma omp parallel for schedule(dynamic, 32)
-  for (long i = 0; i < N; ++i) {
-    double u0 = 0.0, u1 = 0.0, u2 = 0.0;
-    const double xi = X[i], yi = Y[i], zi = Z[i];
-    long long lo = first[body[i]];
-    const long long hi = first[body[i] + 1];
+  double *AX = ax.data(), *AY = ay.data(), *AZ = az.data();
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long b = 0; b < B; ++b) {
+    for (long long i = off[b]; i < off[b + 1]; ++i) {
+      double u0 = 0.0, u1 = 0.0, u2 = 0.0;
+      const double xi = X[i], yi = Y[i], zi = Z[i], gx = F[3 * i], gy = F[3 * i + 1], gz = F[3 * i + 2];
+      long long lo = first[b];
+      const long long hi = first[b + 1];
 #if defined(__AVX512F__)
-    {  // eight sources at a time in explicit vectors, with the backends' vector reciprocal square root
-      using V = rmb::double8;
-      const V vx = V{} + xi, vy = V{} + yi, vz = V{} + zi;
-      V w0{}, w1{}, w2{};
-      for (; lo < hi; lo += 8) {
-        const V rx = vx - load8(SX + lo), ry = vy - load8(SY + lo), rz = vz - load8(SZ + lo);
-        const rmb::TransTransBlock<V> c = rmb::trans_trans_coefficients<Wall, V>(rx, ry, rz, vz, load8(SZ + lo));
-        rmb::apply_trans_trans<Wall, false, V>(c, rx, ry, rz, load8(FX + lo), load8(FY + lo), load8(FZ + lo), w0, w1,
-                                               w2);
+      {  // eight sources at a time in explicit vectors, with the backends' vector reciprocal square root
+        using V = rmb::double8;
+        const V vx = V{} + xi, vy = V{} + yi, vz = V{} + zi, vgx = V{} + gx, vgy = V{} + gy, vgz = V{} + gz;
+        V w0{}, w1{}, w2{};
+        for (; lo < hi; lo += 8) {
+          const V rx = vx - load8(SX + lo), ry = vy - load8(SY + lo), rz = vz - load8(SZ + lo);
+          V s0{}, s1{}, s2{};
+          rmb::trans_times_force_pair_both<Wall, V>(rx, ry, rz, vz, load8(SZ + lo), load8(FX + lo), load8(FY + lo),
+                                                    load8(FZ + lo), vgx, vgy, vgz, w0, w1, w2, s0, s1, s2);
+          store8(AX + lo, load8(AX + lo) + s0);
+          store8(AY + lo, load8(AY + lo) + s1);
+          store8(AZ + lo, load8(AZ + lo) + s2);
+        }
+        for (int k = 0; k < 8; ++k) u0 += w0[k], u1 += w1[k], u2 += w2[k];
       }
-      for (int k = 0; k < 8; ++k) u0 += w0[k], u1 += w1[k], u2 += w2[k];
-    }
 #endif
 #pragma omp simd reduction(+ : u0, u1, u2)
-    for (long long k = lo; k < hi; ++k) {
-      const double rx = xi - SX[k], ry = yi - SY[k], rz = zi - SZ[k];
-      const rmb::TransTransBlock<double> c = rmb::trans_trans_coefficients<Wall, double>(rx, ry, rz, zi, SZ[k]);
-      double v0 = 0.0, v1 = 0.0, v2 = 0.0;
-      rmb::apply_trans_trans<Wall, false, double>(c, rx, ry, rz, FX[k], FY[k], FZ[k], v0, v1, v2);
-      u0 += v0, u1 += v1, u2 += v2;
+      for (long long k = lo; k < hi; ++k) {
+        double v0 = 0.0, v1 = 0.0, v2 = 0.0, s0 = 0.0, s1 = 0.0, s2 = 0.0;
+        rmb::trans_times_force_pair_both<Wall, double>(xi - SX[k], yi - SY[k], zi - SZ[k], zi, SZ[k], FX[k], FY[k],
+                                                       FZ[k], gx, gy, gz, v0, v1, v2, s0, s1, s2);
+        u0 += v0, u1 += v1, u2 += v2;
+        AX[k] += s0, AY[k] += s1, AZ[k] += s2;
+      }
+      out[3 * i] = u0, out[3 * i + 1] = u1, out[3 * i + 2] = u2;
     }
-    const double f = factor * damping[i];
-    out[3 * i] = f * u0, out[3 * i + 1] = f * u1, out[3 * i + 2] = f * u2;
   }
+  for (long long k = 0; k < total; ++k)
+    if (blob[k] >= 0) out[3 * blob[k]] += AX[k], out[3 * blob[k] + 1] += AY[k], out[3 * blob[k] + 2] += AZ[k];
+  const long N = off[B];
+  for (long i = 0; i < N; ++i)
+    for (int k = 0; k < 3; ++k) out[3 * i + k] *= factor * damping[i];
 }
 
 }  // namespace
@@ -604,7 +619,8 @@ PYBIND11_MODULE(_preconditioner_cpp, m) {
         "out[start + k m : start + (k + 1) m] = B_k x[...] (B_k^T with transpose; lower: read the lower triangle)");
   m.def("rigid_near_field", &rigid_near_field, py::arg("x"), py::arg("a"), py::arg("eta"), py::arg("wall"),
         py::arg("offsets"), py::arg("target_start"), py::arg("partners"), py::arg("shifts"), py::arg("forces"),
-        "Blob velocities (N, 3) of the neighbour pairs' mobility applied to forces (N, 3), from the positions");
+        "Blob velocities (N, 3) of the neighbour pairs' mobility (each pair listed once, under its first body) "
+        "applied to forces (N, 3), from the positions");
   m.def("pair_product", &pair_product, py::arg("O"), py::arg("first"), py::arg("second"), py::arg("x"),
         py::arg("out"), "out[i_p:] += O_p x[j_p:], out[j_p:] += O_p^T x[i_p:] for every pair p (added to out).");
   m.def("saddle_block_inverse", &saddle_block_inverse, py::arg("M_inv"), py::arg("M_inv_K"), py::arg("K"),
