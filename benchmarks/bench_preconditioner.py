@@ -279,6 +279,16 @@ def lanczos_main(scenes, steps):
     return 0
 
 
+def scene_model(scene, folder, table):
+    """(model, options or None, scheme names) of ``scene`` in ``table`` (the articulated scene writes its
+    files into ``folder``)."""
+    make, schemes = table[scene]
+    if scene == 'articulated':
+        model, options = articulated(folder)
+        return model, options, schemes
+    return make(), None, schemes
+
+
 def near_field_main(scenes, steps):
     """The neighbour correction's near field from the positions (the compiled loop, the default with the C++
     blob mobility) against stored pair blocks (forced by making ``mobility.compiled_near_field_domain`` return
@@ -293,13 +303,8 @@ def near_field_main(scenes, steps):
     print('%-16s %-36s %-15s %9s %9s %7s' % ('scene', 'scheme', 'near field', 'it/solve', 's/step', 'ratio'))
     try:
         for scene in scenes:
-            make, schemes = NEAR_FIELD_SCENES[scene]
             with tempfile.TemporaryDirectory() as folder:
-                options = None
-                if scene == 'articulated':
-                    model, options = articulated(folder)
-                else:
-                    model = make()
+                model, options, schemes = scene_model(scene, folder, NEAR_FIELD_SCENES)
                 for scheme_name in schemes:
                     r = run(model, scheme_name, 1 if scene == 'boomerangs_1000' else steps, options, variants, hooks)
                     stored = r['stored_blocks'][2]
@@ -334,13 +339,8 @@ def main(argv=None):
     print('%-16s %-36s %-15s %9s %7s %9s %7s %9s %7s %6s' % (
         'scene', 'scheme', 'preconditioner', 'it/solve', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
     for scene in args.scenes:
-        make, schemes = SCENES[scene]
         with tempfile.TemporaryDirectory() as folder:
-            options = None
-            if scene == 'articulated':
-                model, options = articulated(folder)
-            else:
-                model = make()
+            model, options, schemes = scene_model(scene, folder, SCENES)
             for scheme_name in schemes:
                 steps = 1 if scene == 'boomerangs_1000' else args.steps
                 r = run(model, scheme_name, steps, options)

@@ -61,6 +61,15 @@ inline double8 reciprocal_sqrt(double8 x) {
   y = y * (1.5 - half_x * y * y);
   return y;
 }
+
+// Eight doubles from / to memory of any alignment.
+inline double8 load8(const double *p) {
+  double8 v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline void store8(double *p, double8 v) { __builtin_memcpy(p, &v, sizeof v); }
 #endif
 
 // 1/sqrt(r2) (0 when r2 == 0) and 1/sqrt(R2) (R2 > 0, the image distance).

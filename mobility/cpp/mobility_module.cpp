@@ -44,13 +44,8 @@ Array flat_result(const std::vector<double> &ux, const std::vector<double> &uy, 
 }
 
 #if defined(__AVX512F__)
-inline rmb::double8 load8(const double *p) {
-  rmb::double8 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-
-inline void store8(double *p, rmb::double8 v) { std::memcpy(p, &v, sizeof v); }
+using rmb::load8;
+using rmb::store8;
 
 inline double horizontal_sum(rmb::double8 v) {
   double sum = 0.0;

@@ -484,13 +484,8 @@ py::tuple incomplete_cholesky_blocks(const Index &starts, const Index &diag_offs
 namespace {
 
 #if defined(__AVX512F__)
-inline rmb::double8 load8(const double *p) {
-  rmb::double8 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-
-inline void store8(double *p, rmb::double8 v) { std::memcpy(p, &v, sizeof v); }
+using rmb::load8;
+using rmb::store8;
 #endif
 
 // The sources of every target body gathered into contiguous arrays (positions in units of a, shifted, raised;
