@@ -158,7 +158,8 @@ def _first_guess(guess, rhs):
 
 def _solve(problem, rhs, tolerance, counts, kept=None, orientations=None, guess=None, predictor=False):
     """Velocities (N, 6) of ``problem`` for ``rhs``: with ``kept`` None the published solve (a preconditioner built
-    here, from zero); else the kept preconditioner and the first guess ``guess`` (velocities or None); a
+    here, from zero); else the kept preconditioner, the first guess ``guess`` (velocities or None) and GMRES's
+    least-true-residual iterate (``krylov.gmres(minimal_residual=True)``); a
     ``predictor`` solve (at a step's start) may build the kept preconditioner and counts towards its wear."""
     if kept is None:
         preconditioner = problem.preconditioner(tolerance)
@@ -166,7 +167,7 @@ def _solve(problem, rhs, tolerance, counts, kept=None, orientations=None, guess=
         result = solve(problem, rhs, preconditioner, tolerance=tolerance)
     else:
         result = solve(problem, rhs, kept.preconditioner(problem, orientations, counts, start=predictor),
-                       x0=_first_guess(guess, rhs), tolerance=tolerance)
+                       x0=_first_guess(guess, rhs), tolerance=tolerance, minimal_residual=True)
         if predictor:
             kept.served(result.iterations)
     counts['gmres_iterations'] += result.iterations
@@ -270,7 +271,7 @@ def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, c
         counts['factorisations'] += 1
     else:
         result = solve(torque_problem, rhs, kept.torque_preconditioner(problem, orientations, counts, start),
-                       x0=_first_guess(kept.torque_guess, rhs), tolerance=tolerance)
+                       x0=_first_guess(kept.torque_guess, rhs), tolerance=tolerance, minimal_residual=True)
         kept.torque_guess = result.velocities.reshape(-1).copy()
     counts['gmres_iterations'] += result.iterations
     torques = result.velocities[:, 3:].copy()

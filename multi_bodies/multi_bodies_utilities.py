@@ -107,7 +107,8 @@ def run_mobility(options, system, configuration, force_table=None):
             rhs = problem.rhs(slip=slip, force_torque=force_torque)
             preconditioner = system.build_preconditioner(configuration)
             r_vectors = problem.r_vectors
-        result = body_solver.solve(problem, rhs, preconditioner, tolerance=options.solver_tolerance)
+        result = body_solver.solve(problem, rhs, preconditioner, tolerance=options.solver_tolerance,
+                                   minimal_residual=not system.published_solves)
     print('Time to solve mobility problem = %s' % timer.elapsed)
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))

@@ -149,6 +149,87 @@ def test_gmres_meets_scipys_rule_with_fewer_products(restart, warm, tolerance):
         assert (counts['ours'], our_iterations) == (counts['scipy'], iterations[0]), counts
 
 
+def first_iteration_of_least_residual(A, P, b, x0, tolerance, most=80):
+    """The first j at which some x in x0 + span{P r0, (P A) P r0, ..., (P A)^(j-1) P r0} has
+    |b - A x| <= tolerance |b|, from the Krylov basis built and orthonormalised by numpy's QR and a dense least
+    squares (the definition, independent of krylov.gmres)."""
+    r0 = b - A @ x0
+    vectors = [P @ r0]
+    for j in range(1, most + 1):
+        Q, _ = np.linalg.qr(np.array(vectors).T)
+        y = np.linalg.lstsq(A @ Q, r0, rcond=None)[0]
+        if np.linalg.norm(r0 - A @ Q @ y) <= tolerance * np.linalg.norm(b):
+            return j
+        vectors.append(P @ (A @ Q[:, -1]))
+    raise AssertionError('no convergence in %d iterations' % most)
+
+
+@pytest.mark.parametrize('scale, warm', [(1.0, False), (30.0, False), (30.0, True), (0.02, False)])
+def test_least_true_residual_gmres_stops_where_its_krylov_space_first_holds_the_tolerance(scale, warm):
+    """krylov.gmres(minimal_residual=True) stops at the first iteration whose Krylov space (the
+    left-preconditioned one) holds a point within the tolerance, and returns that point and its true residual:
+    the count equals the one found by a dense least squares over the same space and is never more than the
+    left-preconditioned rule's; rows scaled as the velocity and force rows of a mobility problem may be."""
+    from multi_bodies.solver import krylov
+    A, P, b = saddle_like_system()
+    rows = np.ones(b.size)
+    rows[-60:] = scale  # the "constraint" rows in other units; P is their inverse blocks, so P A is unchanged
+    A, b, P = rows[:, None] * A, rows * b, P / rows[None, :]
+    x0 = (np.linalg.solve(A, b) + 1e-3 * np.random.default_rng(1).normal(size=b.size)) if warm else np.zeros(b.size)
+    tolerance = 1e-8
+    counts = []
+
+    def matvec(v):
+        counts.append(1)
+        return A @ v
+    x, info, least_iterations, residual = krylov.gmres(matvec, b, tolerance, psolve=lambda v: P @ v,
+                                                       x0=x0 if warm else None, minimal_residual=True)
+    assert info == 0
+    assert least_iterations == first_iteration_of_least_residual(A, P, b, x0, tolerance)
+    assert len(counts) == least_iterations + (1 if warm else 0)  # no product beyond the Krylov ones
+    true = b - A @ x
+    assert np.linalg.norm(true) <= tolerance * np.linalg.norm(b)
+    np.testing.assert_allclose(residual, true, rtol=0, atol=1e-13 * np.linalg.norm(b))
+    _, _, left_iterations, _ = krylov.gmres(lambda v: A @ v, b, tolerance, psolve=lambda v: P @ v,
+                                            x0=x0 if warm else None)
+    assert least_iterations <= left_iterations
+
+
+def test_least_true_residual_gmres_saves_iterations_on_a_mobility_problem():
+    """On the mobility problem of 16 boomerangs packed at spacing 2 (gravity, block-diagonal preconditioner)
+    the left-preconditioned rule passes the true tolerance an iteration after the space first holds it
+    (measured: 11 against 10); the least-residual solve stops there, with the same velocities within the
+    tolerance, and its count is the dense least squares' over the same Krylov space."""
+    import bench_preconditioner
+    from multi_bodies.solver import body_solver
+    model = bench_preconditioner.packed_boomerangs(num=16).replace(preconditioner='block_diagonal')
+    q = model.start_configuration
+    problem, preconditioner = model.mobility_problem(q), model.build_preconditioner(q)
+    _, force_torque, slip = model.forces_and_slip(q)
+    rhs = problem.rhs(slip=slip, force_torque=force_torque)
+    least, left = (body_solver.solve(problem, rhs, preconditioner, minimal_residual=m) for m in (True, False))
+    assert least.converged and left.converged and least.iterations < left.iterations
+    A = np.column_stack([problem.operator.matvec(e) for e in np.eye(problem.size)])
+    P = np.column_stack([preconditioner.operator.matvec(e) for e in np.eye(problem.size)])
+    b = problem.prepare_rhs(rhs) / np.linalg.norm(problem.prepare_rhs(rhs))
+    assert least.iterations == first_iteration_of_least_residual(A, P, b, np.zeros(b.size), 1e-8)
+    scale = np.abs(left.velocities).max()
+    assert np.abs(least.velocities - left.velocities).max() <= 1e-6 * scale
+
+
+def test_least_true_residual_gmres_restarts_and_stays_exact_below_the_rounding_guard():
+    """With restarts every 4 vectors and at a tolerance below the rounding guard (2.2e-13), the least-residual
+    GMRES still converges and its returned residual is the true one (checked by a product there)."""
+    from multi_bodies.solver import krylov
+    A, P, b = saddle_like_system()
+    for restart, tolerance in ((4, 1e-10), (60, 1e-14)):
+        x, info, iterations, residual = krylov.gmres(lambda v: A @ v, b, tolerance, psolve=lambda v: P @ v,
+                                                     restart=restart, minimal_residual=True)
+        assert info == 0
+        assert np.linalg.norm(b - A @ x) <= tolerance * np.linalg.norm(b)
+        np.testing.assert_allclose(residual, b - A @ x, rtol=0, atol=1e-14 * np.linalg.norm(b))
+
+
 def test_gmres_below_rounding_reports_failure_not_a_false_convergence():
     """Asked for a relative residual of 1e-300 the true residual stagnates near rounding: GMRES must say it did
     not converge (the updated residual alone would shrink to zero and claim convergence)."""

@@ -504,14 +504,16 @@ def _merged_blocks(nb, todo, computed, found):
 
 
 def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=GMRES_RESTART,
-                maxiter=GMRES_MAXITER, print_residual=False):
+                maxiter=GMRES_MAXITER, print_residual=False, minimal_residual=False):
     """GMRES on ``operator x = rhs`` (relative tolerance, ``atol = 0``): the one GMRES call of the package.
 
     operator : LinearOperator or object with ``matvec``; rhs (n,); preconditioner : LinearOperator, object
     with ``matvec`` or None; x0 (n,) or None (zeros).  :func:`krylov.gmres` (SciPy's rules, no product
-    beyond the Krylov ones and the warm start's residual).  Returns :data:`GmresResult` with the true
-    relative residual ``|rhs - A x| / |rhs|`` (from the Arnoldi products, equal to rounding).  A zero
-    right-hand side gives ``x = 0`` at once.
+    beyond the Krylov ones and the warm start's residual); ``minimal_residual``: the point of least true
+    residual of each Krylov space, stopping as soon as it meets the tolerance (the same rule, never more
+    iterations; False: SciPy's iterates).  Returns :data:`GmresResult` with the true relative residual
+    ``|rhs - A x| / |rhs|`` (from the Arnoldi products, equal to rounding).  A zero right-hand side gives
+    ``x = 0`` at once.
     """
     rhs = np.asarray(rhs, dtype=float).reshape(-1)
     rhs_norm = float(np.linalg.norm(rhs))
@@ -525,7 +527,7 @@ def gmres_solve(operator, rhs, tolerance, preconditioner=None, x0=None, restart=
     psolve = None if preconditioner is None else preconditioner.matvec
     solution, info, iterations, residual = krylov.gmres(
         operator.matvec, rhs, tolerance, psolve=psolve, x0=x0, restart=restart, maxiter=maxiter,
-        callback=report if print_residual else None)
+        callback=report if print_residual else None, minimal_residual=minimal_residual)
     return GmresResult(solution, iterations, info == 0, float(np.linalg.norm(residual) / rhs_norm))
 
 
@@ -538,7 +540,7 @@ def kept_fewest(fewest, iterations, margin):
 
 
 def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
-          print_residual=False):
+          print_residual=False, minimal_residual=False):
     """Solve ``A x = rhs`` of any problem of the package by preconditioned GMRES: the one solve of the package.
 
     The problem protocol (``doc/adding_a_problem.md``), implemented by the rigid
@@ -564,6 +566,8 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
         passes the previous normalised solution, ``SolveResult.normalised_solution``); None (or a
         guess of another size) is zeros.
     tolerance : float, GMRES stops when ``|r| <= tolerance |rhs|``.
+    minimal_residual : bool, GMRES takes the point of least true residual of its Krylov space and stops at
+        the first iteration where it meets the tolerance (:func:`gmres_solve`; False: the published iterates).
 
     Returns :data:`SolveResult` (the solution of ``A x = rhs``, un-normalised, its true residual and its
     iteration count).  Nothing is counted or stored here; the caller decides what a non-converged solve means.
@@ -577,7 +581,8 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
     if x0 is not None and np.shape(x0) != rhs.shape:
         x0 = None
     result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
-                         restart=restart, maxiter=maxiter, print_residual=print_residual)
+                         restart=restart, maxiter=maxiter, print_residual=print_residual,
+                         minimal_residual=minimal_residual)
     parts = problem.solution(result.x * norm)
     return SolveResult(parts.lambda_blobs, parts.velocities, result.iterations, result.converged,
                        result.residual, result.x, parts.constraint)

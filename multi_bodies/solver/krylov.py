@@ -30,6 +30,22 @@ What differs is how the true residual is had and what happens when it fails:
   of SciPy's modified Gram-Schmidt in a Python loop; the Givens rotations run on Python
   floats.
 
+``minimal_residual=True`` (the package's solves under ``preconditioner`` ``auto`` and
+``neighbours``) keeps the Krylov space and the convergence rule and changes which point
+of the space is taken: the one of least *true* residual, found at every iteration, as
+right-preconditioned GMRES would (its space of iterates, ``x0 + P K_j(A P, r0)``, is
+the left-preconditioned one).  Left-preconditioned GMRES minimises ``|P (b - A x)|`` and
+tests the true residual only once that estimate has passed ``ptol``; the true residual
+often passes an iteration earlier.  The products ``A v_j`` are kept anyway, so their
+span is orthonormalised as they come (DGKS again, ``A V = Q R``) and the least residual
+``r0 - Q Q^T r0`` is updated with one more vector per iteration: no product more, a
+few vector operations of length n per iteration.  The solve stops at the first
+iteration whose least true residual is at most ``rtol |b|``, which is never later
+than the left-preconditioned rule (the same space, the least residual in it) and is
+the same rule: the answer meets the same tolerance.  Tolerances below the rounding
+guard keep the left rule's stopping point (the answer is still the least-residual one,
+checked by a product).
+
 Shapes: every vector is (n,).
 """
 import math
@@ -58,7 +74,58 @@ def least_squares_solution(R, g, k):
     return y
 
 
-def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callback=None):
+def orthonormalise_against(basis, w):
+    """``(coefficients (j,), |w|, |w'|, w')``: ``w`` (n,) less its projection on the orthonormal rows of
+    ``basis`` (j, n) by classical Gram-Schmidt, repeated once when the first pass removed more than
+    ``1 - 1/sqrt(2)`` of its norm (DGKS); ``w`` is changed in place and returned as ``w'``."""
+    h0 = float(np.linalg.norm(w))
+    h = basis @ w
+    w -= h @ basis
+    h1 = float(np.linalg.norm(w))
+    if h1 < REORTHOGONALISE_AGAIN * h0:
+        again = basis @ w
+        w -= again @ basis
+        h += again
+        h1 = float(np.linalg.norm(w))
+    return h, h0, h1, w
+
+
+class LeastTrueResidual:
+    """The least true residual of a GMRES cycle over its Krylov space, updated as the products come.
+
+    With the kept products ``A v_0 .. A v_j`` orthonormalised into ``Q`` (``A V = Q R``, R upper triangular),
+    the least ``|r0 - A V y|`` is at ``R y = Q r0`` and its residual is ``r0 - Q^T Q r0``, updated by one
+    vector per product.  ``usable`` turns False when a product depends on the earlier ones (``A`` singular on
+    the space); the caller then keeps the left-preconditioned answer.
+    """
+
+    def __init__(self, r0, restart):
+        self.residual = np.array(r0, dtype=float)
+        self.Q = np.empty((restart, r0.size))
+        self.R = np.zeros((restart, restart))
+        self.coefficients = []
+        self.usable = True
+
+    def add(self, j, product):
+        """Take ``A v_j`` (n,) in; returns the least true residual's norm over ``v_0 .. v_j``."""
+        h, h0, h1, q = orthonormalise_against(self.Q[:j], np.array(product, dtype=float))
+        self.R[:j, j] = h
+        self.R[j, j] = h1
+        if h1 <= np.finfo(float).eps * h0 or h1 == 0.0:
+            self.usable = False
+            return float('inf')
+        self.Q[j] = q / h1
+        c = float(self.Q[j] @ self.residual)
+        self.coefficients.append(c)
+        self.residual -= c * self.Q[j]
+        return float(np.linalg.norm(self.residual))
+
+    def solution(self, k):
+        """``y`` (k,) of the least true residual over ``v_0 .. v_{k-1}``."""
+        return least_squares_solution(self.R, self.coefficients, k)
+
+
+def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callback=None, minimal_residual=False):
     """Solve ``A x = b`` by left-preconditioned restarted GMRES.
 
     Parameters
@@ -72,6 +139,8 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
     maxiter : int, most inner iterations in all (SciPy's legacy count).
     callback : callable(float) or None, called after every inner iteration with the preconditioned
         residual estimate divided by ``|b|`` (SciPy's ``callback_type='legacy'``).
+    minimal_residual : bool, take the point of least true residual of the Krylov space and stop as soon as
+        it passes (module docstring); False: SciPy's iterate and stopping point.
 
     Returns
     -------
@@ -115,21 +184,13 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
         R[:] = 0.0
         breakdown = False
         accepted = None
+        least = LeastTrueResidual(r, restart) if minimal_residual else None
         for j in range(restart):
             AV[j] = np.asarray(matvec(V[j]), dtype=float).reshape(-1)
             w = np.asarray(psolve(AV[j]), dtype=float).reshape(-1)
             if np.shares_memory(w, AV[j]):
                 w = w.copy()
-            h0 = float(np.linalg.norm(w))
-            basis = V[:j + 1]
-            h = basis @ w
-            w -= h @ basis
-            h1 = float(np.linalg.norm(w))
-            if h1 < REORTHOGONALISE_AGAIN * h0:
-                again = basis @ w
-                w -= again @ basis
-                h += again
-                h1 = float(np.linalg.norm(w))
+            h, h0, h1, w = orthonormalise_against(V[:j + 1], w)
             if h1 <= eps * h0:
                 breakdown = True
                 h1 = 0.0
@@ -153,8 +214,15 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
             inner += 1
             if callback is not None:
                 callback(presid / bnorm)
+            if least is not None and least.usable:
+                least_norm = least.add(j, AV[j])
+                if trust_update and least_norm <= atol:
+                    accepted = (least.solution(j + 1), least.residual, least_norm)
+                    break
             if inner == maxiter or breakdown:
                 break
+            if least is not None and least.usable and trust_update:
+                continue  # the least true residual was tested above; the estimate's gate is not needed
             if presid <= ptol:
                 if not trust_update:
                     break
@@ -172,6 +240,9 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
         k = j + 1
         if accepted is not None:
             y, r, rnorm = accepted
+        elif least is not None and least.usable:
+            y, r = least.solution(k), least.residual
+            rnorm = float(np.linalg.norm(r))
         else:
             y = least_squares_solution(R, g, k)
             r -= y @ AV[:k]

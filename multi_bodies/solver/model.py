@@ -423,13 +423,14 @@ class Model:
         SimulationStopped when GMRES does not converge.
 
         A preconditioner built where the bodies were oriented otherwise is applied turned with them
-        (``corotated_preconditioner``), except under ``published_solves``.
+        (``corotated_preconditioner``), and GMRES takes the point of least true residual of its Krylov space
+        (``krylov.gmres(minimal_residual=True)``), except under ``published_solves``.
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
         if not self.published_solves:
             preconditioner = corotated_preconditioner.following(problem, preconditioner, self.arrays)
         result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
-                                   print_residual=self.print_residual)
+                                   print_residual=self.print_residual, minimal_residual=not self.published_solves)
         if not result.converged:
             raise SimulationStopped('GMRES of %s did not converge to solver_tolerance %g in %d iterations '
                                     '(relative residual %.3e); try a larger solver_tolerance or check the '
