@@ -42,9 +42,11 @@ span is orthonormalised as they come (DGKS again, ``A V = Q R``) and the least r
 few vector operations of length n per iteration.  The solve stops at the first
 iteration whose least true residual is at most ``rtol |b|``, which is never later
 than the left-preconditioned rule (the same space, the least residual in it) and is
-the same rule: the answer meets the same tolerance.  Tolerances below the rounding
-guard keep the left rule's stopping point (the answer is still the least-residual one,
-checked by a product).
+the same rule: the answer meets the same tolerance, checked on ``r0 - (A V) y`` from
+the products themselves as the left rule checks it (a least-squares answer spoilt by
+rounding falls back to the left rule).  Tolerances below the rounding guard keep the
+left rule's stopping point (the answer is still the least-residual one, checked by a
+product).
 
 Shapes: every vector is (n,).
 """
@@ -215,10 +217,16 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
             if callback is not None:
                 callback(presid / bnorm)
             if least is not None and least.usable:
-                least_norm = least.add(j, AV[j])
-                if trust_update and least_norm <= atol:
-                    accepted = (least.solution(j + 1), least.residual, least_norm)
-                    break
+                if least.add(j, AV[j]) <= atol and trust_update:
+                    # the residual from the products themselves, as the left rule takes it: a least-squares
+                    # answer spoilt by rounding (a nearly singular A on the space) cannot pass unseen
+                    y = least.solution(j + 1)
+                    trial = r - y @ AV[:j + 1]
+                    trial_norm = float(np.linalg.norm(trial))
+                    if trial_norm <= atol:
+                        accepted = (y, trial, trial_norm)
+                        break
+                    least.usable = False  # the left rule's gate from here on
             if inner == maxiter or breakdown:
                 break
             if least is not None and least.usable and trust_update:
@@ -240,11 +248,8 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
         k = j + 1
         if accepted is not None:
             y, r, rnorm = accepted
-        elif least is not None and least.usable:
-            y, r = least.solution(k), least.residual
-            rnorm = float(np.linalg.norm(r))
         else:
-            y = least_squares_solution(R, g, k)
+            y = least.solution(k) if least is not None and least.usable else least_squares_solution(R, g, k)
             r -= y @ AV[:k]
             rnorm = float(np.linalg.norm(r))
         x += y @ V[:k]
