@@ -76,6 +76,13 @@ def least_squares_solution(R, g, k):
     return y
 
 
+def residual_after(r, y, products):
+    """``(r - products^T y (n,), its norm)``: the cycle's residual for the coefficients ``y`` (k,) of its kept
+    products ``A v_j`` (k, n), with no new product."""
+    trial = r - y @ products
+    return trial, float(np.linalg.norm(trial))
+
+
 def orthonormalise_against(basis, w):
     """``(coefficients (j,), |w|, |w'|, w')``: ``w`` (n,) less its projection on the orthonormal rows of
     ``basis`` (j, n) by classical Gram-Schmidt, repeated once when the first pass removed more than
@@ -113,7 +120,7 @@ class LeastTrueResidual:
         h, h0, h1, q = orthonormalise_against(self.Q[:j], np.array(product, dtype=float))
         self.R[:j, j] = h
         self.R[j, j] = h1
-        if h1 <= np.finfo(float).eps * h0 or h1 == 0.0:
+        if h1 <= np.finfo(float).eps * h0:  # also a zero product (h0 = h1 = 0)
             self.usable = False
             return float('inf')
         self.Q[j] = q / h1
@@ -221,8 +228,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
                     # the residual from the products themselves, as the left rule takes it: a least-squares
                     # answer spoilt by rounding (a nearly singular A on the space) cannot pass unseen
                     y = least.solution(j + 1)
-                    trial = r - y @ AV[:j + 1]
-                    trial_norm = float(np.linalg.norm(trial))
+                    trial, trial_norm = residual_after(r, y, AV[:j + 1])
                     if trial_norm <= atol:
                         accepted = (y, trial, trial_norm)
                         break
@@ -238,8 +244,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
                 # residual r - (A V) y first (no product) and, if it fails, goes on with SciPy's tighter
                 # inner tolerance in the same Krylov space instead of a new one.
                 y = least_squares_solution(R, g, j + 1)
-                trial = r - y @ AV[:j + 1]
-                trial_norm = float(np.linalg.norm(trial))
+                trial, trial_norm = residual_after(r, y, AV[:j + 1])
                 if trial_norm <= atol:
                     accepted = (y, trial, trial_norm)  # the cycle's answer: not computed again below
                     break
@@ -250,8 +255,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
             y, r, rnorm = accepted
         else:
             y = least.solution(k) if least is not None and least.usable else least_squares_solution(R, g, k)
-            r -= y @ AV[:k]
-            rnorm = float(np.linalg.norm(r))
+            r, rnorm = residual_after(r, y, AV[:k])
         x += y @ V[:k]
         if rnorm > atol or breakdown or inner == maxiter or not trust_update:
             # The true residual by a product, as SciPy takes it after every cycle: before a restart (which
