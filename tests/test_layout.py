@@ -33,7 +33,9 @@ SCRIPTS = {'multi_bodies.multi_bodies', 'multi_bodies.multi_bodies_utilities', '
 PUBLISHED_FACES = {'quaternion_integrator.quaternion', 'mobility.mobility', 'general_application_utils',
                    'read_input', 'read_input.read_input', 'read_input.read_vertex_file', 'read_input.read_clones_file',
                    'read_input.read_slip_file', 'Lub_Solver', 'constraint', 'constraint.constraint', 'articulated',
-                   'articulated.articulated'}
+                   'articulated.articulated',
+                   # libMobility's classes (SelfMobility, NBody, DPStokes) over the mobility interface: a face too
+                   'mobility.libmobility'}
 TOP_LEVEL_ALLOWED = {'__init__', 'multi_bodies_functions'} | {s.split('.', 1)[1] for s in SCRIPTS
                                                                if s.startswith('multi_bodies.')}
 
