@@ -14,22 +14,60 @@ is measured, not read from a fixed order:
   problem is larger, the time is modelled as ``t0 + c N^2`` (all-pairs work),
   with ``t0`` and ``c`` fitted from probes at two sizes;
 * the backend with the smallest cost wins; a backend within
-  ``TIE_MARGIN`` of the best that comes earlier in the preference order
-  (pycuda, C++, python) is kept instead, so that timing noise on a busy
-  machine does not flip the choice between equivalent backends.
+  ``TIE_MARGIN`` of the best that comes earlier in the registry's
+  preference order (``mobility.interface.PREFERENCE``: pycuda, C++,
+  python) is kept instead, so that timing noise on a busy machine does not
+  flip the choice between equivalent backends.
+
+The candidates are the registered backends that serve the geometry (the wall
+or free space) and, for kind ``blobs``, build dense matrices, in the
+registry's order (:data:`PREFERENCE` reads them from there; this module
+names no backend).  Every probe goes through the interface
+(``BlobMobility.velocities`` and ``dense_matrix``).
 
 Timings are the best of a few repeats after a warm-up call (which also
 compiles the GPU kernels), cached per process and problem size.
 
-Floor 1 (see multi_bodies/__init__.py): imports only ``mobility`` and ``utils``.
+Floor 2 (it reads the registry of ``mobility.interface``): imports only ``mobility`` and ``utils``.
 """
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
-from . import backends
+from . import interface
 
-PREFERENCE = {'vector_product': ('pycuda', 'C++', 'python'), 'blobs': ('C++', 'python')}
+KINDS = ('vector_product', 'blobs')
+
+
+def candidate_backends(kind, wall=True):
+    """Registered backends that may serve ``kind`` ('vector_product': ``M f``; 'blobs': dense matrices) with the
+    wall (``wall``) or in free space, in the registry's preference order."""
+    if kind not in KINDS:
+        raise ValueError('kind %r is not one of %s' % (kind, ', '.join(KINDS)))
+    return tuple(interface.registered_backends(_geometry(wall), dense_matrices=kind == 'blobs'))
+
+
+def _geometry(wall):
+    return interface.Geometry('single_wall' if wall else 'free_space')
+
+
+class _RegistryOrder(Mapping):
+    """kind -> :func:`candidate_backends` (with the wall), read from the registry at every look-up."""
+
+    def __getitem__(self, kind):
+        if kind not in KINDS:
+            raise KeyError(kind)
+        return candidate_backends(kind)
+
+    def __iter__(self):
+        return iter(KINDS)
+
+    def __len__(self):
+        return len(KINDS)
+
+
+PREFERENCE = _RegistryOrder()
 PROBE_BLOBS = {'vector_product': 2000, 'blobs': 300}
 PYTHON_PROBE_BLOBS = 400  # the NumPy backend is timed on fewer blobs, so that probing it stays cheap
 TIE_MARGIN = 0.2
@@ -68,15 +106,13 @@ def _probe(backend, kind, wall, num_blobs):
     """Measured seconds of one evaluation of ``kind`` by ``backend`` on ``num_blobs`` random blobs."""
     key = (backend, kind, wall, int(num_blobs))
     if key not in _cache:
-        name = backend + ('' if wall else '_no_wall')
+        mobility = interface.make_mobility(backend, _geometry(wall), 1.0, 1.0, dense_matrices=kind == 'blobs')
         r = random_blobs(int(num_blobs))
         if kind == 'vector_product':
-            product = backends.mobility_vector_product(name)
             force = np.random.default_rng(1).standard_normal(r.size)
-            _cache[key] = time_call(lambda: product(r, force, 1.0, 1.0))
+            _cache[key] = time_call(lambda: mobility.velocities(r, force))
         else:
-            matrix = backends.blob_mobility_matrix(name)
-            _cache[key] = time_call(lambda: matrix(r, 1.0, 1.0))
+            _cache[key] = time_call(lambda: mobility.dense_matrix(r))
     return _cache[key]
 
 
@@ -97,10 +133,11 @@ def modelled_seconds(backend, kind, num_blobs, wall=True):
 
 
 def backend_costs(kind, num_blobs, wall=True, candidates=None):
-    """Dict backend -> (seconds, how) for every usable backend among ``candidates`` (default: all of ``kind``)."""
+    """Dict backend -> (seconds, how) for every usable backend among ``candidates`` (default: those of
+    :func:`candidate_backends` for ``kind`` and ``wall``)."""
     costs = {}
-    for backend in (candidates or PREFERENCE[kind]):
-        if backends.is_usable(backend):
+    for backend in (candidates or candidate_backends(kind, wall)):
+        if interface.is_usable(backend):
             costs[backend] = modelled_seconds(backend, kind, num_blobs, wall)
     return costs
 
@@ -113,12 +150,13 @@ def choose_backend(kind, num_blobs, wall=True, log=None):
     ``utils.UserInputError`` (through the registry) when nothing is usable.
     """
     size = PROBE_BLOBS[kind] if num_blobs is None else int(num_blobs)
-    costs = backend_costs(kind, size, wall)
+    order = candidate_backends(kind, wall)
+    costs = backend_costs(kind, size, wall, order)
     if not costs:
         from utils import UserInputError
         raise UserInputError('no usable backend for %s' % kind)
     best = min(seconds for seconds, _ in costs.values())
-    chosen = next(b for b in PREFERENCE[kind] if b in costs and costs[b][0] <= (1.0 + TIE_MARGIN) * best)
+    chosen = next(b for b in order if b in costs and costs[b][0] <= (1.0 + TIE_MARGIN) * best)
     if log is not None:
         log('%s costs at %d blobs: %s' % (kind, size, ', '.join(
             '%s %.3g ms (%s)' % (b, 1e3 * s, how) for b, (s, how) in costs.items())))
