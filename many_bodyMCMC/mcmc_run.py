@@ -49,8 +49,8 @@ class MCMCRun:
     Attributes: options, hooks, bodies, types, energy, sampler, rng, restart.
     """
 
-    def __init__(self, options, directory=None, log=print):
-        self.options, self.log = options, log
+    def __init__(self, options, directory=None, log=print, lock=None):
+        self.options, self.log, self.lock = options, log, lock
         check_options(options, 'mcmc')  # the table's rules (kT > 0, n_save >= 1, ...) before any file is read
         unused = unused_options(options, 'mcmc')
         if unused:
@@ -152,11 +152,11 @@ class MCMCRun:
         """The Monte Carlo loop; returns the exit status."""
         options, sampler = self.options, self.sampler
         restart = options.initial_step > 0
-        write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart)
+        write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart, log=self.log)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=(self.restart, self.restart_end),
-                                           fingerprint=self.fingerprint, log=self.log)
+                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
         first, last = options.initial_step, options.n_steps
         name = 'MCMC_' + options.mcmc_move
         progress = run_output.Progress(name, first, last)
@@ -220,7 +220,7 @@ def run_mcmc(options, directory=None, log=print):
     """Set up and run the Monte Carlo chain of validated ``options``; returns the exit status.
 
     ``output_name.lock`` is held from before the restart record is read until the chain ends."""
-    with output_lock(options, log):
-        return MCMCRun(options, directory=directory, log=log).run()
+    with output_lock(options, log) as lock:
+        return MCMCRun(options, directory=directory, log=log, lock=lock).run()
 
 

@@ -33,7 +33,10 @@ style, bodies and their slip from ``set_slip_by_ID``, backends including
 as in the dynamics.
 
 Every run writes ``output_name.inputfile`` and ``output_name.bodies_info``;
-``plot_velocity_field`` adds ``output_name.velocity_field.vtk``.  Mistakes in
+``plot_velocity_field`` adds ``output_name.velocity_field.vtk``.  Like the
+dynamic script it holds ``output_name.lock`` while it writes (one writer per
+output name) and first moves the files of an earlier run with the same
+``output_name`` to ``output_name.set_aside/``.  Mistakes in
 the input stop the run with one message naming file and line (exit status 2);
 a GMRES solve that does not converge writes its results, says so and exits
 with status 1.
@@ -55,7 +58,8 @@ from multi_bodies.solver import body_solver  # noqa: E402
 from multi_bodies.solver import obstacles  # noqa: E402
 from multi_bodies.files.input_options import read_input_file  # noqa: E402
 from multi_bodies.run import run_output  # noqa: E402
-from multi_bodies.run.run_setup import STATIC_SCHEMES, prepare, write_bodies_info  # noqa: E402
+from multi_bodies.run.output_lock import output_lock  # noqa: E402
+from multi_bodies.run.run_setup import STATIC_SCHEMES, prepare, set_aside_earlier_run, write_bodies_info  # noqa: E402
 from multi_bodies.files.structure_files import read_body_table  # noqa: E402
 
 SCHEMES = STATIC_SCHEMES
@@ -200,8 +204,14 @@ def run(options):
         run_output.refuse_if_too_big(run_output.dense_memory(system.num_blobs, system.num_bodies),
                                      'the dense %s problem of %d blobs' % (options.scheme, system.num_blobs),
                                      options.where('scheme'), 'use fewer blobs (or the iterative mobility problem)')
-    run_output.prepare_output_directory(options.output_name, options.where('output_name'))
+    with output_lock(options, log=print):  # one writer per output name, as the dynamic and Monte Carlo runs
+        set_aside_earlier_run(options, setup.types, log=print)
+        return write_results(options, setup, force_table, velocity_table)
 
+
+def write_results(options, setup, force_table=None, velocity_table=None):
+    """Solve the static problem and write its files (the lock of ``output_name`` held, earlier files set aside)."""
+    system = setup.system
     copy = options.output_name + '.inputfile'
     if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
         shutil.copyfile(options.input_file, copy)

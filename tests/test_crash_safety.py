@@ -1,6 +1,7 @@
 """No lost or mixed frames; restarts exact or refused (issue 17).
 
-The crash test kills small runs (dynamic, Monte Carlo, an ensemble replica; both
+The crash test kills small runs (dynamic, Monte Carlo, an ensemble replica, a phoretic run with its
+``.concentration`` file; both
 ``save_clones`` modes) with SIGKILL, SIGTERM and SIGINT at moments drawn from a
 fixed seed, including between a snapshot and its record (the test hook
 ``RMB_TEST_KILL_BETWEEN_SNAPSHOT_AND_RECORD=<step>`` makes the writer SIGKILL
@@ -74,6 +75,16 @@ def mcmc_scene(folder, n_steps=400, n_save=40, save_clones='one_file_per_step', 
     return folder
 
 
+def phoretic_scene(folder, n_steps=40, n_save=4, save_clones='one_file_per_step', **extra):
+    """A Janus sphere (12 blobs, a .Laplace file) in a background gradient, Adams-Bashforth, writing
+    ``.concentration``: the solute's warm start and the history matter."""
+    from test_data_safety import surface_scene
+    values = dict(scheme='deterministic_adams_bashforth', n_steps=n_steps, n_save=n_save, save_clones=save_clones,
+                  save_concentration=True, dt=0.05)
+    values.update(extra)
+    return surface_scene(folder, 'Laplace', **values)
+
+
 def edit(folder, **values):
     path = Path(folder) / 'input.dat'
     path.write_text(set_options(path.read_text(), **values))
@@ -97,7 +108,8 @@ def outputs(folder, mcmc=False):
     """{name: bytes} of the snapshots and counters of ``folder/data`` (the series only, nothing set aside)."""
     data = Path(folder) / 'data'
     found = {p.name: p.read_bytes() for p in data.iterdir()
-             if p.is_file() and (p.name.endswith('.clones') or p.name.endswith('.config'))}
+             if p.is_file() and (p.name.endswith('.clones') or p.name.endswith('.config')
+                                 or p.name.endswith('.concentration'))}
     info = data / ('run.MCMC_info' if mcmc else 'run.info')
     found['info'] = b'\n'.join(info.read_bytes().splitlines()[:3])
     return found
@@ -130,13 +142,13 @@ def wait_for_record(process, folder, step, timeout=60.0, path=None):
 def one_chain(tmp_path, rng, index, counts):
     """One chain: a run killed at a drawn moment, continued, compared with the uninterrupted run."""
     how = ['SIGKILL', 'SIGTERM', 'SIGINT', 'between'][int(rng.integers(4))]
-    if index % 3 == 2:
+    if index % 4 == 2:
         return replica_chain(tmp_path, rng, index, counts, how)
-    program = ['dynamic', 'mcmc'][index % 3]
-    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
-    scene, script, ids = ((dynamic_scene, DYNAMIC, ('a', 'b')) if program == 'dynamic'
-                          else (mcmc_scene, MCMC, ('a',)))
-    n_steps, n_save = (40, 4) if program == 'dynamic' else (4000, 40)
+    program = ['dynamic', 'mcmc', None, 'phoretic'][index % 4]
+    save_clones = ['one_file_per_step', 'one_file'][(index // 4) % 2]
+    scene, script, ids = {'dynamic': (dynamic_scene, DYNAMIC, ('a', 'b')), 'mcmc': (mcmc_scene, MCMC, ('a',)),
+                          'phoretic': (phoretic_scene, DYNAMIC, ('a',))}[program]
+    n_steps, n_save = (4000, 40) if program == 'mcmc' else (40, 4)
     reference = scene(tmp_path / ('reference_%d' % index), n_steps=n_steps, n_save=n_save, save_clones=save_clones)
     assert run(script, reference)[0] == 0
     folder = scene(tmp_path / ('chain_%d' % index), n_steps=n_steps, n_save=n_save, save_clones=save_clones)
@@ -193,7 +205,7 @@ def replica_outputs(spec):
 
 def replica_chain(tmp_path, rng, index, counts, how):
     """A replica killed (child process) at a drawn moment; the runner resumes it by itself."""
-    save_clones = ['one_file_per_step', 'one_file'][(index // 3) % 2]
+    save_clones = ['one_file_per_step', 'one_file'][(index // 4) % 2]
     reference = replica_scene(tmp_path / ('reference_%d' % index), save_clones, n_steps=40, n_save=4)
     assert runner.run_replica(reference)['status'] == 'done'
     killed = replica_scene(tmp_path / ('chain_%d' % index), save_clones, n_steps=40, n_save=4)
@@ -644,3 +656,194 @@ def test_a_refused_run_leaves_no_folder_for_its_lock(tmp_path):
     status, _, err = run(DYNAMIC, folder)
     assert status == 2 and 'dt' in err
     assert not (folder / 'data').exists()
+
+
+# ------------------------------------------------------------------ issue 48: locks that cannot be fooled, nothing mixed
+@pytest.mark.parametrize('kind', ['symlink', 'dangling symlink', 'folder', 'fifo'])
+def test_a_lock_path_that_is_not_a_file_is_one_line(tmp_path, kind):
+    """run.lock as a link (to a file, or dangling), a folder or a FIFO: refused in one line naming it; a link's
+    target is never written (before: overwritten with the holder's record), a FIFO never blocks."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2)
+    (folder / 'data').mkdir()
+    lock = folder / 'data' / 'run.lock'
+    target = tmp_path / 'precious.txt'
+    if kind == 'symlink':
+        target.write_text('keep me\n')
+        lock.symlink_to(target)
+    elif kind == 'dangling symlink':
+        lock.symlink_to(tmp_path / 'nowhere')
+    elif kind == 'folder':
+        lock.mkdir()
+    else:
+        os.mkfifo(str(lock))
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 2 and 'Traceback' not in err and len(err.strip().splitlines()) == 1, err
+    assert 'run.lock' in err and {'symlink': 'symbolic link', 'dangling symlink': 'symbolic link', 'folder': 'folder',
+                                  'fifo': 'FIFO'}[kind] in err, err
+    if kind == 'symlink':
+        assert target.read_text() == 'keep me\n'
+    if kind == 'dangling symlink':
+        assert not (tmp_path / 'nowhere').exists()
+    assert not list((folder / 'data').glob('run.*.clones'))
+
+
+def test_removing_a_live_runs_lock_lets_no_second_writer_in(tmp_path):
+    """The refusal once suggested removing run.lock; removed while its run lives, a second run got in and .restart
+    held records of two runs.  Now the second run is refused (the live run is named in run.run), the first takes
+    its lock back at its next save, and its files are exactly those of a run alone (law: same input, same bytes)."""
+    alone = dynamic_scene(tmp_path / 'alone', n_steps=120, n_save=10)
+    assert run(DYNAMIC, alone)[0] == 0
+    folder = dynamic_scene(tmp_path / 'run', n_steps=120, n_save=10)
+    first = start(DYNAMIC, folder)
+    assert wait_for_lock(first, folder) and wait_for_record(first, folder, 10)
+    first.send_signal(signal.SIGSTOP)
+    try:
+        (folder / 'data' / 'run.lock').unlink()
+        status, _, err = run(DYNAMIC, folder)  # the same input: a new run into the live output name
+    finally:
+        first.send_signal(signal.SIGCONT)
+    assert first.wait(timeout=120) == 0, first.stderr.read()
+    assert status == 2 and 'Traceback' not in err and len(err.strip().splitlines()) == 1, err
+    assert 'in use by another run (pid %d' % first.pid in err and 'run.run' in err, err
+    assert outputs(folder) == outputs(alone)
+    records = run_output.read_restart_records(str(folder / 'data' / 'run'))
+    assert len({record['run_id'] for record in records}) == 1 and len(records) == 13
+    assert not (folder / 'data' / 'run.set_aside').exists() and not (folder / 'data' / 'run.lock').exists()
+
+
+def test_a_run_whose_lock_is_taken_stops_in_one_line(tmp_path):
+    """Another program replacing a live run's lock file (and so taking the outputs): the run stops at its next
+    save with one line naming the lock file, exit 1; what it saved before is complete."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=100000, n_save=10)
+    first = start(DYNAMIC, folder)
+    assert wait_for_lock(first, folder) and wait_for_record(first, folder, 10)
+    first.send_signal(signal.SIGSTOP)
+    lock = folder / 'data' / 'run.lock'
+    lock.unlink()
+    lock.write_text('{"host": "elsewhere", "pid": 1}')
+    first.send_signal(signal.SIGCONT)
+    out, err = first.communicate(timeout=120)
+    assert first.returncode == 1 and 'Traceback' not in err, err
+    assert len([line for line in err.splitlines() if line.startswith('error:')]) == 1, err
+    assert 'run.lock' in err and 'Another program writes the same outputs' in err, err
+    assert last_pair_step(folder, 'one_file_per_step', ['a', 'b']) is not None
+    assert lock.read_text() == '{"host": "elsewhere", "pid": 1}'  # not the run's to remove
+
+
+def test_the_static_script_holds_the_lock(tmp_path):
+    """multi_bodies_utilities.py into the output name of a live dynamic run: refused (before, it overwrote the
+    run's .inputfile and .bodies_info); the dynamic run's files are those of a run alone."""
+    alone = dynamic_scene(tmp_path / 'alone', n_steps=120, n_save=10)
+    assert run(DYNAMIC, alone)[0] == 0
+    folder = dynamic_scene(tmp_path / 'run', n_steps=120, n_save=10)
+    (folder / 'static.dat').write_text(set_options((folder / 'input.dat').read_text(), scheme='mobility'))
+    first = start(DYNAMIC, folder)
+    assert wait_for_lock(first, folder) and wait_for_record(first, folder, 10)
+    first.send_signal(signal.SIGSTOP)
+    try:
+        static = subprocess.run([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'multi_bodies_utilities.py'),
+                                 '--input-file', 'static.dat'], cwd=str(folder), env=child_environment(),
+                                capture_output=True, text=True, timeout=120)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    assert first.wait(timeout=120) == 0
+    assert static.returncode == 2 and 'in use by another run (pid %d' % first.pid in static.stderr, static.stderr
+    assert outputs(folder) == outputs(alone)
+    for suffix in ('inputfile', 'bodies_info'):
+        assert (folder / 'data' / ('run.' + suffix)).read_bytes() == (alone / 'data' / ('run.' + suffix)).read_bytes()
+
+
+def test_a_new_run_leaves_an_output_name_that_starts_the_same_alone(tmp_path):
+    """data/run.b beside data/run: a new run into data/run once moved run.b's snapshots aside (names matched by
+    prefix), so run.b could no longer restart.  Now run.b keeps every file and restarts exactly."""
+    whole = dynamic_scene(tmp_path / 'whole', n_steps=8, n_save=4, output_name='data/run.b')
+    assert run(DYNAMIC, whole)[0] == 0
+    folder = dynamic_scene(tmp_path / 'run', n_steps=8, n_save=4, output_name='data/run.b')
+    edit(folder, n_steps=4)
+    assert run(DYNAMIC, folder)[0] == 0
+    before = snapshot_tree(folder / 'data')
+    edit(folder, output_name='data/run', n_steps=4)
+    assert run(DYNAMIC, folder)[0] == 0  # a new run into data/run, twice (the second sets the first aside)
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0 and 'moved to' in out, err
+    after = snapshot_tree(folder / 'data')
+    assert all(after.get(name) == data for name, data in before.items())  # (run's own run.b.<step>.clones too)
+
+    def series_of_run_b(folder):
+        return {n: d for n, d in snapshot_tree(folder / 'data').items() if n.startswith(('run.b.a.', 'run.b.b.'))}
+    edit(folder, output_name='data/run.b', initial_step=4, n_steps=8)
+    assert run(DYNAMIC, folder)[0] == 0
+    assert series_of_run_b(folder) == series_of_run_b(whole) and len(series_of_run_b(whole)) == 6
+
+
+def snapshot_tree(folder):
+    return {p.name: p.read_bytes() for p in Path(folder).iterdir() if p.is_file() and not p.name.endswith('.lock')}
+
+
+@pytest.mark.parametrize('program', ['dynamic', 'static'])
+def test_a_new_run_sets_aside_every_file_it_would_overwrite(tmp_path, program):
+    """.inputfile and .random_state (and .info, .time, .bodies_info, ...) of an earlier run were overwritten by a
+    new run into the same output name; now every one is in the set-aside folder, byte for byte."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=4, n_save=2)
+    assert run(DYNAMIC, folder)[0] == 0
+    earlier = snapshot_tree(folder / 'data')
+    if program == 'dynamic':
+        edit(folder, seed=11, dt=0.02)
+        status, out, err = run(DYNAMIC, folder)
+    else:
+        edit(folder, scheme='mobility')
+        static = subprocess.run([sys.executable, str(REPO_ROOT / 'multi_bodies' / 'multi_bodies_utilities.py'),
+                                 '--input-file', 'input.dat'], cwd=str(folder), env=child_environment(),
+                                capture_output=True, text=True, timeout=120)
+        status, out, err = static.returncode, static.stdout, static.stderr
+    assert status == 0, err
+    aside = list((folder / 'data' / 'run.set_aside').iterdir())
+    assert len(aside) == 1
+    assert snapshot_tree(aside[0]) == earlier
+    assert {'run.inputfile', 'run.random_state', 'run.info', 'run.time', 'run.bodies_info'} <= set(earlier)
+
+
+# ------------------------------------------------------------------ issue 48: .concentration kept like the snapshots
+@pytest.mark.parametrize('restart_step', [3, 6])
+def test_a_restart_keeps_one_concentration_block_per_saved_step(tmp_path, restart_step):
+    """A finished 0..9 run (n_save 3) restarted from step 3 once left 7 blocks (the continuation's 6 and 9, then
+    3, 6, 9 again); now the file is byte for byte the uninterrupted run's (4 blocks), the replaced blocks set
+    aside (law: a deterministic program with the same state gives the same bytes)."""
+    from multi_bodies.run.concentration_output import read_concentration_file
+    whole = phoretic_scene(tmp_path / 'whole', n_steps=9, n_save=3)
+    assert run(DYNAMIC, whole)[0] == 0
+    folder = phoretic_scene(tmp_path / 'run', n_steps=9, n_save=3)
+    assert run(DYNAMIC, folder)[0] == 0
+    edit(folder, initial_step=restart_step)
+    status, out, err = run(DYNAMIC, folder)
+    assert status == 0, err
+    name = 'run.concentration'
+    assert read_concentration_file(str(whole / 'data' / name)).shape[0] == 4
+    assert (folder / 'data' / name).read_bytes() == (whole / 'data' / name).read_bytes()
+    assert outputs(folder) == outputs(whole)
+    aside = list((folder / 'data' / 'run.set_aside').glob('*/run.concentration.after_byte_*'))
+    assert len(aside) == 1 and aside[0].stat().st_size > 0
+
+
+def test_a_new_phoretic_run_sets_the_earlier_concentration_aside(tmp_path):
+    folder = phoretic_scene(tmp_path / 'run', n_steps=3, n_save=3)
+    assert run(DYNAMIC, folder)[0] == 0
+    earlier = (folder / 'data' / 'run.concentration').read_bytes()
+    edit(folder, dt=0.02)
+    assert run(DYNAMIC, folder)[0] == 0
+    aside = list((folder / 'data' / 'run.set_aside').glob('*/run.concentration'))
+    assert len(aside) == 1 and aside[0].read_bytes() == earlier
+    assert (folder / 'data' / 'run.concentration').read_bytes() != earlier
+
+
+def test_a_cut_concentration_file_refuses_the_restart(tmp_path):
+    folder = phoretic_scene(tmp_path / 'run', n_steps=9, n_save=3)
+    assert run(DYNAMIC, folder)[0] == 0
+    path = folder / 'data' / 'run.concentration'
+    path.write_bytes(path.read_bytes()[:100])
+    before = snapshot_tree(folder / 'data')
+    edit(folder, initial_step=6)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'run.concentration' in err and len(err.strip().splitlines()) == 1, err
+    assert snapshot_tree(folder / 'data') == before
+

@@ -338,8 +338,8 @@ def ensemble_lock(output_dir, log=print):
     path = os.path.join(output_dir, LOCK_NAME)
 
     def refusal(holder):
-        return UserInputError('%s: another ensemble.py (%s) is running in this folder; wait for it or stop it '
-                              '(if it no longer runs, remove %s)' % (output_dir, holder, path))
+        return UserInputError('%s: another ensemble.py (%s) is running in this folder; wait for it or stop it'
+                              % (output_dir, holder))
     with hold_lock(path, refusal, log):
         yield path
 

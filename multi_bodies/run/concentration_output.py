@@ -49,23 +49,113 @@ def read_concentration_file(path):
     return np.array(blocks)
 
 
+SIDE_FILE = 'concentration'  # the key of this file's bytes in a restart record's ``side_files``
+
+
 class AlsoWriteConcentration:
     """Wraps the snapshot writer of a running script: each ``save(step, locations, orientations, ...)`` also
-    appends the block of that configuration to ``output_name.concentration`` (a new file unless restarting)."""
+    appends the block of that configuration to ``output_name.concentration`` and passes the block's bytes
+    ``[start, end]`` to the snapshot writer, which keeps them in the step's restart record.
 
-    def __init__(self, snapshot_writer, options, model):
-        self.snapshot_writer, self.model = snapshot_writer, model
+    A new run starts the file empty (the earlier run's was set aside before).  A restart from step k keeps the
+    blocks before step k (``keep`` bytes, :func:`kept_bytes` of the record of k, checked before the run starts)
+    and, at its first save, moves the rest (the abandoned
+    continuation's blocks, and block k, which the restart writes again) to ``output_name.set_aside/``, so the
+    file holds one block per saved step, as the uninterrupted run's.  Runs without phoretic bodies write nothing
+    (the option is ignored, with a warning).
+    """
+
+    def __init__(self, snapshot_writer, options, model, keep=None, log=print):
+        self.snapshot_writer, self.model, self.log = snapshot_writer, model, log
+        self.output_name = options.output_name
         self.path = options.output_name + '.concentration'
-        phoretic = model.surface is not None and model.surface.phoretic is not None
-        if options.initial_step == 0 and phoretic:  # without phoretic bodies the option is ignored (warned)
+        self.phoretic = is_phoretic(model)
+        self.keep = keep  # bytes of the file a restart keeps (:func:`kept_bytes`; None: nothing to cut)
+        self._begun = False
+        if options.initial_step == 0 and self.phoretic:
             open(self.path, 'w').close()
+            self._begun = True
+
+    def _begin(self):
+        """A restart's first save: cut the file where the record of the restart step says (the tail set aside)."""
+        self._begun = True
+        from multi_bodies.run import run_output
+        import os
+        if self.keep is None or not os.path.isfile(self.path) or os.path.getsize(self.path) <= self.keep:
+            return
+        folder = run_output.aside_folder(self.output_name, 'after_step_concentration')
+        run_output._save_tail(self.path, self.keep, folder)
+        self.log('restart: the blocks of %s after byte %d (the continuation that is replaced) moved to %s'
+                 % (self.path, self.keep, folder))
+
+    def _size(self):
+        import os
+        return os.path.getsize(self.path) if os.path.isfile(self.path) else 0
+
+    def offsets_at_stop(self):
+        """The record's ``side_files`` entry of a step saved off the grid (no block): [end, end]."""
+        if not self.phoretic:
+            return None
+        if not self._begun:
+            self._begin()
+        size = self._size()
+        return {SIDE_FILE: [size, size]}
 
     def save(self, step, locations, orientations, *args, **kwargs):
-        result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
-        if not kwargs.get('stop') and self.model.surface is not None and self.model.surface.phoretic is not None:
-            with open(self.path, 'a') as f:
-                f.write(concentration_block(self.model, Configuration(locations, orientations)))
-        return result
+        if kwargs.get('stop') or not self.phoretic:
+            return self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
+        from multi_bodies.run import run_output
+        if not self._begun:
+            self._begin()
+        block = concentration_block(self.model, Configuration(locations, orientations)).encode()
+        start = self._size()
+        run_output._append_or_take_back(self.path, block)
+        try:
+            return self.snapshot_writer.save(step, locations, orientations, *args,
+                                             side_offsets={SIDE_FILE: [start, start + len(block)]}, **kwargs)
+        except BaseException:
+            _cut_quietly(self.path, start)  # the step is not saved: neither is its block
+            raise
 
     def __getattr__(self, name):
+        if name in ('snapshot_writer', 'model', 'log', 'path', 'phoretic', 'keep', 'output_name', '_begun'):
+            raise AttributeError(name)
         return getattr(self.snapshot_writer, name)
+
+
+def is_phoretic(model):
+    """True when the model has phoretic bodies (a ``.concentration`` file is written)."""
+    surface = getattr(model, 'surface', None)
+    return surface is not None and surface.phoretic is not None
+
+
+def _cut_quietly(path, size):
+    try:
+        with open(path, 'r+b') as f:
+            f.truncate(size)
+    except OSError:
+        pass
+
+
+def kept_bytes(options, record):
+    """The bytes of ``output_name.concentration`` a restart from ``record`` keeps (the blocks before its step).
+
+    Raises UserInputError when the file is shorter than the record says (cut or replaced: the blocks before the
+    restart step are not those of the run); None when the record names no block (a record of a run without
+    ``save_concentration``: the file, if any, is continued as it is)."""
+    import os
+    from utils import UserInputError
+    side = (record or {}).get('side_files') or {}
+    if SIDE_FILE not in side:
+        return None
+    keep = int(side[SIDE_FILE][0])
+    path = options.output_name + '.concentration'
+    size = os.path.getsize(path) if os.path.isfile(path) else None
+    if size is None:
+        return None  # removed by the user: the restart writes its blocks into a new file
+    if size < keep:
+        raise UserInputError('%s: initial_step %d: %s holds %d bytes, but the restart record of step %d says the '
+                             'blocks before that step end at byte %d (the file was cut or replaced); restore it, or '
+                             'move it away to start a new one' % (options.where('initial_step'), options.initial_step,
+                                                                  path, size, options.initial_step, keep))
+    return keep

@@ -34,8 +34,8 @@ class DynamicRun:
     restart (the record of ``initial_step`` or None).
     """
 
-    def __init__(self, options, print_residual=False, log=print):
-        self.options, self.log = options, log
+    def __init__(self, options, print_residual=False, log=print, lock=None):
+        self.options, self.log, self.lock = options, log, lock
         check_options(options, 'dynamic')  # the table's rules (dt > 0, n_save >= 1, ...) before the scheme is made
         try:
             self.scheme = make_scheme(options.scheme, options.dt, options)
@@ -65,6 +65,11 @@ class DynamicRun:
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
             use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,
                                                   report=self.log_error)
+        self.concentration_keep = None  # a restart keeps the .concentration blocks before its step
+        if options.save_concentration and options.initial_step > 0 and self.restart is not None:
+            from multi_bodies.run.concentration_output import is_phoretic, kept_bytes
+            if is_phoretic(self.system):
+                self.concentration_keep = kept_bytes(options, self.restart)
         self.rng = run_output.make_generator(options)
         self.rng_from_restart = False
         model = self.system
@@ -116,19 +121,21 @@ class DynamicRun:
         options, model, scheme = self.options, self.system, self.scheme
         state = self.start_state
         restart = options.initial_step > 0
-        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart)
+        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart, log=self.log)
         write_articulated_copies(options)
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=(self.restart, self.restart_end),
-                                           fingerprint=self.fingerprint, log=self.log)
+                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
         self.writer = writer
         if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
             from multi_bodies.run.vtk_output import AlsoWriteVtk
             writer = AlsoWriteVtk(writer, options, self.types, model)
+        concentration = None
         if options.save_concentration:  # phoretic runs: output_name.concentration (doc/phoretic.md)
             from multi_bodies.run.concentration_output import AlsoWriteConcentration
-            writer = AlsoWriteConcentration(writer, options, model)
+            writer = concentration = AlsoWriteConcentration(writer, options, model, keep=self.concentration_keep,
+                                                            log=self.log)
         if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
             from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
             writer = AlsoSampleStructureFactors(writer, options, log=self.log)
@@ -145,9 +152,10 @@ class DynamicRun:
             self.write_info(state)
             progress.at_save(index, state.counters.invalid_configurations)
 
-        def save_stop(index):  # a signal stopped the run off the n_save grid: keep the step just finished
+        def save_stop(index):  # a signal stopped the run off the n_save grid: keep the last step completed
             self.writer.save(index, state.configuration.locations, state.configuration.orientations,
-                             self.restart_state(state), stop=True)
+                             self.restart_state(state), stop=True,
+                             side_offsets=concentration.offsets_at_stop() if concentration is not None else None)
             self.write_info(state)
             self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
                      '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
@@ -233,6 +241,6 @@ def run_dynamics(options, print_residual=False, log=print):
     """Set up and run the dynamics of validated ``options``; returns the exit status.
 
     ``output_name.lock`` is held from before the restart record is read until the run ends (one writer per
-    output name, ``multi_bodies.run.output_lock``)."""
-    with output_lock(options, log):
-        return DynamicRun(options, print_residual=print_residual, log=log).run()
+    output name, ``multi_bodies.run.output_lock``), and checked before every save."""
+    with output_lock(options, log) as lock:
+        return DynamicRun(options, print_residual=print_residual, log=log, lock=lock).run()

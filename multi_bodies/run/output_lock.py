@@ -1,23 +1,37 @@
 """One writer per output: an exclusive lock file beside the outputs (floor 6).
 
 A run holds ``output_name.lock`` from before it reads its restart record or
-touches, sets aside or writes any file until it ends; the ensemble runner
-holds ``ensemble.lock`` in its folder the same way (:func:`hold_lock` is the
-one mechanism of both).  The lock is an ``flock`` on the file, so the
-operating system drops it when the holding process dies, however it dies;
-the file names the holder (host, process id, start time) for the message
-that refuses a second writer.  A lock file left by a process that has gone
-is taken over, and the log says so.  A file naming a process of another host
-is refused (its lock may not be visible from here): the message says how to
-remove it.
+touches, sets aside or writes any file until it ends; the static script holds
+it while it writes, the ensemble runner holds ``ensemble.lock`` in its folder
+the same way (:func:`hold_lock` is the one mechanism of all).  The lock is an
+``flock`` on the file, so the operating system drops it when the holding
+process dies, however it dies; the file names the holder (host, process id,
+start time, and the process's start in clock ticks where ``/proc`` gives it)
+for the message that refuses a second writer.  A lock file left by a process
+that has gone is taken over, and the log says so; one that names a live
+process (its lock file removed and written again, or a file system without
+``flock``) is refused like a held lock.  A file naming a process of another
+host is refused (its lock may not be visible from here): the message says how
+to remove it.  A lock path that is a symbolic link, a folder, a FIFO or
+anything but a regular file is refused in one line (it is never followed,
+opened for reading or written).
+
+Removing the lock file of a live run does not let a second writer in: a run
+also names its process in ``output_name.run`` (:func:`holder_record`), and a
+new writer refuses an output name whose ``.run`` names another live process;
+the live run notices at its next save that its lock file is gone
+(:meth:`HeldLock.check`) and stops with one line.
 """
 import contextlib
+import errno
 import json
 import os
 import socket
+import stat
 import time
 
 from utils import UserInputError
+from multi_bodies.run.run_state import RUN_SUFFIX
 
 try:
     import fcntl
@@ -25,21 +39,71 @@ except ImportError:  # not a POSIX system: the lock file alone (created exclusiv
     fcntl = None
 
 LOCK_SUFFIX = '.lock'
+HOLDER_BYTES = 4096  # a holder record is a short JSON line; more is not read
+
+
+def process_start(pid):
+    """The start of process ``pid`` in clock ticks after boot (field 22 of ``/proc/<pid>/stat``), or None where
+    ``/proc`` does not say (another system, a process that has gone).  With the pid it names one process: a pid
+    used again by a later process has another start."""
+    try:
+        with open('/proc/%d/stat' % int(pid), 'rb') as f:
+            text = f.read(4096)
+        return int(text[text.rindex(b')') + 2:].split()[19])
+    except (OSError, ValueError, IndexError, OverflowError):
+        return None
+
+
+def holder_record():
+    """This process as a lock file or ``.run`` segment names it: host, pid, UTC start, start in clock ticks."""
+    record = {'host': socket.gethostname(), 'pid': os.getpid(),
+              'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
+    ticks = process_start(os.getpid())
+    if ticks is not None:
+        record['process_start'] = ticks
+    return record
+
+
+def holder_alive(holder):
+    """True when ``holder`` (a dict naming host, pid and perhaps process_start) is a process of this host that
+    still runs and is not this one; False when it has gone or is this process; None for another host (unknown)."""
+    if not isinstance(holder, dict):
+        return False
+    host, pid = holder.get('host'), holder.get('pid')
+    if host != socket.gethostname():
+        return None if host is not None else False
+    if not (isinstance(pid, int) and not isinstance(pid, bool) and 0 < pid < 2 ** 31) or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, under another user
+        pass
+    except OSError:
+        return False
+    recorded, now = holder.get('process_start'), process_start(pid)
+    if isinstance(recorded, int) and now is not None:
+        return recorded == now  # another start: the pid was given to a later process
+    return True
 
 
 def _holder(descriptor):
     """The holder a lock file names (dict; empty when it is empty or not a holder's record)."""
     os.lseek(descriptor, 0, os.SEEK_SET)
-    data = os.read(descriptor, 4096)
+    data = os.read(descriptor, HOLDER_BYTES)
     try:
         holder = json.loads(data.decode('utf-8'))
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):
         return {}
     return holder if isinstance(holder, dict) else {}
 
 
 def _describe(holder):
-    return 'pid %s on %s, started %s' % (holder.get('pid', '?'), holder.get('host', '?'), holder.get('started', '?'))
+    def short(value):
+        text = str(value)
+        return text if len(text) <= 80 else text[:77] + '...'
+    return 'pid %s on %s, started %s' % tuple(short(holder.get(key, '?')) for key in ('pid', 'host', 'started'))
 
 
 def _try_flock(descriptor):
@@ -56,17 +120,58 @@ def _try_flock(descriptor):
 def _same_file(descriptor, path):
     """True while ``path`` is still the file open at ``descriptor`` (not removed and replaced by a releaser)."""
     try:
-        return os.path.samestat(os.fstat(descriptor), os.stat(path))
+        return os.path.samestat(os.fstat(descriptor), os.lstat(path))
     except OSError:
         return False
 
 
+FILE_KINDS = ((stat.S_ISLNK, 'a symbolic link'), (stat.S_ISDIR, 'a folder'), (stat.S_ISFIFO, 'a FIFO'),
+              (stat.S_ISSOCK, 'a socket'), (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'))
+
+
+def kind_of(mode):
+    """'a symbolic link', 'a folder', 'a FIFO', ... of an ``lstat`` mode; None for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    for test, name in FILE_KINDS:
+        if test(mode):
+            return name
+    return 'not a regular file'
+
+
+def _not_a_lock_file(path, kind):
+    return UserInputError('%s is %s, not a lock file; nothing was read or written through it. Remove it (or choose '
+                          'another output name)' % (path, kind))
+
+
 def _open(path):
-    flags = os.O_RDWR | os.O_CREAT | (os.O_EXCL if fcntl is None else 0)
+    """Open (creating) the lock file ``path`` without following a link or blocking on a FIFO; None when it exists
+    and the system has no flock.  Raises UserInputError for a path that is not a regular file."""
     try:
-        return os.open(path, flags, 0o666)
+        kind = kind_of(os.lstat(path).st_mode)
+    except FileNotFoundError:
+        kind = None
+    except OSError as err:
+        raise UserInputError('%s: cannot use it as a lock file (%s); choose another output name'
+                             % (path, err.strerror or err))
+    if kind is not None:
+        raise _not_a_lock_file(path, kind)
+    flags = (os.O_RDWR | os.O_CREAT | getattr(os, 'O_NOFOLLOW', 0) | getattr(os, 'O_NONBLOCK', 0)
+             | (os.O_EXCL if fcntl is None else 0))
+    try:
+        descriptor = os.open(path, flags, 0o666)
     except FileExistsError:
         return None
+    except OSError as err:
+        if err.errno == errno.ELOOP:  # made a link between the check and the open
+            raise _not_a_lock_file(path, 'a symbolic link')
+        raise UserInputError('%s: cannot create the lock file (%s); choose another output name or change the '
+                             "folder's permissions" % (path, err.strerror or err))
+    kind = kind_of(os.fstat(descriptor).st_mode)
+    if kind is not None:  # replaced by a FIFO or device between the check and the open
+        os.close(descriptor)
+        raise _not_a_lock_file(path, kind)
+    return descriptor
 
 
 def acquire(path, refusal, log=None):
@@ -75,7 +180,6 @@ def acquire(path, refusal, log=None):
     ``refusal(holder_text)`` builds the UserInputError raised when another live
     process holds it; ``log`` gets one line when a stale lock is taken over.
     """
-    host = socket.gethostname()
     for _ in range(5):
         descriptor = _open(path)
         if descriptor is None:
@@ -88,15 +192,16 @@ def acquire(path, refusal, log=None):
             os.close(descriptor)
             continue
         holder = _holder(descriptor)
-        if holder.get('host') not in (None, host):
+        alive = holder_alive(holder) if holder else False
+        if alive is not False:  # another host (its flock is not seen here), or a live process without the flock
             os.close(descriptor)
-            raise refusal(_describe(holder))
+            raise refusal(_describe(holder) + ('' if alive else '; a process of another host: if it no longer '
+                                                                'runs, remove %s' % path))
         if holder and log is not None:
             log('%s: the lock of %s, which no longer runs, is taken over' % (path, _describe(holder)))
-        record = {'host': host, 'pid': os.getpid(), 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
         os.ftruncate(descriptor, 0)
         os.lseek(descriptor, 0, os.SEEK_SET)
-        os.write(descriptor, json.dumps(record).encode('utf-8'))
+        os.write(descriptor, json.dumps(holder_record()).encode('utf-8'))
         return descriptor
     raise refusal('the lock file %s keeps being replaced' % path)
 
@@ -111,14 +216,55 @@ def release(path, descriptor):
     os.close(descriptor)
 
 
+class LockLost(OSError):
+    """The outputs of a running writer were taken by another program (its lock file replaced, its ``.restart``
+    appended to by another process): this writer stops."""
+    hint = ('another program writes the same outputs (a lock file removed while its run lived?); let it end, then '
+            'restart from the last complete step')
+
+
+class HeldLock:
+    """A lock held by this process: ``path`` and :meth:`check`, which a writer calls before each save."""
+
+    def __init__(self, path, descriptor):
+        self.path, self.descriptor = path, descriptor
+
+    def check(self):
+        """Keep the lock before a save: a lock file removed by hand is made and locked again; one replaced by
+        another program's raises LockLost."""
+        if _same_file(self.descriptor, self.path):
+            return
+        try:
+            os.lstat(self.path)
+            present = True
+        except FileNotFoundError:
+            present = False
+        except OSError:
+            present = True
+        if not present and fcntl is not None:
+            try:
+                descriptor = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0),
+                                     0o666)
+            except OSError:
+                descriptor = None
+            if descriptor is not None:
+                if _try_flock(descriptor):
+                    os.write(descriptor, json.dumps(holder_record()).encode('utf-8'))
+                    os.close(self.descriptor)  # the removed file's lock is of no use to anyone
+                    self.descriptor = descriptor
+                    return
+                os.close(descriptor)
+        raise LockLost(errno.EBUSY, 'the lock file was removed and replaced while this run held it', self.path)
+
+
 @contextlib.contextmanager
 def hold_lock(path, refusal, log=None):
-    """Hold the lock file ``path`` for the ``with`` block (see :func:`acquire`)."""
-    descriptor = acquire(path, refusal, log)
+    """Hold the lock file ``path`` for the ``with`` block (see :func:`acquire`); yields a :class:`HeldLock`."""
+    held = HeldLock(path, acquire(path, refusal, log))
     try:
-        yield path
+        yield held
     finally:
-        release(path, descriptor)
+        release(path, held.descriptor)
 
 
 def _new_folders(folder):
@@ -133,28 +279,69 @@ def _new_folders(folder):
     return missing
 
 
+def run_file_holder(output_name):
+    """The process the last segment of ``output_name.run`` names (dict), or None (no such file, unreadable)."""
+    path = output_name + RUN_SUFFIX
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode) or os.path.getsize(path) > 1 << 20:
+            return None
+        with open(path) as f:
+            document = json.load(f)
+        return dict(document['segments'][-1], run_id=document.get('run_id'))
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, RecursionError):
+        return None
+
+
+def prepare_output_directory(output_name, where='output_name'):
+    """Create the folder of ``output_name`` and check that files can be written there.
+
+    Raises UserInputError naming ``where`` (the option's file and line) when
+    the folder cannot be created, is a file, or is read-only.
+    """
+    if '\x00' in output_name:  # no file name can hold it (open() would raise ValueError)
+        raise UserInputError('%s: output_name %r holds a NUL byte, which no file name can hold; write the output '
+                             'name in plain text' % (where, output_name))
+    folder = os.path.dirname(output_name) or os.curdir
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise UserInputError('%s: output_name %s needs the folder %s, but that is a file; choose another '
+                             'output_name or remove the file' % (where, output_name, folder))
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as err:
+        raise UserInputError('%s: cannot create the output folder %s (%s); choose another output_name'
+                             % (where, folder, err.strerror or err))
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UserInputError('%s: the output folder %s is not writable; choose another output_name or change '
+                             'its permissions' % (where, folder))
+
+
 @contextlib.contextmanager
 def output_lock(options, log=print):
-    """Hold ``output_name.lock`` for a run of ``options``: one writer per output name.
+    """Hold ``output_name.lock`` for a run of ``options``: one writer per output name; yields a HeldLock.
 
     Created before anything of the run is read or written; a second run
     into the same ``output_name`` (or a restart while the first run lives)
-    raises UserInputError naming the process that holds it.  Folders made
-    for the lock alone are removed again when the run is refused and left
-    them empty.
+    raises UserInputError naming the process that holds it, also when the
+    live run's lock file was removed (``output_name.run`` names it).  Folders
+    made for the lock alone are removed again when the run is refused and
+    left them empty.
     """
-    from multi_bodies.run.run_output import prepare_output_directory
     name = options.output_name
     created = _new_folders(os.path.dirname(os.path.abspath(name)))
     prepare_output_directory(name, options.where('output_name'))
 
     def refusal(holder):
         return UserInputError('%s: output_name %s is in use by another run (%s); wait for it to end or choose '
-                              'another output_name (if that run no longer exists, remove %s%s)'
-                              % (options.where('output_name'), name, holder, name, LOCK_SUFFIX))
+                              'another output_name' % (options.where('output_name'), name, holder))
     try:
-        with hold_lock(name + LOCK_SUFFIX, refusal, log):
-            yield
+        with hold_lock(name + LOCK_SUFFIX, refusal, log) as held:
+            writer = run_file_holder(name)
+            if writer is not None and holder_alive(writer):
+                raise UserInputError('%s: output_name %s is in use by another run (%s, named in %s.run; its lock '
+                                     'file %s%s was removed while it runs); wait for it to end or choose another '
+                                     'output_name' % (options.where('output_name'), name, _describe(writer), name,
+                                                      name, LOCK_SUFFIX))
+            yield held
     finally:
         for folder in created:  # deepest first; a folder that holds outputs is kept
             try:

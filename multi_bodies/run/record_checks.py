@@ -68,6 +68,12 @@ def _is_checksum_entry(value):
             and len(value[0]) == 64 and all(c in '0123456789abcdef' for c in value[0]) and _is_int(value[1]))
 
 
+def _is_byte_range(value):
+    """[start, end] of a block in a side file: integers, 0 <= start <= end."""
+    return isinstance(value, (list, tuple)) and len(value) == 2 and _is_int(value[0]) and _is_int(value[1]) \
+        and value[0] <= value[1]
+
+
 def _check_array(value, where, columns=None):
     _require(isinstance(value, np.ndarray) and value.dtype.kind in 'fiub',
              '%s is %s, not an array of numbers' % (where, type(value).__name__))
@@ -149,6 +155,7 @@ def record_problem(record, step):
         _table(record, 'config_ends', _is_int, 'a byte offset (an integer >= 0)')
         _table(record, 'snapshots', _is_checksum_entry, '[SHA-256 digest, length >= 0]')
         _table(record, 'stop_files', _is_name, 'a file name')
+        _table(record, 'side_files', _is_byte_range, '[start, end], byte offsets with start <= end')
         _require(isinstance(record.get('stop', False), bool), 'stop is not True or False')
         fingerprint = record.get('fingerprint')
         _require(fingerprint is None or (isinstance(fingerprint, dict) and

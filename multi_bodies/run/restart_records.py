@@ -218,8 +218,8 @@ def write_run_file(output_name, run_id, first_step):
             segments = list(document.get('segments', []))
     except (OSError, ValueError, AttributeError):
         pass
-    segments.append({'first_step': int(first_step), 'started': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
-                     'pid': os.getpid()})
+    from multi_bodies.run.output_lock import holder_record  # host, pid, start: a new writer checks it has gone
+    segments.append(dict(holder_record(), first_step=int(first_step)))
     atomic_write(path, json.dumps({'format': STATE_FORMAT, 'kind': 'run', 'run_id': run_id,
                                    'segments': segments}, indent=1) + '\n')
 

@@ -48,6 +48,7 @@ import re
 import numpy as np
 
 from utils import UserInputError
+from multi_bodies.run.output_lock import LockLost, prepare_output_directory  # noqa: F401 (re-exported)
 from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, config_name,  # noqa: F401
                                           format_clones, read_config_snapshot, truncate_config,
                                           write_clones_file)
@@ -70,29 +71,6 @@ from multi_bodies.run.restart_records import (RESTART_MAGIC, RECORD_HEADER, RECO
 
 
 # ------------------------------------------------------------------ set-up of the output folder
-def prepare_output_directory(output_name, where='output_name'):
-    """Create the folder of ``output_name`` and check that files can be written there.
-
-    Raises UserInputError naming ``where`` (the option's file and line) when
-    the folder cannot be created, is a file, or is read-only.
-    """
-    if '\x00' in output_name:  # no file name can hold it (open() would raise ValueError)
-        raise UserInputError('%s: output_name %r holds a NUL byte, which no file name can hold; write the output '
-                             'name in plain text' % (where, output_name))
-    folder = os.path.dirname(output_name) or os.curdir
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        raise UserInputError('%s: output_name %s needs the folder %s, but that is a file; choose another '
-                             'output_name or remove the file' % (where, output_name, folder))
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError as err:
-        raise UserInputError('%s: cannot create the output folder %s (%s); choose another output_name'
-                             % (where, folder, err.strerror or err))
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise UserInputError('%s: the output folder %s is not writable; choose another output_name or change '
-                             'its permissions' % (where, folder))
-
-
 def copy_input_file(input_file, output_name, restart=False):
     """Write ``output_name.inputfile``: a copy, or (restart) the earlier copy followed by the new input."""
     copy = output_name + '.inputfile'
@@ -248,23 +226,105 @@ def append_time(path, elapsed, restart=False, note=None):
 # ------------------------------------------------------------------ moving earlier outputs aside
 _SNAPSHOT_SUFFIX = re.compile(r'^\.(?P<id>.+?)\.(?:(?P<step>\d{8,})(?:\.stop)?\.clones|config)$')
 
+# What the programs write beside the snapshots, by the part of the name after ``output_name.`` (a new run into
+# the same output_name sets these aside first): the dynamic, Monte Carlo and static programs, the phoretic
+# blocks, the VTK collections, the HydroGrid tables, the dense mobilities of the saved steps.
+RUN_FILE_SUFFIXES = frozenset((
+    'inputfile', 'random_state', 'bodies_info', 'info', 'MCMC_info', 'time', 'restart', 'run', 'concentration',
+    'velocities.dat', 'force.dat', 'body_mobility.dat', 'body_slip_mobility.dat', 'joint_forces.dat',
+    'velocity_field.vtk', 'blobs.pvd', 'bodies.pvd', 'joints.pvd', 'hydrogrid.sk.dat', 'hydrogrid.sk_radial.dat',
+    'hydrogrid.fkt.dat', STOP_SUFFIX[1:]))
+_RUN_FILE_PATTERN = re.compile(r'^(?:(?:blobs|bodies|joints)\.\d{8,}\.vtp|hydrogrid\.\d{8,}\.(?:sk|sk_radial|fkt)\.dat'
+                               r'|(?:blobs|body)_mobility\.\d{8,}\.dat)$')
+BODIES_INFO_BYTES = 1 << 20  # a .bodies_info is five short lines
 
-def run_snapshot_files(output_name):
-    """Snapshot files of ``output_name`` (any structure): list of (path, ID, step or None for a ``.config``)."""
+
+def recorded_structure_ids(output_name):
+    """The structure IDs the ``.bodies_info`` of ``output_name`` names (an earlier run's), or [] without one."""
+    import ast
+    path = output_name + '.bodies_info'
+    try:
+        if os.path.getsize(path) > BODIES_INFO_BYTES:
+            return []
+        with open(path, encoding='utf-8', errors='replace') as f:
+            for line in f:
+                if line.startswith('body_names'):
+                    names = ast.literal_eval(line.split(None, 1)[1].strip())
+                    return [name for name in names if isinstance(name, str)] if isinstance(names, list) else []
+    except (OSError, ValueError, SyntaxError, IndexError, MemoryError, RecursionError):
+        pass
+    return []
+
+
+def run_snapshot_files(output_name, ids):
+    """Snapshot files of ``output_name`` of the structures ``ids``: list of (path, ID, step or None for a ``.config``).
+
+    Names are matched exactly: ``output_name.<ID>.<step>.clones`` and ``output_name.<ID>.config`` with ``<ID>`` one
+    of ``ids``, so the files of another output name that starts the same way (``run.b`` beside ``run``) are never
+    taken."""
     folder, base = os.path.split(output_name)
     try:
         names = sorted(os.listdir(folder or os.curdir))
     except OSError:
         return []
+    ids = set(ids)
     found = []
     for name in names:
         if not name.startswith(base + '.'):
             continue
         match = _SNAPSHOT_SUFFIX.match(name[len(base):])
         path = os.path.join(folder, name)
-        if match and os.path.isfile(path):
+        if match and match.group('id') in ids and os.path.isfile(path):
             found.append((path, match.group('id'), int(match.group('step')) if match.group('step') else None))
     return found
+
+
+def earlier_run_files(output_name, ids, copies=()):
+    """Every file (and the ``.stopped`` folder) of an earlier run with ``output_name`` that a new run would
+    overwrite or mix with: the names of :data:`RUN_FILE_SUFFIXES` and its patterns, the snapshots of ``ids`` and
+    of the structures the earlier ``.bodies_info`` names, and ``copies`` (the names after ``output_name.`` of the
+    input files a run copies beside its outputs).  Matched exactly, never by prefix."""
+    folder, base = os.path.split(output_name)
+    ids = set(ids) | set(recorded_structure_ids(output_name))
+    found = [path for path, _, _ in run_snapshot_files(output_name, ids)]
+    try:
+        names = sorted(os.listdir(folder or os.curdir))
+    except OSError:
+        return found
+    for name in names:
+        if not name.startswith(base + '.'):
+            continue
+        rest = name[len(base) + 1:]
+        path = os.path.join(folder, name)
+        if (rest in RUN_FILE_SUFFIXES or _RUN_FILE_PATTERN.match(rest) or rest in copies) and path not in found \
+                and (os.path.isfile(path) or (rest == STOP_SUFFIX[1:] and os.path.isdir(path))):
+            found.append(path)
+    return found
+
+
+def _same_as_any(path, others):
+    for other in others:
+        try:
+            if os.path.samefile(path, other):
+                return True
+        except OSError:
+            pass
+    return False
+
+
+def set_aside_earlier_run(output_name, ids, copies=(), log=print, why=None, keep=()):
+    """Move every file of an earlier run with ``output_name`` (:func:`earlier_run_files`) to
+    ``output_name.set_aside/<time>_earlier_run_<id>/`` before a new run writes any; returns that folder or None.
+
+    ``keep``: files left in place (the input file of the new run, when it is the earlier run's ``.inputfile``)."""
+    files = [path for path in earlier_run_files(output_name, ids, copies) if not _same_as_any(path, keep)]
+    if not files:
+        return None
+    folder = aside_folder(output_name, why or 'earlier_run_%s' % (read_run_id(output_name) or 'unknown'))
+    for path in files:
+        os.replace(path, os.path.join(folder, os.path.basename(path)))
+    log('%d files of an earlier run with output_name %s moved to %s' % (len(files), output_name, folder))
+    return folder
 
 
 def aside_folder(output_name, why):
@@ -313,6 +373,8 @@ class SnapshotWriter:
     run_id : str, the run identifier written in every record (a restart passes the record's)
     fingerprint : dict, ``run_fingerprint`` of the run, written in every record
     log : callable(str) for the lines saying what was moved aside
+    lock : the ``output_lock.HeldLock`` of the run or None: checked before every save, and ``.restart`` must
+        have the size this writer left it at (else another program writes the same outputs: LockLost)
 
     Nothing is changed before the first save (a restart refused or with nothing to do leaves every file as it
     was).  At the first save, a new run moves the snapshots and ``.restart`` of an earlier run with the same
@@ -324,7 +386,7 @@ class SnapshotWriter:
     """
 
     def __init__(self, output_name, save_clones, types, where='save_clones', restart=False, restart_from=None,
-                 run_id=None, fingerprint=None, log=None):
+                 run_id=None, fingerprint=None, log=None, lock=None):
         if save_clones not in ('one_file_per_step', 'one_file'):
             raise UserInputError("%s: save_clones must be one_file_per_step or one_file, got '%s'"
                                  % (where, save_clones))
@@ -340,6 +402,8 @@ class SnapshotWriter:
         self.log = log or (lambda text: print(text, flush=True))
         self._begun = False
         self.last_saved = None
+        self.lock = lock
+        self._restart_size = None  # the size of .restart after this writer's last record
 
     # -------------------------------------------------------------- the first save
     def _begin(self, step):
@@ -349,9 +413,11 @@ class SnapshotWriter:
         else:
             self._set_aside_abandoned(step)
         write_run_file(self.output_name, self.run_id, step)
+        self._restart_size = os.path.getsize(self.restart_path) if os.path.isfile(self.restart_path) else 0
 
     def _set_aside_earlier_run(self):
-        files = [path for path, _, _ in run_snapshot_files(self.output_name)]
+        ids = {name for name, _ in self.types} | set(recorded_structure_ids(self.output_name))
+        files = [path for path, _, _ in run_snapshot_files(self.output_name, ids)]
         for suffix in (RESTART_SUFFIX, RUN_SUFFIX):
             if os.path.isfile(self.output_name + suffix):
                 files.append(self.output_name + suffix)
@@ -369,8 +435,7 @@ class SnapshotWriter:
         moves, cuts = [], []
         ids = {name for name, _ in self.types}
         if self.save_clones == 'one_file_per_step':
-            moves = [path for path, name, s in run_snapshot_files(self.output_name)
-                     if s is not None and s > k and name in ids]
+            moves = [path for path, name, s in run_snapshot_files(self.output_name, ids) if s is not None and s > k]
         else:
             for name, _ in self.types:
                 path = config_name(self.output_name, name)
@@ -408,7 +473,7 @@ class SnapshotWriter:
         return config_snapshot_end(path, offset)
 
     # -------------------------------------------------------------- one save
-    def save(self, step, locations, orientations, restart_state=None, stop=False):
+    def save(self, step, locations, orientations, restart_state=None, stop=False, side_offsets=None):
         """Write snapshot ``step`` of all structures; then append its restart record.
 
         locations (Nb, 3), orientations (Nb, 4); ``restart_state``: what the
@@ -416,11 +481,19 @@ class SnapshotWriter:
         history), nested dicts/lists/tuples of numbers, strings and arrays
         (``encode_state``).  ``stop``: a save outside the ``n_save`` grid (a
         signal stopped the run): the snapshot goes to ``.clones`` files in ``output_name.stopped/`` (the
-        series keep the grid steps only), named in the record.
-        Raises OSError when a file cannot be written (what this save appended is taken back first).
+        series keep the grid steps only), named in the record.  ``side_offsets``: {file kind: [start, end]}, the
+        bytes of this step's block in a side file (``.concentration``), kept in the record so that a restart
+        from this step cuts the side file where the uninterrupted run had it.
+        Raises OSError when a file cannot be written (what this save appended is taken back first), LockLost
+        when another program took the outputs.
         """
+        if self.lock is not None:
+            self.lock.check()
         if not self._begun:
             self._begin(step)
+        elif self._restart_size is not None and self._size_of_restart() != self._restart_size:
+            raise LockLost(errno.EBUSY, 'records of another run were appended after step %s of this one'
+                           % self.last_saved, self.restart_path)
         offsets, digests, stop_files = {}, {}, {}
         start = 0
         for structure_id, count in self.types:
@@ -450,11 +523,20 @@ class SnapshotWriter:
             record['stop'] = True
             if stop_files:
                 record['stop_files'] = stop_files
+        if side_offsets:
+            record['side_files'] = {name: [int(start), int(end)] for name, (start, end) in side_offsets.items()}
         payload = state_to_bytes(record)
         header = RECORD_HEADER.pack(RECORD_TAG, int(step), len(payload), hashlib.sha256(payload).digest())
         new = not os.path.isfile(self.restart_path) or os.path.getsize(self.restart_path) == 0
         _append_or_take_back(self.restart_path, (RESTART_MAGIC if new else b'') + header + payload)
+        self._restart_size = self._size_of_restart()
         self.last_saved = step
+
+    def _size_of_restart(self):
+        try:
+            return os.path.getsize(self.restart_path)
+        except OSError:
+            return -1
 
     def _append_config(self, structure_id, step, text):
         path = config_name(self.output_name, structure_id)
@@ -601,12 +683,13 @@ class TimeLoop:
 
 
 def write_error_line(err, what, step, last_saved):
-    """One line for an OSError while writing outputs (full disk, file-size limit, ...)."""
+    """One line for an OSError while writing outputs (full disk, file-size limit, a lock taken, ...)."""
     name = getattr(err, 'filename', None)
-    return ('cannot write %s at step %d (%s); %s. Free space (or raise the file-size limit) and restart with '
-            'initial_step %s' % (name or what, step, err.strerror or err,
-                                 'outputs are complete up to step %s' % last_saved if last_saved is not None
-                                 else 'no step was saved', last_saved if last_saved is not None else 0))
+    hint = getattr(err, 'hint', 'free space (or raise the file-size limit) and restart')
+    return ('cannot write %s at step %d (%s); %s. %s%s with initial_step %s'
+            % (name or what, step, err.strerror or err,
+               'outputs are complete up to step %s' % last_saved if last_saved is not None else 'no step was saved',
+               hint[0].upper(), hint[1:], last_saved if last_saved is not None else 0))
 
 
 def finish_run(output_name, start, first, step, restart, write_info_lines, stopped_line=None):

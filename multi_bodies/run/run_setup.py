@@ -174,14 +174,18 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
             raise utils.UserInputError('%s: %s names %d vertex files but %s has %d bodies per articulated body'
                                        % (spec.where, spec.list_vertex_file, len(names), spec.const_file,
                                           const.num_bodies))
-        references = {}
+        references, radii = {}, {}  # per vertex file: blob positions (n, 3), radii (n,) of a fourth column or None
         for name in names:
             if name not in references:
-                references[name] = read_vertex_file(name, spec.where)
+                references[name], radii[name] = read_vertex_file(name, spec.where, return_radii=True)
                 if single_blob_bodies and references[name].shape[0] != 1:
                     raise utils.UserInputError('%s: articulated_deterministic_forward_euler_rollers needs single-'
                                                'blob bodies, but %s has %d blobs'
                                                % (spec.where, name, references[name].shape[0]))
+                if single_blob_bodies and radii[name] is not None:
+                    raise utils.UserInputError('%s: %s gives blob radii (fourth column), but the roller schemes use '
+                                               'the one blob_radius of the input file; remove the fourth column'
+                                               % (spec.where, name))
         _, (locations, orientations) = saved_or_input_configuration(options, spec, restart_record)
         if locations.shape[0] % const.num_bodies:
             raise utils.UserInputError('%s: %s has %d bodies, not a multiple of the %d bodies of one articulated '
@@ -192,7 +196,7 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
         lengths = {}
         for i, (location, orientation) in enumerate(zip(locations, orientations)):
             name = names[i % const.num_bodies]
-            body = Body(location, orientation, references[name], options.blob_radius)
+            body = Body(location, orientation, references[name], options.blob_radius, blobs_radius=radii[name])
             body.ID = spec.ID
             set_slip_by_ID(body, None)
             simplify_slip_function(body)
@@ -338,9 +342,11 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
     if articulated is not None:
-        if getattr(hooks, 'published_constraint_class', None) is not None:
+        if getattr(hooks, 'published_constraint_class', None) is not None \
+                or getattr(hooks, 'published_articulated_class', None) is not None:
             try:
-                published_joints.attach(articulated, hooks.published_constraint_class)
+                published_joints.attach(articulated, hooks.published_constraint_class, hooks.published_articulated_class,
+                                        hooks.published_joint_class)
             except user_hooks.UserFunctionError as err:
                 raise utils.UserInputError(str(err))
         articulated.check_extras()
@@ -398,9 +404,30 @@ def start_output(options):
     run_output.prepare_output_directory(options.output_name, options.where('output_name'))
 
 
-def write_run_start(options, types, num_blobs, rng=None, restart=False):
+def copied_input_names(options):
+    """The names after ``output_name.`` of the input files a run copies beside its outputs
+    (:func:`write_articulated_copies`)."""
+    paths = [path for spec in options.articulated for path in (spec.list_vertex_file, spec.const_file)]
+    paths += [path for spec in all_structure_specs(options) for path in (spec.laplace_file, spec.slip_length_file)
+              if path]
+    return tuple(os.path.basename(path) for path in paths)
+
+
+def set_aside_earlier_run(options, types, log=print):
+    """A new run (``initial_step 0``): move every file of an earlier run with the same ``output_name`` to
+    ``output_name.set_aside/`` before anything is written (``run_output.set_aside_earlier_run``)."""
+    return run_output.set_aside_earlier_run(options.output_name, [name for name, _ in types],
+                                            copied_input_names(options), log=log, keep=[options.input_file])
+
+
+def write_run_start(options, types, num_blobs, rng=None, restart=False, log=print):
     """The first files of a run: ``.inputfile`` (appended to on a restart), ``.random_state`` (of ``rng``, new
-    runs only) and ``.bodies_info`` (``types``: (ID, count) per structure; ``num_blobs``: int)."""
+    runs only) and ``.bodies_info`` (``types``: (ID, count) per structure; ``num_blobs``: int).
+
+    A new run first sets the files of an earlier run with the same ``output_name`` aside (nothing of it is
+    overwritten or mixed with the new one)."""
+    if not restart:
+        set_aside_earlier_run(options, types, log)
     run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
     if rng is not None and not restart:
         run_output.save_random_state(options.output_name + '.random_state', rng)
