@@ -188,7 +188,9 @@ class MCMCRun:
         try:
             with stop:
                 loop.run(save, advance, stop, save_stop)
-            if stop.signal_number is not None:
+            if loop.stopped and loop.complete:  # the signal came as the last step ended: nothing is lost
+                self.log('%s came after the last step: the chain is complete' % stop.signal_name)
+            elif loop.stopped:
                 stopped_line = stop.stopped_line(loop.step)
                 status = stop.exit_status
             if last <= first:
@@ -210,6 +212,9 @@ class MCMCRun:
                 print('%s; the step reached is saved too (%s%s/): restart with initial_step %d'
                       % (stopped_line, options.output_name, run_output.STOP_SUFFIX, loop.stop_saved),
                       file=sys.stderr, flush=True)
+            elif loop.stopped:
+                print('%s; outputs are complete up to step %d, which is saved; restart with initial_step %d'
+                      % (stopped_line, loop.step, loop.step), file=sys.stderr, flush=True)
             else:
                 print('%s; outputs are complete up to the last saved step; restart with initial_step set to that '
                       'step' % stopped_line, file=sys.stderr, flush=True)

@@ -847,3 +847,106 @@ def test_a_cut_concentration_file_refuses_the_restart(tmp_path):
     assert status == 2 and 'run.concentration' in err and len(err.strip().splitlines()) == 1, err
     assert snapshot_tree(folder / 'data') == before
 
+
+# ------------------------------------------------------------------ issues 47 and 48: SIGTERM stops a slow step at once
+SLOW_STEP_OVERRIDE = '''import os
+import time
+
+_steps = [0]
+
+
+def preprocess(bodies):
+    """The physics is the default; with RMB_TEST_SLOW_STEP=k the k-th step of the process sleeps ten minutes."""
+    _steps[0] += 1
+    if os.environ.get('RMB_TEST_SLOW_STEP') == str(_steps[0]):
+        open('sleeping', 'w').close()
+        time.sleep(600)
+'''
+
+
+def slow_step_chain(tmp_path, n_steps, n_save, slow_call, signal_name='SIGTERM'):
+    """A run whose ``slow_call``-th step sleeps ten minutes, signalled while it sleeps: (reference folder, stopped
+    folder, exit status, stderr)."""
+    reference = dynamic_scene(tmp_path / 'reference', n_steps=n_steps, n_save=n_save)
+    folder = dynamic_scene(tmp_path / 'run', n_steps=n_steps, n_save=n_save)
+    for scene in (reference, folder):
+        (scene / 'user_defined_functions.py').write_text(SLOW_STEP_OVERRIDE)
+    assert run(DYNAMIC, reference)[0] == 0
+    process = start(DYNAMIC, folder, {'RMB_TEST_SLOW_STEP': str(slow_call)})
+    deadline = time.monotonic() + 120
+    while not (folder / 'sleeping').exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert (folder / 'sleeping').exists(), process.communicate(timeout=10)
+    process.send_signal(getattr(signal, signal_name))
+    try:  # the step sleeps 600 s: an exit before then is the step abandoned (a generous bound, not a timing)
+        out, err = process.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        pytest.fail('the signal did not stop the slow step')
+    return reference, folder, process.returncode, err
+
+
+@pytest.mark.parametrize('signal_name', ['SIGTERM', 'SIGINT'])
+def test_a_signal_abandons_a_slow_step_and_keeps_the_last_completed_one(tmp_path, signal_name):
+    """Issue 47: a run finished its current step before exiting (248 s for a slow step).  Now the step in
+    progress is abandoned; the last completed step (5, off the n_save grid) is saved with its record, and the
+    restart from it equals the uninterrupted run bit for bit."""
+    reference, folder, status, err = slow_step_chain(tmp_path, 12, 4, slow_call=6, signal_name=signal_name)
+    assert status == {'SIGTERM': 143, 'SIGINT': 130}[signal_name] and 'Traceback' not in err, err
+    assert len(err.strip().splitlines()) == 1 and 'restart with initial_step 5' in err, err
+    assert (folder / 'data' / 'run.stopped' / 'run.a.00000005.clones').exists()
+    assert run_output.restart_record(str(folder / 'data' / 'run'), 5)['stop'] is True
+    edit(folder, initial_step=5)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 0, err
+    assert outputs(folder) == outputs(reference)
+
+
+def test_sigterm_in_the_last_step_leaves_the_last_frame_in_the_series(tmp_path):
+    """Issue 48: a SIGTERM in the last step said 'restart with initial_step n_steps' (which does nothing) and
+    left the final frame in run.stopped/ only.  Now the last completed step is named, and the restart writes the
+    final frame into the series, as the uninterrupted run has it."""
+    reference, folder, status, err = slow_step_chain(tmp_path, 8, 4, slow_call=8)
+    assert status == 143 and 'restart with initial_step 7' in err, err
+    edit(folder, initial_step=7)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 0, err
+    assert (folder / 'data' / 'run.a.00000008.clones').exists()
+    assert outputs(folder) == outputs(reference)
+
+
+class _Stop:
+    signal_number = None
+
+
+@pytest.mark.parametrize('first, last, n_save, signal_after, saved, stop_saved, complete', [
+    (0, 8, 4, 7, [0, 4, 8], None, True),    # the signal after the last step: the final save on the grid, complete
+    (0, 9, 4, 8, [0, 4, 8], None, True),    # ... off the grid: nothing more to save, as an uninterrupted run
+    (0, 12, 4, 3, [0, 4], None, False),     # a step reached on the grid is saved in the series
+    (0, 12, 4, 4, [0, 4], 5, False),        # off the grid: beside the series
+    (4, 12, 4, 4, [4], 5, False),           # a restart
+])
+def test_the_time_loop_keeps_the_step_a_signal_stops_at(first, last, n_save, signal_after, saved, stop_saved,
+                                                        complete):
+    """The loop's rule, without processes: the step reached is saved where an uninterrupted run has it."""
+    stop, grid, beside = _Stop(), [], []
+
+    def advance(step):
+        if step == signal_after:
+            stop.signal_number = signal.SIGTERM
+
+    loop = run_output.TimeLoop(first, last, n_save)
+    loop.run(grid.append, advance, stop, beside.append)
+    assert grid == saved and beside == ([stop_saved] if stop_saved else []) and loop.complete == complete
+    assert loop.stopped
+
+
+def test_an_interrupted_step_is_kept_as_the_step_before_it():
+    stop, grid, beside = _Stop(), [], []
+
+    def advance(step):
+        if step == 6:
+            raise run_output.StepInterrupted(completed=False)
+    loop = run_output.TimeLoop(0, 12, 4)
+    loop.run(grid.append, advance, stop, beside.append)
+    assert grid == [0, 4] and beside == [6] and loop.step == 6 and not loop.complete

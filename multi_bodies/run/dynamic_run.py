@@ -166,8 +166,15 @@ class DynamicRun:
         def advance(step):
             nonlocal state
             assert state.step == step, 'the run state is at step %d, the loop at %d' % (state.step, step)
+            generator_before = self.rng.bit_generator.state  # a signal may abandon the step: back to here
             try:
-                state = scheme.step(model, state, self.rng)
+                with stop.interrupting():
+                    state = scheme.step(model, state, self.rng)
+            except run_output.StepInterrupted:
+                if state.step == step:  # abandoned: the state is the one before the step, so is the generator
+                    self.rng.bit_generator.state = generator_before
+                    raise run_output.StepInterrupted(completed=False)
+                raise run_output.StepInterrupted(completed=True)
             except utils.SimulationStopped as err:  # the counts of the stopped step reach .info
                 if err.state is not None:
                     state = err.state
@@ -177,8 +184,10 @@ class DynamicRun:
         with run_output.StopRequest() as stop:
             try:
                 loop.run(save, advance, stop, save_stop)
-                if stop.signal_number is not None:
-                    stopped_line = stop.stopped_line(loop.step, loop.last_saved)
+                if loop.stopped and loop.complete:  # the signal came as the last step ended: nothing is lost
+                    self.log('%s came after the last step: the run is complete' % stop.signal_name)
+                elif loop.stopped:
+                    stopped_line = stop.stopped_line(loop.step, loop.saved)
                     status = stop.exit_status
                 if last <= first:
                     self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
@@ -210,8 +219,12 @@ class DynamicRun:
                     status = 1
         if stopped_line and status != 1:
             if loop.stop_saved is not None:
-                self.log_error('%s; the step reached is saved too (%s%s/): restart with initial_step %d'
-                               % (stopped_line, options.output_name, run_output.STOP_SUFFIX, loop.stop_saved))
+                self.log_error('%s; the last step completed, %d, is saved (%s%s/): restart with initial_step %d'
+                               % (stopped_line, loop.stop_saved, options.output_name, run_output.STOP_SUFFIX,
+                                  loop.stop_saved))
+            elif loop.stopped:
+                self.log_error('%s; outputs are complete up to step %d, which is saved; restart with initial_step %d'
+                               % (stopped_line, loop.step, loop.step))
             else:
                 self.log_error('%s; outputs are complete up to step %d; restart with initial_step %d'
                                % (stopped_line, loop.last_saved, loop.last_saved))

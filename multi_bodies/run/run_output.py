@@ -36,6 +36,8 @@ end of a run; the encoding of saved state and the generator are in
 :mod:`multi_bodies.run.run_state`, the format and checks of restart records
 in :mod:`multi_bodies.run.restart_records` (their names are re-exported here).
 """
+import contextlib
+import errno
 import hashlib
 import os
 import shutil
@@ -597,9 +599,23 @@ def config_snapshot_end(path, offset):
 SIGNAL_EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 
-class StopRequest:
-    """Context manager: SIGINT/SIGTERM set ``signal_number``; the loop stops after the step in progress.
+class StepInterrupted(BaseException):
+    """Raised by :class:`StopRequest`'s handler while a step may be interrupted (``StopRequest.interrupting``):
+    the step in progress is abandoned at once (a BaseException, so that no ``except Exception`` of a scheme
+    swallows it).  ``completed``: the step had ended when it was raised."""
 
+    def __init__(self, completed=False):
+        super().__init__('the step in progress was interrupted by a signal')
+        self.completed = completed
+
+
+class StopRequest:
+    """Context manager: SIGINT/SIGTERM set ``signal_number``; the loop stops at the next step boundary.
+
+    Inside :meth:`interrupting` (the dynamic run wraps each step in it) the first signal raises
+    :class:`StepInterrupted` at once, so a slow step (a large solve) is abandoned within moments and the run keeps
+    the last completed step; elsewhere (a save being written, the Monte Carlo steps, which change their sampler
+    in place) the signal is only noted and the loop stops after the save or step in progress.
     A second signal raises KeyboardInterrupt at once.  Handlers are only
     installed in the main thread (Dask workers run tasks in other threads).
     """
@@ -607,6 +623,7 @@ class StopRequest:
     def __init__(self):
         self.signal_number = None
         self._previous = {}
+        self._interruptible = False
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -618,8 +635,24 @@ class StopRequest:
         if self.signal_number is not None:  # a second signal: stop at once
             raise KeyboardInterrupt
         self.signal_number = signal_number
+        if self._interruptible:
+            self._interruptible = False
+            raise StepInterrupted()
+
+    @contextlib.contextmanager
+    def interrupting(self):
+        """The ``with`` block (one step) is abandoned by the first signal (StepInterrupted), also when the signal
+        came before it began."""
+        if self.signal_number is not None:
+            raise StepInterrupted()
+        self._interruptible = True
+        try:
+            yield
+        finally:
+            self._interruptible = False
 
     def __exit__(self, *exc):
+        self._interruptible = False
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         return False
@@ -628,9 +661,13 @@ class StopRequest:
     def exit_status(self):
         return SIGNAL_EXIT_STATUS.get(self.signal_number, 0)
 
+    @property
+    def signal_name(self):
+        return signal.Signals(self.signal_number).name
+
     def stopped_line(self, step, last_saved=None):
         """'run stopped by SIGTERM at step k (last saved step s)'."""
-        text = 'run stopped by %s at step %d' % (signal.Signals(self.signal_number).name, step)
+        text = 'run stopped by %s at step %d' % (self.signal_name, step)
         return text + (' (last saved step %d)' % last_saved if last_saved is not None else '')
 
 
@@ -638,13 +675,15 @@ class TimeLoop:
     """The loop over steps ``first .. last - 1`` of a dynamic or Monte Carlo run.
 
     ``run(save, advance, stop, save_stop)`` calls ``save(k)`` before step k when k is a
-    multiple of ``n_save`` (and after the last step when ``last`` is one),
-    ``advance(k)`` for every step, and stops after the step in progress once
-    ``stop.signal_number`` is set; it then saves the step just reached with ``save_stop(k)`` (when given),
-    so a stop loses no work.
+    multiple of ``n_save`` (and after the last step when ``last`` is one) and ``advance(k)`` for every step.
+    When a signal is noted (``stop.signal_number``) after a step, or ``advance`` raises StepInterrupted (the step
+    abandoned: the run is still at step k, or at k + 1 when the step had ended), the loop stops at the step
+    reached, r, and keeps it: with ``save(r)`` when r is on the ``n_save`` grid (the series, where an
+    uninterrupted run has it), else with ``save_stop(r)`` (beside the series), unless it is saved already or
+    r = ``last`` off the grid (the run is complete: an uninterrupted run does not save it either).
     ``step`` is always the index of the step being (or next to be) run, so an error handler can name it;
     ``saved`` the last step saved on the grid (None before the first save), ``stop_saved`` the step saved by
-    ``save_stop``.
+    ``save_stop``, ``stopped`` whether a signal ended the loop, ``complete`` whether every step was run.
     ``save_first=False`` skips the save at ``first`` (a restart whose
     snapshot the earlier run wrote).
     """
@@ -654,6 +693,7 @@ class TimeLoop:
         self.step = first
         self.saved = None  # the last step saved on the n_save grid
         self.stop_saved = None  # the step saved off the grid when a signal stopped the run
+        self.stopped = False
 
     def _save(self, save, step):
         save(step)
@@ -663,16 +703,32 @@ class TimeLoop:
         for self.step in range(self.first, self.last):
             if self.step % self.n_save == 0 and (self.save_first or self.step != self.first):
                 self._save(save, self.step)
-            advance(self.step)
+            try:
+                advance(self.step)
+            except StepInterrupted as interrupted:
+                self._stop_at(self.step + (1 if interrupted.completed else 0), save, save_stop)
+                return
             if stop.signal_number is not None:
-                self.step += 1
-                if save_stop is not None:  # beside the series, also on the grid (a restart writes it there)
-                    save_stop(self.step)
-                    self.stop_saved = self.step
+                self._stop_at(self.step + 1, save, save_stop)
                 return
         self.step = self.last
         if self.last > self.first and self.last % self.n_save == 0:
             self._save(save, self.last)
+
+    def _stop_at(self, reached, save, save_stop):
+        self.step, self.stopped = reached, True
+        if reached == self.saved or (reached == self.first and not self.save_first):
+            return  # saved already (the earlier run wrote the restart step)
+        if reached % self.n_save == 0:
+            self._save(save, reached)  # on the grid: in the series, as the uninterrupted run has it
+        elif reached < self.last and save_stop is not None:
+            save_stop(reached)
+            self.stop_saved = reached
+
+    @property
+    def complete(self):
+        """True when every step up to ``last`` was run."""
+        return self.step >= self.last
 
     @property
     def last_saved(self):
