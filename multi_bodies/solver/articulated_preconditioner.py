@@ -25,7 +25,7 @@ import scipy.linalg
 import scipy.sparse.linalg as spla
 
 from body.body import K_matrices
-from multi_bodies.solver.body_solver import MobilityProblem, blob_radius_argument
+from multi_bodies.solver.body_solver import MobilityProblem, blob_mobility, radius_of_blobs
 
 MAX_GROUP_BLOBS = 600  # a (1,800 + 6k + r)-square LU, about 2e9 flops, per articulated body and build
 # preconditioner auto: the groups are built when their LUs, sum of (3n)^3 / 3 flops, cost at most this many times
@@ -51,7 +51,7 @@ def build(problem, model, configuration):
     for group in groups:
         grouped[group.body_indices] = True
     body = None if np.all(grouped) else model.build_preconditioner(configuration)
-    return GroupPreconditioner(problem, arrays, body, model.stacked_mobility, model.eta, model.blob_radius)
+    return GroupPreconditioner(problem, arrays, body, model.blobs_mobility)
 
 
 def lu_cost_in_products(group_blobs, num_blobs):
@@ -63,13 +63,15 @@ class GroupPreconditioner:
     """``P ~ A^{-1}`` of an articulated problem: every articulated body's saddle-point system solved exactly.
 
     problem : articulated.ArticulatedProblem; arrays : body.body.BodyArrays; body_preconditioner : the model's,
-    for the bodies outside the articulated bodies (None when there are none); stacked_mobility : dense blob
-    mobilities of a stack ``(r (k, n, 3), eta, radius) -> (k, 3n, 3n)``; eta, blob_radius.
+    for the bodies outside the articulated bodies (None when there are none); mobility : the BlobMobility of the
+    dense blocks (the model's blobs mobility), or a function of the published form ``(r (k, n, 3), eta, radius)
+    -> (k, 3n, 3n)`` with eta and blob_radius.
     ``apply(x)`` on ``[lambda (3N); U (6Nb); psi]``; ``operator`` is it as a LinearOperator.
     """
 
-    def __init__(self, problem, arrays, body_preconditioner, stacked_mobility, eta, blob_radius):
+    def __init__(self, problem, arrays, body_preconditioner, mobility, eta=None, blob_radius=None):
         self.problem, self.body = problem, body_preconditioner
+        mobility = blob_mobility(arrays, mobility, eta, blob_radius, role='stacked_dense_matrix')
         r_vectors, locations = problem.problem.r_vectors, problem.problem.locations
         offsets = arrays.blob_offsets
         n3, n6 = 3 * problem.num_blobs, 3 * problem.num_blobs + 6 * problem.num_bodies
@@ -85,9 +87,8 @@ class GroupPreconditioner:
         for n in np.unique(counts):
             chosen = np.flatnonzero(counts == n)
             blobs = np.stack([members[c][1] for c in chosen])
-            radius = blob_radius_argument(arrays, blob_radius, blobs.reshape(-1))
-            radius = np.reshape(radius, blobs.shape) if np.ndim(radius) else radius
-            for c, M in zip(chosen, stacked_mobility(r_vectors[blobs], eta, radius)):
+            stack = mobility.replace(blob_radius=radius_of_blobs(mobility, blobs.reshape(-1), blobs.shape))
+            for c, M in zip(chosen, stack.dense_matrix(r_vectors[blobs])):
                 mobilities[c] = M
         self.groups = []  # (rows (m,), LU of the articulated body's matrix)
         for (bodies, blobs, start, stop, QC), M in zip(members, mobilities):

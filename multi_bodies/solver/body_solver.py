@@ -40,6 +40,7 @@ import scipy.linalg.lapack as _lapack
 import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions, saddle_point_product
+from mobility.interface import as_blob_mobility
 
 from utils import SimulationStopped
 
@@ -98,6 +99,40 @@ def blob_radius_argument(body_arrays, blob_radius, blobs=slice(None)):
     return blob_radius
 
 
+def blob_mobility(body_arrays, mobility, eta=None, blob_radius=None, periodic_length=None, role='velocities',
+                  **functions):
+    """The ``mobility.interface.BlobMobility`` of a building block's mobility argument.
+
+    ``mobility`` a BlobMobility (what the model passes: it carries its viscosity, radii and box): itself.  Or
+    a function of the published form (``role`` ``velocities``: ``f(r, v, eta, a, periodic_length)``;
+    ``dense_matrix``: ``f(r, eta, a)``) with ``eta`` and the number ``blob_radius``, wrapped with the per-blob
+    radii of ``body_arrays`` where a vertex file gave them (``interface.FunctionMobility``); ``functions``:
+    its other functions (``stacked_dense_matrix``, ``cross_blocks``, ``near_field_domain``).
+    """
+    if blob_radius is not None:
+        blob_radius = blob_radius_argument(body_arrays, float(blob_radius))
+    return as_blob_mobility(mobility, None if eta is None else float(eta), blob_radius, periodic_length, role,
+                            **functions)
+
+
+def one_radius(mobility, body_arrays, blob_radius=None):
+    """The blob radius as one number: ``blob_radius`` when given, else the mobility's radius when it is one number,
+    else the body arrays' (the option ``blob_radius``; per-blob radii are the mobility's)."""
+    if blob_radius is not None:
+        return float(blob_radius)
+    return mobility.blob_radius if np.ndim(mobility.blob_radius) == 0 else float(body_arrays.blob_radius)
+
+
+def radius_of_blobs(mobility, blobs, shape=None):
+    """The radius (a number) or radii of ``blobs`` (an index of the blobs) of ``mobility``'s blobs, reshaped to
+    ``shape`` when they are radii."""
+    radius = mobility.blob_radius
+    if np.ndim(radius) == 0:
+        return radius
+    radius = radius[blobs]
+    return radius if shape is None else np.reshape(radius, shape)
+
+
 def body_mobility_from_resistance(resistance):
     """Body mobility ``N = pinv(R)`` of resistance matrices ``R = K^T M^{-1} K``, symmetrised.
 
@@ -124,36 +159,40 @@ class MobilityProblem:
     body_arrays : body.body.BodyArrays
         Only its fixed structure is used (reference blobs, blob-body index, offsets).
     configuration : body.body.Configuration (or (locations (Nb, 3), orientations (Nb, 4)))
-    mobility_product : callable ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)``
-    eta, blob_radius : float; periodic_length : (3,) floats
+    mobility : mobility.interface.BlobMobility (the model's: its viscosity, radii and box), or a function of
+        the published form ``f(r_vectors, force (3N,), eta, a, periodic_length) -> (3N,)`` with
+    eta, blob_radius : float; periodic_length : (3,) floats (given with a function only)
 
-    Attributes: ``configuration``, ``locations``, ``orientations``,
-    ``r_vectors`` (N, 3), ``operator`` (SciPy LinearOperator of size 3N + 6Nb), ``size``.
+    Attributes: ``configuration``, ``locations``, ``orientations``, ``r_vectors`` (N, 3), ``mobility``,
+    ``eta``, ``blob_radius`` (the number: the mobility's, or the body arrays' where it has per-blob radii),
+    ``blob_radii`` (the mobility's radius or radii), ``periodic_length``, ``operator`` (SciPy LinearOperator
+    of size 3N + 6Nb), ``size``.
     """
 
-    def __init__(self, body_arrays, configuration, mobility_product, eta, blob_radius,
-                 periodic_length=(0.0, 0.0, 0.0)):
+    def __init__(self, body_arrays, configuration, mobility, eta=None, blob_radius=None, periodic_length=None):
         self.body_arrays = body_arrays
         self.configuration = as_configuration(configuration)
         self.locations, self.orientations = self.configuration.locations, self.configuration.orientations
         self.r_vectors = blob_positions(self.locations, self.orientations, body_arrays.reference_blobs,
                                         body_arrays.blob_body_index)
-        self.mobility_product = mobility_product
-        self.eta, self.blob_radius = float(eta), float(blob_radius)
+        self.mobility = blob_mobility(body_arrays, mobility, eta, blob_radius, periodic_length)
+        self.eta = self.mobility.eta
         # one number, or the per-blob radii (N,) when a vertex file gave them
-        self.blob_radii = blob_radius_argument(body_arrays, self.blob_radius)
-        self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3).copy()
+        self.blob_radii = self.mobility.blob_radius
+        self.blob_radius = one_radius(self.mobility, body_arrays, blob_radius)
+        self.periodic_length = self.mobility.periodic_length
         self.num_blobs = self.r_vectors.shape[0]
         self.num_bodies = self.locations.shape[0]
         self.size = 3 * self.num_blobs + 6 * self.num_bodies
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
         self._projectors = None
 
-    def with_mobility_product(self, mobility_product):
-        """The same problem (same configuration, a shallow copy) with another ``M f`` product."""
+    def with_mobility(self, mobility):
+        """The same problem (same configuration, a shallow copy) with another ``BlobMobility`` (the paired
+        products of ``model.PairedProducts``)."""
         import copy
         twin = copy.copy(self)
-        twin.mobility_product = mobility_product
+        twin.mobility = mobility
         twin.operator = spla.LinearOperator((self.size, self.size), matvec=twin.matvec, dtype=float)
         return twin
 
@@ -217,8 +256,8 @@ class MobilityProblem:
 
     def M_dot(self, blob_forces):
         """``M lambda``: blob velocities (3N,) of blob forces (3N,) or (N, 3)."""
-        return np.asarray(self.mobility_product(self.r_vectors, np.asarray(blob_forces, dtype=float).reshape(-1),
-                                                self.eta, self.blob_radii, self.periodic_length)).reshape(-1)
+        return np.asarray(self.mobility.velocities(self.r_vectors,
+                                                   np.asarray(blob_forces, dtype=float).reshape(-1))).reshape(-1)
 
     def K_dot(self, body_velocities):
         """``K U``: blob velocities (N, 3) of body velocities (Nb, 6) or (6Nb,)."""
@@ -306,10 +345,12 @@ class BlockDiagonalPreconditioner:
     ----------
     body_arrays : body.body.BodyArrays (fixed structure only)
     configuration : body.body.Configuration
-    blob_mobility_matrix : callable ``f(r (n, 3), eta, a) -> (3n, 3n)``
-    eta, blob_radius : float
-    stacked_mobility : callable ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` or None
-        Builds the dense blocks of many bodies at once (``mobility.blob_mobility_matrix(name)`` accepts stacks).
+    mobility : mobility.interface.BlobMobility (the model's blobs mobility: ``dense_matrix`` of a stack of
+        bodies gives their blocks at once), or a function of the published form ``f(r (n, 3), eta, a) ->
+        (3n, 3n)`` with
+    eta, blob_radius : float, and
+    stacked_mobility : callable ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` or None (given with a function
+        only: the dense blocks of many bodies at once; None: the function once per body).
     memo, memo_bodies : dict and (Nb,) bool, or None
         The blocks of the bodies of ``memo_bodies`` are looked up in ``memo['blocks']`` (keyed by their exact
         blob positions, location and radii) and the ones of this build stored there in place of the last
@@ -325,11 +366,13 @@ class BlockDiagonalPreconditioner:
     configuration : the configuration it was built at.
     """
 
-    def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
+    def __init__(self, body_arrays, configuration, mobility, eta=None, blob_radius=None, stacked_mobility=None,
                  memo=None, memo_bodies=None):
         self.body_arrays = body_arrays
         self.configuration = as_configuration(configuration)
         self.memo = memo
+        mobility = blob_mobility(body_arrays, mobility, eta, blob_radius, role='dense_matrix',
+                                 stacked_dense_matrix=stacked_mobility)
         locations = self.configuration.locations
         r_vectors = body_arrays.blob_positions(self.configuration)
         self.inverse_cholesky_factors = []
@@ -342,9 +385,7 @@ class BlockDiagonalPreconditioner:
         for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
             nb = bodies.stop - bodies.start
             r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
-            radius = blob_radius_argument(body_arrays, blob_radius, blobs)
-            if np.ndim(radius):
-                radius = np.reshape(radius, (nb, n_blobs))
+            radius = radius_of_blobs(mobility, blobs, (nb, n_blobs))
             # bodies of the memo whose blobs are where they were at the last build keep their blocks (the same
             # numbers: every block depends on its own body alone); the others are computed in one stack
             keys, found = [None] * nb, {}
@@ -357,8 +398,8 @@ class BlockDiagonalPreconditioner:
                         found[k] = blocks_memo[keys[k]]
             todo = np.array([k for k in range(nb) if k not in found], dtype=int)
             parts = _saddle_blocks(r_type[todo], locations[bodies][todo],
-                                   radius if np.ndim(radius) == 0 else radius[todo], eta, blob_mobility_matrix,
-                                   stacked_mobility) if todo.size or not found else None
+                                   mobility.replace(blob_radius=radius if np.ndim(radius) == 0 else radius[todo])) \
+                if todo.size or not found else None
             if found:
                 parts = _merged_blocks(nb, todo, parts, found)
             L, L_inv, M_inv, K, M_inv_K, N = parts
@@ -460,14 +501,11 @@ class BlockDiagonalPreconditioner:
         return np.concatenate((lambda_out.reshape(-1), velocity_out.reshape(-1)))
 
 
-def _saddle_blocks(r_type, locations, radius, eta, blob_mobility_matrix, stacked_mobility):
+def _saddle_blocks(r_type, locations, mobility):
     """(L, L^{-1}, M^{-1}, K, M^{-1} K, N) of a stack of bodies r_type (nb, n, 3) at locations (nb, 3): Cholesky
-    factors (None where Cholesky failed, then a plain inverse), inverse mobilities, K, and body mobilities."""
-    if stacked_mobility is not None:
-        M_blocks = stacked_mobility(r_type, eta, radius)
-    else:  # the backend once per body (set-up only)
-        M_blocks = np.stack([blob_mobility_matrix(r_body, eta, radius if np.ndim(radius) == 0 else radius[k])
-                             for k, r_body in enumerate(r_type)])
+    factors (None where Cholesky failed, then a plain inverse), inverse mobilities, K, and body mobilities.
+    ``mobility``: the BlobMobility of these blobs (its radius one number or (nb, n))."""
+    M_blocks = mobility.dense_matrix(r_type)
     try:
         L = np.linalg.cholesky(M_blocks)
         L_inv = lower_triangular_inverse(L)
@@ -589,20 +627,21 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
 
 
 # ---------------------------------------------------------------------------------------------- dense algebra
-def dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius):
-    """Dense blob mobility of all blobs, shape (3N, 3N); ``blob_radius`` a number or per-blob radii (N,)."""
-    return blob_mobility_matrix(np.asarray(r_vectors, dtype=float).reshape(-1, 3), eta, blob_radius)
+def dense_blob_mobility(r_vectors, mobility):
+    """Dense blob mobility of all blobs, shape (3N, 3N), of a BlobMobility (its radius or per-blob radii (N,))."""
+    return mobility.dense_matrix(np.asarray(r_vectors, dtype=float).reshape(-1, 3))
 
 
-def dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, inverse=True):
+def dense_matrices(body_arrays, configuration, mobility, eta=None, blob_radius=None, inverse=True):
     """Dense algebra at a configuration: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
 
-    ``M`` from ``blob_mobility_matrix``, ``M^{-1}`` by Cholesky (:func:`spd_inverse`), ``N = pinv(K^T M^{-1} K)``
-    (:func:`body_mobility_from_resistance`).
+    ``M`` from ``mobility`` (a BlobMobility, or a dense-matrix function of the published form with ``eta`` and
+    ``blob_radius``: :func:`blob_mobility`), ``M^{-1}`` by Cholesky (:func:`spd_inverse`),
+    ``N = pinv(K^T M^{-1} K)`` (:func:`body_mobility_from_resistance`).
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
-    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius_argument(body_arrays, blob_radius))
+    M = dense_blob_mobility(r_vectors, blob_mobility(body_arrays, mobility, eta, blob_radius, role='dense_matrix'))
     K = body_arrays.K_dense(configuration, r_vectors)
     if not inverse:
         return M, None, K, None
@@ -627,8 +666,9 @@ def spd_inverse(matrix):
     return upper + np.triu(upper, 1).T
 
 
-def dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius):
-    """Body mobility of the whole system by dense algebra, at ``configuration``.
+def dense_body_mobility(body_arrays, configuration, mobility, eta=None, blob_radius=None):
+    """Body mobility of the whole system by dense algebra, at ``configuration`` (``mobility`` as
+    :func:`dense_matrices` takes it).
 
     Returns
     -------
@@ -638,31 +678,32 @@ def dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta, b
     slip_mobility : ndarray, shape (6 Nb, 3N)
         ``N K^T M^{-1}`` (body velocities are ``-slip_mobility @ slip`` for slip alone).
     """
-    _, M_inv, K, N = dense_matrices(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius)
+    _, M_inv, K, N = dense_matrices(body_arrays, configuration, mobility, eta, blob_radius)
     return N, N @ K.T @ M_inv
 
 
-def dense_mobility_velocities(body_arrays, configuration, force_torque, slip, blob_mobility_matrix, eta,
-                              blob_radius):
-    """Body velocities (Nb, 6) by dense algebra at ``configuration``: ``U = N (F - K^T M^{-1} slip)``."""
-    body_mobility, slip_mobility = dense_body_mobility(body_arrays, configuration, blob_mobility_matrix, eta,
-                                                       blob_radius)
+def dense_mobility_velocities(body_arrays, configuration, force_torque, slip, mobility, eta=None,
+                              blob_radius=None):
+    """Body velocities (Nb, 6) by dense algebra at ``configuration``: ``U = N (F - K^T M^{-1} slip)``
+    (``mobility`` as :func:`dense_matrices` takes it)."""
+    body_mobility, slip_mobility = dense_body_mobility(body_arrays, configuration, mobility, eta, blob_radius)
     U = body_mobility @ np.asarray(force_torque, dtype=float).reshape(-1) \
         - slip_mobility @ np.asarray(slip, dtype=float).reshape(-1)
     return U.reshape(-1, 6)
 
 
-def solve_resistance_problem(body_arrays, configuration, body_velocities, slip, blob_mobility_matrix, eta,
-                             blob_radius):
+def solve_resistance_problem(body_arrays, configuration, body_velocities, slip, mobility, eta=None,
+                             blob_radius=None):
     """Forces and torques that move the bodies at ``configuration`` with the given velocities (SPEC 4.4).
 
-    ``lambda = M^{-1} (slip + K U)`` by a dense solve, ``[F; T] = K^T lambda``.
+    ``lambda = M^{-1} (slip + K U)`` by a dense solve, ``[F; T] = K^T lambda`` (``mobility`` as
+    :func:`dense_matrices` takes it).
 
     Returns (force_torque (Nb, 6), lambda_blobs (N, 3)).
     """
     configuration = as_configuration(configuration)
     r_vectors = body_arrays.blob_positions(configuration)
-    M = dense_blob_mobility(r_vectors, blob_mobility_matrix, eta, blob_radius_argument(body_arrays, blob_radius))
+    M = dense_blob_mobility(r_vectors, blob_mobility(body_arrays, mobility, eta, blob_radius, role='dense_matrix'))
     blob_velocities = np.asarray(slip, dtype=float).reshape(-1, 3) + body_arrays.K_dot(configuration,
                                                                                       body_velocities, r_vectors)
     lambda_blobs = np.linalg.solve(M, blob_velocities.reshape(-1)).reshape(-1, 3)

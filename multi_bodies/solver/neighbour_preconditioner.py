@@ -36,7 +36,7 @@ preconditioner changes, and GMRES converges to the same solution within ``solver
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from multi_bodies.solver.body_solver import blob_radius_argument
+from multi_bodies.solver.body_solver import blob_mobility, blob_radius_argument
 
 try:
     from multi_bodies.solver import _preconditioner_cpp
@@ -180,11 +180,29 @@ def body_types(body_arrays):
     return body_type, local
 
 
-def pair_blocks(body_arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobility, cross_blocks, body_type=None):
+def cross_or_stacked_blocks(mobility, r_i, r_j, radius, radii_i=None, radii_j=None):
+    """The off-diagonal blocks (P, 3ni, 3nj) of the blob mobility of pairs of bodies r_i (P, ni, 3), r_j (P, nj, 3).
+
+    radius : the one radius of every blob, or None: then radii_i (P, ni) and radii_j (P, nj) are the pairs'.
+    With one radius ``mobility.cross_blocks`` where the backend builds them; else (or when it does not) the
+    off-diagonal blocks of ``dense_matrix`` of the pairs' stacks (four times the work).
+    """
+    O = None
+    if radius is not None:
+        O = mobility.replace(blob_radius=radius).cross_blocks(r_i, r_j)
+    if O is None:
+        n_i = r_i.shape[1]
+        stack_radius = radius if radius is not None else np.concatenate((radii_i, radii_j), axis=1)
+        O = mobility.replace(blob_radius=stack_radius).dense_matrix(np.concatenate((r_i, r_j), axis=1))[
+            :, :3 * n_i, 3 * n_i:]
+    return O
+
+
+def pair_blocks(body_arrays, r_vectors, radii, pairs, shifts, mobility, body_type=None):
     """The blob mobility blocks ``M_ij`` of body pairs, by groups of pairs of the same two structure types.
 
     r_vectors (N, 3), radii (N,), pairs (P, 2) and shifts (P, 3) as :func:`neighbour_pairs` returns them;
-    stacked_mobility and cross_blocks as :class:`NeighbourPreconditioner` takes them; body_type (Nb,) or None.
+    mobility the BlobMobility of the dense blocks (:func:`cross_or_stacked_blocks`); body_type (Nb,) or None.
     Yields (chosen (p,): the group's rows of ``pairs``, t_i, t_j: the two types, O (p, 3 n_i, 3 n_j): rows of
     body ``pairs[chosen, 0]``'s blobs, columns of ``pairs[chosen, 1]``'s, shifted by ``shifts``).
     """
@@ -201,15 +219,11 @@ def pair_blocks(body_arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobil
         blobs_i = offsets[i][:, None] + np.arange(n_i)[None, :]
         blobs_j = offsets[j][:, None] + np.arange(n_j)[None, :]
         r_i, r_j = r_vectors[blobs_i], r_vectors[blobs_j] + shifts[chosen][:, None, :]
-        O = None
-        if cross_blocks is not None and np.ptp(radii) == 0:
-            O = cross_blocks(r_i, r_j, eta, float(radii[0]))
-        if O is None:  # the off-diagonal blocks of the stacked matrices of the pairs
-            radius = np.concatenate((radii[blobs_i], radii[blobs_j]), axis=1) if np.ptp(radii) > 0 \
-                else float(radii[0])
-            O = np.ascontiguousarray(stacked_mobility(np.concatenate((r_i, r_j), axis=1), eta,
-                                                      radius)[:, :3 * n_i, 3 * n_i:])
-        yield chosen, t_i, t_j, O
+        if np.ptp(radii) == 0:
+            O = cross_or_stacked_blocks(mobility, r_i, r_j, float(radii[0]))
+        else:
+            O = cross_or_stacked_blocks(mobility, r_i, r_j, None, radii[blobs_i], radii[blobs_j])
+        yield chosen, t_i, t_j, np.ascontiguousarray(O)
 
 
 def symmetric_pair_product(groups, blob_vector):
@@ -249,7 +263,7 @@ class _ObstacleCoarseCorrection:
     modes.  Measured (doc/preconditioners.md): 16 pillars among 84 spheres, 23 -> 18 iterations from zero.
     """
 
-    def __init__(self, base, fixed, r_vectors, radii, eta, stacked_mobility, cross_blocks, periodic_length):
+    def __init__(self, base, fixed, r_vectors, radii, mobility, periodic_length):
         arrays = base.body_arrays
         offsets = arrays.blob_offsets
         locations = base.configuration.locations
@@ -271,14 +285,14 @@ class _ObstacleCoarseCorrection:
         key = None
         if memo is not None:
             key = ('coarse', r_vectors[np.concatenate([np.arange(offsets[b], offsets[b + 1]) for b in fixed])].tobytes(),
-                   locations[fixed].tobytes(), radii.tobytes(), L.tobytes(), float(eta))
+                   locations[fixed].tobytes(), radii.tobytes(), L.tobytes(), float(mobility.eta))
             if key in memo.get('coarse', {}):  # the obstacles have not moved since the last build: the same matrix
                 self.D = memo['coarse'][key]
                 return
         E = np.zeros((6 * F, 6 * F))
         for a in range(F):
             E[6 * a:6 * a + 6, 6 * a:6 * a + 6] = resistances[a]
-        uniform = bool(np.ptp(radii) == 0)
+        radius = float(radii[0]) if np.ptp(radii) == 0 else None  # one radius, else the pairs' radii
         for a in range(F):
             for b in range(a + 1, F):
                 i, j = fixed[a], fixed[b]
@@ -287,12 +301,9 @@ class _ObstacleCoarseCorrection:
                 periodic = L > 0
                 shift[periodic] = -L[periodic] * np.round((locations[j] - locations[i])[periodic] / L[periodic])
                 r_j = r_vectors[offsets[j]:offsets[j + 1]] + shift
-                O = cross_blocks(r_i[None], r_j[None], eta, float(radii[0])) if cross_blocks is not None and uniform \
-                    else None
-                if O is None:
-                    radius = np.concatenate((radii[offsets[i]:offsets[i + 1]], radii[offsets[j]:offsets[j + 1]]))[
-                        None] if not uniform else float(radii[0])
-                    O = stacked_mobility(np.concatenate((r_i, r_j))[None], eta, radius)[:, :r_i.size, r_i.size:]
+                O = cross_or_stacked_blocks(mobility, r_i[None], r_j[None], radius,
+                                            radii[None, offsets[i]:offsets[i + 1]],
+                                            radii[None, offsets[j]:offsets[j + 1]])
                 block = self.Phi[a].T @ O[0] @ self.Phi[b]
                 E[6 * a:6 * a + 6, 6 * b:6 * b + 6] = block
                 E[6 * b:6 * b + 6, 6 * a:6 * a + 6] = block.T
@@ -322,10 +333,12 @@ class NeighbourPreconditioner:
         Built at the same configuration.  It must provide ``apply``, ``blob_blocks()`` (the blob-blob blocks
         ``Q_k`` of its inverse, per structure type (nb, 3n, 3n)) and ``blob_body_blocks()`` (the body rows of
         its blob columns, (nb, 6, 3n)).
-    stacked_mobility : callable ``f(r (npairs, n, 3), eta, a) -> (npairs, 3n, 3n)`` (the backend's dense
-        blocks, those the base preconditioner is built from).
-    eta, blob_radius : float (blob_radius: or per-blob radii through the base's body arrays)
-    periodic_length : (3,) floats
+    mobility : mobility.interface.BlobMobility, the one the base preconditioner is built from (the model's blobs
+        mobility: its ``dense_matrix`` of stacks of pairs, ``cross_blocks`` and ``near_field_domain``); or a
+        function of the published form ``f(r (npairs, n, 3), eta, a) -> (npairs, 3n, 3n)`` with
+    eta, blob_radius : float (blob_radius: or per-blob radii through the base's body arrays), and the functions
+        ``cross_blocks`` and ``near_field_domain`` below (given with a function only).
+    periodic_length : (3,) floats, the box in which neighbours are found (the minimum image of every pair)
     gap : float, surface-to-surface distance (length) below which two bodies are neighbours (None:
         DEFAULT_GAP_IN_RADII blob radii); their coupling enters to first order.
     strong_gap : float, the distance below which the pair's second-order terms ``W`` enter too (None:
@@ -333,13 +346,14 @@ class NeighbourPreconditioner:
     body_lengths : (Nb,) or None, the bodies' length scales (``Model.body_lengths``): a pair is a neighbour
         pair only when its gap is also below the smaller body's length.
     cross_blocks : callable ``f(r_i (P, ni, 3), r_j (P, nj, 3), eta, a) -> (P, 3ni, 3nj)`` or None (returning
-        None where it cannot): the pair blocks without the bodies' own blocks (``mobility.blob_cross_blocks``);
-        None takes them from ``stacked_mobility`` of the pairs (four times the work).
+        None where it cannot): the pair blocks without the bodies' own blocks (``BlobMobility.cross_blocks``);
+        None takes them from the dense blocks of the pairs (four times the work).
     max_cost_ratio : float or None, build the correction only when ``sum of n_i n_j / N^2`` over the candidate
         pairs (:func:`candidate_pairs`) is at most this (``preconditioner auto``); otherwise it is the base
         preconditioner (``pairs`` then empty and ``cost_ratio`` says why).  None: always.
     near_field_domain : 'single_wall', 'no_wall' or None: the domain of the blob mobility (that of
-        ``cross_blocks``, the C++ backend's) when the near field may be computed again from the positions at every
+        ``cross_blocks``, the C++ backend's: ``BlobMobility.near_field_domain``) when the near field may be
+        computed again from the positions at every
         application by the compiled loop (``_preconditioner_cpp.rigid_near_field``), storing the pair blocks of
         the strongly coupled pairs only; None (or blobs of several radii, or no compiled module): every
         neighbour pair's block is stored.  Both give the same preconditioner to rounding.
@@ -351,11 +365,14 @@ class NeighbourPreconditioner:
     the neighbour pairs.
     """
 
-    def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
+    def __init__(self, base, mobility, eta=None, blob_radius=None, periodic_length=(0.0, 0.0, 0.0), gap=None,
                  strong_gap=None, exact_woodbury=False, body_lengths=None, cross_blocks=None, max_cost_ratio=None,
                  near_field_domain=None):
         self.base = base
-        arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
+        mobility = blob_mobility(base.body_arrays, mobility, eta, blob_radius, role='stacked_dense_matrix',
+                                 cross_blocks=cross_blocks, near_field_domain=near_field_domain)
+        near_field_domain, eta = mobility.near_field_domain, mobility.eta
+        arrays, configuration, r_vectors, radii = blobs_of(base, mobility.blob_radius)
         if gap is None:
             gap = DEFAULT_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
         if strong_gap is None:
@@ -385,8 +402,7 @@ class NeighbourPreconditioner:
         self.obstacles = None
         fixed = np.flatnonzero(getattr(base, 'fixed', np.zeros(0, dtype=bool)))
         if 2 <= fixed.size <= MAX_COARSE_OBSTACLES:
-            self.obstacles = _ObstacleCoarseCorrection(base, fixed, r_vectors, radii, eta, stacked_mobility,
-                                                       cross_blocks, periodic_length)
+            self.obstacles = _ObstacleCoarseCorrection(base, fixed, r_vectors, radii, mobility, periodic_length)
         self.on_the_fly, self.stored_gap = False, self.gap
         if not self.has_neighbours:
             return  # every body alone: the base preconditioner (with the obstacles' coarse correction)
@@ -411,8 +427,8 @@ class NeighbourPreconditioner:
                 np.searchsorted(self.pairs[:, 0], np.arange(arrays.num_bodies + 1)).astype(np.int64),
                 np.ascontiguousarray(self.pairs[:, 1], dtype=np.int64),
                 np.ascontiguousarray(shifts, dtype=float).reshape(-1, 3))
-        for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs[stored], shifts[stored], eta,
-                                               stacked_mobility, cross_blocks, body_type) if stored.size else ():
+        for chosen, t_i, t_j, O in pair_blocks(arrays, r_vectors, radii, self.pairs[stored], shifts[stored], mobility,
+                                               body_type) if stored.size else ():
             chosen = stored[chosen]
             i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
             # the second-order terms W_i = sum_j O_ij Q_j O_ji of the strongly coupled pairs only

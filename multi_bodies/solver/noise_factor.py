@@ -30,8 +30,9 @@ dense.  The factorisation and the applications use the compiled ``_preconditione
 """
 import numpy as np
 
-from multi_bodies.solver.body_solver import lower_triangular_inverse
-from multi_bodies.solver.neighbour_preconditioner import blobs_of, neighbour_pairs, pair_blocks
+from mobility.interface import BlobMobility, as_blob_mobility
+from multi_bodies.solver.body_solver import blob_mobility, lower_triangular_inverse
+from multi_bodies.solver.neighbour_preconditioner import blobs_of, cross_or_stacked_blocks, neighbour_pairs, pair_blocks
 
 try:
     from multi_bodies.solver import _preconditioner_cpp
@@ -229,7 +230,7 @@ def incomplete_cholesky_factor(starts, own_factors, own_inverses, pair_blocks_by
     return BlockLowerFactor.from_blocks(starts, factors, rows, inverses), breakdowns
 
 
-def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0),
+def neighbour_noise_factor(base, mobility, eta=None, blob_radius=None, periodic_length=(0.0, 0.0, 0.0),
                            body_lengths=None, cross_blocks=None, gap=None, neighbours=None):
     """The block IC(0) factor of the blob mobility over neighbouring bodies (module docstring): a
     :class:`BlockLowerFactor` with ``pairs`` (P, 2), the neighbour pairs whose blocks enter, and ``breakdowns``,
@@ -239,14 +240,17 @@ def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_le
     ----------
     base : body_solver.BlockDiagonalPreconditioner (or a subclass), built at the configuration: its bodies'
         Cholesky factors give the diagonal blocks ``M_bb = L_b L_b^T``.
-    stacked_mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks : as
-        :class:`neighbour_preconditioner.NeighbourPreconditioner` takes them.
+    mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks : as
+        :class:`neighbour_preconditioner.NeighbourPreconditioner` takes them (the model passes its blobs
+        mobility, a ``BlobMobility``, alone).
     gap : float or None, the neighbour gap (surface to surface, length; None: NOISE_GAP_IN_RADII blob radii).
     neighbours : a NeighbourPreconditioner built on ``base`` that stores the blocks of its pairs up to at least
         that gap (its ``stored_gap``), or None: its pairs closer than ``gap`` and their blocks are taken instead
         of computed again.
     """
-    arrays, configuration, r_vectors, radii = blobs_of(base, blob_radius)
+    mobility = blob_mobility(base.body_arrays, mobility, eta, blob_radius, role='stacked_dense_matrix',
+                             cross_blocks=cross_blocks)
+    arrays, configuration, r_vectors, radii = blobs_of(base, mobility.blob_radius)
     if gap is None:
         gap = NOISE_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
     by_start = sorted(range(len(arrays.type_slices)), key=lambda t: arrays.type_slices[t][0].start)
@@ -263,7 +267,7 @@ def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_le
         pairs, shifts, _ = neighbour_pairs(r_vectors, arrays.blob_body_index, radii, configuration.locations,
                                            float(gap), periodic_length, body_lengths)
         groups = [(chosen, O) for chosen, _, _, O in pair_blocks(
-            arrays, r_vectors, radii, pairs, shifts, eta, stacked_mobility, cross_blocks)] if pairs.size else []
+            arrays, r_vectors, radii, pairs, shifts, mobility)] if pairs.size else []
     by_pair = {}
     for chosen, O in groups:
         for (i, j), block in zip(map(tuple, pairs[chosen]), O):
@@ -275,28 +279,30 @@ def neighbour_noise_factor(base, stacked_mobility, eta, blob_radius, periodic_le
     return factor
 
 
-def single_blob_factor(r_vectors, eta, blob_radius, stacked_mobility, cross_blocks=None, gap=None):
+def single_blob_factor(r_vectors, mobility, blob_radius=None, stacked_mobility=None, cross_blocks=None, gap=None):
     """The block IC(0) factor of the mobility of single blobs (rollers): (BlockLowerFactor, pairs (P, 2)).
 
-    r_vectors (N, 3); blob_radius a (one radius); the 3 x 3 blocks of blobs whose surfaces come within ``gap``
-    (None: ROLLER_NOISE_GAP_IN_RADII a, centre distances below 2a + gap) and the blobs' own blocks, from
-    ``stacked_mobility`` (and ``cross_blocks`` where it builds them).  No periodic images: a pair coupled only
-    through one is left out (L stays invertible, the covariance M).
+    r_vectors (N, 3); mobility : the BlobMobility of the blobs (one radius ``a``: its dense blocks and
+    ``cross_blocks``), or the viscosity of the published-form call ``(r_vectors, eta, a, stacked_mobility,
+    cross_blocks)`` with ``stacked_mobility`` ``f(r (P, n, 3), eta, a)``.  The 3 x 3 blocks of blobs whose
+    surfaces come within ``gap`` (None: ROLLER_NOISE_GAP_IN_RADII a, centre distances below 2a + gap) and the
+    blobs' own blocks.  No periodic images: a pair coupled only through one is left out (L stays invertible,
+    the covariance M).
     """
     from scipy.spatial import cKDTree
+    if not isinstance(mobility, BlobMobility):
+        mobility = as_blob_mobility(stacked_mobility, mobility, float(blob_radius), role='stacked_dense_matrix',
+                                    cross_blocks=cross_blocks)
     r = np.ascontiguousarray(r_vectors, dtype=float).reshape(-1, 3)
-    a = float(blob_radius)
+    a = float(mobility.blob_radius)
     gap = ROLLER_NOISE_GAP_IN_RADII * a if gap is None else float(gap)
-    own = np.linalg.cholesky(stacked_mobility(r[:, None, :], eta, a))
+    own = np.linalg.cholesky(mobility.dense_matrix(r[:, None, :]))
     pairs = cKDTree(r).query_pairs(2.0 * a + gap, output_type='ndarray') if r.shape[0] > 1 else np.zeros((0, 2))
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     blocks = np.zeros((0, 3, 3))
     if pairs.size:
-        blocks = cross_blocks(r[pairs[:, 0]][:, None, :], r[pairs[:, 1]][:, None, :], eta, a) \
-            if cross_blocks is not None else None
-        if blocks is None:
-            blocks = stacked_mobility(np.stack((r[pairs[:, 0]], r[pairs[:, 1]]), axis=1), eta, a)[:, :3, 3:]
+        blocks = cross_or_stacked_blocks(mobility, r[pairs[:, 0]][:, None, :], r[pairs[:, 1]][:, None, :], a)
     starts = 3 * np.arange(r.shape[0] + 1)
     if _compiled():  # the blocks as they are: one (3, 3) block per pair, in the pairs' order
         factor, _ = _compiled_factor(starts, own, pairs, 9 * np.arange(pairs.shape[0]), blocks)

@@ -57,9 +57,11 @@ class MixedMobilityProblem(MobilityProblem):
     ``prescribed_velocities`` (Nb, 6) lab-frame ``[v, w]`` (rows of free bodies ignored).
     """
 
-    def __init__(self, body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length,
-                 fixed, prescribed_velocities):
-        super().__init__(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length)
+    def __init__(self, body_arrays, configuration, mobility, eta=None, blob_radius=None, periodic_length=None,
+                 fixed=None, prescribed_velocities=None):
+        super().__init__(body_arrays, configuration, mobility, eta, blob_radius, periodic_length)
+        if fixed is None or prescribed_velocities is None:
+            raise TypeError('MixedMobilityProblem needs fixed and prescribed_velocities')
         self.fixed = np.asarray(fixed, dtype=bool).reshape(-1).copy()
         if self.fixed.size != self.num_bodies:
             raise ValueError('fixed has %d entries for %d bodies' % (self.fixed.size, self.num_bodies))
@@ -134,11 +136,11 @@ class MixedPreconditioner(BlockDiagonalPreconditioner):
     same.
     """
 
-    def __init__(self, body_arrays, configuration, blob_mobility_matrix, eta, blob_radius, stacked_mobility=None,
+    def __init__(self, body_arrays, configuration, mobility, eta=None, blob_radius=None, stacked_mobility=None,
                  fixed=None, memo=None):
         fixed = np.zeros(body_arrays.num_bodies, dtype=bool) if fixed is None \
             else np.asarray(fixed, dtype=bool).reshape(-1).copy()
-        super().__init__(body_arrays, configuration, blob_mobility_matrix, eta, blob_radius,
+        super().__init__(body_arrays, configuration, mobility, eta, blob_radius,
                          stacked_mobility=stacked_mobility, memo=memo, memo_bodies=fixed)
         self.fixed = fixed
 

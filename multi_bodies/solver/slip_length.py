@@ -29,7 +29,8 @@ import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices
 from multi_bodies.solver import neighbour_preconditioner as neighbours
-from multi_bodies.solver.body_solver import MobilityProblem, SolutionParts, blob_radius_argument, spd_inverse
+from multi_bodies.solver.body_solver import (MobilityProblem, SolutionParts, blob_mobility, one_radius,
+                                             radius_of_blobs, spd_inverse)
 
 PAIRS_PER_CHUNK = 1 << 19
 SELF_DISTANCE = 1e-14  # pairs closer than this are skipped (the published self term)
@@ -227,6 +228,9 @@ def double_layer_matrix(x, normals, weights, blob_radius):
 class SlipLengthPreconditioner:
     """Block-diagonal preconditioner of :class:`SlipLengthProblem`: each body alone, solved exactly.
 
+    mobility : the BlobMobility of the dense blocks (the model's blobs mobility), or a function of the published
+    form ``f(r (nb, n, 3), eta, a) -> (nb, 3n, 3n)`` with eta and blob_radius (the radius of the double layer is
+    ``blob_radius``, else the mobility's one radius, else the body arrays').
     normals : (N, 3) body-frame normals (turned with the bodies at ``configuration`` here); slip_lengths,
     weights : (N,).  ``kind='double_layer'`` (the default): per body, with ``B_k = I/2 + D_k`` (the body's
     own double layer, dense) and ``A_k = M_k + B_k Xi_k P_k`` (LU inverse), applied to ``y = [y1; y2; y3]``::
@@ -241,11 +245,13 @@ class SlipLengthPreconditioner:
     against 1, ten shells 14 against 9, at l = 1 and l = 1e3).
     """
 
-    def __init__(self, body_arrays, configuration, stacked_mobility, eta, blob_radius, normals, slip_lengths,
-                 weights, kind='double_layer'):
+    def __init__(self, body_arrays, configuration, mobility, eta=None, blob_radius=None, normals=None,
+                 slip_lengths=None, weights=None, kind='double_layer'):
         if kind not in ('double_layer', 'published'):
             raise ValueError("kind must be 'double_layer' or 'published', got %r" % (kind,))
         self.body_arrays, self.kind = body_arrays, kind
+        mobility = blob_mobility(body_arrays, mobility, eta, blob_radius, role='stacked_dense_matrix')
+        eta, blob_radius = mobility.eta, one_radius(mobility, body_arrays, blob_radius)
         r_vectors = body_arrays.blob_positions(configuration)
         locations = configuration.locations
         from multi_bodies.solver.phoretic import lab_normals
@@ -260,10 +266,8 @@ class SlipLengthPreconditioner:
                 self.blocks.append(None)
                 continue
             r_type = r_vectors[blobs].reshape(nb, n_blobs, 3)
-            radius = blob_radius_argument(body_arrays, blob_radius, blobs)
-            if np.ndim(radius):
-                radius = np.reshape(radius, (nb, n_blobs))
-            M = np.array(stacked_mobility(r_type, eta, radius), dtype=float)
+            M = np.array(mobility.replace(blob_radius=radius_of_blobs(mobility, blobs, (nb, n_blobs))).dense_matrix(
+                r_type), dtype=float)
             n = normals[blobs].reshape(nb, n_blobs, 3)
             xiP = self.xi[blobs].reshape(nb, n_blobs, 1, 1) * (np.eye(3) - n[:, :, :, None] * n[:, :, None, :])
             XiP = np.zeros_like(M)
@@ -332,9 +336,9 @@ class SlipLengthNeighbourPreconditioner:
     Parameters
     ----------
     base : SlipLengthPreconditioner at the configuration.
-    stacked_mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks, max_cost_ratio :
+    mobility, eta, blob_radius, periodic_length, body_lengths, cross_blocks, max_cost_ratio :
         as :class:`~multi_bodies.solver.neighbour_preconditioner.NeighbourPreconditioner` takes them (the pair
-        blocks ``M_ij`` come the same way).  ``D`` is the free-space double layer whatever the domain
+        blocks ``M_ij`` come the same way; the model passes its blobs mobility, a ``BlobMobility``, alone).  ``D`` is the free-space double layer whatever the domain
         (:class:`SlipLengthProblem`), so only pairs that meet without a periodic shift get blocks ``D_ij``.
     gap : float or None (``DEFAULT_GAP_IN_RADII`` blob radii), surface-to-surface distance of neighbours.
 
@@ -342,12 +346,14 @@ class SlipLengthNeighbourPreconditioner:
     ``cost_ratio`` exceeded ``max_cost_ratio``).
     """
 
-    def __init__(self, base, stacked_mobility, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), gap=None,
+    def __init__(self, base, mobility, eta=None, blob_radius=None, periodic_length=(0.0, 0.0, 0.0), gap=None,
                  body_lengths=None, cross_blocks=None, max_cost_ratio=None, backend=None):
         if backend not in (None, 'C++', 'python'):
             raise ValueError("backend must be 'C++', 'python' or None, got %r" % (backend,))
         self.base = base
-        arrays, configuration, r_vectors, radii = neighbours.blobs_of(base, blob_radius)
+        mobility = blob_mobility(base.body_arrays, mobility, eta, blob_radius, role='stacked_dense_matrix',
+                                 cross_blocks=cross_blocks)
+        arrays, configuration, r_vectors, radii = neighbours.blobs_of(base, mobility.blob_radius)
         self.body_arrays, self.configuration, self.r_vectors = arrays, configuration, r_vectors
         if gap is None:
             gap = neighbours.DEFAULT_GAP_IN_RADII * float(np.max(radii)) if radii.size else 0.0
@@ -368,7 +374,7 @@ class SlipLengthNeighbourPreconditioner:
         self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
         self.mobility_groups, self.double_layer_groups = [], []
         normals, weights, a = base.normals, base.weights, float(np.max(radii)) if radii.size else 0.0
-        self.eta, self.blob_radius = float(eta), a
+        self.eta, self.blob_radius = mobility.eta, a
         unshifted = ~np.any(shifts != 0.0, axis=1)
         self.has_neighbours = bool(self.pairs.size)
         # the near field from the positions (compiled, uniform radii), else from stored pair blocks
@@ -392,8 +398,7 @@ class SlipLengthNeighbourPreconditioner:
                 partners[order].astype(np.int64), np.ascontiguousarray(both_shifts[order]),
                 np.concatenate((unshifted, unshifted))[order].astype(np.int64))
             return
-        for chosen, t_i, t_j, O in neighbours.pair_blocks(arrays, r_vectors, radii, self.pairs, shifts, eta,
-                                                          stacked_mobility, cross_blocks):
+        for chosen, t_i, t_j, O in neighbours.pair_blocks(arrays, r_vectors, radii, self.pairs, shifts, mobility):
             i, j = self.pairs[chosen, 0], self.pairs[chosen, 1]
             first_i, first_j = (3 * offsets[i]).astype(np.int64), (3 * offsets[j]).astype(np.int64)
             self.mobility_groups.append((first_i, first_j, O))
@@ -447,10 +452,11 @@ class SlipLengthNeighbourPreconditioner:
         return self.base.apply(s)
 
 
-def slip_length_problem(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length,
-                        reference_normals, slip_lengths, weights):
-    """The :class:`SlipLengthProblem` at ``configuration`` (normals turned with the bodies)."""
+def slip_length_problem(body_arrays, configuration, mobility, eta=None, blob_radius=None, periodic_length=None,
+                        reference_normals=None, slip_lengths=None, weights=None):
+    """The :class:`SlipLengthProblem` at ``configuration`` (normals turned with the bodies); ``mobility``, ``eta``,
+    ``blob_radius`` and ``periodic_length`` as :class:`body_solver.MobilityProblem` takes them."""
     from multi_bodies.solver.phoretic import lab_normals
-    rigid = MobilityProblem(body_arrays, configuration, mobility_product, eta, blob_radius, periodic_length)
+    rigid = MobilityProblem(body_arrays, configuration, mobility, eta, blob_radius, periodic_length)
     return SlipLengthProblem(rigid, lab_normals(body_arrays, rigid.configuration, reference_normals),
                              slip_lengths, weights)
