@@ -38,6 +38,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from body.body import Body, bodies_to_arrays  # noqa: E402
+from mobility.interface import BlobMobility  # noqa: E402
 from multi_bodies.solver import user_hooks  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 from multi_bodies.solver.model import Model  # noqa: E402
@@ -117,23 +118,43 @@ class ProductCounter:
         return dict(self.counts, pc=self.preconditioner, kernel_seconds=self.seconds)
 
 
+class CountedMobility(BlobMobility):
+    """A ``BlobMobility`` whose products (``velocities``, couplings, ``paired_velocities``) a ProductCounter counts."""
+
+    def __init__(self, mobility, counter):
+        self.mobility, self.counter = mobility, counter
+        for name in ('backend', 'geometry', 'eta', 'blob_radius', 'periodic_length', 'has_rotation',
+                     'pairs_in_one_pass', 'near_field_domain'):
+            setattr(self, name, getattr(mobility, name))
+        self._velocities = counter.wrap(mobility.velocities)
+        self._coupling = counter.wrap(mobility.coupling)
+
+    def velocities(self, r_vectors, forces):
+        return self._velocities(r_vectors, forces)
+
+    def coupling(self, kind, r_vectors, vector):
+        return self._coupling(kind, r_vectors, vector)
+
+    def check_coupling(self, kind):
+        self.mobility.check_coupling(kind)
+
+    def paired_velocities(self, r_vectors, forces_1, forces_2):
+        self.counter.counts['paired'] += 1
+        start = time.perf_counter()
+        try:
+            return self.mobility.paired_velocities(r_vectors, forces_1, forces_2)
+        finally:
+            self.counter.seconds += time.perf_counter() - start
+
+
 def count_products(model):
     """(a Model like ``model`` whose M f products and preconditioners are counted, its ProductCounter)."""
     counter = ProductCounter()
-    paired = model.paired_mobility_product
-    counted_pair = None
-    if paired is not None:
-        def counted_pair(*args):
-            counter.counts['paired'] += 1
-            start = time.perf_counter()
-            try:
-                return paired(*args)
-            finally:
-                counter.seconds += time.perf_counter() - start
 
     class CountedModel(Model):
-        def roller_product(self, kind):
-            return counter.wrap(Model.roller_product(self, kind))
+        @property
+        def roller_mobility(self):
+            return CountedMobility(Model.roller_mobility.fget(self), counter)
 
         def build_preconditioner(self, configuration, solves=1):
             pc = Model.build_preconditioner(self, configuration, solves=solves)
@@ -145,8 +166,7 @@ def count_products(model):
             pc.apply = counted_apply
             pc.operator = type(pc.operator)(pc.operator.shape, matvec=counted_apply, dtype=float)
             return pc
-    arguments = dict(model.arguments, mobility_product=counter.wrap(model.mobility_product),
-                     paired_mobility_product=counted_pair)
+    arguments = dict(model.arguments, vector_mobility=CountedMobility(model.vector_mobility, counter))
     return CountedModel(**arguments), counter
 
 

@@ -198,11 +198,19 @@ class BlobMobility:
         (``trans_times_force``, ``trans_times_torque``, ``rot_times_force``, ``rot_times_torque``); (3N,)."""
         if kind == 'trans_times_force':
             return self.velocities(r_vectors, vector)
+        self.check_coupling(kind)
+        raise UserInputError('the %s mobility in geometry %s has no %s product'
+                             % (self.backend, getattr(self.geometry, 'kind', 'of its functions'), kind))
+
+    def check_coupling(self, kind):
+        """Raise the ``UserInputError`` that :meth:`coupling` raises for ``kind`` where this mobility has no such
+        coupling (before any product is made)."""
         if kind not in PRODUCT_KINDS:
             raise UserInputError('unknown blob product %r; known: %s' % (kind, ', '.join(PRODUCT_KINDS)))
-        raise UserInputError('the %s mobility in geometry %s has no %s product (blobs with torques need a backend '
-                             'with rotation)' % (self.backend, getattr(self.geometry, 'kind', 'of its functions'),
-                                                 kind))
+        if kind != 'trans_times_force' and not self.has_rotation:
+            raise UserInputError('the %s mobility in geometry %s has no %s product (blobs with torques need a '
+                                 'backend with rotation)' % (self.backend, getattr(self.geometry, 'kind',
+                                                                                   'of its functions'), kind))
 
     def product(self, r_vectors, forces=None, torques=None):
         """``(U, W)`` = the grand mobility times ``[forces; torques]`` (each (3N,), None counts as zero).

@@ -212,16 +212,16 @@ class StochasticScheme(Scheme):
 
         With a paired product (``Model.paired_mobility_product``, the C++ backend) they run side by side
         in two threads and share each pass over the blob pairs (one product of two vectors instead of
-        two, ``model.PairedProducts``); otherwise one after the other.  The same numbers either way, to
-        rounding; ``pair_products = False`` switches the pairing off.
+        two: the problem's mobility wrapped in ``model.PairedProducts``); otherwise one after the other.
+        The same numbers either way, to rounding; ``pair_products = False`` switches the pairing off.
         """
         paired = work.paired_mobility_product if self.pair_products else None
-        if paired is None or not hasattr(problem, 'with_mobility_product'):
+        if paired is None or not hasattr(problem, 'with_mobility'):
             return first(problem), second(problem)
         from concurrent.futures import ThreadPoolExecutor
         from multi_bodies.solver.model import PairedProducts
-        pairer = PairedProducts(paired, problem.mobility_product)
-        shared = problem.with_mobility_product(pairer.product)
+        pairer = PairedProducts(problem.mobility)
+        shared = problem.with_mobility(pairer)
 
         def run_first():
             try:

@@ -240,6 +240,9 @@ class ArticulatedSet:
         self.extras = []  # per constraint: (fields, where) of a published constraint_extra, or None
         self.groups = []
         self.link_override = None  # callable (t, links (Nc, 6)) -> (links, rates) or None (user hook)
+        # callable (t, links (Nc, 6)) -> links, or None: the links the joints hold at the positions (the restoration
+        # and the residuals), when a user's published-style Articulated.update_links gives them apart from the solve's
+        self.position_link_override = None
         self.step_event = None  # callable (t) called at the start of every step, or None (published tumbling_event)
 
     @property
@@ -270,21 +273,28 @@ class ArticulatedSet:
                                                const.bodies))
 
     # -------------------------------------------------------------- links
-    def links(self, t):
-        """Body-frame links (Nc, 6) and their time derivatives (Nc, 6) at time ``t``."""
+    def links(self, t, positions=False):
+        """Body-frame links (Nc, 6) and their time derivatives (Nc, 6) at time ``t``.
+
+        ``positions``: the links the joints hold at the positions (restoration, residuals) rather than those of
+        the velocity solve; they differ only under a user's ``Articulated.update_links`` (the published code
+        restores the joints with it and solves with ``Constraint.update_links``); the rates are the solve's."""
         links = self.reference_links.copy()
         rates = np.zeros_like(links)
         for c, functions in enumerate(self.expressions):
             if functions is not None:
                 values = [f(t) for f in functions]
                 links[c], rates[c] = values[:6], values[6:]
+        if positions and self.position_link_override is not None:
+            return self.position_link_override(t, links), rates
         if self.link_override is not None:
             links, rates = self.link_override(t, links, rates)
         return links, rates
 
-    def lab_links(self, configuration, t):
-        """(a (Nc, 6) lab-frame links ``[R_p l_p, R_q l_q]``, b (Nc, 6) lab-frame rates) at ``configuration``."""
-        links, rates = self.links(t)
+    def lab_links(self, configuration, t, positions=False):
+        """(a (Nc, 6) lab-frame links ``[R_p l_p, R_q l_q]``, b (Nc, 6) lab-frame rates) at ``configuration``
+        (``positions``: see :meth:`links`)."""
+        links, rates = self.links(t, positions)
         R = rotation_matrices(as_configuration(configuration).orientations)
         Rp, Rq = R[self.bodies[:, 0]], R[self.bodies[:, 1]]
         a = np.concatenate((np.einsum('kij,kj->ki', Rp, links[:, :3]), np.einsum('kij,kj->ki', Rq, links[:, 3:])),
@@ -296,7 +306,7 @@ class ArticulatedSet:
     def violation(self, configuration, t):
         """Joint residuals ``g = q_p + R_p l_p - q_q - R_q l_q``, shape (Nc, 3) (length units)."""
         configuration = as_configuration(configuration)
-        a, _ = self.lab_links(configuration, t)
+        a, _ = self.lab_links(configuration, t, positions=True)
         q = configuration.locations
         return q[self.bodies[:, 0]] + a[:, :3] - q[self.bodies[:, 1]] - a[:, 3:]
 
@@ -354,13 +364,13 @@ class ArticulatedSet:
         from body.body import Configuration
         configuration = as_configuration(configuration)
         locations, orientations = configuration.copy_arrays()
-        a, _ = self.lab_links(configuration, t)
+        a, _ = self.lab_links(configuration, t, positions=True)
         for group, centre in zip(self.groups, centres):
             ac = a[group.constraint_indices]
             relative = (group.A_pinv @ (-(ac[:, :3] - ac[:, 3:])).reshape(-1)).reshape(-1, 3)
             locations[group.body_indices] = relative + centre - relative.mean(axis=0)
         new = Configuration(locations, orientations)
-        a, _ = self.lab_links(new, t)
+        a, _ = self.lab_links(new, t, positions=True)
         g_all = self.violation(new, t)
         evaluations = 0
         for group in self.groups:
@@ -596,18 +606,16 @@ class ArticulatedPreconditioner:
 
 # ---------------------------------------------------------------------------------------------- single blobs
 def roller_mobility_product(system, r_vectors):
-    """``[v; w] = M6 [F; T]`` of single-blob bodies at blob positions (N, 3): a function of (N, 6) -> (N, 6)."""
-    a, eta, L = system.blob_radius, system.eta, system.periodic_length
-    products = {kind: system.roller_product(kind) for kind in ('trans_times_force', 'trans_times_torque',
-                                                               'rot_times_force', 'rot_times_torque')}
+    """``[v; w] = M6 [F; T]`` of single-blob bodies at blob positions (N, 3): a function of (N, 6) -> (N, 6)
+    (the grand product of the model's ``roller_mobility``)."""
+    roller = system.roller_mobility
+    for kind in ('rot_times_force', 'rot_times_torque'):  # refused now (domain in_plane), not in the solve
+        roller.check_coupling(kind)
 
     def apply(force_torque):
         ft = np.asarray(force_torque, dtype=float).reshape(-1, 6)
         F, T = ft[:, :3].reshape(-1).copy(), ft[:, 3:].reshape(-1).copy()
-        v = np.asarray(products['trans_times_force'](r_vectors, F, eta, a, L)).reshape(-1) \
-            + np.asarray(products['trans_times_torque'](r_vectors, T, eta, a, L)).reshape(-1)
-        w = np.asarray(products['rot_times_force'](r_vectors, F, eta, a, L)).reshape(-1) \
-            + np.asarray(products['rot_times_torque'](r_vectors, T, eta, a, L)).reshape(-1)
+        v, w = roller.product(r_vectors, F, T)
         return np.concatenate((v.reshape(-1, 3), w.reshape(-1, 3)), axis=1)
     return apply
 

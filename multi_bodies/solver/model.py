@@ -1,8 +1,10 @@
 """The model of a run: everything fixed for the run, frozen (floor 4).
 
 A ``Model`` holds every body's structure as contiguous arrays (``BodyArrays``),
-the backends chosen once at set-up (matrix-free ``M f``, dense blocks for the
-preconditioner, blob-blob and body-body forces, roller couplings), the
+the backends chosen once at set-up (the blob mobilities, each a
+``mobility.interface.BlobMobility``: ``vector_mobility`` for matrix-free
+``M f`` and the roller couplings, ``blobs_mobility`` for the dense blocks of
+the preconditioner and the dense schemes; blob-blob and body-body forces), the
 physics hooks of the run (defaults of ``multi_bodies_functions`` or the
 user's overrides), the tolerances, the joints of articulated bodies and
 whether the wall is seen.  It can
@@ -31,9 +33,10 @@ import copy
 
 import numpy as np
 
-import mobility
 from body.body import Configuration, as_configuration, reference_slip_in_lab_frame
 from body.geometry import Quaternion
+from mobility.interface import (BlobMobility, Geometry, from_implementation_name, implementation_geometry,
+                                make_mobility, published_function, registered_backends)
 from multi_bodies.solver import body_solver, corotated_preconditioner, noise_factor, obstacles, rollers, user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
@@ -52,7 +55,9 @@ def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None
 
     kinds 'vector_product' and 'blobs' (dense matrices, CPU only): the backend
     of smallest cost measured on this machine at ``num_blobs`` blobs
-    (``mobility.choose``); 'forces': pycuda, else C++, else python.  Other
+    (``mobility.choose``); 'forces': the first backend of the mobility
+    registry's preference order (``mobility.interface.PREFERENCE``: the same
+    devices, pycuda, C++, python) whose blob-blob forces run here.  Other
     names are returned unchanged.  ``log`` (callable) is told the choice.
     """
     if name not in ('auto', 'auto' + NO_WALL):
@@ -64,22 +69,16 @@ def resolve_implementation(name, kind='vector_product', log=None, num_blobs=None
         if log is not None:
             log('%s: auto chose %s (smallest measured cost here)' % (kind, chosen))
         return chosen
-    order = {'vector_product': ('pycuda', 'C++', 'python'), 'blobs': ('C++', 'python'),
-             'forces': ('pycuda', 'C++', 'python')}[kind]
+    order = registered_backends()
     for backend in order:
-        if kind == 'forces':
-            try:
-                mbf.blob_blob_force_calculator(backend)
-                usable = True
-            except UserInputError:
-                usable = False
-        else:
-            usable = mobility.backends.is_usable(backend)
-        if usable:
-            chosen = backend + suffix
-            if log is not None:
-                log('%s: auto chose %s (fastest usable here; order %s)' % (kind, chosen, ', '.join(order)))
-            return chosen
+        try:
+            mbf.blob_blob_force_calculator(backend)
+        except UserInputError:
+            continue
+        chosen = backend + suffix
+        if log is not None:
+            log('%s: auto chose %s (fastest usable here; order %s)' % (kind, chosen, ', '.join(order)))
+        return chosen
     raise UserInputError('no usable backend for %s' % name)
 
 
@@ -113,13 +112,21 @@ class Model:
     check_wall : bool
         Whether a blob centre below ``z = 0`` is invalid (False without a wall).
     lanczos_max_iterations : int
-    mobility_product, paired_mobility_product : callables or None
-        Replace the chosen backend's ``M f`` (and paired) product (benchmarks count products this way);
-        None is the backend's.
+    vector_mobility : mobility.interface.BlobMobility or None
+        Replaces the mobility of ``vector_product_name`` (benchmarks count its products this way: its
+        ``velocities`` and ``paired_velocities``); None is the backend's.
     pycuda_blob_blob_forces : callable or None
         The user's ``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py`` (None: the hooks').
     surface : multi_bodies.solver.surface.Surface or None
         Phoretic and slip-length data of the blobs (``.Laplace``, ``.slip_length`` files; doc/phoretic.md).
+
+    The blob mobilities (``mobility.interface.BlobMobility``, configured once with ``eta``, the blob radius or
+    the vertex files' per-blob radii, and the box) are ``vector_mobility`` (``vector_product_name`` with
+    ``periodic_length``: ``M f`` of the problems), ``blobs_mobility`` (``blobs_name``: the dense blocks of the
+    preconditioners and the dense schemes, without periodic images, as they have always been built) and
+    ``roller_mobility`` (the couplings of single-blob rollers: the vector-product backend in the geometry of
+    ``domain``, one radius).  ``paired_mobility_product`` is ``vector_mobility.paired_velocities`` where the
+    products of two threads are paired in one pass (C++ by its own name, one radius, no box), else None.
 
     Every attribute is set here; assigning one afterwards raises ``AttributeError`` (a model is a value:
     build another with :meth:`replace`).
@@ -129,7 +136,7 @@ class Model:
                  vector_product_name='python', blobs_name='python', blob_blob_name='None', body_body_name='None',
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
-                 check_wall=True, lanczos_max_iterations=1000, mobility_product=None, paired_mobility_product=None,
+                 check_wall=True, lanczos_max_iterations=1000, vector_mobility=None,
                  pycuda_blob_blob_forces=None, surface=None, preconditioner='auto',
                  lanczos_preconditioner='block_diagonal'):
         arguments = dict(locals())
@@ -154,13 +161,15 @@ class Model:
         set_(self, 'lanczos_max_iterations', int(lanczos_max_iterations))
         set_(self, 'vector_product_name', vector_product_name)
         set_(self, 'blobs_name', blobs_name)
-        set_(self, 'mobility_product', mobility_product if mobility_product is not None
-             else mobility.mobility_vector_product(vector_product_name))
-        # (M v1, M v2) in one pass over the pairs, or None where the backend has no such product
-        set_(self, 'paired_mobility_product', paired_mobility_product if paired_mobility_product is not None
-             else paired_product(vector_product_name, body_arrays, self.periodic_length))
-        set_(self, 'blob_mobility_matrix', mobility.blob_mobility_matrix(blobs_name))
-        set_(self, 'stacked_mobility', mobility.blob_mobility_matrix(blobs_name))  # takes stacks of bodies
+        radius = body_solver.blob_radius_argument(body_arrays, self.blob_radius)  # one number, or per-blob radii
+        set_(self, 'vector_mobility', vector_mobility if vector_mobility is not None
+             else from_implementation_name(vector_product_name, self.eta, radius, self.periodic_length))
+        set_(self, 'blobs_mobility', from_implementation_name(blobs_name, self.eta, radius, dense_matrices=True))
+        # (M v1, M v2) in one pass over the pairs where the backend offers it under its own name (C++, C++_no_wall:
+        # the aliases keep their products unpaired, so their runs repeat to the bit), else None
+        set_(self, 'paired_mobility_product', self.vector_mobility.paired_velocities
+             if vector_product_name in ('C++', 'C++' + NO_WALL) and self.vector_mobility.pairs_in_one_pass else None)
+        set_(self, '_roller_mobility', None)  # made on first use (rollers.py): roller_mobility
         set_(self, 'blob_blob_name', blob_blob_name)
         set_(self, 'body_body_name', body_body_name)
         radii_given = bool(body_arrays.radii_given)
@@ -210,6 +219,30 @@ class Model:
 
     def __delattr__(self, name):
         raise AttributeError('a Model is frozen: %s cannot be deleted' % name)
+
+    @property
+    def blob_mobility_matrix(self):
+        """The published function form ``f(r (N, 3), eta, a) -> (3N, 3N)`` of ``blobs_mobility.dense_matrix`` (also
+        stacks (nb, n, 3)), for scripts written against the functions."""
+        return published_function(self.blobs_mobility, 'dense_matrix')
+
+    stacked_mobility = blob_mobility_matrix
+
+    @property
+    def roller_mobility(self):
+        """The couplings of single-blob rollers: the ``mobility_vector_prod_implementation`` backend in the
+        geometry of ``domain`` (``in_plane``: :class:`rollers.InPlaneMobility` over the wall's), one blob radius,
+        the run's box (made on first use: a free-surface name is refused only by the roller schemes)."""
+        if self._roller_mobility is None:
+            backend, geometry = implementation_geometry(self.vector_product_name, self.periodic_length)
+            if geometry.kind == 'free_surface':
+                raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
+                                     'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
+            geometry = Geometry('free_space' if self.domain == 'no_wall' else 'single_wall', self.periodic_length)
+            roller = make_mobility(backend, geometry, self.eta, self.blob_radius)
+            object.__setattr__(self, '_roller_mobility', rollers.InPlaneMobility(roller) if self.domain == 'in_plane'
+                               else roller)
+        return self._roller_mobility
 
     @property
     def arguments(self):
@@ -362,11 +395,10 @@ class Model:
         if self.surface is not None and self.surface.has_slip_length:
             return self.surface.slip_length_problem(self, configuration)
         if self.has_fixed_bodies:
-            return obstacles.MixedMobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
-                                                  self.blob_radius, self.periodic_length, self.fixed_bodies,
-                                                  self.prescribed_velocities)
-        return body_solver.MobilityProblem(self.arrays, configuration, self.mobility_product, self.eta,
-                                           self.blob_radius, self.periodic_length)
+            return obstacles.MixedMobilityProblem(self.arrays, configuration, self.vector_mobility,
+                                                  fixed=self.fixed_bodies,
+                                                  prescribed_velocities=self.prescribed_velocities)
+        return body_solver.MobilityProblem(self.arrays, configuration, self.vector_mobility)
 
     @property
     def published_solves(self):
@@ -389,26 +421,20 @@ class Model:
         if self.surface is not None and self.surface.has_slip_length:
             return self.surface.slip_length_preconditioner(self, configuration)
         if self.has_fixed_bodies:
-            base = obstacles.MixedPreconditioner(self.arrays, configuration, self.blob_mobility_matrix, self.eta,
-                                                 self.blob_radius, stacked_mobility=self.stacked_mobility,
+            base = obstacles.MixedPreconditioner(self.arrays, configuration, self.blobs_mobility,
                                                  fixed=self.fixed_bodies, memo=self._obstacle_memo)
         else:
-            base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blob_mobility_matrix,
-                                                           self.eta, self.blob_radius,
-                                                           stacked_mobility=self.stacked_mobility)
+            base = body_solver.BlockDiagonalPreconditioner(self.arrays, configuration, self.blobs_mobility)
         built = base
         if not self.published_solves and self.num_bodies >= 2:
-            built = NeighbourPreconditioner(base, self.stacked_mobility, self.eta, self.blob_radius,
-                                            periodic_length=self.periodic_length, body_lengths=self.body_lengths,
-                                            cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
+            built = NeighbourPreconditioner(base, self.blobs_mobility, periodic_length=self.periodic_length,
+                                            body_lengths=self.body_lengths,
                                             max_cost_ratio=AUTO_MAX_COST_RATIO * max(1, int(solves))
-                                            if self.preconditioner == 'auto' else None,
-                                            near_field_domain=mobility.compiled_near_field_domain(self.blobs_name))
+                                            if self.preconditioner == 'auto' else None)
         if self.lanczos_preconditioner == 'incomplete_cholesky' and self.num_bodies >= 2:
             # Lanczos runs on L^{-1} M L^{-T} with this factor instead of the block-diagonal one (noise_factor)
             built.noise_factor = noise_factor.neighbour_noise_factor(
-                base, self.stacked_mobility, self.eta, self.blob_radius, periodic_length=self.periodic_length,
-                body_lengths=self.body_lengths, cross_blocks=mobility.blob_cross_blocks(self.blobs_name),
+                base, self.blobs_mobility, periodic_length=self.periodic_length, body_lengths=self.body_lengths,
                 neighbours=built if built is not base else None)
         return built
 
@@ -475,8 +501,8 @@ class Model:
 
         ``M`` from the blobs backend, ``N = pinv(K^T M^{-1} K)`` (body_solver.dense_matrices).
         """
-        return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.blob_mobility_matrix,
-                                          self.eta, self.blob_radius, inverse=inverse)
+        return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.blobs_mobility,
+                                          inverse=inverse)
 
     def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None):
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
@@ -497,29 +523,18 @@ class Model:
         _, force_torque, slip = self.forces_and_slip(configuration)
         if self.has_fixed_bodies:
             M, _, K, _ = body_solver.dense_matrices(self.arrays, as_configuration(configuration),
-                                                    self.blob_mobility_matrix, self.eta, self.blob_radius,
-                                                    inverse=False)
+                                                    self.blobs_mobility, inverse=False)
             return obstacles.dense_mixed_solution(M, K, self.fixed_bodies, self.prescribed_velocities,
                                                   force_torque, slip)[0]
         return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
-                                                     self.blob_mobility_matrix, self.eta, self.blob_radius)
+                                                     self.blobs_mobility)
 
     # -------------------------------------------------------------- rollers (multi_bodies.solver.rollers)
     def roller_product(self, kind):
-        """Roller coupling ``kind`` of the chosen vector-product backend and ``domain``.
-
-        ``domain in_plane``: the single-wall coupling with its in-plane block only (``rollers.in_plane_product``).
-        """
-        if mobility.backends.split_domain(self.vector_product_name)[1] == 'free_surface':
-            raise UserInputError('mobility_vector_prod_implementation %s: the roller schemes have no free-surface '
-                                 'couplings; use a wall or _no_wall implementation' % self.vector_product_name)
-        name = self.vector_product_name
-        name = name[len('radii_'):] if name.startswith('radii_') else name  # published aliases (one radius here)
-        base = name[:-len(NO_WALL)] if name.endswith(NO_WALL) else name
-        name = base + (NO_WALL if self.domain == 'no_wall' else '')
-        if self.domain == 'in_plane':
-            return rollers.in_plane_product(mobility.blob_product(name, kind), kind)
-        return mobility.blob_product(name, kind)
+        """The published function form ``f(r_vectors, vector, eta, a, periodic_length) -> (3N,)`` of the roller
+        coupling ``kind`` (:attr:`roller_mobility`), for scripts written against the functions."""
+        self.roller_mobility.check_coupling(kind)
+        return published_function(self.roller_mobility, kind)
 
     def roller_velocities(self, configuration, torque_guess=None):
         """``rollers.roller_velocities``: RollerVelocities (velocities (N, 3), torque_guess, iterations)."""
@@ -534,46 +549,26 @@ class Model:
         return rollers.roller_drift(self, r_vectors, W, kT, delta)
 
 
-def paired_product(name, body_arrays, periodic_length):
-    """``f(r (N, 3), v1 (3N,), v2 (3N,), eta, a) -> (M v1, M v2)`` of the C++ backend, else None.
-
-    Only for the C++ wall and no-wall products of one blob radius without periodic images (the cases of
-    ``mobility.cpp_backend.trans_times_force_two``).
-    """
-    if name not in ('C++', 'C++' + NO_WALL) or getattr(body_arrays, 'radii_given', False) \
-            or np.any(np.asarray(periodic_length) != 0):
-        return None
-    try:
-        from mobility import cpp_backend
-    except ImportError:
-        return None
-    if not cpp_backend.has_product_two():  # an extension built before product_two: no pairing
-        return None
-    wall = name == 'C++'
-
-    def product(r_vectors, v1, v2, eta, a):
-        return cpp_backend.trans_times_force_two(r_vectors, v1, v2, eta, a, wall)
-    return product
-
-
-class PairedProducts:
+class PairedProducts(BlobMobility):
     """Pairs the products ``M v`` of two threads at one configuration into one pass over the blob pairs.
 
-    ``product(r_vectors, v, eta, a, periodic_length)`` has the signature of a mobility product: a call
-    waits until the other participant asks for a product too (then one of them computes both with
-    ``paired_product``) or has left (then it computes its own with ``single_product``).  Each
+    A ``BlobMobility`` over ``mobility`` (one whose ``pairs_in_one_pass``): a call of :meth:`velocities` waits
+    until the other participant asks for a product too (then one of them computes both with
+    ``mobility.paired_velocities``) or has left (then it computes its own with ``mobility.velocities``).  Each
     participant calls ``leave()`` when it needs no more products.
     """
 
-    def __init__(self, paired_product, single_product, participants=2):
+    def __init__(self, mobility, participants=2):
         import threading
-        self._paired, self._single = paired_product, single_product
+        self.mobility = mobility
+        self.backend, self.geometry, self.eta = mobility.backend, mobility.geometry, mobility.eta
+        self.blob_radius, self.periodic_length = mobility.blob_radius, mobility.periodic_length
         self._condition = threading.Condition()
         self._pending = None
         self._active = participants
         self.pairs = 0
 
-    def product(self, r_vectors, vector, eta, a, periodic_length=(0.0, 0.0, 0.0)):
+    def velocities(self, r_vectors, vector):
         with self._condition:
             other = self._pending
             if other is None and self._active > 1:
@@ -587,14 +582,14 @@ class PairedProducts:
             elif other is not None:
                 self._pending = None
         if other is None or other['r'] is not r_vectors and not np.array_equal(other['r'], r_vectors):
-            result = self._single(r_vectors, vector, eta, a, periodic_length)
+            result = self.mobility.velocities(r_vectors, vector)
             if other is not None:  # different configurations: the other one alone too
-                other_result = self._single(other['r'], other['vector'], eta, a, periodic_length)
+                other_result = self.mobility.velocities(other['r'], other['vector'])
                 with self._condition:
                     other['result'] = other_result
                     self._condition.notify_all()
             return result
-        mine_result, other_result = self._paired(r_vectors, vector, other['vector'], eta, a)
+        mine_result, other_result = self.mobility.paired_velocities(r_vectors, vector, other['vector'])
         with self._condition:
             self.pairs += 1
             other['result'] = other_result
@@ -693,8 +688,10 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                                 lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
         if log is not None:
             log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)
-    checked('mobility_vector_prod_implementation', lambda: mobility.mobility_vector_product(product))
-    checked('mobility_blobs_implementation', lambda: mobility.blob_mobility_matrix(blobs))
+    checked('mobility_vector_prod_implementation', lambda: from_implementation_name(
+        product, options.eta, options.blob_radius, options.periodic_length))
+    checked('mobility_blobs_implementation', lambda: from_implementation_name(
+        blobs, options.eta, options.blob_radius, dense_matrices=True))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
         forces, pycuda_forces=pycuda_forces, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))

@@ -8,14 +8,17 @@ makes every blob spin at ``omega_one_roller``: the solution of
 (:class:`RollerSpinProblem`, solved by the one ``body_solver.solve``).
 
 Everything here is a function of the model (``multi_bodies.solver.model.Model``)
-and a configuration; nothing is counted or stored.
+and a configuration; nothing is counted or stored.  The couplings are those of
+the model's ``roller_mobility`` (a ``mobility.interface.BlobMobility``: the
+vector-product backend in the geometry of ``domain``, one blob radius;
+:class:`InPlaneMobility` for ``domain in_plane``).
 """
 from collections import namedtuple
 
 import numpy as np
 import scipy.sparse.linalg as spla
 
-import mobility
+from mobility.interface import BlobMobility
 from multi_bodies.solver import noise_factor
 from multi_bodies.solver.body_solver import SolutionParts, check_finite
 from stochastic_forcing import displace_positions, lanczos_square_root, rfd
@@ -38,25 +41,41 @@ class RollerSpinProblem:
 
     def __init__(self, model, r_vectors, forces):
         self.r_vectors, self.forces = r_vectors, forces
-        self.eta, self.a, self.periodic_length = model.eta, model.blob_radius, model.periodic_length
         self.omega = np.tile(model.omega_one_roller, r_vectors.shape[0])
-        self.rot_times_force = model.roller_product('rot_times_force')
-        self.rot_times_torque = model.roller_product('rot_times_torque')
+        self.mobility = model.roller_mobility
+        for kind in ('rot_times_force', 'rot_times_torque'):  # refused now (domain in_plane), not in the solve
+            self.mobility.check_coupling(kind)
         self.size = forces.size
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, torques):
-        return self.rot_times_torque(self.r_vectors, torques, self.eta, self.a, self.periodic_length)
+        return self.mobility.coupling('rot_times_torque', self.r_vectors, torques)
 
     def rhs(self):
         """``omega - M_WF F`` (3N,)."""
-        return self.omega - self.rot_times_force(self.r_vectors, self.forces, self.eta, self.a, self.periodic_length)
+        return self.omega - self.mobility.coupling('rot_times_force', self.r_vectors, self.forces)
 
     def prepare_rhs(self, rhs):
         return rhs
 
     def solution(self, torques):
         return SolutionParts(None, None, np.asarray(torques).reshape(-1, 3))
+
+
+def _check_in_plane(kind):
+    if kind not in ('trans_times_force', 'trans_times_torque'):
+        raise UserInputError('domain in_plane: the published in-plane roller mobility has translational couplings '
+                             'only, so the rollers need free_kinematics True (a constant torque), not a prescribed '
+                             'spin; or use domain single_wall')
+
+
+def _projected(apply, vector):
+    """``P apply(P v)`` with ``P`` the projection on the plane of the wall (z components set to zero); (3N,)."""
+    projected = np.array(vector, dtype=float).reshape(-1, 3)
+    projected[:, 2] = 0.0
+    velocity = np.array(apply(projected.reshape(-1)), dtype=float).reshape(-1, 3)
+    velocity[:, 2] = 0.0
+    return velocity.reshape(-1)
 
 
 def in_plane_product(product, kind):
@@ -66,21 +85,41 @@ def in_plane_product(product, kind):
     torque) of every blob act through the x, y rows of the single-wall coupling and the z component of every
     velocity is zero, so heights never change.  Only the translational couplings exist (``trans_times_force``,
     ``trans_times_torque``), as in the published code; the prescribed-spin couplings are refused.
-    ``product(r_vectors (N, 3), vector (3N,), eta, a, L) -> (3N,)``, the same signature returned.
+    ``product(r_vectors (N, 3), vector (3N,), eta, a, L) -> (3N,)``, the same signature returned (the function
+    form of :class:`InPlaneMobility`).
     """
-    if kind not in ('trans_times_force', 'trans_times_torque'):
-        raise UserInputError('domain in_plane: the published in-plane roller mobility has translational couplings '
-                             'only, so the rollers need free_kinematics True (a constant torque), not a prescribed '
-                             'spin; or use domain single_wall')
+    _check_in_plane(kind)
 
     def in_plane(r_vectors, vector, eta, a, L):
-        projected = np.array(vector, dtype=float).reshape(-1, 3)
-        projected[:, 2] = 0.0
-        velocity = np.array(product(r_vectors, projected.reshape(-1), eta, a, L), dtype=float).reshape(-1, 3)
-        velocity[:, 2] = 0.0
-        return velocity.reshape(-1)
+        return _projected(lambda v: product(r_vectors, v, eta, a, L), vector)
     in_plane.__name__ = 'in_plane_' + getattr(product, '__name__', kind)
     return in_plane
+
+
+class InPlaneMobility(BlobMobility):
+    """The ``domain in_plane`` roller mobility (:func:`in_plane_product`) over a single-wall ``BlobMobility``:
+    ``P M P`` for the translational couplings; the rotational ones are refused with the published reason."""
+    has_rotation = True
+
+    def __init__(self, wall_mobility):
+        self.wall_mobility = wall_mobility
+        self.backend, self.geometry = wall_mobility.backend, wall_mobility.geometry
+        self.eta, self.blob_radius = wall_mobility.eta, wall_mobility.blob_radius
+        self.periodic_length = wall_mobility.periodic_length
+
+    def replace(self, eta=None, blob_radius=None, periodic_length=None):
+        inner = self.wall_mobility.replace(eta, blob_radius, periodic_length)
+        return self if inner is self.wall_mobility else InPlaneMobility(inner)
+
+    def check_coupling(self, kind):
+        _check_in_plane(kind)
+
+    def velocities(self, r_vectors, forces):
+        return self.coupling('trans_times_force', r_vectors, forces)
+
+    def coupling(self, kind, r_vectors, vector):
+        _check_in_plane(kind)
+        return _projected(lambda v: self.wall_mobility.coupling(kind, r_vectors, v), vector)
 
 
 def roller_velocities(model, configuration, torque_guess=None):
@@ -93,7 +132,8 @@ def roller_velocities(model, configuration, torque_guess=None):
     r_vectors = model.blob_positions(configuration)
     forces = model.blob_forces(r_vectors).reshape(-1)
     check_finite(forces, 'blob forces')
-    a, eta, L = model.blob_radius, model.eta, model.periodic_length
+    a, eta = model.blob_radius, model.eta
+    roller = model.roller_mobility
     iterations = 0
     if model.free_kinematics:
         torques = np.tile(8.0 * np.pi * eta * a ** 3 * model.omega_one_roller, model.num_blobs)
@@ -104,9 +144,9 @@ def roller_velocities(model, configuration, torque_guess=None):
         torques, iterations = result.constraint_force_torque.reshape(-1), result.iterations
         if result.normalised_solution is not None:
             torque_guess = result.normalised_solution
-    velocity = model.roller_product('trans_times_force')(r_vectors, forces, eta, a, L)
+    velocity = roller.coupling('trans_times_force', r_vectors, forces)
     if np.any(torques != 0):
-        velocity = velocity + model.roller_product('trans_times_torque')(r_vectors, torques, eta, a, L)
+        velocity = velocity + roller.coupling('trans_times_torque', r_vectors, torques)
     return RollerVelocities(np.asarray(velocity).reshape(-1, 3), torque_guess, iterations)
 
 
@@ -118,15 +158,15 @@ def roller_noise(model, r_vectors, z, factor):
     (``noise_factor.single_blob_factor``): the same covariance, another sample, fewer iterations.
     Returns the ``stochastic_forcing.LanczosResult`` with ``noise`` (N, 3) (its count is the caller's).
     """
-    product = model.roller_product('trans_times_force')
-    a, eta, L = model.blob_radius, model.eta, model.periodic_length
+    roller = model.roller_mobility
 
     def plain(v):
-        return np.asarray(product(r_vectors, v, eta, a, L)).reshape(-1)
+        return np.asarray(roller.velocities(r_vectors, v)).reshape(-1)
     matvec, L_mult = plain, None
     if getattr(model, 'lanczos_preconditioner', 'block_diagonal') == 'incomplete_cholesky':
-        lower, _ = noise_factor.single_blob_factor(r_vectors, eta, a, model.stacked_mobility,
-                                                   mobility.blob_cross_blocks(model.blobs_name))
+        # the blocks of the blobs backend with the rollers' one radius
+        lower, _ = noise_factor.single_blob_factor(r_vectors, model.blobs_mobility.replace(
+            blob_radius=model.blob_radius))
 
         def matvec(v):
             return lower.L_inv_dot(plain(lower.L_inv_T_dot(v)))
@@ -149,9 +189,8 @@ def roller_drift(model, r_vectors, W, kT, delta):
     """
     if model.domain == 'no_wall' or kT == 0:
         return np.zeros_like(r_vectors)
-    product = model.roller_product('trans_times_force')
-    a, eta, L = model.blob_radius, model.eta, model.periodic_length
+    roller = model.roller_mobility
     W = np.asarray(W, dtype=float).reshape(-1)
-    difference = rfd(lambda r: np.asarray(product(r, W, eta, a, L)).reshape(-1, 3), r_vectors, W, delta * a,
-                     displace_positions)
+    difference = rfd(lambda r: np.asarray(roller.velocities(r, W)).reshape(-1, 3), r_vectors, W,
+                     delta * model.blob_radius, displace_positions)
     return kT * difference

@@ -23,7 +23,6 @@ Which runs are refused, and why:
 """
 import numpy as np
 
-import mobility
 from multi_bodies.files.surface_files import read_laplace_file, read_slip_length_file
 from multi_bodies.solver import laplace_preconditioner, phoretic, slip_length
 from utils import UserInputError, warn_user
@@ -89,9 +88,9 @@ class Surface:
         return self.phoretic.slip(problem, result.constraint_force_torque)
 
     def slip_length_problem(self, model, configuration):
-        return slip_length.slip_length_problem(model.arrays, configuration, model.mobility_product, model.eta,
-                                               model.blob_radius, model.periodic_length, self.slip_normals,
-                                               self.slip_lengths, self.slip_weights)
+        return slip_length.slip_length_problem(model.arrays, configuration, model.vector_mobility,
+                                               reference_normals=self.slip_normals, slip_lengths=self.slip_lengths,
+                                               weights=self.slip_weights)
 
     def slip_length_preconditioner(self, model, configuration):
         """The slip-length problem's preconditioner at ``configuration``: every body's own system inverted
@@ -99,14 +98,13 @@ class Surface:
         published), corrected for the couplings of neighbouring bodies under ``neighbours`` and under ``auto``
         where the near pairs hold at most ``slip_length.AUTO_MAX_COST_RATIO`` of the blob pairs
         (:class:`slip_length.SlipLengthNeighbourPreconditioner`)."""
-        base = slip_length.SlipLengthPreconditioner(model.arrays, configuration, model.stacked_mobility, model.eta,
-                                                    model.blob_radius, self.slip_normals, self.slip_lengths,
-                                                    self.slip_weights)
+        base = slip_length.SlipLengthPreconditioner(model.arrays, configuration, model.blobs_mobility,
+                                                    normals=self.slip_normals, slip_lengths=self.slip_lengths,
+                                                    weights=self.slip_weights)
         if model.published_solves or model.num_bodies < 2:
             return base
         return slip_length.SlipLengthNeighbourPreconditioner(
-            base, model.stacked_mobility, model.eta, model.blob_radius, periodic_length=model.periodic_length,
-            body_lengths=model.body_lengths, cross_blocks=mobility.blob_cross_blocks(model.blobs_name),
+            base, model.blobs_mobility, periodic_length=model.periodic_length, body_lengths=model.body_lengths,
             max_cost_ratio=slip_length.AUTO_MAX_COST_RATIO if model.preconditioner == 'auto' else None)
 
 
