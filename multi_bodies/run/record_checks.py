@@ -116,12 +116,9 @@ def _check_generator(state):
         _require(state['has_gauss'] in (0, 1) and _finite(state.get('gauss')),
                  'state.rng has a cached Gaussian that is not a finite number')
     if name == 'MT19937':
-        key = state['state'].get('key')
-        _require(isinstance(key, np.ndarray) and key.shape == (624,) and key.dtype.kind in 'ui'
-                 and key.any() and 0 <= int(key.min()) and int(key.max()) <= 0xFFFFFFFF,
-                 'state.rng of MT19937 does not hold 624 keys between 0 and 2**32 - 1, not all 0')
-        _require(_is_int(state['state'].get('pos')) and state['state']['pos'] <= 624,
-                 'state.rng of MT19937 has a position outside 0 .. 624')
+        from multi_bodies.run.run_state import mt19937_key_problem
+        problem = mt19937_key_problem(state['state'].get('key'), state['state'].get('pos'))
+        _require(problem is None, 'state.rng: %s' % problem)
     _check_data(state, 'state.rng')
 
 

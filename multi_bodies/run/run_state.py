@@ -108,6 +108,51 @@ PUBLISHED_MEMO_ENTRIES = 64            # the state pickle memoises a handful of 
 _SAFE_KINDS = 'uifb'                   # array dtypes of a state: integers, floats, booleans (never objects)
 
 
+# The state of MT19937 is 19,937 bits: the top bit of key word 0 and the 32 bits of words 1 .. 623 (the other 31
+# bits of word 0 never reach an output; Matsumoto and Nishimura, ACM TOMACS 8, 3, 1998).  All of them 0 is the
+# fixed point of the recurrence: the generator draws zeros for ever (the legacy Gaussian then loops for ever in
+# compiled code, deaf to signals).  A state with few bits set (or few unset) leaves that point only slowly, drawing
+# far from random numbers for thousands of draws; a seeded generator's state has about half its bits set
+# (19,937 fair bits: 9,968 +- 71), so a state outside a quarter to three quarters set was made by hand.
+MT19937_STATE_BITS = 19937
+MT19937_BIT_FRACTION = (0.25, 0.75)
+
+
+def mt19937_key_problem(key, pos):
+    """None when ``key`` (624 words) and ``pos`` are a state a seeded MT19937 can be in; else one line saying why
+    not (a degenerate state: all state bits 0, or far too few or too many set; words or position out of range)."""
+    if not (isinstance(key, np.ndarray) and key.shape == (PUBLISHED_STATE_WORDS,) and key.dtype.kind in 'ui'):
+        return 'the MT19937 key is not 624 integers'
+    if int(key.min()) < 0 or int(key.max()) > 0xFFFFFFFF:
+        return 'an MT19937 key word is outside 0 .. 2**32 - 1'
+    if not (isinstance(pos, (int, np.integer)) and not isinstance(pos, bool) and 0 <= int(pos) <= 624):
+        return 'the position of the MT19937 state is not an integer between 0 and 624'
+    words = key.astype(np.uint32)
+    bits = int(np.unpackbits(words[1:].view(np.uint8)).sum()) + int(words[0] >> np.uint32(31))
+    if bits == 0:
+        return ('every bit of the MT19937 state is 0 (the top bit of key 0 and keys 1 .. 623): a generator that '
+                'draws only zeros')
+    low, high = (int(f * MT19937_STATE_BITS) for f in MT19937_BIT_FRACTION)
+    if not low <= bits <= high:
+        return ('the MT19937 state has %d of its %d bits set, where a seeded generator has about half (%d to %d '
+                'accepted): a degenerate state whose draws are far from random'
+                % (bits, MT19937_STATE_BITS, low, high))
+    return None
+
+
+def generator_state_problem(state):
+    """None for a ``bit_generator.state`` dict that numpy's bit generator may take as a run's generator; else one
+    line (an MT19937 state is checked by :func:`mt19937_key_problem`)."""
+    if not isinstance(state, dict):
+        return 'the generator state is not a table'
+    if state.get('bit_generator') == 'MT19937':
+        inner = state.get('state')
+        if not isinstance(inner, dict):
+            return 'the MT19937 state holds no key and position'
+        return mt19937_key_problem(inner.get('key'), inner.get('pos'))
+    return None
+
+
 def _check_pickle_opcodes(data):
     """Read the opcodes of ``data`` without running any: refuse sizes a published state never has.
 
@@ -251,15 +296,10 @@ def read_published_state(data):
     if not (isinstance(state, tuple) and len(state) == 5 and state[0] in ('MT19937', b'MT19937')):
         raise ValueError('not a numpy RandomState state (MT19937, keys, pos, has_gauss, cached_gaussian)')
     keys = state[1]
-    if not (isinstance(keys, np.ndarray) and keys.shape == (PUBLISHED_STATE_WORDS,) and keys.dtype.kind in 'ui'):
-        raise ValueError('the MT19937 keys are not 624 unsigned 32-bit integers')
-    if keys.min() < 0 or keys.max() > 0xFFFFFFFF:
-        raise ValueError('an MT19937 key is outside 0 .. 2**32 - 1')
-    if not keys.any():
-        raise ValueError('every MT19937 key is 0 (a generator that draws only zeros)')
     pos, has_gauss, gauss = (_plain(v) for v in state[2:])
-    if not (isinstance(pos, int) and not isinstance(pos, bool) and 0 <= pos <= PUBLISHED_STATE_WORDS):
-        raise ValueError('the position of the MT19937 state is not an integer between 0 and 624')
+    problem = mt19937_key_problem(keys, pos)
+    if problem is not None:
+        raise ValueError(problem)
     if not (isinstance(has_gauss, int) and has_gauss in (0, 1)):
         raise ValueError('has_gauss of the MT19937 state is not 0 or 1')
     if not (isinstance(gauss, (float, int)) and np.isfinite(gauss)):
@@ -327,6 +367,10 @@ def load_random_state(path, where='random_state', generator='auto'):
             and issubclass(getattr(np.random, name), np.random.BitGenerator)):
         raise UserInputError('%s: %s does not hold a numpy random state; give a .random_state file, or use seed '
                              'instead' % (where, path))
+    problem = generator_state_problem(state)
+    if problem is not None:
+        raise UserInputError('%s: %s holds a degenerate random state (%s); nothing in it was used. Give a '
+                             '.random_state file a run wrote, or use seed instead' % (where, path, problem))
     legacy = generator == 'published' or (generator == 'auto' and generators.is_legacy_state(state))
     try:
         if legacy:
