@@ -256,6 +256,11 @@ class BlobMobility:
     def source_target(self, sources, targets, forces, radius_sources, radius_targets):
         """Velocity (3Nt,) at ``targets`` (Nt, 3) of radius ``radius_targets`` from ``forces`` (3Ns,) on
         ``sources`` (Ns, 3) of radius ``radius_sources`` (the velocity field of the static script)."""
+        self.check_source_target()
+        raise NotImplementedError
+
+    def check_source_target(self):
+        """Raise the ``UserInputError`` of :meth:`source_target` where this mobility has none (before any work)."""
         raise UserInputError('the %s mobility in geometry %s has no source-target product'
                              % (self.backend, getattr(self.geometry, 'kind', '-')))
 
@@ -371,6 +376,9 @@ class DirectMobility(BlobMobility):
     def source_target(self, sources, targets, forces, radius_sources, radius_targets):
         product = _direct.source_target_product(self.name)
         return product(sources, targets, forces, radius_sources, radius_targets, self.eta, self.periodic_length)
+
+    def check_source_target(self):
+        _direct.source_target_product(self.name)
 
 
 # ------------------------------------------------------------------ functions of the published form

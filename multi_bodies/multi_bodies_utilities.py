@@ -53,7 +53,6 @@ utils.prepare_script_path(__file__)
 
 import numpy as np  # noqa: E402
 
-import mobility  # noqa: E402
 from multi_bodies.solver import body_solver  # noqa: E402
 from multi_bodies.solver import obstacles  # noqa: E402
 from multi_bodies.files.input_options import read_input_file  # noqa: E402
@@ -76,8 +75,8 @@ def run_body_mobility(options, system, configuration):
             body_mobility, slip_mobility = obstacles.dense_mixed_body_mobility(np.linalg.inv(M), K,
                                                                                system.fixed_bodies)
         else:
-            body_mobility, slip_mobility = body_solver.dense_body_mobility(
-                system.arrays, configuration, system.blob_mobility_matrix, system.eta, system.blob_radius)
+            body_mobility, slip_mobility = body_solver.dense_body_mobility(system.arrays, configuration,
+                                                                           system.blobs_mobility)
     print('Time to compute body mobility = %s' % timer.elapsed)
     save_table(options.output_name + '.body_mobility.dat', body_mobility)
     save_table(options.output_name + '.body_slip_mobility.dat', slip_mobility)
@@ -147,8 +146,7 @@ def run_resistance(options, system, configuration, velocity_table=None):
     slip = system.slip(configuration) if system.has_slip else np.zeros((system.num_blobs, 3))
     with utils.Timer() as timer:
         force_torque, lambda_blobs = body_solver.solve_resistance_problem(
-            system.arrays, configuration, velocities, slip, system.blob_mobility_matrix, system.eta,
-            system.blob_radius)
+            system.arrays, configuration, velocities, slip, system.blobs_mobility)
     print('Time to solve resistance problem = %s' % timer.elapsed)
     save_table(options.output_name + '.force.dat', force_torque)
     write_velocity_field(options, system, system.blob_positions(configuration), lambda_blobs)
@@ -160,18 +158,22 @@ def write_velocity_field(options, system, r_vectors, lambda_blobs):
     if options.plot_velocity_field is None:
         return
     from multi_bodies.run import velocity_field
-    try:
-        product = mobility.source_target_product(system.vector_product_name)
-    except utils.UserInputError as err:
-        raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
-                                   % (options.where('mobility_vector_prod_implementation'), err))
-    radius = body_solver.blob_radius_argument(system.arrays, options.blob_radius)  # per-blob radii if given
+    check_velocity_field_mobility(options, system)
+    # the source-target product of the run's vector mobility (its viscosity, box and per-blob radii if given)
     velocity = velocity_field.velocity_field(options.plot_velocity_field, r_vectors, lambda_blobs,
-                                             radius, options.tracer_radius, options.eta, product,
-                                             options.periodic_length)
+                                             options.tracer_radius, system.vector_mobility)
     path = velocity_field.write_velocity_field_vtk(options.output_name + '.velocity_field.vtk',
                                                    options.plot_velocity_field, velocity)
     print('plot_velocity_field: wrote %s' % path)
+
+
+def check_velocity_field_mobility(options, system):
+    """A UserInputError naming the option when the vector mobility has no source-target product."""
+    try:
+        system.vector_mobility.check_source_target()
+    except utils.UserInputError as err:
+        raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
+                                   % (options.where('mobility_vector_prod_implementation'), err))
 
 
 def run(options):
@@ -193,11 +195,7 @@ def run(options):
         velocity_table = read_body_table(options.velocity_file, system.num_bodies, 'velocity',
                                          options.where('velocity_file'))
     if options.plot_velocity_field is not None and options.scheme != 'body_mobility':
-        try:
-            mobility.source_target_product(system.vector_product_name)
-        except utils.UserInputError as err:
-            raise utils.UserInputError('%s: mobility_vector_prod_implementation: %s'
-                                       % (options.where('mobility_vector_prod_implementation'), err))
+        check_velocity_field_mobility(options, system)
         from multi_bodies.run import velocity_field
         velocity_field.check_grid(options.plot_velocity_field, system.num_blobs, options.where('plot_velocity_field'))
     if options.scheme in ('body_mobility', 'resistance'):  # dense algebra: refuse up front what cannot fit

@@ -50,8 +50,7 @@ def check_grid(grid, num_blobs, where='plot_velocity_field'):
                       where, 'give fewer cells Nx Ny Nz')
 
 
-def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, eta, source_target_product,
-                   periodic_length=(0.0, 0.0, 0.0)):
+def velocity_field(grid, r_vectors, lambda_blobs, tracer_radius, mobility):
     """Fluid velocity at the cell centres, shape (Nx Ny Nz, 3), x fastest.
 
     Parameters
@@ -59,17 +58,15 @@ def velocity_field(grid, r_vectors, lambda_blobs, blob_radius, tracer_radius, et
     grid : ((x0, x1, Nx), (y0, y1, Ny), (z0, z1, Nz))
     r_vectors : ndarray (N, 3), blob positions (sources).
     lambda_blobs : ndarray (N, 3), blob constraint forces.
-    blob_radius : float, or ndarray (N,) (the radius of each source blob)
-    tracer_radius, eta : float
-    source_target_product : callable
-        ``f(source_r, target_r, force, radius_source, radius_target, eta, periodic_length) -> (3 Nt,)``
-        (``mobility.source_target_product(name)``).
+    tracer_radius : float, the radius of the tracers at the cell centres (a length)
+    mobility : mobility.interface.BlobMobility of the blobs (its ``source_target`` product; the sources have its
+        radius or per-blob radii (N,), its viscosity and box).
     """
     check_grid(grid, np.asarray(r_vectors).size // 3)
     targets = cell_centres(grid)
-    velocity = source_target_product(np.asarray(r_vectors, dtype=float).reshape(-1, 3), targets,
-                                     np.asarray(lambda_blobs, dtype=float).reshape(-1), blob_radius,
-                                     tracer_radius, eta, periodic_length)
+    velocity = mobility.source_target(np.asarray(r_vectors, dtype=float).reshape(-1, 3), targets,
+                                      np.asarray(lambda_blobs, dtype=float).reshape(-1), mobility.blob_radius,
+                                      tracer_radius)
     return np.asarray(velocity).reshape(-1, 3)
 
 
