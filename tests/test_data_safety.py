@@ -31,7 +31,7 @@ from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
 from multi_bodies.files.snapshots import write_clones_file  # noqa: E402
 from multi_bodies.files.structure_files import write_vertex_file  # noqa: E402
 from multi_bodies.run import run_output  # noqa: E402
-from run_scenes import REPO_ROOT, copy_scene, edit_input, run_in_process  # noqa: E402
+from run_scenes import REPO_ROOT, copy_scene, edit_input, run_in_process, set_options  # noqa: E402
 
 MCMC_SCRIPT = importlib.import_module('many_bodyMCMC.many_body_MCMC')
 
@@ -645,6 +645,29 @@ def _override(folder):
     (folder / 'user_defined_functions.py').write_text('# an override source that overrides nothing\n')
 
 
+DATA_FILES_OVERRIDE = '''"""Reads the strength of a constant force on every blob from parameters.dat."""
+import numpy as np
+
+data_files = ['parameters.dat']
+
+
+def blob_external_forces(r_vectors, g=1.0, **kw):
+    push = float(open('parameters.dat').read())
+    forces = np.zeros_like(r_vectors)
+    forces[:, 0] = push
+    forces[:, 2] = -g
+    return forces
+'''
+
+
+def _data_files_scene(folder, **options):
+    """The driven scene with an override that declares the data file it reads."""
+    folder = driven_scene(folder, **options)
+    (folder / 'user_defined_functions.py').write_text(DATA_FILES_OVERRIDE)
+    (folder / 'parameters.dat').write_text('0.5\n')
+    return folder
+
+
 FILE_EDITS = {  # kind -> (scene, edit before the restart)
     'vertex': ('driven', _edit('blob.vertex', '0 0 0', '0 0 0.0')),    # same numbers, other text: refused too
     'slip': ('driven', _edit('a.slip', '0.1 0 0', '0.2 0 0')),
@@ -652,6 +675,7 @@ FILE_EDITS = {  # kind -> (scene, edit before the restart)
     'list_vertex': ('articulated', _edit('chain.list_vertex', 'blob.vertex\n', 'blob.vertex  # first\n')),
     'const': ('articulated', _edit('chain.const', '0.1*sin(t)', '0.2*sin(t)')),
     'override': ('driven', _override),
+    'override data': ('data_files', _edit('parameters.dat', '0.5', '0.7')),
     'clones': ('driven', _edit('a.clones', '0 0 2.0', '0 0 2.2')),
     'force': ('driven', _edit('b.velocity', '0.2 0 0', '0.3 0 0')),  # placeholder, replaced below
     'random_state': ('driven', None),
@@ -667,7 +691,9 @@ def test_the_restart_fingerprint_covers_every_file_kind(twelve_steps, tmp_path):
     from multi_bodies.files.run_inputs import FILE_KINDS
     chain = articulated_scene(tmp_path / 'chain', n_steps=12)
     assert run_dynamic(chain)[0] == 0
-    bases = {'driven': twelve_steps, 'articulated': chain}
+    bases = {'driven': twelve_steps, 'articulated': chain,
+             'data_files': _data_files_scene(tmp_path / 'data_files', n_steps=12)}
+    assert run_dynamic(bases['data_files'])[0] == 0
     for kind in ('Laplace', 'slip_length'):
         bases[kind] = surface_scene(tmp_path / ('base_' + kind), kind, n_steps=12)
         assert run_dynamic(bases[kind])[0] == 0, kind
@@ -693,6 +719,32 @@ def test_the_restart_fingerprint_covers_every_file_kind(twelve_steps, tmp_path):
         outcome = assert_exact_or_refused(base, folder, status, out, err, named=named, refused=reads)
         assert outcome == ('refused' if reads else 'exact'), (kind, err)
     print('file kinds covered: %d' % len(edits))
+
+
+@pytest.mark.parametrize('line', ["data_files = 'parameters.dat'", 'data_files = [name for name in ("a",)]',
+                                  'data_files = [1, 2]'])
+def test_data_files_must_be_a_list_of_names_written_as_text(tmp_path, line):
+    folder = _data_files_scene(tmp_path / 'run')
+    path = folder / 'user_defined_functions.py'
+    path.write_text(path.read_text().replace("data_files = ['parameters.dat']", line))
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert 'user_defined_functions.py, line 4: data_files must be a list of file names' in err, err
+    assert not (folder / 'data').exists()
+
+
+def test_an_obstacle_made_a_structure_refuses_the_restart(tmp_path):
+    """Changing the last obstacle line to structure between a run and its restart was not refused (4 of 15
+    snapshots differed); the fingerprint now holds the kind of every line."""
+    base = driven_scene(tmp_path / 'run', n_steps=12)
+    text = (base / 'input.dat').read_text().replace('structure blob.vertex b.clones None b.velocity',
+                                                    'obstacle blob.vertex b.clones')
+    (base / 'input.dat').write_text(set_options(text, scheme='deterministic_adams_bashforth', kT=0))
+    assert run_dynamic(base)[0] == 0
+    status, out, err = restart_from_6(base, tmp_path / 'changed', _edit('input.dat', 'obstacle blob.vertex',
+                                                                          'structure blob.vertex'))
+    assert assert_exact_or_refused(base, tmp_path / 'changed', status, out, err, refused=True,
+                                   named='structures: was a x 1, b x 1 (obstacle), now a x 1, b x 1') == 'refused'
 
 
 def test_the_override_sources_covered_are_those_the_programs_import():

@@ -6,7 +6,10 @@ it was when the record was written: the options (``OPTION_TABLE``'s
 restart.  :func:`restart_inputs` lists those files from the options, so the
 restart fingerprint (``multi_bodies.run.restart_records.run_fingerprint``)
 covers each of them; ``FILE_KINDS`` says, for every kind of file a program
-reads, whether a restart depends on it and why not when it does not.
+reads, whether a restart depends on it and why not when it does not.  A data
+file that an override source reads (a table of parameters) cannot be seen
+from the options: the source declares it, ``data_files = ['parameters.dat']``
+at module level, and it is covered like the source itself.
 """
 import hashlib
 import os
@@ -28,6 +31,7 @@ FILE_KINDS = {
     'list_vertex': True,    # vertex files of the bodies of an articulated line
     'const': True,          # joints of an articulated line (and their expressions of t)
     'override': True,       # user_defined_functions.py and the other override sources of the run directory
+    'override data': True,  # the data files an override source declares it reads (``data_files = [...]``)
     'Laplace': True,        # phoretic bodies: normals, reaction and emitting rates, surface mobilities, weights
     'slip_length': True,    # partial-slip surfaces: normals, slip lengths, weights
     'clones': 'read at step 0 only: a restart reads the saved snapshot instead (checked against its record)',
@@ -37,12 +41,56 @@ FILE_KINDS = {
 
 
 def file_digest(path):
-    """'sha256 <first 16 hex digits>' of the bytes of ``path``, or 'missing'."""
+    """'sha256 <first 16 hex digits>' of the bytes of ``path`` (read in chunks: any size), 'missing', or 'not a
+    regular file' (a FIFO or device is never read: it could block for ever)."""
+    import stat
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return 'not a regular file'
+        digest = hashlib.sha256()
         with open(path, 'rb') as f:
-            return 'sha256 %s' % hashlib.sha256(f.read()).hexdigest()[:16]
+            for chunk in iter(lambda: f.read(1 << 20), b''):
+                digest.update(chunk)
+        return 'sha256 %s' % digest.hexdigest()[:16]
     except OSError:
         return 'missing'
+
+
+DATA_FILES_NAME = 'data_files'  # the list an override source declares: the files its hooks read
+OVERRIDE_SOURCE_BYTES = 1 << 24  # an override source is a Python file of a few kilobytes
+
+
+def declared_data_files(path):
+    """The names an override source at ``path`` declares in a module-level ``data_files = ['a.dat', ...]`` (file
+    names relative to the run directory), read from its text without running it.
+
+    Raises UserInputError naming the file and line when ``data_files`` is not a list (or tuple) of strings written
+    as literals, so that what the restart fingerprint covers never depends on running the file."""
+    import ast
+    try:
+        if os.path.getsize(path) > OVERRIDE_SOURCE_BYTES:
+            return []
+        with open(path, 'rb') as f:
+            tree = ast.parse(f.read(), filename=path)
+    except (OSError, SyntaxError, ValueError, RecursionError, MemoryError):
+        return []  # the hooks loader names what is wrong with the file
+    found = []
+    for node in tree.body:
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, ast.AnnAssign) and node.value is not None else []
+        if not any(isinstance(t, ast.Name) and t.id == DATA_FILES_NAME for t in targets):
+            continue
+        try:
+            value = ast.literal_eval(node.value)
+        except (ValueError, TypeError, SyntaxError, RecursionError, MemoryError):
+            value = None
+        if not (isinstance(value, (list, tuple)) and all(isinstance(v, str) and v and '\x00' not in v
+                                                          for v in value)):
+            raise UserInputError('%s, line %d: %s must be a list of file names written as text (for example '
+                                 "data_files = ['parameters.dat']): the restart fingerprint reads it without running "
+                                 'the file' % (path, node.lineno, DATA_FILES_NAME))
+        found = list(value)
+    return found
 
 
 def _list_vertex_names(path):
@@ -80,6 +128,8 @@ def restart_inputs(options, directory):
         path = os.path.join(directory, name)
         if os.path.isfile(path):
             found.append(('override', name, path))
+            found.extend(('override data', data, os.path.join(directory, data))
+                         for data in declared_data_files(path))
     unique, seen = [], set()
     for entry in found:
         kind, name, path = entry if len(entry) == 3 else (entry[0], entry[1], entry[1])

@@ -155,16 +155,19 @@ def _digest(data):
 
 
 def run_fingerprint(options, types, bodies, directory=None):
-    """What a restart record depends on, as {name: text}: structures in order, their blobs, radii, slips, the
-    options of the table that change the dynamics, the content of every file a restart reads.
+    """What a restart record depends on, as {name: text}: structures in order with the kind of their line, their
+    blobs, radii, slips, the options of the table that change the dynamics, the content of every file a restart
+    reads (and of the data files the override sources declare, ``run_inputs.declared_data_files``).
 
     types: list of (structure ID, number of bodies) in body order; bodies: the Body list (``reference_configuration``
     (n, 3), ``blob_radius``, ``slip_reference`` (n, 3) or None); directory: the run directory (default the current
     one), whose override sources are covered.  Two runs with equal fingerprints compute the same trajectory from
     the same snapshot, generator and scheme history.
     """
+    kinds = line_kinds(options)
     found = {'fingerprint': FINGERPRINT_VERSION,
-             'structures': ', '.join('%s x %d' % (name, count) for name, count in types)}
+             'structures': ', '.join('%s x %d%s' % (name, count, kind) for (name, count), kind
+                                     in zip(types, kinds + [''] * (len(types) - len(kinds))))}
     start = 0
     for name, count in types:
         if count:
@@ -176,6 +179,13 @@ def run_fingerprint(options, types, bodies, directory=None):
     for kind, name, path in restart_inputs(options, os.getcwd() if directory is None else directory):
         found['%s file %s' % (kind, name)] = file_digest(path)
     return found
+
+
+def line_kinds(options):
+    """Per line of bodies, in body order: '' for a ``structure`` line of free bodies, ' (prescribed velocity)',
+    ' (obstacle)', ' (articulated)' (the kind changes the dynamics as much as the bodies do)."""
+    return ([' (prescribed velocity)' if getattr(spec, 'velocity_file', None) else '' for spec in options.structures]
+            + [' (obstacle)'] * len(options.obstacles) + [' (articulated)'] * len(options.articulated))
 
 
 def _body_fingerprint(name, body):
