@@ -1,11 +1,12 @@
 """``articulated.articulated``: the published class of an articulated body, as a face for users' files (top floor).
 
 Override files written for the published package import it (``from articulated.articulated import *``) and may
-patch ``Articulated.update_links``.  The package's joints (``multi_bodies.solver.articulated``) take their links
-from the published ``Constraint`` objects (``constraint.constraint``), one per joint, for both the solve and the
-restoration of the joints; an ``Articulated.update_links`` override is therefore not called (the published code
-calls it in the restoration only: keep the two overrides consistent, or override ``Constraint.update_links``
-alone).  The package never imports this module.
+patch ``Articulated.update_links``.  The package's joints (``multi_bodies.solver.articulated``) take the links of
+the velocity solve from the published ``Constraint`` objects (``constraint.constraint``), one per joint; when a
+user's file patches ``Articulated.update_links``, the run makes one object of this class per articulated body and
+restores the joints after every move with the body-frame links its ``update_links(time)`` leaves in
+``constraints_links`` (Nc, 6), as the published code does (``multi_bodies.solver.published_joints``).  The package
+never imports this module.
 """
 import numpy as np
 
@@ -13,7 +14,8 @@ from constraint.constraint import Constraint  # noqa: F401  (published files imp
 
 
 class Articulated(object):
-    """The bodies and joints of one articulated body (attributes as published; the run does not use them)."""
+    """The bodies and joints of one articulated body (attributes as published; a patched ``update_links`` reads
+    them)."""
 
     def __init__(self, bodies, ind_bodies, constraints, ind_constraints, num_bodies, num_constraints,
                  constraints_bodies, constraints_links, constraints_extra):

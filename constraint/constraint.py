@@ -8,7 +8,8 @@ its class, the run makes one object per joint (``multi_bodies.solver.published_j
 links from them:
 
 * ``links`` (6,): the body-frame links ``[l_p, l_q]`` (length units) after ``update_links(time)``;
-* ``links_deriv`` (6,): their time derivatives (length / time);
+* ``links_deriv`` (6,): their time derivatives (length / time); the solve reads the prescribed joint velocities
+  from ``links_deriv_updated`` (6,), as published (``update_links`` sets it to ``R links_deriv``);
 * ``bodies``: the two bodies, each with ``location`` (3,) and ``orientation`` (``rotation_matrix()`` (3, 3)).
 """
 import numpy as np

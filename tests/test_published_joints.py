@@ -151,3 +151,163 @@ def test_articulated_schemes_move_plain_bodies_as_the_rigid_schemes(tmp_path, mo
     ours, rigid = frames.values()
     assert np.abs(ours - rigid).max() < 1e-12
     assert np.abs(ours[-1] - ours[0]).max() > 0.1
+
+
+# ---------------------------------------------------------------------------------------------- run and tumble
+# An override with the conventions of the published bacteria_run_and_tumble folder (issue 47), written here: the
+# joints are restored after every move with the links of Articulated.update_links (the flagellum tilted by alpha),
+# while the velocity solve takes Constraint.update_links, whose tilt differs (l01 sin^2 alpha off the axis) and
+# whose rate is set in links_deriv_updated during a tumble and zeroed there afterwards, links_deriv keeping its last
+# value.  Reading links_deriv, or restoring with the solve's links (two joints that no rigid pair can hold at once),
+# made the published folder jump 28 to 600 length units per tumble.
+TUMBLE_OVERRIDE = '''
+import numpy as np
+import multi_bodies_functions
+from multi_bodies_functions import *
+from articulated.articulated import *
+from constraint.constraint import *
+
+def torque_pair(bodies, r_vectors, *args, **kwargs):
+    torque = kwargs.get('omega_one_roller')
+    out = np.zeros((2 * len(bodies), 3))
+    for i, b in enumerate(bodies):
+        out[2 * i + 1] = (1 if i % 2 == 0 else -1) * np.dot(b.orientation.rotation_matrix(), torque)
+    return out
+multi_bodies_functions.calc_body_body_forces_torques_python = torque_pair
+
+base_init = Constraint.__init__
+def init(self, bodies, ind_bodies, articulated_body, links, constraint_extra=None):
+    base_init(self, bodies, ind_bodies, articulated_body, links, constraint_extra)
+    self.tumbling_time = -1000.0
+Constraint.__init__ = init
+
+def tumbling_event(self, t):
+    if len(self.constraint_extra) > 0:
+        dt, tau, period = (float(w) for w in self.constraint_extra[:3])
+        if t - self.tumbling_time > period and np.random.rand(1) < 1 - np.exp(-dt / tau):
+            self.tumbling_time = t
+Constraint.tumbling_event = tumbling_event
+
+def tilt(extra, s):
+    period, max_angle = float(extra[2]), float(extra[3])
+    return max_angle * np.pi * np.sin(np.pi * s / period) ** 2 if s <= period else None
+
+def articulated_links(self, time=0):
+    for i in range(self.num_constraints):
+        extra = self.constraints_extra[i]
+        if len(extra) > 0:
+            l00, l01, l10 = (float(w) for w in extra[4:7])
+            alpha = tilt(extra, time - self.constraints[i].tumbling_time)
+            alpha = 0.0 if alpha is None else alpha
+            self.constraints_links[i] = [l01 * np.sin(alpha), 0, l00 + l01 * np.cos(alpha), 0, 0, l10]
+Articulated.update_links = articulated_links
+
+def constraint_links(self, time=0):
+    extra = self.constraint_extra
+    if len(extra) > 0:
+        period = float(extra[2])
+        l00, l01, l10 = (float(w) for w in extra[4:7])
+        alpha = tilt(extra, time - self.tumbling_time)
+        R_p = self.bodies[0].orientation.rotation_matrix()
+        if alpha is not None:
+            self.links[:] = [l01 * np.sin(alpha) ** 2, 0, l00 + l01 * np.cos(alpha), 0, 0, l10]
+            self.links_deriv[:] = [np.pi * l01 / period * np.cos(alpha), 0, -np.pi * l01 / period * np.sin(alpha),
+                                   0, 0, 0]
+            self.links_deriv_updated[:3] = R_p @ self.links_deriv[:3]
+            self.links_deriv_updated[3:] = 0
+        else:
+            self.links[:] = [0, 0, l00 + l01, 0, 0, l10]
+            self.links_deriv_updated[:] = 0
+    self.links_updated[:3] = self.bodies[0].orientation.rotation_matrix() @ self.links[:3]
+    self.links_updated[3:] = self.bodies[1].orientation.rotation_matrix() @ self.links[3:]
+Constraint.update_links = constraint_links
+'''
+TUMBLE_PERIOD, L01, MAX_ANGLE = 0.05, 1.0, np.pi / 3
+
+
+def tumble_scene(tmp_path, reference_dir, tau, n_steps):
+    """The published bacterium (its flagellum's vertex file with a fourth column: every radius blob_radius) with
+    the run-and-tumble joints and override above, forward Euler as the published folder; returns the folder."""
+    published = reference_dir / 'published_2025' / 'multi_bodies'
+    structures = tmp_path / 'Structures'
+    shutil.copytree(published / 'Structures', structures)
+    flagellum = snapshots_vertex_with_radii(structures / 'flagellum_L_10_alpha_0.35.vertex', 0.131)
+    (structures / 'bacteria_radii.list_vertex').write_text('../../Structures/shell_N_162_Rg_0_9497_Rh_1.vertex\n'
+                                                           '../../Structures/%s\n' % flagellum.name)
+    (structures / 'bacteria_tumble.const').write_text(
+        '2\n2\n0 1   0 0 1.1310     0 0 -0.1310\n'
+        '0 1   0 0 2.1310     0 0  0.869   0.0025  %r  %r  %r  1.131  %r  0.869\n'
+        % (tau, TUMBLE_PERIOD, MAX_ANGLE, L01))
+    folder = tmp_path / 'examples' / 'bacteria_run_and_tumble'
+    folder.mkdir(parents=True)
+    text = (published / 'examples' / 'bacteria' / 'inputfile_bacteria_constant_torque.dat').read_text()
+    text = (text.replace('bacteria_passive.const', 'bacteria_tumble.const')
+            .replace('bacteria.list_vertex', 'bacteria_radii.list_vertex')
+            .replace('articulated_deterministic_midpoint', 'articulated_deterministic_forward_euler')
+            .replace('n_steps 8', 'n_steps %d' % n_steps))
+    (folder / 'inputfile.dat').write_text(text + 'seed 3\n')
+    (folder / 'user_defined_functions.py').write_text(TUMBLE_OVERRIDE)
+    return folder
+
+
+def snapshots_vertex_with_radii(path, radius):
+    """A copy of the vertex file at ``path`` with a fourth column ``radius``; returns its path."""
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith('#')]
+    out = path.with_name(path.stem + '_radii.vertex')
+    out.write_text('%s\n' % rows[0][0] + ''.join('%s %s %s %r\n' % (x, y, z, radius) for x, y, z in rows[1:]))
+    return out
+
+
+@pytest.mark.slow
+def test_run_and_tumble_keeps_its_joints_and_moves_at_the_speed_of_its_links(tmp_path, reference_dir, monkeypatch):
+    """A tumble from t = 0 (tau 1e-6) over the first half of its period (the fastest tilt), against the same
+    bacterium without tumbles (tau 1e6, negative control of the tilt).  Laws: at every saved step the joints hold
+    the links of ``Articulated.update_links`` to ``nonlinear_solver_tolerance`` (1e-10); and no body moves in one
+    step further than the untumbled bacterium's largest step plus the largest change of the tilted link in one
+    step, ``l01 max_angle pi^2 dt / period`` (0.52 for a flagellum 4.3 long).  Measured: residuals 1.5e-15, largest
+    step 0.44 against the bound 0.52 (0.007 untumbled); before the fix a residual of 0.15 and a step of 74."""
+    from multi_bodies.solver import articulated as art
+    from body.body import Configuration
+    n_steps, dt = 10, 0.0025
+    steps = {}
+    for tau in (1e6, 1e-6):
+        folder = tumble_scene(tmp_path / ('tau_%g' % tau), reference_dir, tau, n_steps)
+        monkeypatch.chdir(folder)
+        options = read_input_file('inputfile.dat', 'dynamic')
+        assert run_dynamics(options, log=lambda *a: None) == 0
+        frames = snapshots.read_config_frames('run_constant_torque.bacteria_constant_torque.config')
+        assert frames.shape[0] == n_steps + 1
+        steps[tau] = np.linalg.norm(np.diff(frames[:, :, :3], axis=0), axis=2).max()
+        if tau < 1:  # the joints at the links the override restores them to, at every saved time
+            joints = prepare(options, 'dynamics', log=lambda *a: None).system.articulated
+            np.random.seed(0)
+            joints.step_event(0.0)  # the tumble starts at t = 0 (probability 1 - exp(-dt / 1e-6))
+            residuals = [np.abs(joints.violation(Configuration(f[:, :3], f[:, 3:]), k * dt)).max()
+                         for k, f in enumerate(frames)]
+            assert max(residuals) < 1e-10, residuals
+            assert tilt(frames)[-1] > 0.3  # the flagellum tilted (0.5 rad measured)
+    bound = steps[1e6] + L01 * MAX_ANGLE * np.pi ** 2 * dt / TUMBLE_PERIOD
+    assert steps[1e-6] <= bound, (steps, bound)
+
+
+def test_prescribed_joint_rates_are_read_from_links_deriv_updated(tmp_path, reference_dir, monkeypatch):
+    """After a tumble the override zeroes links_deriv_updated and leaves links_deriv at its last value (pi l01 /
+    period): the solve's rates are the former (zero), as published; during the tumble they are R_p links_deriv
+    (identity frames here: the body-frame derivative of the override, (pi l01 / T) (cos alpha, 0, -sin alpha))."""
+    folder = tumble_scene(tmp_path, reference_dir, 1e-6, 1)
+    monkeypatch.chdir(folder)
+    joints = prepare(read_input_file('inputfile.dat', 'dynamic'), 'dynamics', log=lambda *a: None).system.articulated
+    np.random.seed(0)
+    joints.step_event(0.0)
+    s = 0.3 * TUMBLE_PERIOD
+    alpha = MAX_ANGLE * np.pi * np.sin(np.pi * s / TUMBLE_PERIOD) ** 2
+    _, rates = joints.links(s)
+    speed = np.pi * L01 / TUMBLE_PERIOD
+    assert rates[1] == pytest.approx([speed * np.cos(alpha), 0, -speed * np.sin(alpha), 0, 0, 0], abs=1e-12)
+    _, rates = joints.links(2 * TUMBLE_PERIOD)  # the tumble is over
+    assert np.all(rates == 0)
+    # the restoration's links (Articulated.update_links) tilt by alpha, the solve's by sin^2 alpha
+    position_links, _ = joints.links(s, positions=True)
+    solve_links, _ = joints.links(s)
+    assert position_links[1, 0] == pytest.approx(L01 * np.sin(alpha), abs=1e-14)
+    assert solve_links[1, 0] == pytest.approx(L01 * np.sin(alpha) ** 2, abs=1e-14)

@@ -185,6 +185,8 @@ class PhysicsHooks:
         self.calc_blob_blob_forces_pycuda = None
         self.body_body_of_bodies = None  # published calc_body_body_forces_torques_python (bodies, r_vectors)
         self.published_constraint_class = None  # the user's patched constraint.constraint.Constraint, or None
+        self.published_articulated_class = None  # the user's articulated.articulated.Articulated, update_links patched
+        self.published_joint_class = None  # with it: the constraint.constraint.Constraint class of the same import
         self.pycuda_file = None
         self.overridden = []
         self.sources = []
@@ -260,6 +262,11 @@ class PhysicsHooks:
             self.body_body_of_bodies = body_body_of_bodies
             self._replaced('calc_body_body_forces_torques_python', function,
                            '(bodies, r_vectors) -> (2 Nb, 3), with body_body_force_torque_implementation python')
+        if 'published Articulated' in found:
+            self.published_articulated_class, self.published_joint_class = found['published Articulated']
+            self.notes.append('%s patches the published Articulated.update_links: the joints are restored after every '
+                              'move with the links it gives, as published (the velocity solve takes them from '
+                              'Constraint.update_links)' % path)
         if 'published Constraint' in found:
             self.published_constraint_class = found['published Constraint']
             self.notes.append('%s patches the published Constraint class (%s): the joints take their links from '
@@ -481,6 +488,7 @@ def import_user_file(path):
                              'from the run directory' % (path, line, type(err).__name__, err))
     finally:
         published_constraint = getattr(sys.modules.get('constraint.constraint'), 'Constraint', None)
+        published_articulated = getattr(sys.modules.get('articulated.articulated'), 'Articulated', None)
         if added_root:
             sys.path.remove(FACE_ROOT)
         for name, value in saved.items():
@@ -505,6 +513,10 @@ def import_user_file(path):
                                                  'constraint.constraint' for value in vars(published_constraint).values()
                                                  if callable(value)):
         found['published Constraint'] = published_constraint  # patched by the file: the joints use it
+    if published_articulated is not None and getattr(published_articulated.update_links, '__module__',
+                                                     'articulated.articulated') != 'articulated.articulated':
+        # its update_links restores the joints; the joint objects it reads are of the (maybe unpatched) class
+        found['published Articulated'] = (published_articulated, published_constraint)
     for name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS:
         candidates = []
         for where, table in (('multi_bodies_functions.%s = ...' % name, rebound_copy),
