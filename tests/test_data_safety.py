@@ -835,3 +835,29 @@ def test_an_output_name_with_a_nul_byte_is_a_one_line_refusal(tmp_path):
     status, out, err = run_dynamic(folder)
     assert status == 2 and 'Traceback' not in out + err and 'holds a NUL byte' in err, err
     assert not (folder / 'data').exists()
+
+
+# ------------------------------------------------------------------ .const joints (issue 48)
+def test_a_joint_of_a_body_with_itself_is_refused(tmp_path):
+    """A .const joint of body 0 with body 0 ran to the end with the joint never satisfied."""
+    folder = articulated_scene(tmp_path / 'run')
+    (folder / 'chain.const').write_text('2\n2\n0 1 0.5 0 0 -0.5 0 0\n1 1 0.5 0 0 -0.5 0 0\n')
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert 'chain.const, line 4: a joint of body 1 with itself' in err, err
+    assert not (folder / 'data').exists()
+
+
+@pytest.mark.parametrize('expression, status, words', [
+    ('0.1*log(t)', 2, "chain.const, line 3: the expression '0.1*log(t)' is -inf at t = 0.0"),
+    ('sqrt(0.025-t)', 1, "chain.const, line 3: the expression 'sqrt(0.025-t)' is nan at t = 0.03"),
+])
+def test_a_non_finite_const_expression_is_named(tmp_path, expression, status, words):
+    """A joint vector that is not finite (at the start: refused; later: the run stops) was blamed on the blob
+    spacing ('the blobs of a body are too close'); now the message names the file, the line and the expression."""
+    folder = articulated_scene(tmp_path / 'run', n_steps=6, n_save=1)
+    (folder / 'chain.const').write_text('2\n1\n0 1 0.5 0 0 -0.5 0 0 0.5 0 0 -0.5 0 %s 0 0 0 0 0 0\n' % expression)
+    code, out, err = run_dynamic(folder)
+    assert code == status and 'Traceback' not in out + err, err
+    assert words in err and 'too close' not in err, err
+    assert len([line for line in err.splitlines() if line.startswith('error:')]) == 1, err

@@ -58,7 +58,7 @@ from body.geometry import rotation_matrices
 from multi_bodies.solver import articulated_preconditioner
 from multi_bodies.solver.body_solver import SolutionParts
 from multi_bodies.files.expressions import parse_expression
-from utils import UserInputError, read_text_file
+from utils import SimulationStopped, UserInputError, read_text_file
 
 # ---------------------------------------------------------------------------------------------- files
 _FUNCTIONS = {name: getattr(np, name) for name in ('sin', 'cos', 'tan', 'exp', 'log', 'sqrt', 'abs', 'arcsin',
@@ -97,7 +97,22 @@ def compile_expression(text, where):
                              "+ - * / ** and %s" % (where, text, ast.unparse(node) if hasattr(ast, 'unparse')
                                                     else type(node).__name__, ', '.join(sorted(_FUNCTIONS))))
     evaluate = build(tree)
-    return lambda t: float(np.float64(evaluate(np.float64(t))))
+
+    def expression(t):
+        with np.errstate(all='ignore'):  # overflow and division give inf or NaN, which the caller names
+            return float(np.float64(evaluate(np.float64(t))))
+    expression.text, expression.where = text, where
+    return expression
+
+
+def non_finite_expression(function, t, error):
+    """Raise ``error`` (UserInputError at set-up, SimulationStopped during a run) naming the file, line and
+    expression when ``function`` (of :func:`compile_expression`) is not a finite number at time ``t``."""
+    value = function(t)
+    if not math.isfinite(value):
+        raise error("%s: the expression '%s' is %r at t = %r, not a finite number (a joint vector or its rate "
+                    "must be finite at every time of the run); fix the expression"
+                    % (function.where, function.text, value, float(t)))
 
 
 Restored = namedtuple('Restored', ['configuration', 'nonlinear_iterations'])
@@ -166,9 +181,15 @@ def read_const_file(path, where):
                                  'the value' % (at, LARGEST_LINK))
         if np.any(bodies[c] < 0) or np.any(bodies[c] >= num_bodies):
             raise UserInputError('%s: body indices must be between 0 and %d' % (at, num_bodies - 1))
+        if bodies[c, 0] == bodies[c, 1]:
+            raise UserInputError('%s: a joint of body %d with itself (body_p and body_q are the same); a joint links '
+                                 'two different bodies of the articulated body (a rigid body cannot satisfy a joint '
+                                 'between two of its own points): fix the body indices' % (at, bodies[c, 0]))
         # other extra fields are the published constraint_extra of a user's Constraint.update_links override
         # (checked by :meth:`ArticulatedSet.check_extras` once the overrides are known)
         expressions.append([compile_expression(w, at) for w in words[8:]] if len(words) == 20 else None)
+        for function in expressions[-1] or ():
+            non_finite_expression(function, 0.0, UserInputError)  # at the start of the run
         extras.append((tuple(words[8:]), at) if len(words) not in (8, 20) else None)
     return ConstFile(num_bodies, bodies, links, expressions, path, extras)
 
@@ -284,6 +305,9 @@ class ArticulatedSet:
         for c, functions in enumerate(self.expressions):
             if functions is not None:
                 values = [f(t) for f in functions]
+                if not np.all(np.isfinite(values)):
+                    for function in functions:
+                        non_finite_expression(function, t, SimulationStopped)
                 links[c], rates[c] = values[:6], values[6:]
         if positions and self.position_link_override is not None:
             return self.position_link_override(t, links), rates
