@@ -19,10 +19,10 @@ Modules (floor of ``multi_bodies.solver``):
 See ``doc/lubrication.md``.
 """
 from .assembly import DEFAULT_CUTOFF, LubricationMatrices, delta_R, neighbour_pairs, resistance_matrices
-from .problem import (LubricationPreconditioner, LubricationProblem, dense_lubricated_mobility, far_field_product,
-                      lubricated_velocities)
+from .problem import (LubricationPreconditioner, LubricationProblem, dense_lubricated_mobility, far_field_mobility,
+                      far_field_product, lubricated_velocities)
 from .resistance import DEFAULT_FIRM_DELTA
 
 __all__ = ['DEFAULT_CUTOFF', 'DEFAULT_FIRM_DELTA', 'LubricationMatrices', 'LubricationPreconditioner',
-           'LubricationProblem', 'delta_R', 'dense_lubricated_mobility', 'far_field_product', 'lubricated_velocities',
-           'neighbour_pairs', 'resistance_matrices']
+           'LubricationProblem', 'delta_R', 'dense_lubricated_mobility', 'far_field_mobility', 'far_field_product',
+           'lubricated_velocities', 'neighbour_pairs', 'resistance_matrices']

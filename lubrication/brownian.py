@@ -41,7 +41,7 @@ from stochastic_forcing import lanczos_square_root
 from utils import UserInputError
 
 from . import assembly, resistance
-from .problem import LubricationProblem, far_field_product
+from .problem import LubricationProblem, far_field_mobility, far_field_product
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
 PUBLISHED_RFD_DELTA = 1e-3
@@ -59,11 +59,15 @@ class LubricationSettings(namedtuple('LubricationSettings', [
     rfd_delta : RFD step (length units, or units of a with ``rfd_scaled_by_a``).
     """
 
+    def far_field(self):
+        """The far-field ``mobility.interface.BlobMobility`` (``lubrication.problem.far_field_mobility``)."""
+        return far_field_mobility(self.eta, self.a, self.periodic_length, self.wall, self.implementation)
+
     def problem(self, locations, matrices=None):
         """The :class:`LubricationProblem` at locations (N, 3)."""
         return LubricationProblem(locations, self.a, self.eta, wall=self.wall, cutoff=self.cutoff,
                                   periodic_length=self.periodic_length, firm_delta=self.firm_delta,
-                                  implementation=self.implementation, matrices=matrices, handover=self.handover)
+                                  matrices=matrices, handover=self.handover, far_field=self.far_field())
 
     def matrices(self, locations):
         """:data:`lubrication.assembly.LubricationMatrices` at locations (N, 3)."""
@@ -264,5 +268,4 @@ def far_field_drift(settings, locations, W, kT):
 
 
 def _far_field(settings, locations):
-    return far_field_product(locations, settings.eta, settings.a, settings.periodic_length, settings.wall,
-                             settings.implementation)
+    return far_field_product(locations, settings.far_field())

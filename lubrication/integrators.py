@@ -403,8 +403,7 @@ def rpb_step(settings, locations, orientations, force_torque_at, kT, dt, rng, to
     counts = new_counts()
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
-    product = far_field_product(locations, settings.eta, settings.a, settings.periodic_length, settings.wall,
-                                settings.implementation)
+    product = far_field_product(locations, settings.far_field())
     force_torque = np.asarray(force_torque_at(locations, orientations), dtype=float).reshape(-1)
     velocities = product(force_torque)
     counts['far_field_products'] += 1

@@ -1,8 +1,8 @@
 """The lubrication-corrected mobility M_lub = (M^-1 + Delta_R)^-1 as a problem of the package's one solve.
 
 ``M`` is the far-field 6N x 6N mobility of single blobs (translational and rotational Rotne-Prager-Blake
-above the wall, Rotne-Prager-Yamakawa in free space; the package's blob products
-``mobility.blob_product(name, kind)``), ``Delta_R`` the sparse near-field correction
+above the wall, Rotne-Prager-Yamakawa in free space: the grand product of a ``mobility.interface.BlobMobility``,
+:func:`far_field_mobility`), ``Delta_R`` the sparse near-field correction
 (:mod:`lubrication.assembly`).  Velocities ``U = M_lub F`` (and more generally ``U = (I + M Delta_R)^-1
 (X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F``
 (``multi_bodies.solver.body_solver.solve``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
@@ -16,22 +16,21 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-import mobility
-from mobility import backends
+from mobility.interface import Geometry, from_implementation_name, preferred_backend
 from multi_bodies.solver.body_solver import SolutionParts, solve
 from utils import UserInputError
 
 from . import assembly, resistance
 
 NO_WALL = '_no_wall'
-PRODUCT_KINDS = ('trans_times_force', 'trans_times_torque', 'rot_times_force', 'rot_times_torque')
 
 
 def far_field_implementation(implementation, wall):
-    """The blob-product name for ``implementation`` ('python', 'C++', 'pycuda'; None: C++ if usable, else
-    python) with or without the wall."""
+    """The implementation name for ``implementation`` ('python', 'C++', 'pycuda', 'numba', with or without
+    ``_no_wall``; None: the first usable CPU backend of the registry's preference order, C++ where it is built)
+    with or without the wall."""
     if implementation is None:
-        implementation = 'C++' if backends.is_usable('C++') else 'python'
+        implementation = preferred_backend(Geometry('single_wall' if wall else 'free_space'), device='cpu')
     base = implementation[:-len(NO_WALL)] if implementation.endswith(NO_WALL) else implementation
     if base not in ('python', 'C++', 'pycuda', 'numba'):
         raise UserInputError('lubrication: far-field implementation %r is not one of python, C++, pycuda (with or '
@@ -39,26 +38,28 @@ def far_field_implementation(implementation, wall):
     return base + ('' if wall else NO_WALL)
 
 
-def far_field_product(r_vectors, eta, a, periodic_length=(0.0, 0.0, 0.0), wall=True, implementation=None):
-    """``f(x (6N,)) -> M x (6N,)``: the single-blob translational and rotational mobility at r_vectors (N, 3).
+def far_field_mobility(eta, a, periodic_length=(0.0, 0.0, 0.0), wall=True, implementation=None):
+    """The far-field ``BlobMobility`` of spheres of radius ``a``: RPB above the wall at z = 0 (``wall=True``), RPY in
+    free space, with the box ``periodic_length``; ``implementation`` as :func:`far_field_implementation`."""
+    return from_implementation_name(far_field_implementation(implementation, wall), eta, a, periodic_length)
 
-    x and the result in the layout ``[F1 T1 F2 T2 ...]`` -> ``[U1 W1 U2 W2 ...]``; RPB above the wall
-    at z = 0 (``wall=True``), RPY in free space; ``implementation`` as :func:`far_field_implementation`.
+
+def far_field_product(r_vectors, mobility):
+    """``f(x (6N,)) -> M x (6N,)``: the grand product of ``mobility`` (:func:`far_field_mobility`) at r_vectors (N, 3).
+
+    x and the result in the layout ``[F1 T1 F2 T2 ...]`` -> ``[U1 W1 U2 W2 ...]`` (``BlobMobility.product``:
+    ``U = M_UF F + M_UT T``, ``W = M_WF F + M_WT T``).
     """
     r_vectors = np.ascontiguousarray(np.asarray(r_vectors, dtype=float).reshape(-1, 3))
-    name = far_field_implementation(implementation, wall)
-    products = {kind: mobility.blob_product(name, kind) for kind in PRODUCT_KINDS}
-    L = np.asarray(periodic_length, dtype=float).reshape(3)
     n = r_vectors.shape[0]
 
     def apply(x):
         ft = np.asarray(x, dtype=float).reshape(n, 6)
         F, T = np.ascontiguousarray(ft[:, :3]).reshape(-1), np.ascontiguousarray(ft[:, 3:]).reshape(-1)
+        U, W = mobility.product(r_vectors, F, T)
         out = np.empty((n, 6))
-        out[:, :3] = (np.asarray(products['trans_times_force'](r_vectors, F, eta, a, L)).reshape(-1, 3)
-                      + np.asarray(products['trans_times_torque'](r_vectors, T, eta, a, L)).reshape(-1, 3))
-        out[:, 3:] = (np.asarray(products['rot_times_force'](r_vectors, F, eta, a, L)).reshape(-1, 3)
-                      + np.asarray(products['rot_times_torque'](r_vectors, T, eta, a, L)).reshape(-1, 3))
+        out[:, :3] = U.reshape(-1, 3)
+        out[:, 3:] = W.reshape(-1, 3)
         return out.reshape(-1)
     return apply
 
@@ -107,6 +108,8 @@ class LubricationProblem:
     implementation : far-field blob products ('python', 'C++', 'pycuda'; None: C++ when built).
     matrices : :data:`lubrication.assembly.LubricationMatrices` already built at ``locations`` (else built).
     handover : ``'published'`` or ``'smooth'`` (the switches between formulas; :mod:`lubrication.resistance`).
+    far_field : the far-field ``BlobMobility`` (None: :func:`far_field_mobility` of a, eta, the box, the wall and
+        ``implementation``); ``self.far_field`` holds it and ``self.mobility_product`` is its grand product here.
 
     Protocol of ``multi_bodies.solver.body_solver.solve``: ``size`` (6N), ``operator`` (``x + M Delta_R x``),
     ``prepare_rhs`` (unchanged), ``solution(x)`` -> ``SolutionParts(None, velocities (N, 6), None)``.
@@ -114,7 +117,8 @@ class LubricationProblem:
     """
 
     def __init__(self, locations, a, eta, wall=True, cutoff=assembly.DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0),
-                 firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None, handover='published'):
+                 firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None, handover='published',
+                 far_field=None):
         locations, a, eta, cutoff, L = assembly.check_geometry(locations, a, eta, cutoff, periodic_length)
         if wall and np.any(locations[:, 2] <= 0):
             below = int(np.argmax(locations[:, 2] <= 0))
@@ -128,7 +132,8 @@ class LubricationProblem:
         self.Delta_R = matrices.Delta_R
         self.num_bodies = locations.shape[0]
         self.size = 6 * self.num_bodies
-        self.mobility_product = far_field_product(locations, eta, a, L, wall, implementation)
+        self.far_field = far_field if far_field is not None else far_field_mobility(eta, a, L, wall, implementation)
+        self.mobility_product = far_field_product(locations, self.far_field)
         self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, x):

@@ -50,15 +50,15 @@ def _best(call, repeats=2):
 
 
 def cost_single_blob(centres):
-    from lubrication import far_field_product
-    product = far_field_product(centres, models.ETA, 1.0, wall=True, implementation='C++')
+    from lubrication import far_field_mobility, far_field_product
+    product = far_field_product(centres, far_field_mobility(models.ETA, 1.0, wall=True, implementation='C++'))
     x = np.random.default_rng(0).standard_normal(6 * len(centres))
     seconds, _ = _best(lambda: product(x), 3)
     return seconds, seconds, 0
 
 
 def cost_lubrication(centres):
-    from lubrication import LubricationProblem, far_field_product
+    from lubrication import LubricationProblem
     from multi_bodies.solver.body_solver import solve
     force = np.zeros((len(centres), 6))
     force[:, 2] = -1.0
@@ -73,31 +73,30 @@ def cost_lubrication(centres):
 
 
 def _shell_scene(num_blobs, centres):
-    import mobility
     from body.body import Body, bodies_to_arrays
+    from mobility.interface import Geometry, make_mobility
     blobs, blob_radius = models.calibrated_model_blobs(num_blobs)
     bodies = [Body(c, np.array([1.0, 0.0, 0.0, 0.0]), blobs, blob_radius) for c in centres]
     for body in bodies:
         body.ID = 'sphere'
     arrays = bodies_to_arrays(bodies)
-    return arrays, blob_radius, mobility.mobility_vector_product('C++'), mobility.blob_mobility_matrix('C++')
+    return arrays, make_mobility('C++', Geometry('single_wall'), models.ETA, blob_radius)
 
 
 def cost_shell(num_blobs, centres, iterations=None):
     """(seconds of one M f, seconds of one solve, GMRES iterations); modelled solve when ``iterations`` given."""
     from multi_bodies.solver import body_solver
-    arrays, blob_radius, product, matrix = _shell_scene(num_blobs, centres)
+    arrays, blob_mobility = _shell_scene(num_blobs, centres)
     configuration = arrays.configuration
-    problem = body_solver.MobilityProblem(arrays, configuration, product, models.ETA, blob_radius)
+    problem = body_solver.MobilityProblem(arrays, configuration, blob_mobility)
     x = np.random.default_rng(0).standard_normal(problem.r_vectors.size)
-    product_seconds, _ = _best(lambda: product(problem.r_vectors, x, models.ETA, blob_radius), 1)
+    product_seconds, _ = _best(lambda: blob_mobility.velocities(problem.r_vectors, x), 1)
     force = np.zeros((len(centres), 6))
     force[:, 2] = -1.0
     force[:, 0] = 0.3
 
     def preconditioner():
-        return body_solver.BlockDiagonalPreconditioner(arrays, configuration, matrix, models.ETA, blob_radius,
-                                                       stacked_mobility=matrix)
+        return body_solver.BlockDiagonalPreconditioner(arrays, configuration, blob_mobility)
     if iterations is not None:
         build_seconds, _ = _best(preconditioner, 1)
         return product_seconds, build_seconds + iterations * product_seconds, iterations
