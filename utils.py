@@ -171,15 +171,35 @@ def warn_user(message, stream=None):
     print('warning: %s' % message, file=sys.stderr if stream is None else stream, flush=True)
 
 
+def special_file_kind(path):
+    """What is at ``path`` when it is there but is not a regular file (links followed): 'a folder', 'a FIFO',
+    'a socket', 'a character device', 'a block device', 'a symbolic link to a missing file'; None for a regular
+    file or when nothing is there."""
+    import stat
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return 'a symbolic link to a missing file' if os.path.islink(path) else None
+    except OSError:
+        return None
+    for test, kind in ((stat.S_ISREG, None), (stat.S_ISDIR, 'a folder'), (stat.S_ISFIFO, 'a FIFO'),
+                       (stat.S_ISSOCK, 'a socket'), (stat.S_ISCHR, 'a character device'),
+                       (stat.S_ISBLK, 'a block device')):
+        if test(mode):
+            return kind
+    return 'not a regular file'
+
+
 def read_text_file(path, what, hint):
     """Text of the UTF-8 file ``path`` (a byte-order mark is allowed), or UserInputError.
 
     ``what`` names the file in messages ("input file", "vertex file", ...);
-    ``hint`` says how to give another one.  A folder, a missing file, an
-    unreadable file and bytes that are not UTF-8 each get their own message.
+    ``hint`` says how to give another one.  A folder, a FIFO or device (never read: it could block for ever), a
+    dangling link, a missing file, an unreadable file and bytes that are not UTF-8 each get their own message.
     """
-    if os.path.isdir(path):
-        raise UserInputError("%s '%s' is a folder, not a file; %s" % (what, path, hint))
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise UserInputError("%s '%s' is %s, not a file; %s" % (what, path, kind, hint))
     if not os.path.isfile(path):
         raise UserInputError("%s '%s' not found; %s" % (what, path, hint))
     try:

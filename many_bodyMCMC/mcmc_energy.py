@@ -42,7 +42,7 @@ from body.body import blob_positions
 from body import geometry as _quaternion
 from mobility.periodic import minimum_image
 from multi_bodies.solver.physics import blob_blob_potential, blob_external_potential, body_body_potential
-from multi_bodies.solver.user_hooks import import_module_file
+from multi_bodies.solver.user_hooks import import_module_file, override_file
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 65536  # pairs per chunk of the NumPy sums (bounded memory)
@@ -108,12 +108,12 @@ def load_user_potentials(directory='.', default_body_body=False):
     hooks = PotentialHooks()
     if default_body_body:
         hooks.body_body_potential = body_body_potential
-    path = os.path.join(directory, USER_POTENTIAL_FILE)
-    if os.path.isfile(path):
+    path = override_file(directory, USER_POTENTIAL_FILE)  # a folder, FIFO or dangling link there is refused
+    if path is not None:
         _take_hooks(import_module_file(path, 'user_defined_potentials'), hooks)
         hooks.sources.append(path)
-    path = os.path.join(directory, GPU_POTENTIAL_FILE)
-    if os.path.isfile(path):
+    path = override_file(directory, GPU_POTENTIAL_FILE)
+    if path is not None:
         hooks.gpu_file = path
     return hooks
 

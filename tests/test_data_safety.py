@@ -861,3 +861,53 @@ def test_a_non_finite_const_expression_is_named(tmp_path, expression, status, wo
     assert code == status and 'Traceback' not in out + err, err
     assert words in err and 'too close' not in err, err
     assert len([line for line in err.splitlines() if line.startswith('error:')]) == 1, err
+
+
+# ------------------------------------------------------------------ override sources that are not files (issue 48)
+@pytest.mark.parametrize('kind', ['dangling symlink', 'fifo', 'folder'])
+@pytest.mark.parametrize('program', ['dynamic', 'static'])
+def test_an_override_source_that_is_not_a_file_is_refused(tmp_path, kind, program):
+    """A user_defined_functions.py that is a dangling link, a FIFO or a folder was skipped without a word and the
+    default physics used; now it is a one-line refusal naming it, before any file is written."""
+    folder = driven_scene(tmp_path / 'run')
+    if program == 'static':
+        (folder / 'input.dat').write_text(set_options_text(folder, scheme='mobility'))
+    path = folder / 'user_defined_functions.py'
+    if kind == 'dangling symlink':
+        path.symlink_to(folder / 'moved_away.py')
+    elif kind == 'fifo':
+        os.mkfifo(str(path))
+    else:
+        path.mkdir()
+    status, out, err = run_in_process(program, folder, 'input.dat')
+    assert status == 2 and 'Traceback' not in out + err, err
+    assert len([line for line in err.splitlines() if not line.startswith('warning:')]) == 1, err
+    assert 'user_defined_functions.py is %s' % {'dangling symlink': 'a symbolic link to a missing file',
+                                               'fifo': 'a FIFO', 'folder': 'a folder'}[kind] in err, err
+    assert not (folder / 'data').exists()
+
+
+def test_a_potential_source_that_is_not_a_file_is_refused(tmp_path, monkeypatch, capsys):
+    from test_crash_safety import mcmc_scene
+    folder = mcmc_scene(tmp_path / 'run')
+    os.mkfifo(str(folder / 'user_defined_potentials.py'))
+    monkeypatch.chdir(folder)
+    with pytest.raises(SystemExit) as stop:
+        utils.fail_cleanly(MCMC_SCRIPT.main, ['input.dat'])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and 'user_defined_potentials.py is a FIFO' in err, err
+
+
+@pytest.mark.parametrize('kind, words', [('fifo', 'is a FIFO, not a file'), ('dangling symlink', 'is a symbolic link '
+                                                                                      'to a missing file')])
+def test_a_data_file_that_is_a_fifo_or_a_dangling_link_is_named_as_such(tmp_path, kind, words):
+    """A vertex file that is a FIFO (or a device) was reported 'not found'; it is now named for what it is, and
+    never read (a FIFO read blocks for ever)."""
+    folder = driven_scene(tmp_path / 'run')
+    (folder / 'blob.vertex').unlink()
+    if kind == 'fifo':
+        os.mkfifo(str(folder / 'blob.vertex'))
+    else:
+        (folder / 'blob.vertex').symlink_to(folder / 'elsewhere.vertex')
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and 'blob.vertex' in err and words in err, err
