@@ -1,0 +1,626 @@
+"""Loading the user's override files and adapting their functions to the package's hooks (floor 4).
+
+:mod:`multi_bodies.solver.physics` holds the default physics; this module reads
+``user_defined_functions.py`` (this package's style or the published one,
+see doc/overrides.md) and ``forces_pycuda_user_defined.py``, and builds a
+:class:`PhysicsHooks` whose functions all follow the package's vectorised
+conventions, whatever the signature of the user's function, with checks of
+the shapes and finiteness of what they return.  The published override
+module ``multi_bodies/multi_bodies_functions.py`` (on the scripts' floor)
+re-exports the physics and these names; this module never imports it: it
+copies that file for each user file and looks the package-style module up
+in ``sys.modules`` only when the user's file imported it.
+"""
+import inspect
+import os
+import sys
+import traceback
+from functools import partial
+
+import numpy as np
+
+from mobility.periodic import minimum_image
+from multi_bodies.solver import physics as mbf
+from body.geometry import Quaternion
+import utils
+from utils import SimulationStopped, UserInputError
+
+
+class UserFunctionError(SimulationStopped):
+    """A function of the user's override file raised, or returned the wrong shape or non-finite values.
+
+    The message names the function, the hook it replaces and the file (with
+    the line, when the function raised).  A subclass of SimulationStopped: a
+    dynamic run stops after its files are complete (exit status 1).
+    """
+
+
+def function_name(function):
+    """Readable name of a user function (partials show the wrapped function)."""
+    if isinstance(function, partial):
+        return 'partial(%s)' % function_name(function.func)
+    return getattr(function, '__qualname__', getattr(function, '__name__', repr(function)))
+
+
+def function_file(function):
+    """File where ``function`` was defined, or None."""
+    while isinstance(function, partial):
+        function = function.func
+    code = getattr(inspect.unwrap(function), '__code__', None) if callable(function) else None
+    return None if code is None else code.co_filename
+
+
+def describe_user_function(function, hook=None):
+    """``'name (replacing hook) in file'`` for messages."""
+    text = function_name(function)
+    if hook is not None and hook != getattr(function, '__name__', None):
+        text += ' (replacing %s)' % hook
+    path = function_file(function)
+    return text + (' in %s' % path if path else '')
+
+
+def call_user_function(function, hook, *args, **kwargs):
+    """Call a user's hook; any exception becomes a UserFunctionError naming function, file and line."""
+    try:
+        return function(*args, **kwargs)
+    except SimulationStopped:
+        raise
+    except Exception as err:
+        path = function_file(function)
+        line = ''
+        frames = traceback.extract_tb(err.__traceback__)
+        inside = [f for f in frames if path is not None and os.path.abspath(f.filename) == os.path.abspath(path)]
+        if inside:
+            line = ', line %d (%s)' % (inside[-1].lineno, (inside[-1].line or '').strip())
+        elif frames:
+            line = ', in %s line %d' % (frames[-1].filename, frames[-1].lineno)
+        raise UserFunctionError('the user-defined function %s raised %s: %s%s; fix the function or remove it '
+                                'from the file' % (describe_user_function(function, hook), type(err).__name__,
+                                                   err, line)) from None
+
+
+def checked_array(value, shapes, function, hook, what):
+    """``value`` as a float array of one of the accepted ``shapes`` (first is the result shape), finite.
+
+    Raises UserFunctionError naming the function, the hook and the file when
+    the value is not numbers, has another shape or holds NaN or inf.
+    """
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise UserFunctionError('the user-defined function %s returned %r, not an array of numbers; it must return '
+                                '%s, shape %s' % (describe_user_function(function, hook), type(value).__name__, what,
+                                                  shapes[0])) from None
+    if array.shape not in [tuple(s) for s in shapes]:
+        raise UserFunctionError('the user-defined function %s returned an array of shape %s; it must return %s, '
+                                'shape %s' % (describe_user_function(function, hook), array.shape, what,
+                                              ' or '.join(str(tuple(s)) for s in shapes)))
+    if not np.all(np.isfinite(array)):
+        raise UserFunctionError('the user-defined function %s returned values that are not finite (NaN or inf) '
+                                'for %s' % (describe_user_function(function, hook), what))
+    return array.reshape(shapes[0])
+
+
+def positional_arity(function):
+    """(required positional parameters, accepts *args) of ``function``; (None, True) when unknown."""
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError):
+        return None, True
+    required, var = 0, False
+    for parameter in signature.parameters.values():
+        if parameter.kind == parameter.VAR_POSITIONAL:
+            var = True
+        elif parameter.kind in (parameter.POSITIONAL_ONLY, parameter.POSITIONAL_OR_KEYWORD) \
+                and parameter.default is parameter.empty:
+            required += 1
+    return required, var
+
+
+def positional_capacity(function):
+    """How many positional arguments ``function`` accepts (a large number for ``*args``; 2 when unknown)."""
+    try:
+        parameters = inspect.signature(function).parameters.values()
+    except (TypeError, ValueError):
+        return 2
+    if any(p.kind == p.VAR_POSITIONAL for p in parameters):
+        return 1 << 20
+    return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in parameters)
+
+
+def _vectorises(function, samples, physics):
+    """True when ``function`` applied to the rows ``samples`` (k, 3) at once equals its row-by-row results.
+
+    Decides which published convention a ``blob_external_force`` or
+    ``blob_blob_force`` follows: vectorised over rows, or one row (3,) at a
+    time.  A function that fails on the stack but not on rows is per row.
+    """
+    with np.errstate(all='ignore'):
+        try:
+            stacked = np.asarray(function(samples.copy(), **physics), dtype=float)
+        except Exception:
+            return False
+        if stacked.shape != samples.shape:
+            return False
+        try:
+            rows = np.array([np.asarray(function(row.copy(), **physics), dtype=float).reshape(3) for row in samples])
+        except Exception:
+            return True  # works on the stack only
+    return bool(np.allclose(stacked, rows, rtol=1e-10, atol=1e-300, equal_nan=True))
+
+
+class PhysicsHooks:
+    """The physics hooks of one run: this module's defaults, some replaced by the user's files.
+
+    Every attribute follows this package's conventions, whatever the style
+    and signature of the user's function (the adapters loop over blobs or
+    pairs where the user's function takes one at a time, and check shapes and
+    finiteness of what it returns):
+
+    * ``blob_external_forces(r_vectors (N, 3), **kw) -> (N, 3)``;
+    * ``blob_blob_forces_python(r_vectors (N, 3), **kw) -> (N, 3)``, the all-pairs
+      sum for ``blob_blob_force_implementation python`` (None: the default sum
+      with the vectorised law ``blob_blob_force``);
+    * ``body_body_forces_python(locations (Nb, 3), orientations (Nb, 4), **kw) -> (2 Nb, 3)``
+      (None: the default sum with the vectorised law ``body_body_force_torque``);
+    * ``bodies_external_force_torque(bodies, r_vectors, **kw) -> (2 Nb, 3)``;
+    * ``set_slip_by_ID(body, slip)``; ``preprocess(bodies)``; ``postprocess(bodies)``;
+    * ``calc_blob_blob_forces_pycuda`` (None unless a ``forces_pycuda_user_defined.py`` supplied it).
+
+    ``overridden`` lists the hooks the user's files replaced, ``sources`` the
+    files read, ``notes`` the lines the log should show (what was replaced,
+    with which convention, and what has no effect).
+    """
+
+    def __init__(self, physics=None):
+        self.physics = {} if physics is None else dict(physics)
+        self.blob_external_forces = mbf.blob_external_forces
+        self.blob_blob_force = mbf.blob_blob_force
+        self.body_body_force_torque = mbf.body_body_force_torque
+        self.blob_blob_forces_python = None
+        self.body_body_forces_python = None
+        self.bodies_external_force_torque = mbf.bodies_external_force_torque
+        self.set_slip_by_ID = mbf.set_slip_by_ID
+        self.preprocess = mbf.preprocess
+        self.postprocess = mbf.postprocess
+        self.calc_blob_blob_forces_pycuda = None
+        self.body_body_of_bodies = None  # published calc_body_body_forces_torques_python (bodies, r_vectors)
+        self.published_constraint_class = None  # the user's patched constraint.constraint.Constraint, or None
+        self.published_articulated_class = None  # the user's articulated.articulated.Articulated, update_links patched
+        self.published_joint_class = None  # with it: the constraint.constraint.Constraint class of the same import
+        self.pycuda_file = None
+        self.overridden = []
+        self.sources = []
+        self.notes = []
+        self.user_functions = {}
+
+    def is_default(self, name):
+        return name not in self.overridden
+
+    # -------------------------------------------------------------- installing user functions
+    def install(self, found, path):
+        """Install the user functions ``found`` (hook name -> function) read from ``path``."""
+        physics = self.physics
+        a = float(physics.get('blob_radius', 1.0))
+        one_blob = [name for name in mbf.ONE_BLOB_NAMES if name in found]
+        if one_blob:
+            name = one_blob[0]
+            function = found[name]
+            for ignored in one_blob[1:]:
+                self.notes.append('%s: %s is also replaced but not used: %s wins (the order is calc_one_blob_forces, '
+                                  'blob_external_forces, blob_external_force)' % (path, ignored, name))
+            samples = np.array([[0.1, -0.2, 1.7 * a], [0.4, 0.3, 2.6 * a], [-0.3, 0.5, 4.1 * a]])
+            per_blob = name == 'blob_external_force' and not _vectorises(function, samples, physics)
+            self.blob_external_forces = self._one_blob_adapter(function, name, per_blob)
+            self._replaced(name, function, 'per blob, r (3,) -> (3,): a Python loop over blobs, slow' if per_blob
+                           else 'vectorised, r_vectors (N, 3) -> (N, 3)')
+        if 'blob_blob_force' in found:
+            function = found['blob_blob_force']
+            samples = 2.0 * a * np.array([[1.3, 0.2, -0.1], [-0.4, 1.6, 0.3], [0.9, -1.1, 1.7]])
+            per_pair = not _vectorises(function, samples, physics)
+            self.blob_blob_force = function
+            self.blob_blob_forces_python = self._blob_pairs_adapter(function, per_pair)
+            self._replaced('blob_blob_force', function, 'per pair, r (3,) -> (3,): a Python loop over blob pairs, '
+                           'slow' if per_pair else 'vectorised over pairs, r (..., 3) -> (..., 3)')
+        if 'body_body_force_torque' in found:
+            function = found['body_body_force_torque']
+            required, _ = positional_arity(function)
+            per_pair = required is not None and required >= 3
+            self.body_body_force_torque = function
+            self.body_body_forces_python = self._body_pairs_adapter(function, per_pair)
+            self._replaced('body_body_force_torque', function,
+                           'per pair, (r, quaternion_i, quaternion_j) -> (2, 3): a Python loop over body pairs, slow'
+                           if per_pair else 'vectorised over pairs, r (..., 3) -> (force, torque)')
+        if 'bodies_external_force_torque' in found:
+            function = found['bodies_external_force_torque']
+
+            def bodies_external(bodies, r_vectors, function=function, **kw):  # bound now: `function` is reused
+                nb = len(bodies)
+                value = call_user_function(function, 'bodies_external_force_torque', bodies, r_vectors, **kw)
+                return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], function,
+                                     'bodies_external_force_torque', 'the force and torque of every body')
+            self.bodies_external_force_torque = bodies_external
+            self._replaced('bodies_external_force_torque', function, '(bodies, r_vectors) -> (2 Nb, 3)')
+        if 'set_slip_by_ID' in found:
+            function = found['set_slip_by_ID']
+            one_argument = positional_capacity(function) == 1
+
+            def set_slip(body, slip, function=function, one_argument=one_argument):
+                if one_argument:
+                    call_user_function(function, 'set_slip_by_ID', body)
+                else:
+                    call_user_function(function, 'set_slip_by_ID', body, slip)
+            self.set_slip_by_ID = set_slip
+            self._replaced('set_slip_by_ID', function, '(body)' if one_argument else '(body, slip)')
+        if 'calc_body_body_forces_torques_python' in found:
+            function = found['calc_body_body_forces_torques_python']
+
+            def body_body_of_bodies(bodies, r_vectors, function=function, **kw):
+                nb = len(bodies)
+                value = call_user_function(function, 'calc_body_body_forces_torques_python', bodies, r_vectors, **kw)
+                return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], function,
+                                     'calc_body_body_forces_torques_python', 'the force and torque of every body')
+            self.body_body_of_bodies = body_body_of_bodies
+            self._replaced('calc_body_body_forces_torques_python', function,
+                           '(bodies, r_vectors) -> (2 Nb, 3), with body_body_force_torque_implementation python')
+        if 'published Articulated' in found:
+            self.published_articulated_class, self.published_joint_class = found['published Articulated']
+            self.notes.append('%s patches the published Articulated.update_links: the joints are restored after every '
+                              'move with the links it gives, as published (the velocity solve takes them from '
+                              'Constraint.update_links)' % path)
+        if 'published Constraint' in found:
+            self.published_constraint_class = found['published Constraint']
+            self.notes.append('%s patches the published Constraint class (%s): the joints take their links from '
+                              'its update_links%s' % (path, ', '.join(sorted(
+                                  name for name, value in vars(self.published_constraint_class).items()
+                                  if callable(value) and getattr(value, '__module__', '') != 'constraint.constraint')),
+                                  ' and every step calls its tumbling_event(t)' if hasattr(
+                                      self.published_constraint_class, 'tumbling_event') else ''))
+        for name in ('preprocess', 'postprocess'):
+            if name in found:
+                function = found[name]
+                setattr(self, name, partial(call_user_function, function, name))
+                self._replaced(name, function, '(bodies)')
+
+    def _replaced(self, hook, function, convention):
+        self.overridden.append(hook)
+        self.user_functions[hook] = function
+        self.notes.append('%s replaced by %s [%s]' % (hook, describe_user_function(function, hook), convention))
+
+    @staticmethod
+    def _one_blob_adapter(function, hook, per_blob):
+        if per_blob:
+            def one_blob_forces(r_vectors, **kw):
+                r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+                forces = np.empty_like(r_vectors)
+                for i, r in enumerate(r_vectors):
+                    forces[i] = checked_array(call_user_function(function, hook, r.copy(), **kw), [(3,)], function,
+                                              hook, 'the force on one blob')
+                return forces
+        else:
+            def one_blob_forces(r_vectors, **kw):
+                r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+                n = r_vectors.shape[0]
+                return checked_array(call_user_function(function, hook, r_vectors, **kw), [(n, 3), (3 * n,)],
+                                     function, hook, 'the force on every blob')
+        return one_blob_forces
+
+    @staticmethod
+    def _blob_pairs_adapter(function, per_pair):
+        hook = 'blob_blob_force'
+        if not per_pair:
+            def vectorised_pairs(r_vectors, periodic_length=(0.0, 0.0, 0.0), **kw):
+                # As calc_blob_blob_forces, but the user's law never sees a blob paired with itself (r = 0).
+                r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+                n = r_vectors.shape[0]
+                forces = np.zeros_like(r_vectors)
+                rows = max(1, mbf.PAIR_CHUNK_ELEMENTS // max(n, 1))
+                for start in range(0, n, rows):
+                    stop = min(n, start + rows)
+                    others = np.ones((stop - start, n), dtype=bool)
+                    others[np.arange(stop - start), np.arange(start, stop)] = False
+                    r = minimum_image(r_vectors[None, :, :] - r_vectors[start:stop, None, :], periodic_length)[others]
+                    pair = checked_array(call_user_function(function, hook, r, periodic_length=periodic_length, **kw),
+                                         [r.shape], function, hook, 'the force on blob i of every pair')
+                    # Each row has exactly n - 1 other blobs, in order: sum them per row.
+                    forces[start:stop] = pair.reshape(stop - start, n - 1, 3).sum(axis=1)
+                return forces
+            return vectorised_pairs
+
+        def blob_pairs(r_vectors, periodic_length=(0.0, 0.0, 0.0), **kw):
+            r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
+            n = r_vectors.shape[0]
+            forces = np.zeros_like(r_vectors)
+            for i in range(n - 1):
+                separations = minimum_image(r_vectors[i + 1:] - r_vectors[i], periodic_length)
+                for k, r in enumerate(separations):
+                    force = checked_array(call_user_function(function, hook, r.copy(), periodic_length=periodic_length,
+                                                             **kw), [(3,)], function, hook,
+                                          'the force on blob i of one pair')
+                    forces[i] += force
+                    forces[i + 1 + k] -= force
+            return forces
+        return blob_pairs
+
+    @staticmethod
+    def _body_pairs_adapter(function, per_pair):
+        hook = 'body_body_force_torque'
+        if not per_pair:
+            def law(r, **kw):
+                value = call_user_function(function, hook, r, **kw)
+                if isinstance(value, tuple) and len(value) == 2:
+                    value = np.stack([np.asarray(v, dtype=float) for v in value])
+                return checked_array(value, [(2,) + r.shape], function, hook,
+                                     '(force on i, torque on i) of every pair')
+            return lambda locations, orientations=None, **kw: mbf.calc_body_body_forces_torques(
+                locations, pair_force_torque=law, **kw)
+
+        def body_pairs(locations, orientations=None, periodic_length=(0.0, 0.0, 0.0), **kw):
+            locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+            nb = locations.shape[0]
+            if orientations is None:
+                orientations = np.tile([1.0, 0.0, 0.0, 0.0], (nb, 1))
+            quaternions = [Quaternion(q) for q in np.asarray(orientations, dtype=float).reshape(-1, 4)]
+            result = np.zeros((nb, 2, 3))
+            for i in range(nb - 1):
+                separations = minimum_image(locations[i + 1:] - locations[i], periodic_length)
+                for k, r in enumerate(separations):
+                    j = i + 1 + k
+                    value = call_user_function(function, hook, r.copy(), quaternions[i], quaternions[j],
+                                               periodic_length=periodic_length, **kw)
+                    if isinstance(value, tuple) and len(value) == 2:
+                        value = np.stack([np.asarray(v, dtype=float) for v in value])
+                    force_torque = checked_array(value, [(2, 3), (6,)], function, hook,
+                                                 '(force on i, torque on i) of one pair')
+                    result[i] += force_torque
+                    result[j] -= force_torque
+            return result.reshape(2 * nb, 3)
+        return body_pairs
+
+
+def import_module_file(path, module_name):
+    """Import the Python file ``path`` as a module; a UserInputError naming the file when it fails."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as err:
+        raise UserInputError('%s: could not be imported (%s: %s); fix the file or remove it from the run directory'
+                             % (path, type(err).__name__, err))
+    return module
+
+
+# The published override module, a file beside this package's folder (read as a file, never imported here).
+PUBLISHED_MODULE_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                     'multi_bodies_functions.py')
+PACKAGE_MODULE_NAME = 'multi_bodies.multi_bodies_functions'
+# Published hooks with no default here: ``calc_body_body_forces_torques_python(bodies, r_vectors, **kw) ->
+# (2 Nb, 3)``, the python body-body force-torque of later published versions (the bacteria example), used with
+# ``body_body_force_torque_implementation python``.
+PUBLISHED_EXTRA_HOOKS = ('calc_body_body_forces_torques_python',)
+
+
+def _fresh_copy_of_this_module():
+    """A new module object with this file's defaults, importable as ``multi_bodies_functions``.
+
+    Published override files rebind its attributes; each run gets its own
+    copy, so one run's overrides never leak into another run in the same
+    process, and the user's functions that look names up through
+    ``multi_bodies_functions.X`` at run time see their own replacements.
+    """
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('multi_bodies_functions', PUBLISHED_MODULE_FILE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _public_callables(module):
+    return {name: value for name, value in vars(module).items() if not name.startswith('_') and callable(value)}
+
+
+# Top-level modules and folders of the published code's tree: an import of one of them that fails is a published
+# module path, not a missing package (pip would install unrelated software of the same name).
+PUBLISHED_TREE_MODULES = ('mobility', 'articulated', 'constraint', 'general_application_utils', 'read_input', 'body',
+                          'quaternion_integrator', 'multi_bodies', 'multi_bodies_functions', 'stochastic_forcing',
+                          'utils', 'Lubrication', 'many_bodyMCMC', 'boomerang', 'sphere', 'forces_numba',
+                          'forces_pycuda', 'forces_cpp', 'HydroGrid', 'calculateConcentration', 'visit',
+                          'plot_velocity_field', 'multi_bodies_utilities', 'periodic_mobility', 'stkfmm')
+# The published faces of the joints (constraint/, articulated/ at the repository root) and where they live.
+JOINT_FACE_MODULES = ('constraint', 'constraint.constraint', 'articulated', 'articulated.articulated')
+FACE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# The published module paths this package provides for override files and drivers (tests/test_layout.py).
+PUBLISHED_FACES = ('mobility.mobility', 'general_application_utils', 'read_input', 'quaternion_integrator.quaternion',
+                   'multi_bodies_functions', 'articulated.articulated', 'constraint.constraint')
+
+
+def import_user_file(path):
+    """Import the user's override file; returns (hook name -> function, notes for the log).
+
+    While the file runs, ``import multi_bodies_functions`` gives a fresh copy
+    of this module (published style).  A hook counts as replaced when the file
+    rebinds it on that copy, or on ``multi_bodies.multi_bodies_functions``
+    (restored afterwards), or defines a function of that name that is not
+    one of this module's (package style).  Rebinding a function that no run
+    calls is reported in the notes.  A syntax error or an exception while
+    importing is a UserInputError naming the file and line.
+    """
+    import importlib.util
+    copy = _fresh_copy_of_this_module()
+    # The package-style module ``multi_bodies.multi_bodies_functions`` has the same defaults as the copy; it is
+    # checked for rebindings only when it was imported (by the user's file or before).
+    before_copy = _public_callables(copy)
+    this_before = sys.modules.get(PACKAGE_MODULE_NAME)
+    before_this = _public_callables(this_before) if this_before is not None else dict(before_copy)
+    # the published faces of the joints are imported afresh for each file, so one run's patches of their classes
+    # never reach another run in the same process
+    saved = {name: sys.modules.get(name) for name in ('multi_bodies_functions', 'user_defined_functions')
+             + JOINT_FACE_MODULES}
+    for name in JOINT_FACE_MODULES:
+        sys.modules.pop(name, None)
+    added_root = FACE_ROOT not in sys.path and importlib.util.find_spec('constraint') is None
+    if added_root:  # an editable install made before the faces existed does not map them
+        sys.path.append(FACE_ROOT)
+    module_name = os.path.splitext(os.path.basename(path))[0]
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules['multi_bodies_functions'] = copy
+    sys.modules[module_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as err:
+        raise UserInputError('%s, line %s: syntax error in the user-defined functions: %s (%s); fix the file or '
+                             'remove it from the run directory' % (path, err.lineno, err.msg, (err.text or '').strip()))
+    except Exception as err:
+        frames = [f for f in traceback.extract_tb(err.__traceback__)
+                  if os.path.abspath(f.filename) == os.path.abspath(path)]
+        line = (', line %d' % frames[-1].lineno) if frames else ''
+        if isinstance(err, ImportError) and getattr(err, 'name', None):
+            missing = err.name.split('.')[0]
+            if missing in PUBLISHED_TREE_MODULES:
+                raise UserInputError('%s%s: the user file imports %s, a module of the published code\'s own tree '
+                                     '(not a package to install); this package offers the published faces %s and '
+                                     'not this one (doc/overrides.md); remove the import or use the package\'s '
+                                     'equivalent' % (path, line, err.name, ', '.join(PUBLISHED_FACES)))
+            raise UserInputError('%s%s: the user file imports %s, which is not installed; pip install %s or remove '
+                                 'the import' % (path, line, missing, missing))
+        raise UserInputError('%s%s: importing the user-defined functions raised %s: %s; fix the file or remove it '
+                             'from the run directory' % (path, line, type(err).__name__, err))
+    finally:
+        published_constraint = getattr(sys.modules.get('constraint.constraint'), 'Constraint', None)
+        published_articulated = getattr(sys.modules.get('articulated.articulated'), 'Articulated', None)
+        if added_root:
+            sys.path.remove(FACE_ROOT)
+        for name, value in saved.items():
+            if value is None:
+                sys.modules.pop(name, None)
+            else:
+                sys.modules[name] = value
+        this = sys.modules.get(PACKAGE_MODULE_NAME)
+        rebound_here = {} if this is None else {name: value for name, value in _public_callables(this).items()
+                                                if before_this.get(name) is not value}
+        for name in rebound_here:  # keep the package module clean for other runs
+            if name in before_this:
+                setattr(this, name, before_this[name])
+            else:
+                delattr(this, name)
+    rebound_copy = {name: value for name, value in _public_callables(copy).items()
+                    if before_copy.get(name) is not value}
+    defaults = set(map(id, before_copy.values())) | set(map(id, before_this.values())) | \
+        set(map(id, _public_callables(mbf).values()))
+    found, notes = {}, []
+    if published_constraint is not None and any(getattr(value, '__module__', 'constraint.constraint') !=
+                                                 'constraint.constraint' for value in vars(published_constraint).values()
+                                                 if callable(value)):
+        found['published Constraint'] = published_constraint  # patched by the file: the joints use it
+    if published_articulated is not None and getattr(published_articulated.update_links, '__module__',
+                                                     'articulated.articulated') != 'articulated.articulated':
+        # its update_links restores the joints; the joint objects it reads are of the (maybe unpatched) class
+        found['published Articulated'] = (published_articulated, published_constraint)
+    for name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS:
+        candidates = []
+        for where, table in (('multi_bodies_functions.%s = ...' % name, rebound_copy),
+                             ('multi_bodies.multi_bodies_functions.%s = ...' % name, rebound_here)):
+            if name in table:
+                candidates.append((where, table[name]))
+        defined = getattr(module, name, None)
+        if callable(defined) and id(defined) not in defaults and not isinstance(defined, type):
+            candidates.append(('def %s' % name, defined))
+        if candidates:
+            found[name] = candidates[0][1]
+            others = [w for w, f in candidates[1:] if f is not candidates[0][1]]
+            if others:
+                notes.append('%s: %s is given twice (%s and %s); %s is used'
+                             % (path, name, candidates[0][0], ', '.join(others), candidates[0][0]))
+    for table in (rebound_copy, rebound_here):
+        for name in sorted(set(table) - set(mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS)):
+            if isinstance(table[name], type) or name in ('np', 'partial', 'Quaternion'):
+                continue
+            notes.append('%s: rebinds multi_bodies_functions.%s, which this package does not call, so it has no '
+                         'effect; the hooks that can be replaced are %s' % (path, name, ', '.join(mbf.HOOK_NAMES)))
+    return found, notes
+
+
+def override_file(directory, name):
+    """The path of the override source ``name`` in ``directory`` when it is a file, None when nothing is there.
+
+    Raises UserInputError when something else is there (a folder, a FIFO, a dangling link): the run would
+    otherwise use the default physics without a word."""
+    path = os.path.join(directory, name)
+    kind = utils.special_file_kind(path)
+    if kind is not None:
+        raise UserInputError('%s is %s, not a Python file, so its overrides cannot be read; make it the file you '
+                             'meant, or remove it to run with the default physics' % (path, kind))
+    return path if os.path.isfile(path) else None
+
+
+def load_user_hooks(directory='.', load_pycuda=True, physics=None):
+    """Physics hooks for a run in ``directory``, with the user's overrides (see doc/overrides.md).
+
+    Parameters
+    ----------
+    directory : str
+        The run directory; ``user_defined_functions.py`` there is imported
+        (either style, :func:`import_user_file`).
+    load_pycuda : bool
+        Also read ``forces_pycuda_user_defined.py`` (when the run may use the
+        pycuda blob-blob forces); it must define
+        ``calc_blob_blob_forces_pycuda(r_vectors, **kw) -> (N, 3)``.
+    physics : dict
+        The run's hook keywords; the adapters are probed with them to tell a
+        per-blob (per-pair) published function from a vectorised one.
+
+    Conventions of the replaced functions (either is accepted where two are listed):
+    ``blob_external_force(r (3,), **kw) -> (3,)`` (per blob, slow) or vectorised;
+    ``blob_external_forces`` / ``calc_one_blob_forces(r_vectors (N,3), **kw) -> (N,3)``;
+    ``blob_blob_force(r (3,) or (...,3), **kw)``, r from blob i to blob j, force on i;
+    ``body_body_force_torque(r, quaternion_i, quaternion_j, **kw) -> (2,3)`` per pair, or
+    ``body_body_force_torque(r (...,3), **kw) -> (force, torque)`` vectorised;
+    ``bodies_external_force_torque(bodies, r_vectors, **kw) -> (2Nb, 3)``;
+    ``set_slip_by_ID(body, slip)`` or ``set_slip_by_ID(body)``; ``preprocess(bodies)``;
+    ``postprocess(bodies)``.
+    """
+    hooks = PhysicsHooks(physics)
+    path = override_file(directory, mbf.USER_FILE)
+    if path is not None:
+        found, notes = import_user_file(path)
+        hooks.sources.append(path)
+        hooks.install(found, path)
+        hooks.notes.extend(notes)
+        if not found:
+            hooks.notes.append('%s defines no hook; the defaults are used (the hooks are %s)'
+                               % (path, ', '.join(mbf.HOOK_NAMES)))
+    path = override_file(directory, mbf.USER_PYCUDA_FILE)
+    if path is not None:
+        hooks.sources.append(path)
+        if load_pycuda:
+            hooks.pycuda_file = path
+        else:
+            hooks.notes.append('%s is not used: blob_blob_force_implementation is not pycuda' % path)
+    return hooks
+
+
+def load_user_pycuda_forces(path):
+    """``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py``, after checking that a GPU is usable.
+
+    Raises UserInputError naming the file when no GPU can run it, when it
+    does not import, or when it lacks the function.
+    """
+    try:
+        from multi_bodies.solver import forces_pycuda
+        forces_pycuda.check_usable()
+    except Exception as err:
+        raise UserInputError('%s replaces the GPU blob-blob force kernel, but no GPU is usable here (%s: %s); run '
+                             'on a machine with a CUDA GPU, or set blob_blob_force_implementation to python or '
+                             'C++ (and move the file away)' % (path, type(err).__name__, err))
+    module = import_module_file(path, 'forces_pycuda_user_defined')
+    function = getattr(module, 'calc_blob_blob_forces_pycuda', None)
+    if not callable(function):
+        raise UserInputError('%s must define calc_blob_blob_forces_pycuda(r_vectors, **kwargs) -> (N, 3)' % path)
+
+    def gpu_forces(r_vectors, **kw):
+        n = np.asarray(r_vectors).size // 3
+        return checked_array(call_user_function(function, 'calc_blob_blob_forces_pycuda', r_vectors, **kw),
+                             [(n, 3), (3 * n,)], function, 'calc_blob_blob_forces_pycuda', 'the force on every blob')
+    return gpu_forces
