@@ -47,8 +47,8 @@ import numpy as np
 
 import utils
 
-import mobility
 from mobility import choose
+from mobility.interface import Geometry, preferred_backend, registered_backends, unusable_reason
 from multi_bodies.solver import body_solver
 
 from multi_bodies.advice import advisor_physics
@@ -57,6 +57,7 @@ from multi_bodies.advice.advisor_lubrication import LubricationMeasurements
 from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
 from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
+    blob_mobility,
     Choice,
     Scene,
     DENSE_BLOB_LIMIT,
@@ -105,7 +106,8 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         self.recommendation = {}
         self.files = {}
         self.sources = []
-        self.backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
+        # the registry's first usable backend that builds dense matrices: the fastest CPU one (C++, else python)
+        self.backend = preferred_backend(Geometry('single_wall'), dense_matrices=True)
         self.iterations = None
         self.product_seconds = {}  # (backend, wall) -> (seconds of one M f of the scene, blobs)
         self.lubrication_lines = []  # input lines of the lubrication topic's model change (advisor_lubrication)
@@ -131,10 +133,9 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
                 return base_seconds, 'measured'
             if self.quick or predicted > MEASURE_BUDGET_S:
                 return predicted, 'modelled'
-        product = mobility.mobility_vector_product(backend + ('' if wall else NO_WALL))
+        mobility = blob_mobility(backend, self.scene.eta, self.scene.a, wall, self.scene.options.periodic_length)
         force = np.random.default_rng(2).standard_normal(3 * n)
-        seconds = choose.time_call(lambda: product(r_vectors, force, self.scene.eta, self.scene.a,
-                                                   self.scene.options.periodic_length), repeats=2)
+        seconds = choose.time_call(lambda: mobility.velocities(r_vectors, force), repeats=2)
         if n == self.scene.num_blobs:
             self.product_seconds = self.product_seconds or {}
             self.product_seconds[(backend, wall)] = (seconds, n)
@@ -237,8 +238,11 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
     def measure_solver(self):
         scene = self.scene
         wall = scene.wall
-        product = mobility.mobility_vector_product(self.backend + ('' if wall else NO_WALL))
-        matrix = mobility.blob_mobility_matrix(self.backend + ('' if wall else NO_WALL))
+        # the model's two mobilities: M f with the box, the dense blocks without periodic images (per-blob radii
+        # where the vertex files give them)
+        radius = body_solver.blob_radius_argument(scene.arrays, scene.a)
+        vector = blob_mobility(self.backend, scene.eta, radius, wall, scene.options.periodic_length)
+        blobs = blob_mobility(self.backend, scene.eta, radius, wall)
         force_torque, slip = self.scene_rhs()
         tolerance = scene.options.solver_tolerance
         results = []
@@ -246,10 +250,8 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         def gmres_solve():
             # The same solve as the scripts and schemes (body_solver.solve), from a zero guess.
             configuration = scene.arrays.configuration
-            problem = body_solver.MobilityProblem(scene.arrays, configuration, product, scene.eta, scene.a,
-                                                  scene.options.periodic_length)
-            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, configuration, matrix,
-                                                                     scene.eta, scene.a, stacked_mobility=matrix)
+            problem = body_solver.MobilityProblem(scene.arrays, configuration, vector)
+            preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, configuration, blobs)
             results.append(body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
                                              preconditioner, tolerance=tolerance))
         # One solve (preconditioner built, GMRES from a zero guess); repeated when short, best time kept.
@@ -280,13 +282,13 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         n = scene.num_blobs
         if n <= DENSE_BLOB_LIMIT and (not self.quick or n <= 600):
             dense_seconds = choose.time_call(lambda: body_solver.dense_mobility_velocities(
-                scene.arrays, scene.arrays.configuration, force_torque, slip, matrix, scene.eta, scene.a), repeats=2)
+                scene.arrays, scene.arrays.configuration, force_torque, slip, blobs), repeats=2)
             how = 'measured'
         else:
             probe = min(n, 600)
             r = scene.r_vectors[:probe]
             start = time.perf_counter()
-            M = matrix(r, scene.eta, scene.a)
+            M = blobs.replace(blob_radius=scene.a).dense_matrix(r)
             np.linalg.inv(M)
             dense_seconds, how = (time.perf_counter() - start) * 2.0 * (n / probe) ** 3, 'modelled'
         self.add('solver', None, 'dense solve', n, None, dense_seconds, True,
@@ -303,10 +305,12 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         scene = self.scene
         wall = scene.wall
         costs = {}
-        for backend in ('pycuda', 'C++', 'python'):
-            if not mobility.backends.is_usable(backend):
+        geometry = Geometry('single_wall' if wall else 'free_space')
+        for backend in registered_backends(geometry):  # the registry's preference order
+            reason = unusable_reason(backend)
+            if reason is not None:
                 self.add('backend', None, backend + ('' if wall else NO_WALL), scene.num_blobs, None, None, False,
-                         'not usable here: %s' % mobility.backends.available_implementations()[backend])
+                         'not usable here: %s' % reason)
                 continue
             if backend == 'python' and scene.num_blobs > 4000:
                 seconds, how = choose.modelled_seconds('python', 'vector_product', scene.num_blobs, wall)
@@ -317,7 +321,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
                      'one M f, %s' % how)
         fastest = min(costs, key=costs.get)
         suffix = '' if wall else NO_WALL
-        cpu = 'C++' if 'C++' in costs else 'python'
+        cpu = next(b for b in registered_backends(geometry, dense_matrices=True) if b in costs)
         for option, best in (('mobility_vector_prod_implementation', fastest), ('mobility_blobs_implementation', cpu)):
             current = getattr(scene.options, option)
             if current not in (best + suffix, 'auto' + suffix):  # auto measures the same costs at run time

@@ -17,8 +17,8 @@ from collections import namedtuple
 import numpy as np
 import scipy.linalg
 
-import mobility
 from body.body import K_matrices, bodies_to_arrays
+from mobility.interface import Geometry, make_mobility, preferred_backend
 from multi_bodies.solver.body_solver import body_mobility_from_resistance
 from multi_bodies.solver import user_hooks
 from multi_bodies.advice import sphere_tables
@@ -108,8 +108,10 @@ Choice.__doc__ = """One row of a choice table (the JSON rows of ``.advice.json``
 
 
 # ------------------------------------------------------------------ dense mobilities of small sets of bodies
-def _dense_matrix(wall, backend):
-    return mobility.blob_mobility_matrix(backend + ('' if wall else NO_WALL))
+def blob_mobility(backend, eta, blob_radius, wall=True, periodic_length=(0.0, 0.0, 0.0)):
+    """The ``BlobMobility`` of ``backend`` above the wall (``wall``) or in free space (the advisor's products)."""
+    return make_mobility(backend, Geometry('single_wall' if wall else 'free_space', periodic_length), eta,
+                         blob_radius)
 
 
 def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='python'):
@@ -122,7 +124,7 @@ def bodies_mobility(blob_sets, centres, blob_radius, eta, wall=True, backend='py
     if all(len(b) == 1 for b in blob_sets):
         return roller_grand_mobility(np.concatenate(blob_sets), blob_radius, eta, wall, backend)
     r = np.concatenate(blob_sets)
-    M = _dense_matrix(wall, backend)(r, eta, blob_radius)
+    M = blob_mobility(backend, eta, blob_radius, wall).dense_matrix(r)
     K = np.zeros((3 * r.shape[0], 6 * len(blob_sets)))
     row = 0
     for k, (blobs, centre) in enumerate(zip(blob_sets, centres)):
@@ -138,19 +140,18 @@ def roller_grand_mobility(positions, blob_radius, eta, wall=True, backend='pytho
     """Grand mobility (6n, 6n) of single blobs ``positions`` (n, 3), ordered ``[v_k, w_k]`` per blob."""
     positions = np.asarray(positions, dtype=float).reshape(-1, 3)
     n = positions.shape[0]
-    name = backend + ('' if wall else NO_WALL)
-    products = {kind: mobility.blob_product(name, kind) for kind in mobility.PRODUCT_KINDS}
+    mobility = blob_mobility(backend, eta, blob_radius, wall)
     G = np.zeros((6 * n, 6 * n))
     for col in range(6 * n):
         body, component = divmod(col, 6)
         e = np.zeros(3 * n)
         e[3 * body + component % 3] = 1.0
         if component < 3:
-            v = products['trans_times_force'](positions, e, eta, blob_radius)
-            w = products['rot_times_force'](positions, e, eta, blob_radius)
+            v = mobility.coupling('trans_times_force', positions, e)
+            w = mobility.coupling('rot_times_force', positions, e)
         else:
-            v = products['trans_times_torque'](positions, e, eta, blob_radius)
-            w = products['rot_times_torque'](positions, e, eta, blob_radius)
+            v = mobility.coupling('trans_times_torque', positions, e)
+            w = mobility.coupling('rot_times_torque', positions, e)
         G[:, col] = np.concatenate((np.reshape(v, (n, 3)), np.reshape(w, (n, 3))), axis=1).reshape(-1)
     return G
 
@@ -232,8 +233,8 @@ def bulk_radius(blobs, blob_radius):
     """Hydrodynamic radius (translation, far from walls) of a rigid body of RPY blobs (n, 3)."""
     centre = np.mean(blobs, axis=0)
     arms = np.asarray(blobs, dtype=float) - centre
-    backend = 'C++' if mobility.backends.is_usable('C++') else 'python'
-    M = mobility.blob_mobility_matrix(backend + NO_WALL)(arms, 1.0, blob_radius)
+    backend = preferred_backend(Geometry('free_space'), dense_matrices=True)  # the registry's fastest CPU one
+    M = blob_mobility(backend, 1.0, blob_radius, wall=False).dense_matrix(arms)
     K = K_matrices(arms[None], np.zeros((1, 3)))[0]
     N = body_mobility_from_resistance(K.T @ scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), K))
     return 1.0 / (6 * np.pi * np.trace(N[:3, :3]) / 3.0)
