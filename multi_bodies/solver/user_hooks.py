@@ -555,6 +555,38 @@ def override_file(directory, name):
     return path if os.path.isfile(path) else None
 
 
+FOLDER_MODULE_COPY = 'multi_bodies_functions.py'
+
+
+def check_folder_module_copy(directory):
+    """Refuse a run directory that holds its own ``multi_bodies_functions.py`` (not this package's).
+
+    Several published example folders ship a modified copy of the published ``multi_bodies_functions.py`` (and of
+    ``multi_bodies.py``, which imports it instead of the defaults and may hard-code keywords, e.g. the ``f = 9.0``
+    of ``Spectral_Multiblob_Roller``).  This package reads the user's functions from ``user_defined_functions.py``
+    only, so such a copy would be ignored: the run stops instead, naming the file, the hooks it defines and what
+    to do.  Raises UserInputError.
+    """
+    path = os.path.join(directory, FOLDER_MODULE_COPY)
+    if not os.path.isfile(path) or os.path.samefile(path, PUBLISHED_MODULE_FILE):
+        return
+    import ast
+    try:
+        with open(path, encoding='utf-8', errors='replace') as f:
+            tree = ast.parse(f.read())
+        defined = [node.name for node in tree.body if isinstance(node, ast.FunctionDef)
+                   and node.name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS]
+    except (SyntaxError, ValueError, OSError):
+        defined = []
+    raise UserInputError(
+        '%s: this folder has its own copy of the published multi_bodies_functions.py (the folder\'s copy of the '
+        'published multi_bodies.py reads it in place of the defaults), which this package does not read; copy the '
+        'functions you need%s into user_defined_functions.py (published style: multi_bodies_functions.<name> = '
+        '<function>; a keyword that the folder\'s multi_bodies.py sets and the input file does not must get its '
+        'value in the function), then rename or remove %s (doc/overrides.md)'
+        % (path, ' (it defines %s)' % ', '.join(defined) if defined else '', FOLDER_MODULE_COPY))
+
+
 def load_user_hooks(directory='.', load_pycuda=True, physics=None):
     """Physics hooks for a run in ``directory``, with the user's overrides (see doc/overrides.md).
 
@@ -581,6 +613,7 @@ def load_user_hooks(directory='.', load_pycuda=True, physics=None):
     ``set_slip_by_ID(body, slip)`` or ``set_slip_by_ID(body)``; ``preprocess(bodies)``;
     ``postprocess(bodies)``.
     """
+    check_folder_module_copy(directory)
     hooks = PhysicsHooks(physics)
     path = override_file(directory, mbf.USER_FILE)
     if path is not None:

@@ -1,0 +1,57 @@
+"""What users trying the package found (issue 47): published example folders and mistakes that got no clean
+answer.  Each test says which report it answers; the scenes are copies of the shipped examples
+(``tests/run_scenes.py``) with the one feature of the report.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from run_scenes import SCRIPT_DIR, copy_scene, edit_input, run_in_process, snapshot_files
+
+
+def error_lines(err):
+    """The lines of stderr that are not warnings."""
+    return [line for line in err.splitlines() if line.strip() and not line.startswith('warning:')]
+
+
+# ---------------------------------------------------------------------------------------------- folder module copy
+FOLDER_MODULE = '''
+import numpy as np
+
+def bodies_external_force_torque(bodies, r_vectors, *args, **kwargs):
+    freq = kwargs.get('f')
+    force_torque = np.zeros((2 * len(bodies), 3))
+    for k in range(len(bodies)):
+        force_torque[2 * k + 1] = 2 * np.pi * freq * np.array([0.0, 1.0, 0.0])
+    return force_torque
+
+def preprocess(bodies, *args, **kwargs):
+    return
+'''
+
+
+@pytest.mark.parametrize('program', ['dynamic', 'static'])
+def test_a_folder_copy_of_multi_bodies_functions_is_refused_by_name(tmp_path, program):
+    """Published folders (Spectral_Multiblob_Roller, ...) ship a modified multi_bodies_functions.py that their copy
+    of the published multi_bodies.py reads (with keywords it hard-codes, f = 9.0 there); this package read
+    user_defined_functions.py only and ran without it (the rollers only sank).  Now: one line naming the file, the
+    hooks it defines and what to do, and no output written."""
+    folder = copy_scene(tmp_path / 'run')
+    name = 'inputfile_dynamic.dat' if program == 'dynamic' else 'inputfile.dat'
+    (folder / 'multi_bodies_functions.py').write_text(FOLDER_MODULE)
+    before = snapshot_files(folder)
+    status, out, err = run_in_process(program, folder, name)
+    lines = error_lines(err)
+    assert status == 2 and 'Traceback' not in out + err and len(lines) == 1, err
+    assert str(folder / 'multi_bodies_functions.py') in lines[0] or 'multi_bodies_functions.py' in lines[0]
+    assert 'bodies_external_force_torque, preprocess' in lines[0] and 'user_defined_functions.py' in lines[0]
+    assert snapshot_files(folder) == before  # nothing written
+
+
+def test_the_package_folder_with_its_own_module_is_not_refused():
+    """Negative control: the scripts' own folder holds the package's multi_bodies_functions.py (the manual's
+    examples run from there)."""
+    from multi_bodies.solver.user_hooks import check_folder_module_copy
+    assert (SCRIPT_DIR / 'multi_bodies_functions.py').is_file()
+    check_folder_module_copy(str(SCRIPT_DIR))
