@@ -29,8 +29,8 @@ shape (nb, 3), ``orientations`` shape (nb, 4) (scalar-first quaternions).
 """
 import numpy as np
 
-import mobility
 from body.body import BodyArrays, KT_dot, K_matrices, blob_positions
+from mobility.interface import from_implementation_name
 from multi_bodies.solver.body_solver import body_mobility_from_resistance, dense_body_mobility
 from multi_bodies.files.structure_generators import boomerang as boomerang_blobs
 
@@ -75,7 +75,8 @@ class BoomerangModel:
     gfactor : float
         Multiplies the weight of every blob (``-gfactor`` of the script).
     implementation : str
-        Dense blob mobility: ``python`` or ``C++`` (``mobility.blob_mobility_matrix``).
+        Dense blob mobility: ``python`` or ``C++`` (a ``mobility.interface.BlobMobility`` above the wall, the
+        boomerang's blob radius and viscosity: ``blob_mobility``).
 
     Attributes
     ----------
@@ -89,7 +90,7 @@ class BoomerangModel:
         self.implementation = implementation
         self.reference = reference_configuration()
         self.blob_weights = np.full(NUM_BLOBS, TOTAL_WEIGHT / NUM_BLOBS * self.gfactor)
-        self.blob_mobility_matrix = mobility.blob_mobility_matrix(implementation)
+        self.blob_mobility = from_implementation_name(implementation, ETA, A, dense_matrices=True)
 
     def _layout(self, nb):
         blob_body_index = np.repeat(np.arange(nb), NUM_BLOBS)
@@ -140,9 +141,9 @@ class BoomerangModel:
         nb = locations.shape[0]
         if nb == 1:
             bodies = BodyArrays(locations, orientations, [self.reference], [1], A)
-            N, _ = dense_body_mobility(bodies, bodies.configuration, self.blob_mobility_matrix, ETA, A)
+            N, _ = dense_body_mobility(bodies, bodies.configuration, self.blob_mobility)
             return N[None]
-        M = self.blob_mobility_matrix(r, ETA, A)
+        M = self.blob_mobility.dense_matrix(r)
         K = K_matrices(r, locations)
         return body_mobility_from_resistance(np.matmul(np.swapaxes(K, 1, 2), np.linalg.solve(M, K)))
 

@@ -33,7 +33,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
 utils.prepare_script_path(__file__)
 
-import mobility  # noqa: E402
+from mobility.interface import Geometry, make_mobility  # noqa: E402
 from body.body import BodyArrays  # noqa: E402
 from multi_bodies.solver.body_solver import dense_body_mobility  # noqa: E402
 from multi_bodies.files.structure_generators import calibrated_shell  # noqa: E402
@@ -42,24 +42,25 @@ DEFAULT_HEIGHTS = np.concatenate((1.0 + np.geomspace(0.002, 1.0, 40), np.arange(
                                   np.arange(11.0, 20.01, 1.0), [25.0, 30.0, 40.0, 50.0]))
 
 
-def shell_mobility(blobs, blob_radius, height, blob_mobility_matrix, eta=1.0):
-    """6x6 body mobility of the shell (blobs (n, 3) about its centre) with its centre at ``height``."""
+def shell_mobility(blobs, height, blob_mobility):
+    """6x6 body mobility of the shell (blobs (n, 3) about its centre) with its centre at ``height``;
+    ``blob_mobility`` the ``mobility.interface.BlobMobility`` of its blobs (radius, viscosity, wall or not)."""
     location = np.array([[0.0, 0.0, height]])
-    bodies = BodyArrays(location, [[1.0, 0.0, 0.0, 0.0]], [blobs], [1], blob_radius)
-    N, _ = dense_body_mobility(bodies, bodies.configuration, blob_mobility_matrix, eta, blob_radius)
+    bodies = BodyArrays(location, [[1.0, 0.0, 0.0, 0.0]], [blobs], [1], blob_mobility.blob_radius)
+    N, _ = dense_body_mobility(bodies, bodies.configuration, blob_mobility)
     return N
 
 
 def table_rows(num_blobs=162, heights=DEFAULT_HEIGHTS, implementation='python'):
     """Rows ``h, par, perp, rot_par, rot_perp, coupling`` (shape (len(heights), 6)) and the shell's data."""
     blobs, blob_radius, shell_radius = calibrated_shell(num_blobs)
-    wall = mobility.blob_mobility_matrix(implementation)
-    free = mobility.blob_mobility_matrix(implementation + '_no_wall')
-    N_free = shell_mobility(blobs, blob_radius, 0.0, free)
+    wall = make_mobility(implementation, Geometry('single_wall'), 1.0, blob_radius, dense_matrices=True)
+    free = make_mobility(implementation, Geometry('free_space'), 1.0, blob_radius, dense_matrices=True)
+    N_free = shell_mobility(blobs, 0.0, free)
     rot_free = np.trace(N_free[3:, 3:]) / 3.0
     rows = []
     for h in heights:
-        N = shell_mobility(blobs, blob_radius, h, wall)
+        N = shell_mobility(blobs, h, wall)
         par = 0.5 * (N[0, 0] + N[1, 1]) * 6.0 * np.pi
         perp = N[2, 2] * 6.0 * np.pi
         rot_par = 0.5 * (N[3, 3] + N[4, 4]) / rot_free

@@ -118,12 +118,13 @@ def smallest_distance(points):
 def bulk_translational_mobility(reference_blobs, blob_radius, eta=1.0):
     """Translational mobility of a rigid blob body far from walls (RPY blobs), ``trace(N_tt)/3``.
 
-    Uses ``mobility.rotne_prager_tensor``; the body is tracked at the origin.
+    The dense free-space mobility of the NumPy backend (``mobility.interface``); the body is tracked at the
+    origin.
     """
-    import mobility
     from body.body import K_matrices
+    from mobility.interface import Geometry, make_mobility
     blobs = np.asarray(reference_blobs, dtype=float)
-    M = mobility.rotne_prager_tensor(blobs, eta, blob_radius)
+    M = make_mobility('python', Geometry('free_space'), eta, blob_radius).dense_matrix(blobs)
     K = K_matrices(blobs[None], np.zeros((1, 3)))[0]
     resistance = K.T @ np.linalg.solve(M, K)
     body_mobility = np.linalg.inv(resistance)
