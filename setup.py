@@ -106,10 +106,20 @@ extensions = [
         extra_link_args=link_args,
         cxx_std=17,
     ),
+    Pybind11Extension(
+        'mobility._spectral_cpp',
+        ['mobility/cpp/spectral_module.cpp'],
+        include_dirs=['mobility/cpp'],
+        depends=['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h'],
+        # complex products and quotients inline (finite values only; no NaN recovery calls)
+        extra_compile_args=compile_args + ['-fcx-limited-range'],
+        extra_link_args=link_args,
+        cxx_std=17,
+    ),
 ]
 
 setup(
-    packages=['body', 'mobility', 'multi_bodies', 'multi_bodies.solver', 'multi_bodies.files', 'multi_bodies.run',
+    packages=['body', 'mobility', 'mobility.spectral', 'multi_bodies', 'multi_bodies.solver', 'multi_bodies.files', 'multi_bodies.run',
               'multi_bodies.ensembles', 'multi_bodies.advice', 'multi_bodies.analysis', 'quaternion_integrator',
               'stochastic_forcing', 'many_bodyMCMC', 'boomerang', 'sphere', 'lubrication', 'read_input',
               'articulated', 'constraint'],

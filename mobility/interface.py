@@ -599,3 +599,13 @@ def _direct_check(backend):
 for _backend, _dense, _device in (('pycuda', False, 'gpu'), ('C++', True, 'cpu'), ('python', True, 'cpu')):
     register_backend(_backend, _direct_factory(_backend), DIRECT_GEOMETRIES, dense_matrices=_dense, device=_device,
                      check=_direct_check(_backend))
+
+
+def _spectral_factory(geometry, eta, blob_radius, **options):
+    """The spectral product (``mobility.spectral_mobility``), loaded on first use by its module name, as
+    ``mobility.backends`` loads the direct backends (it sits beside this module and imports it)."""
+    import importlib
+    return importlib.import_module('mobility.spectral_mobility').SpectralMobility(geometry, eta, blob_radius, **options)
+
+
+register_backend('spectral', _spectral_factory, PERIODIC_GEOMETRIES)

@@ -46,7 +46,8 @@ def floor(module):
         return 9
     if module == 'multi_bodies.multi_bodies_functions' or module in PUBLISHED_FACES:
         return 8
-    rules = [('utils', 1), ('body.geometry', 1), ('mobility.interface', 2), ('mobility.choose', 2), ('mobility', 1),
+    rules = [('utils', 1), ('body.geometry', 1), ('mobility.interface', 2), ('mobility.choose', 2),
+             ('mobility.spectral_mobility', 2), ('mobility', 1),
              ('body', 2), ('stochastic_forcing', 2),
              ('multi_bodies.files', 3), ('multi_bodies.solver', 4), ('lubrication', 4),
              ('quaternion_integrator', 5), ('sphere', 5),

@@ -79,7 +79,7 @@ class ChebyshevSystem:
         self.backward = cosines.copy()                       # f_k = sum_j c_j cos(pi j k/(N-1))
         ends = np.ones(N)
         ends[0] = ends[-1] = 0.5
-        self.forward = (ends[:, None] * cosines * ends[None, :]) / (N - 1)
+        self.forward = 2.0 * (ends[:, None] * cosines * ends[None, :]) / (N - 1)
 
     # -------------------------------------------------------------- transforms along axis 0
     def to_coefficients(self, values):
