@@ -55,3 +55,38 @@ def test_the_package_folder_with_its_own_module_is_not_refused():
     from multi_bodies.solver.user_hooks import check_folder_module_copy
     assert (SCRIPT_DIR / 'multi_bodies_functions.py').is_file()
     check_folder_module_copy(str(SCRIPT_DIR))
+
+
+# ---------------------------------------------------------------------------------------------- slip rows
+def test_a_slip_file_longer_than_the_body_uses_its_first_rows_with_a_warning(tmp_path):
+    """rollers_pillars gives a slip file of 1,536 rows to pillars of 120 blobs; the published code reads the rows
+    it needs and ignores the rest, and this package refused the file.  Now the first rows are used with a warning
+    naming the file and both counts: the run equals the run with the trimmed file (extra rows of slip 5 would move
+    the squirmer if they were used), and a file with fewer rows than blobs is still an error."""
+    from run_scenes import add_generated_inputs
+    folder = add_generated_inputs(copy_scene(tmp_path / 'run'))
+    slip = folder / 'Structures' / 'shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip'
+    rows = [line for line in slip.read_text().splitlines() if line.strip() and not line.startswith('#')]
+    assert int(rows[0].split()[0]) == 42 and len(rows) == 43
+    (folder / 'Structures' / 'long.slip').write_text('%d\n' % 50 + '\n'.join(rows[1:]) + '\n' + '5 5 5\n' * 8)
+    (folder / 'Structures' / 'short.slip').write_text('%d\n' % 40 + '\n'.join(rows[1:41]) + '\n')
+    text = (folder / 'inputfile_squirmer.dat').read_text()
+    runs = {}
+    for name in ('shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1', 'long'):
+        (folder / ('in_%s.dat' % name)).write_text(
+            text.replace('shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip', name + '.slip')
+            .replace('data/squirmer', 'data/%s' % name))
+        status, out, err = run_in_process('dynamic', folder, 'in_%s.dat' % name)
+        assert status == 0, err
+        runs[name] = (err, sorted((folder / 'data').glob('%s.squirmer.*.clones' % name)))
+    warning = [line for line in runs['long'][0].splitlines() if 'long.slip' in line]
+    assert len(warning) == 1 and 'has 50 rows for the 42 blobs' in warning[0] and 'other 8 ignored' in warning[0]
+    assert 'slip file' not in runs['shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1'][0]
+    trimmed, long = runs['shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1'][1], runs['long'][1]
+    assert len(trimmed) == len(long) == 3
+    for a, b in zip(trimmed, long):
+        assert a.read_text().split() == b.read_text().split()
+    assert trimmed[0].read_text().split() != trimmed[-1].read_text().split()  # the squirmer moved
+    (folder / 'in_short.dat').write_text(text.replace('shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip', 'short.slip'))
+    status, out, err = run_in_process('dynamic', folder, 'in_short.dat')
+    assert status == 2 and 'short.slip has 40 blobs but vertex file' in err, err

@@ -81,10 +81,17 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         slip = None
         if spec.slip_file is not None:
             slip = read_slip_file(spec.slip_file, spec.where)
-            if slip.shape[0] != reference.shape[0]:
-                raise utils.UserInputError('%s: slip file %s has %d blobs but vertex file %s has %d'
-                                           % (spec.where, spec.slip_file, slip.shape[0], spec.vertex_file,
-                                              reference.shape[0]))
+            if slip.shape[0] < reference.shape[0]:
+                raise utils.UserInputError('%s: slip file %s has %d blobs but vertex file %s has %d; give one slip '
+                                           'line per blob' % (spec.where, spec.slip_file, slip.shape[0],
+                                                              spec.vertex_file, reference.shape[0]))
+            if slip.shape[0] > reference.shape[0]:  # the published code uses the first rows and ignores the rest
+                utils.warn_user('%s: slip file %s has %d rows for the %d blobs of vertex file %s; the first %d are '
+                                'used and the other %d ignored, as the published code does (trim the file to '
+                                'silence this)' % (spec.where, spec.slip_file, slip.shape[0], reference.shape[0],
+                                                   spec.vertex_file, reference.shape[0],
+                                                   slip.shape[0] - reference.shape[0]))
+                slip = slip[:reference.shape[0]]
         if single_blob_bodies and reference.shape[0] != 1:
             raise utils.UserInputError('%s: roller schemes need single-blob bodies, but %s has %d blobs'
                                        % (spec.where, spec.vertex_file, reference.shape[0]))
