@@ -90,3 +90,19 @@ def test_a_slip_file_longer_than_the_body_uses_its_first_rows_with_a_warning(tmp
     (folder / 'in_short.dat').write_text(text.replace('shell_N_42_Rg_0_8912_Rh_1_squirmer_B1_1.slip', 'short.slip'))
     status, out, err = run_in_process('dynamic', folder, 'in_short.dat')
     assert status == 2 and 'short.slip has 40 blobs but vertex file' in err, err
+
+
+# ---------------------------------------------------------------------------------------------- later options
+def test_domType_is_named_as_the_cRigid_cFibers_domain_not_lubrication():
+    """cRigid_cFibers/Rigid_Rods/rods_input.dat (an input of the published Rigid_Object_Main.py) was refused on
+    domType with a message that put it under lubrication; the refusal says what the option is and that fibres are
+    not supported."""
+    from multi_bodies.files.input_options import parse_input_text
+    from utils import UserInputError
+    for line in ('domType RPB', 'zmax 8.0'):
+        with pytest.raises(UserInputError) as refusal:
+            parse_input_text('dt 0.001\n%s\n' % line, 'rods_input.dat', 'dynamic')
+        message = str(refusal.value)
+        assert message.startswith('rods_input.dat, line 2: option') and 'cRigid_cFibers' in message
+        assert 'geometry' in message and 'fibres' in message and 'Rigid_Object_Main.py' in message
+        assert 'lubrication' not in message.lower()

@@ -250,8 +250,9 @@ OPTION_TABLE = {
 # they belong to (named in the refusal, so a user knows what is missing rather than only that a line is wrong).
 UNSUPPORTED_FEATURES = {
     "HydroGrid's snapshots of the concentration cells": ('save_HydroGrid_cells',),
-    'lubrication corrections (the Lubrication solver)': ('domType', 'stiffness_wall', 'mu',
-                                                         'vacf', 'zmin', 'zmax'),
+    'lubrication corrections (the Lubrication solver)': ('stiffness_wall', 'mu', 'vacf'),
+    # the cRigid_cFibers codes (Rigid_Object_Main.py, the fibre drivers) over libMobility and DoublyPeriodicStokes
+    'the domains of the published cRigid_cFibers codes': ('domType', 'zmin', 'zmax'),
     'a solver of a later published version': ('hydro_interactions', 'slip_length', 'plot_velocity_field_shell',
                                               'hydrodynamic_radius'),
 }
@@ -264,6 +265,13 @@ FEATURE_STATUS = {
                                                         'repulsion_strength_firm, not the options of the later '
                                                         'confined solvers; see doc/lubrication.md',
     'a solver of a later published version': 'not available: see doc/examples.md for the published folders',
+    'the domains of the published cRigid_cFibers codes': 'domType names the geometry of their compiled mobility '
+                                                         '(RPB: one wall; DPBW, DPSC, DP, TP: doubly periodic above '
+                                                         'a wall, slit channel, periodic) and zmin, zmax its height; '
+                                                         'those inputs are for its own driver Rigid_Object_Main.py, '
+                                                         'and this package has neither that driver nor fibres; the '
+                                                         'doubly periodic product of the spectral solvers is being '
+                                                         'added, see doc/examples.md',
 }
 
 
