@@ -106,3 +106,24 @@ def test_domType_is_named_as_the_cRigid_cFibers_domain_not_lubrication():
         assert message.startswith('rods_input.dat, line 2: option') and 'cRigid_cFibers' in message
         assert 'geometry' in message and 'fibres' in message and 'Rigid_Object_Main.py' in message
         assert 'lubrication' not in message.lower()
+
+
+def test_omega_one_roller_is_not_called_ignored_when_the_user_functions_read_it(tmp_path):
+    """Multi_Blob_Two_Rollers sets omega_one_roller with a rigid scheme and its override turns it into the torque
+    that rolls the shells; the warning said the value was ignored and should be removed (removing it stops the
+    rollers).  Now the warning is given only when no function of user_defined_functions.py reads the option:
+    here the shells roll (x grows) and nothing is said; the same scene with an override that does not read it
+    gets the warning (negative control)."""
+    from test_published_hooks import TWO_ROLLERS_OVERRIDE, two_shell_scene
+    options = dict(scheme='deterministic_adams_bashforth', omega_one_roller='0 62.8 0', n_steps=2,
+                   blob_blob_force_implementation='None', body_body_force_torque_implementation='None')
+    folder = two_shell_scene(tmp_path / 'reads', TWO_ROLLERS_OVERRIDE, **options)
+    status, _, err = run_in_process('dynamic', folder, 'inputfile_rollers.dat')
+    assert status == 0 and 'omega_one_roller' not in err, err
+    lines = (folder / 'run_two_rollers' / 'data.two_rollers.config').read_text().split('\n')
+    assert np.all(np.array([float(line.split()[0]) for line in lines[-3:-1]]) > np.array([-1.5, 1.5]))
+    plain = TWO_ROLLERS_OVERRIDE.replace("kwargs['omega_one_roller']", 'np.zeros(3)')
+    folder = two_shell_scene(tmp_path / 'ignores', plain, **options)
+    status, _, err = run_in_process('dynamic', folder, 'inputfile_rollers.dat')
+    warning = [line for line in err.splitlines() if "option 'omega_one_roller' is ignored" in line]
+    assert status == 0 and len(warning) == 1 and 'user_defined_functions.py that read it (none here)' in warning[0]

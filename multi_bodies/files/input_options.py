@@ -582,17 +582,43 @@ def unused_option_warnings(options, program=None):
                             "has no effect in this version (see doc/options.md)" % (options.where(name), name))
     if program == 'mcmc':
         return messages
-    for name in unused_options(options, program):
+    unused = unused_options(options, program)
+    read_by_user = names_read_by_user_file(os.getcwd()) if unused else set()
+    for name in unused:
+        if name in read_by_user:  # a hook keyword that the user's functions read (Multi_Blob_Two_Rollers)
+            continue
         used_by = OPTION_TABLE[name].used_by
         extra = {'domain': ' (the wall is chosen by the mobility implementations: names ending in _no_wall are '
                            'free space)',
-                 'omega_one_roller': ' (except by a published-style calc_body_body_forces_torques_python of '
-                                     'user_defined_functions.py, which receives it)'}.get(name, '')
+                 'omega_one_roller': ' and by the functions of a user_defined_functions.py that read it (none '
+                                     'here)'}.get(name, '')
         fix = 'choose a stochastic scheme or remove the line' if 'stochastic' in used_by else 'remove the line'
         messages.append("%s: option '%s' is ignored by scheme '%s' (it is used by %s only)%s; %s"
                         % (options.where(name), name, options.scheme,
                            ' and '.join(_USERS[tag] for tag in used_by), extra, fix))
     return messages
+
+
+# The user's override file of the run directory (multi_bodies.solver.physics.USER_FILE; named here, a floor below).
+USER_FILE = 'user_defined_functions.py'
+
+
+def names_read_by_user_file(directory):
+    """The string constants of ``directory``/user_defined_functions.py (the option names its functions may read
+    from their keywords, ``kwargs.get('omega_one_roller')``); an empty set when there is no such readable file.
+
+    Every hook receives the options of ``physics_keywords`` as keywords, so an option that a scheme does not use
+    still changes a run whose user functions read it: its "ignored by scheme" warning is not given."""
+    import ast
+    path = os.path.join(directory, USER_FILE)
+    if not os.path.isfile(path):
+        return set()
+    try:
+        with open(path, encoding='utf-8', errors='replace') as f:
+            tree = ast.parse(f.read())
+    except (SyntaxError, ValueError, OSError):  # the hook loader reports a broken file
+        return set()
+    return {node.value for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)}
 
 
 def check_options(options, program=None):
