@@ -27,8 +27,7 @@ import time
 
 import numpy as np
 
-import mobility
-from mobility import backends
+from mobility.interface import Geometry, is_usable, make_mobility, registered_backends, unusable_reason
 
 # Published M f (wall) on a 2-core machine, seconds (reference/timings_original.json).
 PUBLISHED_CPU = {1000: {'python': 0.46, 'numba': 0.0024, 'C++': 0.0073},
@@ -62,14 +61,15 @@ def configuration(n, a=0.25, seed=0):
     return r, rng.standard_normal(3 * n), a
 
 
-def time_product(product, r, f, a, repeats, synchronize=None):
-    product(r, f, 1.0, a)  # warm-up (compilation, caches)
+def time_product(blob_mobility, r, f, repeats, synchronize=None):
+    """Median seconds of ``blob_mobility.velocities(r, f)`` (a ``mobility.interface.BlobMobility``)."""
+    blob_mobility.velocities(r, f)  # warm-up (compilation, caches)
     if synchronize:
         synchronize()
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        product(r, f, 1.0, a)
+        blob_mobility.velocities(r, f)
         if synchronize:
             synchronize()
         times.append(time.perf_counter() - start)
@@ -81,7 +81,7 @@ def main():
     parser.add_argument('--sizes', type=int, nargs='+', default=[1000, 4000, 16000])
     parser.add_argument('--gpu-sizes', type=int, nargs='*', default=[],
                         help='extra sizes run on the GPU backend only (e.g. 100000 300000)')
-    parser.add_argument('--backends', nargs='+', default=['python', 'C++', 'pycuda'])
+    parser.add_argument('--backends', nargs='+', default=registered_backends(Geometry('single_wall')))
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--python-max', type=int, default=16000, help='largest N for the python backend')
     parser.add_argument('--radii-sizes', type=int, nargs='*', default=[1000, 4000],
@@ -89,10 +89,10 @@ def main():
     parser.add_argument('--radii-only', action='store_true', help='time only the radii comparison')
     args = parser.parse_args()
 
-    usable = [b for b in args.backends if backends.is_usable(b)]
+    usable = [b for b in args.backends if is_usable(b)]
     for b in args.backends:
         if b not in usable:
-            print('# %s: not usable here (%s)' % (b, backends.available_implementations().get(b)))
+            print('# %s: not usable here (%s)' % (b, unusable_reason(b)))
     if 'C++' in usable:
         from mobility import cpp_backend
         print('# C++ backend: %d OpenMP threads' % cpp_backend.max_threads())
@@ -100,21 +100,21 @@ def main():
     rows = []
     for n in ([] if args.radii_only else sorted(set(args.sizes) | set(args.gpu_sizes))):
         r, f, a = configuration(n)
-        for wall_name, suffix in (('wall', ''), ('no wall', '_no_wall')):
+        for wall_name, geometry in (('wall', 'single_wall'), ('no wall', 'free_space')):
             timings = {}
             for b in usable:
                 if n in args.gpu_sizes and n not in args.sizes and b != 'pycuda':
                     continue
                 if b == 'python' and n > args.python_max:
                     continue
-                product = mobility.mobility_vector_product(b + suffix)
+                blob_mobility = make_mobility(b, Geometry(geometry), 1.0, a)
                 inputs, sync = (r, f), None
                 if b == 'pycuda':
                     import cupy as cp
                     inputs, sync = (cp.asarray(r), cp.asarray(f)), cp.cuda.Device().synchronize
                 rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
                 repeats = 1 if (b == 'python' and n > 4000) else args.repeats
-                timings[b] = time_product(product, inputs[0], inputs[1], a, repeats, sync)
+                timings[b] = time_product(blob_mobility, inputs[0], inputs[1], repeats, sync)
                 rss_growth_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss_before) / 1024.0
                 rows.append((n, wall_name, b, timings[b], rss_growth_mb))
             for b, t in timings.items():
@@ -127,7 +127,7 @@ def main():
     if rows:
         print('# peak resident-memory growth of the python backend runs: %.0f MB' % max(
             [row[4] for row in rows if row[2] == 'python'] or [0.0]))
-    radii_comparison(args.radii_sizes, [b for b in usable if b != 'pycuda'], args.repeats)
+    radii_comparison(args.radii_sizes, [b for b in usable if b in registered_backends(device='cpu')], args.repeats)
 
 
 def radii_comparison(sizes, cpu_backends, repeats):
@@ -138,11 +138,12 @@ def radii_comparison(sizes, cpu_backends, repeats):
     for n in sizes:
         r, f, a = configuration(n)
         radii = np.random.default_rng(1).uniform(0.15, 0.35, n)
-        for wall_name, suffix in (('wall', ''), ('no wall', '_no_wall')):
+        for wall_name, geometry in (('wall', 'single_wall'), ('no wall', 'free_space')):
             for b in cpu_backends:
-                product = mobility.mobility_vector_product(b + suffix)
-                equal = time_product(product, r, f, a, repeats if n <= 4000 or b != 'python' else 1)
-                different = time_product(product, r, f, radii, repeats if n <= 4000 or b != 'python' else 1)
+                equal_mobility = make_mobility(b, Geometry(geometry), 1.0, a)
+                equal = time_product(equal_mobility, r, f, repeats if n <= 4000 or b != 'python' else 1)
+                different = time_product(equal_mobility.replace(blob_radius=radii), r, f,
+                                         repeats if n <= 4000 or b != 'python' else 1)
                 print('%8d  %-8s %-8s radii %10.3f ms  one radius %10.3f ms  ratio %.2f' % (
                     n, wall_name, b, 1e3 * different, 1e3 * equal, different / equal))
 

@@ -33,8 +33,8 @@ import scipy.spatial  # noqa: F401  (the neighbour search's; imported once per r
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import mobility  # noqa: E402
 from body.body import Body, bodies_to_arrays  # noqa: E402
+from mobility.interface import from_implementation_name  # noqa: E402
 from multi_bodies.files.structure_generators import icosahedral_shell, smallest_distance  # noqa: E402
 from multi_bodies.solver import body_solver, slip_length  # noqa: E402
 from multi_bodies.solver.laplace_preconditioner import LaplacePreconditioner  # noqa: E402
@@ -66,15 +66,14 @@ def timed(function):
 def measure(count, blobs, implementation, tolerance, slip_length_value=1e3, spacing=3.0):
     arrays, a, normals, weights = suspension(count, blobs, spacing=spacing)
     q = arrays.configuration
-    product = mobility.mobility_vector_product(implementation)
-    dense = mobility.blob_mobility_matrix(implementation)
+    blob_mobility = from_implementation_name(implementation, 1.0, a, dense_matrices=True)  # M f and dense blocks
     force = np.zeros((count, 6))
     force[:, 2] = -1.0
     row = {}
 
     def plain():
-        problem = body_solver.MobilityProblem(arrays, q, product, 1.0, a)
-        pc = body_solver.BlockDiagonalPreconditioner(arrays, q, dense, 1.0, a, stacked_mobility=dense)
+        problem = body_solver.MobilityProblem(arrays, q, blob_mobility)
+        pc = body_solver.BlockDiagonalPreconditioner(arrays, q, blob_mobility)
         return body_solver.solve(problem, problem.rhs(None, force), pc, tolerance=tolerance)
     seconds, result = timed(plain)
     row['mobility'] = (seconds, result.iterations)
@@ -100,11 +99,12 @@ def measure(count, blobs, implementation, tolerance, slip_length_value=1e3, spac
     lengths = np.full(len(weights), slip_length_value)
 
     def with_slip_length(corrected):
-        problem = slip_length.slip_length_problem(arrays, q, product, 1.0, a, np.zeros(3), normals, lengths, weights)
-        pc = slip_length.SlipLengthPreconditioner(arrays, q, dense, 1.0, a, normals, lengths, weights)
+        problem = slip_length.slip_length_problem(arrays, q, blob_mobility, reference_normals=normals,
+                                                  slip_lengths=lengths, weights=weights)
+        pc = slip_length.SlipLengthPreconditioner(arrays, q, blob_mobility, normals=normals, slip_lengths=lengths,
+                                                  weights=weights)
         if corrected:
-            pc = slip_length.SlipLengthNeighbourPreconditioner(pc, dense, 1.0, a,
-                                                               cross_blocks=mobility.blob_cross_blocks(implementation))
+            pc = slip_length.SlipLengthNeighbourPreconditioner(pc, blob_mobility)
         return body_solver.solve(problem, problem.rhs(None, force), pc, tolerance=tolerance, restart=300)
     for name, corrected in (('slip_length', False), ('slip_length_nb', True)):
         seconds, result = timed(lambda: with_slip_length(corrected))

@@ -289,31 +289,33 @@ def scene_model(scene, folder, table):
     return make(), None, schemes
 
 
+def without_compiled_near_field(blob_mobility):
+    """The same blob mobility whose neighbour preconditioner stores the near field's pair blocks (its
+    ``near_field_domain`` None: the compiled loop from the positions is not used)."""
+    import copy
+    stored = copy.copy(blob_mobility)
+    stored.near_field_domain = None
+    return stored
+
+
 def near_field_main(scenes, steps):
     """The neighbour correction's near field from the positions (the compiled loop, the default with the C++
-    blob mobility) against stored pair blocks (forced by making ``mobility.compiled_near_field_domain`` return
-    None), under ``preconditioner neighbours``, their steps alternating."""
-    import mobility
-    compiled = mobility.compiled_near_field_domain
-
-    def use(function):
-        return lambda: setattr(mobility, 'compiled_near_field_domain', function)
-    variants = {'positions': dict(preconditioner='neighbours'), 'stored_blocks': dict(preconditioner='neighbours')}
-    hooks = {'positions': use(compiled), 'stored_blocks': use(lambda name: None)}
+    blob mobility) against stored pair blocks (a blobs mobility without ``near_field_domain``), under
+    ``preconditioner neighbours``, their steps alternating."""
     print('%-16s %-36s %-15s %9s %9s %7s' % ('scene', 'scheme', 'near field', 'it/solve', 's/step', 'ratio'))
-    try:
-        for scene in scenes:
-            with tempfile.TemporaryDirectory() as folder:
-                model, options, schemes = scene_model(scene, folder, NEAR_FIELD_SCENES)
-                for scheme_name in schemes:
-                    r = run(model, scheme_name, 1 if scene == 'boomerangs_1000' else steps, options, variants, hooks)
-                    stored = r['stored_blocks'][2]
-                    for name in variants:
-                        it, _, seconds, _ = r[name]
-                        print('%-16s %-36s %-15s %9.1f %9.4f %7.2f' % (scene, scheme_name, name, it, seconds,
-                                                                      seconds / stored), flush=True)
-    finally:
-        mobility.compiled_near_field_domain = compiled
+    for scene in scenes:
+        with tempfile.TemporaryDirectory() as folder:
+            model, options, schemes = scene_model(scene, folder, NEAR_FIELD_SCENES)
+            variants = {'positions': dict(preconditioner='neighbours'),
+                        'stored_blocks': dict(preconditioner='neighbours',
+                                              blobs_mobility=without_compiled_near_field(model.blobs_mobility))}
+            for scheme_name in schemes:
+                r = run(model, scheme_name, 1 if scene == 'boomerangs_1000' else steps, options, variants)
+                stored = r['stored_blocks'][2]
+                for name in variants:
+                    it, _, seconds, _ = r[name]
+                    print('%-16s %-36s %-15s %9.1f %9.4f %7.2f' % (scene, scheme_name, name, it, seconds,
+                                                                  seconds / stored), flush=True)
     return 0
 
 

@@ -16,8 +16,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import mobility  # noqa: E402
 from boomerang import boomerang_model as bm  # noqa: E402
+from mobility.interface import Geometry, usable_backends  # noqa: E402
 from sphere import sphere as sph  # noqa: E402
 from sphere.single_body_integrators import SCHEMES, SingleBodyIntegrator  # noqa: E402
 
@@ -41,7 +41,7 @@ def main(argv=None):
     parser.add_argument('--steps', type=int, default=20)
     parser.add_argument('--repeats', type=int, default=2)
     args = parser.parse_args(argv)
-    backends = [b for b in ('python', 'C++') if mobility.backends.is_usable(b)]
+    backends = usable_backends(Geometry('single_wall'), dense_matrices=True)  # the dense backends, registry order
     print('boomerang, gfactor 10, dt 0.01 s (seconds per step, body-steps per second)')
     for nb in args.bodies:
         locations = np.tile([0.0, 0.0, 1.25], (nb, 1))

@@ -18,8 +18,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import mobility  # noqa: E402
 from body.body import Body, bodies_to_arrays  # noqa: E402
+from mobility.interface import from_implementation_name  # noqa: E402
 from multi_bodies.solver import body_solver  # noqa: E402
 from multi_bodies.files.structure_generators import boomerang  # noqa: E402
 
@@ -42,10 +42,9 @@ def solve(count, implementation, tolerance):
     configuration = arrays.configuration
     forces = np.tile([0.0, 0.0, -1.0, 0.0, 0.0, 0.0], (count, 1))
     start = time.perf_counter()
-    problem = body_solver.MobilityProblem(arrays, configuration, mobility.mobility_vector_product(implementation),
-                                          1.0, 0.25)
-    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, configuration,
-                                                             mobility.blob_mobility_matrix(implementation), 1.0, 0.25)
+    blob_mobility = from_implementation_name(implementation, 1.0, 0.25, dense_matrices=True)
+    problem = body_solver.MobilityProblem(arrays, configuration, blob_mobility)
+    preconditioner = body_solver.BlockDiagonalPreconditioner(arrays, configuration, blob_mobility)
     set_up = time.perf_counter() - start
     result = body_solver.solve(problem, body_solver.mobility_rhs(forces, np.zeros((arrays.num_blobs, 3))),
                                preconditioner, tolerance=tolerance)

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-import mobility
+from mobility.interface import Geometry, make_mobility
 from multi_bodies.files.structure_generators import calibrated_shell
 
 # Exact values (Brenner 1961, O'Neill 1964, Dean and O'Neill 1963, Jeffery 1915): h/R -> (mu_par, mu_perp, rot_par, rot_perp, coupling), exact.
@@ -36,7 +36,7 @@ def shell_scalars(num_blobs, h, eta=1.0):
     """The five normalised mobilities of a calibrated shell with centre at height h."""
     blobs, a, _ = calibrated_shell(num_blobs)
     r = blobs + np.array([0.0, 0.0, h])
-    M = mobility.single_wall_fluid_mobility(r, eta, a)
+    M = make_mobility('python', Geometry('single_wall'), eta, a).dense_matrix(r)
     n = r.shape[0]
     K = np.zeros((3 * n, 6))
     for i, arm in enumerate(blobs):
@@ -49,13 +49,14 @@ def shell_scalars(num_blobs, h, eta=1.0):
 def single_blob_scalars(h, eta=1.0):
     """The same scalars for one blob of radius 1 (grand mobility of the roller model)."""
     r = np.array([[0.0, 0.0, h]])
+    blob = make_mobility('C++', Geometry('single_wall'), eta, 1.0)
     N = np.zeros((6, 6))
     for col, (kind_t, kind_r) in enumerate([('trans_times_force', 'rot_times_force')] * 3
                                            + [('trans_times_torque', 'rot_times_torque')] * 3):
         e = np.zeros(3)
         e[col % 3] = 1.0
-        N[0:3, col] = mobility.blob_product('C++', kind_t)(r, e, eta, 1.0)
-        N[3:6, col] = mobility.blob_product('C++', kind_r)(r, e, eta, 1.0)
+        N[0:3, col] = blob.coupling(kind_t, r, e)
+        N[3:6, col] = blob.coupling(kind_r, r, e)
     return normalised(N, eta)
 
 
@@ -73,12 +74,12 @@ def product_seconds(blobs_per_sphere, spheres=100, repeats=3):
     r = np.repeat(centres, blobs_per_sphere, axis=0) + rng.uniform(-1, 1, (n, 3)) * 0.9
     r[:, 2] = np.abs(r[:, 2]) + 0.1
     f = rng.standard_normal(3 * n)
-    product = mobility.mobility_vector_product('C++')
-    product(r, f, 1.0, 0.1)
+    blobs = make_mobility('C++', Geometry('single_wall'), 1.0, 0.1)
+    blobs.velocities(r, f)
     best = np.inf
     for _ in range(repeats):
         start = time.perf_counter()
-        product(r, f, 1.0, 0.1)
+        blobs.velocities(r, f)
         best = min(best, time.perf_counter() - start)
     return best
 

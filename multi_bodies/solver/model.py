@@ -112,9 +112,9 @@ class Model:
     check_wall : bool
         Whether a blob centre below ``z = 0`` is invalid (False without a wall).
     lanczos_max_iterations : int
-    vector_mobility : mobility.interface.BlobMobility or None
-        Replaces the mobility of ``vector_product_name`` (benchmarks count its products this way: its
-        ``velocities`` and ``paired_velocities``); None is the backend's.
+    vector_mobility, blobs_mobility : mobility.interface.BlobMobility or None
+        Replace the mobilities of ``vector_product_name`` and ``blobs_name`` (benchmarks count products or
+        change a mobility's capabilities this way); None is the backend's.
     pycuda_blob_blob_forces : callable or None
         The user's ``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py`` (None: the hooks').
     surface : multi_bodies.solver.surface.Surface or None
@@ -136,7 +136,7 @@ class Model:
                  vector_product_name='python', blobs_name='python', blob_blob_name='None', body_body_name='None',
                  periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
-                 check_wall=True, lanczos_max_iterations=1000, vector_mobility=None,
+                 check_wall=True, lanczos_max_iterations=1000, vector_mobility=None, blobs_mobility=None,
                  pycuda_blob_blob_forces=None, surface=None, preconditioner='auto',
                  lanczos_preconditioner='block_diagonal'):
         arguments = dict(locals())
@@ -164,7 +164,8 @@ class Model:
         radius = body_solver.blob_radius_argument(body_arrays, self.blob_radius)  # one number, or per-blob radii
         set_(self, 'vector_mobility', vector_mobility if vector_mobility is not None
              else from_implementation_name(vector_product_name, self.eta, radius, self.periodic_length))
-        set_(self, 'blobs_mobility', from_implementation_name(blobs_name, self.eta, radius, dense_matrices=True))
+        set_(self, 'blobs_mobility', blobs_mobility if blobs_mobility is not None
+             else from_implementation_name(blobs_name, self.eta, radius, dense_matrices=True))
         # (M v1, M v2) in one pass over the pairs where the backend offers it under its own name (C++, C++_no_wall:
         # the aliases keep their products unpaired, so their runs repeat to the bit), else None
         set_(self, 'paired_mobility_product', self.vector_mobility.paired_velocities
