@@ -46,7 +46,7 @@ def main(argv=None):
     parser.add_argument('--input-file', default='data.main', help='input file (default data.main)')
     parser.add_argument('--print-residual', action='store_true', help='print every GMRES and Lanczos residual')
     args = parser.parse_args(argv)
-    options = read_input_file(args.input_file)
+    options = read_input_file(args.input_file, program='dynamic')  # this program's rules first, then its warnings
     status = run_dynamics(options, print_residual=args.print_residual)
     print('\n\n\n# End')
     return status

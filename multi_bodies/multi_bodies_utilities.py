@@ -236,7 +236,7 @@ def main(argv=None):
                                                  'of rigid multiblob bodies above a wall.')
     parser.add_argument('--input-file', required=True, help='input file (see doc/static_problems.md)')
     args = parser.parse_args(argv)
-    options = read_input_file(args.input_file)
+    options = read_input_file(args.input_file, program='static')  # this program's rules first, then its warnings
     status = run(options)
     print('\n\n\n# End')
     return status

@@ -127,3 +127,18 @@ def test_omega_one_roller_is_not_called_ignored_when_the_user_functions_read_it(
     status, _, err = run_in_process('dynamic', folder, 'inputfile_rollers.dat')
     warning = [line for line in err.splitlines() if "option 'omega_one_roller' is ignored" in line]
     assert status == 0 and len(warning) == 1 and 'user_defined_functions.py that read it (none here)' in warning[0]
+
+
+# ---------------------------------------------------------------------------------------------- mistakes
+@pytest.mark.parametrize('program, scheme, name', [('dynamic', 'mobility', 'inputfile_dynamic.dat'),
+                                                   ('static', 'deterministic_adams_bashforth', 'inputfile.dat')])
+def test_a_scheme_of_the_other_script_gets_its_one_line_first(tmp_path, program, scheme, name):
+    """`scheme mobility` given to multi_bodies.py printed three warnings about dt, n_steps and n_save (options a
+    static problem ignores) before the real message; now the only line is the refusal naming the other script."""
+    folder = copy_scene(tmp_path / 'run')
+    edit_input(folder / name, scheme=scheme)
+    status, out, err = run_in_process(program, folder, name)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert status == 2 and len(lines) == 1, err
+    assert "scheme '%s' is not for this program" % scheme in lines[0]
+    assert ('multi_bodies_utilities.py' if program == 'dynamic' else 'multi_bodies.py') in lines[0]
