@@ -100,9 +100,16 @@ def load_sources(args):
     else:
         if args.frame_interval is None:
             raise UserInputError('--config needs --frame-interval (the time between its snapshots)')
+        if not os.path.isfile(args.config):
+            raise UserInputError('--config %s: %s; give the .config file of a save_clones one_file run '
+                                 '(<output_name>.<structure>.config)'
+                                 % (args.config, 'is not a file' if os.path.exists(args.config) else 'no such file'))
         path = args.config[:-len('.config')] if args.config.endswith('.config') else args.config
         folder, base = os.path.split(path)
         stem, _, structure_id = base.rpartition('.')
+        if not stem:
+            raise UserInputError('--config %s: the name does not say the run and the structure; a save_clones one_file '
+                                 'run writes <output_name>.<structure>.config' % args.config)
         source = ConfigSeries(os.path.join(folder, stem), [structure_id], args.frame_interval, 1,
                               args.periodic_length or (0, 0, 0), label=args.config)
         sources, default_name = [source], os.path.join(folder, stem)

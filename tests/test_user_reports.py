@@ -142,3 +142,19 @@ def test_a_scheme_of_the_other_script_gets_its_one_line_first(tmp_path, program,
     assert status == 2 and len(lines) == 1, err
     assert "scheme '%s' is not for this program" % scheme in lines[0]
     assert ('multi_bodies_utilities.py' if program == 'dynamic' else 'multi_bodies.py') in lines[0]
+
+
+@pytest.mark.parametrize('given, words', [('nothere/missing.config', 'nothere/missing.config: no such file'),
+                                          ('plain.config', 'plain.config: the name does not say the run')])
+def test_analyse_names_the_config_file_it_was_given(tmp_path, monkeypatch, capsys, given, words):
+    """analyse.py --config of a missing file said "snapshot file 'nothere/.missing.config' not found", a path the
+    user never gave; now the message names the given path and the expected name form."""
+    import importlib
+    import utils
+    analyse = importlib.import_module('multi_bodies.analyse')
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / 'plain.config').write_text('1\n0 0 1 1 0 0 0\n')
+    with pytest.raises(SystemExit) as stop:
+        utils.fail_cleanly(analyse.main, ['--config', given, '--gr', '--frame-interval', '1'])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and ('--config %s' % words) in err and '/.missing' not in err, err
