@@ -16,26 +16,29 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from mobility.interface import Geometry, from_implementation_name, preferred_backend
+from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
+                                preferred_backend)
 from multi_bodies.solver.body_solver import SolutionParts, solve
 from utils import UserInputError
 
 from . import assembly, resistance
 
-NO_WALL = '_no_wall'
-
 
 def far_field_implementation(implementation, wall):
-    """The implementation name for ``implementation`` ('python', 'C++', 'pycuda', 'numba', with or without
-    ``_no_wall``; None: the first usable CPU backend of the registry's preference order, C++ where it is built)
-    with or without the wall."""
+    """The implementation name for ``implementation`` (a backend of the registry that sums blob pairs: 'python',
+    'C++', 'pycuda', or 'numba', with or without ``_no_wall``; None: the first usable CPU backend of the registry's
+    preference order, C++ where it is built) with the wall (``wall``) or in free space."""
+    geometry = Geometry('single_wall' if wall else 'free_space')
     if implementation is None:
-        implementation = preferred_backend(Geometry('single_wall' if wall else 'free_space'), device='cpu')
-    base = implementation[:-len(NO_WALL)] if implementation.endswith(NO_WALL) else implementation
-    if base not in ('python', 'C++', 'pycuda', 'numba'):
+        return implementation_name(preferred_backend(geometry, device='cpu'), geometry)
+    try:
+        backend, named = implementation_geometry(implementation)
+    except UserInputError:
+        named = None
+    if named is None or named.kind == 'free_surface' or implementation.startswith('radii_'):
         raise UserInputError('lubrication: far-field implementation %r is not one of python, C++, pycuda (with or '
                              'without _no_wall)' % implementation)
-    return base + ('' if wall else NO_WALL)
+    return implementation_name(backend, geometry)
 
 
 def far_field_mobility(eta, a, periodic_length=(0.0, 0.0, 0.0), wall=True, implementation=None):
