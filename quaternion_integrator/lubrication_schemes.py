@@ -60,8 +60,14 @@ class LubricationScheme(StochasticScheme):
                                              firm_delta=self.firm_delta, implementation=name,
                                              handover=self.handover, rfd_delta=self.delta)
 
+    def init(self, model, configuration, step=0, history=None, counters=None):
+        """As :meth:`Scheme.init`, after :meth:`check_spheres` of the model: a run refused here has written nothing."""
+        self.check_spheres(model)
+        return super().init(model, configuration, step=step, history=history, counters=counters)
+
     def check_spheres(self, work):
-        """UserInputError unless every body is one blob, all of radius ``blob_radius``, without slip."""
+        """UserInputError unless every body is one blob, all of radius ``blob_radius``, without slip (``work``: the
+        step's work or the model, which both have ``num_blobs``, ``num_bodies``, ``has_slip`` and ``domain``)."""
         if work.num_blobs != work.num_bodies:
             raise UserInputError('scheme %s: every body must be a single blob (a sphere; .vertex file with one '
                                  'blob at 0 0 0); the structures have %d blobs for %d bodies'

@@ -158,3 +158,18 @@ def test_analyse_names_the_config_file_it_was_given(tmp_path, monkeypatch, capsy
         utils.fail_cleanly(analyse.main, ['--config', given, '--gr', '--frame-interval', '1'])
     err = capsys.readouterr().err
     assert stop.value.code == 2 and ('--config %s' % words) in err and '/.missing' not in err, err
+
+
+@pytest.mark.parametrize('scheme', ['lubrication_trapezoidal', 'lubrication_trapezoidal_rollers'])
+def test_a_lubrication_scheme_on_multiblob_bodies_writes_nothing(tmp_path, scheme):
+    """A lubrication scheme on the manual's boomerang and shells was refused only after the step-0 files were
+    written; now the refusal comes while the run is set up, and the run folder is left as it was."""
+    folder = copy_scene(tmp_path / 'run')
+    (folder / 'data').mkdir()
+    edit_input(folder / 'inputfile_dynamic.dat', scheme=scheme)
+    before = snapshot_files(folder)
+    status, out, err = run_in_process('dynamic', folder, 'inputfile_dynamic.dat')
+    lines = error_lines(err)
+    assert status == 2 and len(lines) == 1, err
+    assert ('single-blob bodies' if 'rollers' in scheme else 'every body must be a single blob') in lines[0], err
+    assert snapshot_files(folder) == before and not list((folder / 'data').iterdir())
