@@ -21,7 +21,7 @@ from .. import _spectral_cpp as _ext
 from .chebyshev import ChebyshevSystem
 from .fourier import derivative_factors, partner_wavenumbers, unpaired, wavenumbers
 
-BLOCK_BYTES = 32 << 20   # row blocks of the real transforms along x
+BLOCK_BYTES = 8 << 20    # row blocks of the real transforms along x
 TILE = 16                # modes per tile of the Chebyshev solves
 GEOMETRY_CODE = {'DP': 0, 'DPBW': 1, 'DPSC': 2}
 

@@ -117,6 +117,7 @@ class SpectralStokes:
         self.n_blobs = 0
         self._monopole = None
         self._dipole = None
+        self._prepared = False
         self._engine = None
         if self.path == 'compiled':
             from .compiled import CompiledEngine
@@ -137,11 +138,15 @@ class SpectralStokes:
         p = self.parameters
         r = check_positions(p, r_vectors)
         rel = wrap_positions(p, r)
-        self._monopole = make_stencil(p, p.monopole, rel)
-        self._dipole = make_stencil(p, p.dipole, rel, derivative=True) if p.has_torque else None
+        self._monopole = self._dipole = None
+        monopole = make_stencil(p, p.monopole, rel)
+        dipole = make_stencil(p, p.dipole, rel, derivative=True) if p.has_torque else None
         self.n_blobs = r.shape[0]
         if self._engine is not None:
-            self._engine.prepare(self._monopole, self._dipole)
+            self._engine.prepare(monopole, dipole)   # the engine keeps its own layout; these are dropped
+        else:
+            self._monopole, self._dipole = monopole, dipole
+        self._prepared = True
         self.timings['prepare'] = time.perf_counter() - start
 
     def product(self, forces=None, torques=None):
@@ -151,7 +156,7 @@ class SpectralStokes:
         Triply periodic: the mean force is dropped (no mean flow), as DoublyPeriodicStokes does; DP (open z):
         the k = 0 (xy-mean) flow is zero at every height, as the library does.
         """
-        if self._monopole is None:
+        if not self._prepared:
             raise UserInputError('spectral product: call set_positions before product')
         n = self.n_blobs
         F = None if forces is None else as_blob_array(forces, n, 'forces')
