@@ -307,6 +307,45 @@ def check_start(options, model, types):
             start += count
 
 
+def body_names(options, types):
+    """(where, structure ID, index in its clones file) of every body, in the order of the run's bodies."""
+    names = []
+    for (structure_id, count), spec in zip(types, all_structure_specs(options) + list(options.articulated)):
+        names.extend((spec.where, structure_id, k) for k in range(count))
+    return names
+
+
+def check_coincident_bodies(options, bodies, types):
+    """Refuse two bodies whose blobs coincide (the same position, blobs and orientation: the blob mobility is then
+    singular and GMRES stalls); warn, naming both, when two bodies of different blobs share their position.
+
+    Positions closer than 1e-9 blob_radius count as the same (a copied line of a clones file gives 0)."""
+    if len(bodies) < 2:
+        return
+    from scipy.spatial import cKDTree
+    locations = np.array([b.location for b in bodies], dtype=float).reshape(-1, 3)
+    pairs = sorted(cKDTree(locations).query_pairs(1e-9 * options.blob_radius))
+    if not pairs:
+        return
+    names = body_names(options, types)
+
+    def name(i):
+        where, structure_id, k = names[i]
+        return 'body %d of %s (%s)' % (k, structure_id, where)
+    for i, j in pairs:
+        a, b = bodies[i], bodies[j]
+        same_blobs = a.reference_configuration.shape == b.reference_configuration.shape and np.allclose(
+            a.get_r_vectors(), b.get_r_vectors(), rtol=0, atol=1e-9 * options.blob_radius)
+        if same_blobs:
+            raise utils.UserInputError(
+                '%s and %s are at the same position %s with the same blobs, which coincide and make the mobility '
+                'singular (%d such pair(s)); move or remove one of them in the clones file'
+                % (name(i), name(j), ' '.join('%g' % x for x in locations[i]), len(pairs)))
+    i, j = pairs[0]
+    utils.warn_user('%s and %s are at the same position %s (%d such pair(s)); their blobs overlap: check the clones '
+                    'files' % (name(i), name(j), ' '.join('%g' % x for x in locations[i]), len(pairs)))
+
+
 def prepare(options, script, print_residual=False, log=print, directory=None, restart_record=None,
             hook_loader=None, set_slip_by_ID=None):
     """Everything a run needs before its first solve; shared by the three programs.
@@ -357,6 +396,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
             except user_hooks.UserFunctionError as err:
                 raise utils.UserInputError(str(err))
         articulated.check_extras()
+    check_coincident_bodies(options, bodies, types)
     body_arrays = bodies_to_arrays(bodies, array_runs(bodies) if articulated is not None
                                    else [count for _, count in types], per_body_slip=script != 'mcmc')
     fixed = [spec for spec in all_structure_specs(options) if spec.obstacle or spec.velocity_file is not None]
