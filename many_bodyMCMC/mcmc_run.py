@@ -87,7 +87,8 @@ class MCMCRun:
         use_record = True
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
             use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,
-                                                  report=lambda text: print('warning: ' + text, file=sys.stderr))
+                                                  report=lambda text: print('warning: ' + text, file=sys.stderr),
+                                                  program='mcmc')
         self.rng = run_output.make_generator(options)
         if use_record and self.restart is not None and (self.restart.get('state') or {}).get('sampler') is not None:
             state = self.restart['state']

@@ -911,3 +911,56 @@ def test_a_data_file_that_is_a_fifo_or_a_dangling_link_is_named_as_such(tmp_path
         (folder / 'blob.vertex').symlink_to(folder / 'elsewhere.vertex')
     status, out, err = run_dynamic(folder)
     assert status == 2 and 'Traceback' not in out + err and 'blob.vertex' in err and words in err, err
+
+
+# ------------------------------------------------------------------ every field against the run (issue 48)
+def _zero_first_quaternion(orientations):
+    orientations = orientations.copy()
+    orientations[0] = 0.0
+    return orientations
+
+
+RUN_FORGERIES = [  # (scene, change of the record of step 6, words of the refusal)
+    ('adams_bashforth', _set('state', 'scheme', 'previous_velocities', np.zeros((2, 3))),
+     'previous_velocities is a float64 array of shape (2, 3), not the body velocities (2, 6)'),
+    ('adams_bashforth', _set('state', 'scheme', 'previous_velocities', np.zeros(12)),
+     'previous_velocities is a float64 array of shape (12,)'),
+    ('rollers', _set('state', 'scheme', 'previous_velocities', np.zeros((2, 6))), 'roller velocities (2, 3)'),
+    ('adams_bashforth', _set('state', 'scheme', 'concentration_guess', {'a': 1}), 'concentration_guess'),
+    ('adams_bashforth', _set('state', 'scheme', 'first_guess', np.zeros((3, 6))), 'first_guess is not a flat'),
+    ('adams_bashforth', _set('state', 'orientations', _zero_first_quaternion),
+     'state.orientations holds a quaternion of norm 0.0'),
+    ('adams_bashforth', _set('state', 'scheme', 'preconditioner_configuration',
+                             lambda saved: (saved[0], np.zeros_like(saved[1]))) , 'not a unit quaternion'),
+    ('adams_bashforth', _set('state', 'locations', lambda locations: locations + 0.1),
+     'state.locations are not the positions of the snapshot'),
+    ('adams_bashforth', _set('state', 'rng', None), 'state.rng is absent'),
+    ('adams_bashforth', _set('fingerprint', None), 'holds no fingerprint'),
+    ('adams_bashforth', _set('snapshots', {}), 'snapshots holds no checksum of a, b'),
+    ('adams_bashforth', _set('state', 'scheme', None), 'state.scheme is absent'),
+]
+
+
+@pytest.mark.parametrize('scene, change, words', RUN_FORGERIES)
+def test_a_record_that_does_not_fit_the_run_is_a_one_line_refusal(tmp_path, scene, change, words):
+    """Every field checked against what the run needs before it is used: Adams-Bashforth velocities of another
+    shape (a ValueError traceback in every Adams-Bashforth scene), zero quaternions (once used, and written to the
+    snapshots), a configuration that is not the snapshot's (once silently replaced by it), required fields
+    absent (a record without fingerprint, state or checksums was taken as exact)."""
+    from test_crash_safety import dynamic_scene
+    folder = dynamic_scene(tmp_path / 'run', n_steps=12, n_save=6,
+                           **({'scheme': 'stochastic_adams_bashforth_rollers'} if scene == 'rollers' else {}))
+    assert run_dynamic(folder)[0] == 0
+    before = snapshot_tree(folder / 'data')
+    forge_record(str(folder / 'data' / 'run'), 6, change)
+    (folder / 'input.dat').write_text(set_options_text(folder, initial_step=6))
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert 'step 6' in err and words in err, err
+    after = snapshot_tree(folder / 'data')
+    assert {k: v for k, v in after.items() if k != 'run.restart'} == {k: v for k, v in before.items()
+                                                                      if k != 'run.restart'}
+
+
+def snapshot_tree(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in Path(folder).rglob('*') if p.is_file()}

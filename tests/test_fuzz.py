@@ -33,9 +33,11 @@ every unmutated input.  Asserted for every run:
   comment or changed whitespace runs (status 0).
 
 A second fuzzer (issue 27) forges restart records: one field of the record of
-a dynamic (``one_file_per_step`` and ``one_file``), articulated or Monte Carlo
-run replaced by a value of another type, sign or size, the checksum
-recomputed; the restart must end in one ``error:`` line (exit 2) or run.
+a dynamic (``one_file_per_step`` and ``one_file``), articulated, Monte Carlo,
+Adams-Bashforth, phoretic or roller run replaced by a value of another type,
+sign, size or shape, the checksum recomputed; the fields a scene's records do
+not have are forged too (added: ``KNOWN_FIELDS``, issue 48).  The restart must
+end in one ``error:`` line (exit 2) or run.
 
 Findings in files owned elsewhere are listed in ``KNOWN_FOREIGN`` (each
 reproduced by a strict xfail test at the end); any other finding fails.
@@ -437,26 +439,6 @@ def test_scripts_survive_mutated_inputs(earlier_run, tmp_path_factory, case):
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def test_report_fuzz_outcomes():
-    """Prints how many cases ran and how each script ended (run with -s to see it)."""
-    if not OUTCOMES:
-        pytest.skip('the fuzz test did not run in this session')
-    print('\nfuzz cases: %d (%.1f s in the scripts); outcomes: %s'
-          % (OUTCOMES['cases'], OUTCOMES['seconds'],
-             ', '.join('%s: %d' % (k, v) for k, v in sorted(OUTCOMES.items()) if k not in ('cases', 'seconds'))))
-    for signature, examples in sorted(FINDINGS.items()):
-        print('finding (%d cases): %s\n    first: %s\n    %s' % (len(examples), signature, examples[0].splitlines()[0],
-                                                            examples[0].splitlines()[-1][:300]))
-    if COLLECT:
-        print('%d kinds of status-2 message, most frequent first:' % len(MESSAGES))
-        for text, count in MESSAGES.most_common():
-            print('%5d  %s' % (count, text))
-    assert OUTCOMES['cases'] > 0
-    if OUTCOMES['cases'] >= 100:  # about one case in four is classified: both kinds were checked
-        assert OUTCOMES['classified refused, exit 2 as expected'] > 0
-        assert OUTCOMES['classified harmless, exit 0 as expected'] > 0
-
-
 # ---------------------------------------------------------------------- earlier findings in the static script, now fixed
 def test_known_static_writes_before_validation(earlier_run, tmp_path):
     folder = tmp_path / 'case'
@@ -501,10 +483,46 @@ def _record_paths(value, path=()):
     return found
 
 
+# Every field a record of this package may hold (issue 48: the fuzzer forged only the fields its scenes' records
+# have; the others, absent there, are added with a forged value).  '*' stands for each structure ID of the scene.
+KNOWN_FIELDS = (
+    ('step',), ('run_id',), ('config_offsets',), ('config_offsets', '*'), ('config_ends',), ('config_ends', '*'),
+    ('snapshots',), ('snapshots', '*'), ('fingerprint',), ('stop',), ('stop_files',), ('stop_files', '*'),
+    ('side_files',), ('side_files', 'concentration'), ('state',), ('state', 'locations'), ('state', 'orientations'),
+    ('state', 'rng'), ('state', 'rng', 'bit_generator'), ('state', 'rng', 'state'), ('state', 'rng', 'state', 'key'),
+    ('state', 'rng', 'state', 'pos'), ('state', 'rng', 'has_gauss'), ('state', 'rng', 'gauss'),
+    ('state', 'counters'), ('state', 'scheme'), ('state', 'sampler'),
+    ('state', 'sampler', 'locations'), ('state', 'sampler', 'orientations'), ('state', 'sampler', 'max_translation'),
+    ('state', 'sampler', 'max_angle_shift'), ('state', 'sampler', 'counters')) + tuple(
+    ('state', 'scheme', name) for name in (
+        'first_guess', 'earlier_guesses', 'roller_torque_guess', 'previous_velocities', 'concentration_guess',
+        'invalid_configurations', 'preconditioner_step', 'preconditioner_configuration', 'preconditioner_solves',
+        'preconditioner_fewest', 'preconditioner_lifetime', 'concentration_preconditioner_configuration',
+        'concentration_preconditioner_solves', 'concentration_preconditioner_fewest'))
+
+
+def _all_record_paths(record, structure_ids):
+    """The paths of ``record`` (``_record_paths``) and of every known field it lacks (its parents created when
+    forged)."""
+    paths = _record_paths(record)
+    known = set(map(tuple, paths))
+    for field in KNOWN_FIELDS:
+        for name in (structure_ids if '*' in field else [None]):
+            path = tuple(name if key == '*' else key for key in field)
+            if path not in known:
+                known.add(path)
+                paths.append(path)
+    return paths
+
+
 def _forged_value(draw_index, old):
     import numpy as np
-    extra = [np.zeros((2, 3)), np.full(5, np.nan), np.zeros(0), np.arange(3)]
-    values = FORGED_VALUES + extra + ([old[:1], old * 2] if isinstance(old, np.ndarray) else [])
+    extra = [np.zeros((2, 3)), np.full(5, np.nan), np.zeros(0), np.arange(3), np.zeros((2, 4)), np.zeros((3, 6)),
+             np.ones((2, 6)), np.ones(6), np.ones(27), np.ones((1, 6)), np.ones((2, 1)), np.ones((1, 27)),
+             (np.zeros((2, 3)), np.zeros((2, 4))), (np.ones((2, 3)), np.full((2, 4), 0.5)),
+             np.eye(1, 624, 0, np.uint32)[0], np.full(624, 7, np.uint32), [0, 2 ** 40], [5, 3], [0, 0]]
+    values = FORGED_VALUES + extra + ([old[:1], old * 2, old.reshape(-1), old[..., :1]]
+                                      if isinstance(old, np.ndarray) and old.size else [])
     return values[draw_index % len(values)]
 
 
@@ -530,7 +548,7 @@ def _run_scene(kind, folder):
     return (0 if status is None else status), out.getvalue(), err.getvalue()
 
 
-RECORD_SCENES = ('driven', 'one_file', 'articulated', 'mcmc')
+RECORD_SCENES = ('driven', 'one_file', 'articulated', 'mcmc', 'adams_bashforth', 'phoretic', 'rollers')
 
 
 @pytest.fixture(scope='module')
@@ -539,10 +557,17 @@ def recorded_runs(tmp_path_factory):
     from test_crash_safety import mcmc_scene
     from test_data_safety import articulated_scene, driven_scene
     root = tmp_path_factory.mktemp('records')
+    from test_crash_safety import dynamic_scene, phoretic_scene
     scenes = {'driven': (driven_scene(root / 'driven', n_steps=6), 3),
               'one_file': (driven_scene(root / 'one_file', n_steps=6, save_clones='one_file'), 3),
               'articulated': (articulated_scene(root / 'articulated', n_steps=6), 3),
-              'mcmc': (mcmc_scene(root / 'mcmc', n_steps=80, n_save=40), 40)}
+              'mcmc': (mcmc_scene(root / 'mcmc', n_steps=80, n_save=40), 40),
+              # issue 48: Adams-Bashforth (previous_velocities), a phoretic run (the concentration fields and
+              # side_files), rollers (the roller torque guess)
+              'adams_bashforth': (dynamic_scene(root / 'adams_bashforth', n_steps=6, n_save=3), 3),
+              'phoretic': (phoretic_scene(root / 'phoretic', n_steps=6, n_save=3), 3),
+              'rollers': (dynamic_scene(root / 'rollers', n_steps=6, n_save=3,
+                                        scheme='stochastic_adams_bashforth_rollers'), 3)}
     for kind, (folder, _) in scenes.items():
         assert _run_scene(kind, folder)[0] == 0, kind
     return scenes
@@ -562,23 +587,58 @@ def test_forged_restart_records_never_make_a_traceback(recorded_runs, tmp_path_f
     shutil.rmtree(folder)
     shutil.copytree(base, folder)
     record = restart_record(str(folder / 'data' / 'run'), step)
-    paths = _record_paths(record)
+    paths = _all_record_paths(record, sorted(record.get('snapshots') or {}))
     path = paths[where % len(paths)]
 
     def change(record):
         target = record
         for key in path[:-1]:
+            if isinstance(target, dict) and not isinstance(target.get(key), (dict, list)):
+                target[key] = {}  # a field the record lacks: its parents made
             target = target[key]
-        target[path[-1]] = _forged_value(what, target[path[-1]])
+        old = target[path[-1]] if isinstance(target, list) or path[-1] in target else None
+        target[path[-1]] = _forged_value(what, old)
     try:
         forge_record(str(folder / 'data' / 'run'), step, change)
         (folder / 'input.dat').write_text(set_options_text(folder, initial_step=step))
         try:
-            status, out, err = _run_scene(scene, folder)
-        except Exception as error:
-            raise Finding(traceback_signature(scene, error), 'record field %r forged: %s' % (path, error))
-        assert status in (0, 2) and 'Traceback' not in out + err, (path, status, err[-2000:])
-        if status == 2:
-            assert len([line for line in err.splitlines() if line.startswith('error:')]) == 1, err
+            try:
+                status, out, err = _run_scene(scene, folder)
+            except Exception as error:
+                raise Finding('forged %s: %s' % ('.'.join(str(k) for k in path[:2]),
+                                                 traceback_signature(scene, error)),
+                              'record field %r forged: %s' % (path, ''.join(traceback.format_exception(error))[-2000:]))
+            OUTCOMES['forged records, exit %s' % status] += 1
+            if status not in (0, 2) or 'Traceback' in out + err:
+                raise Finding('forged %s: exit %s%s' % ('.'.join(str(k) for k in path[:2]), status,
+                                                        ', traceback' if 'Traceback' in out + err else ''),
+                              '%r: %s' % (path, err[-2000:]))
+            if status == 2 and len([line for line in err.splitlines() if line.startswith('error:')]) != 1:
+                raise Finding('forged %s: not one error line' % '.'.join(str(k) for k in path[:2]), err[-2000:])
+        except Finding as finding:
+            FINDINGS[finding.signature].append('%s, record field %r forged\n%s' % (scene, path, finding))
+            if not COLLECT:
+                raise
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+# ---------------------------------------------------------------------- the report (last: after both fuzzers)
+def test_report_fuzz_outcomes():
+    """Prints how many cases ran and how each script ended (run with -s to see it)."""
+    if not OUTCOMES:
+        pytest.skip('the fuzz tests did not run in this session')
+    print('\nfuzz cases: %d (%.1f s in the scripts); outcomes: %s'
+          % (OUTCOMES['cases'], OUTCOMES['seconds'],
+             ', '.join('%s: %d' % (k, v) for k, v in sorted(OUTCOMES.items()) if k not in ('cases', 'seconds'))))
+    for signature, examples in sorted(FINDINGS.items()):
+        print('finding (%d cases): %s\n    first: %s\n    %s' % (len(examples), signature, examples[0].splitlines()[0],
+                                                            examples[0].splitlines()[-1][:300]))
+    if COLLECT:
+        print('%d kinds of status-2 message, most frequent first:' % len(MESSAGES))
+        for text, count in MESSAGES.most_common():
+            print('%5d  %s' % (count, text))
+    assert OUTCOMES['cases'] > 0 or any(k.startswith('forged') for k in OUTCOMES)
+    if OUTCOMES['cases'] >= 100:  # about one case in four is classified: both kinds were checked
+        assert OUTCOMES['classified refused, exit 2 as expected'] > 0
+        assert OUTCOMES['classified harmless, exit 0 as expected'] > 0

@@ -63,8 +63,11 @@ class DynamicRun:
         self.fingerprint = run_output.run_fingerprint(options, self.types, self.bodies)
         use_record = True
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
+            start = self.system.start_configuration  # the snapshot as read
             use_record = run_output.check_restart(options, self.restart, self.types, self.fingerprint,
-                                                  report=self.log_error)
+                                                  report=self.log_error,
+                                                  configuration=(start.locations, start.orientations),
+                                                  num_blobs=self.system.num_blobs)
         self.concentration_keep = None  # a restart keeps the .concentration blocks before its step
         if options.save_concentration and options.initial_step > 0 and self.restart is not None:
             from multi_bodies.run.concentration_output import is_phoretic, kept_bytes

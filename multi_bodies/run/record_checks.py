@@ -58,7 +58,10 @@ def _table(record, key, check_value, what):
 
 
 def _short(value):
-    text = repr(value)
+    """A field's value in at most 60 characters of one line (an array by its dtype and shape)."""
+    if isinstance(value, np.ndarray):
+        return 'a %s array of shape %s' % (value.dtype, value.shape)
+    text = ' '.join(repr(value).split())
     return text if len(text) <= 60 else text[:57] + '...'
 
 
@@ -74,6 +77,9 @@ def _is_byte_range(value):
         and value[0] <= value[1]
 
 
+QUATERNION_NORM_TOLERANCE = 1e-6  # a run's quaternions are unit to round-off
+
+
 def _check_array(value, where, columns=None):
     _require(isinstance(value, np.ndarray) and value.dtype.kind in 'fiub',
              '%s is %s, not an array of numbers' % (where, type(value).__name__))
@@ -81,6 +87,11 @@ def _check_array(value, where, columns=None):
     if columns is not None:
         _require(value.ndim == 2 and value.shape[1] == columns, '%s has shape %s, not (bodies, %d)'
                  % (where, value.shape, columns))
+    if columns == 4:  # orientations: unit quaternions (a zero quaternion is no rotation at all)
+        norms = np.linalg.norm(np.asarray(value, dtype=float), axis=1)
+        _require(bool(np.all(np.abs(norms - 1.0) <= QUATERNION_NORM_TOLERANCE)),
+                 '%s holds a quaternion of norm %r, not a unit quaternion (a rotation)'
+                 % (where, float(norms[np.argmax(np.abs(norms - 1.0))]) if norms.size else 0.0))
 
 
 def _check_data(value, where, depth=0):
@@ -164,9 +175,54 @@ def record_problem(record, step):
     return None
 
 
-def run_problem(record, types):
+# What a record must hold to continue a run exactly, by program: the snapshot checksums and the fingerprint
+# (every record this package writes has them), and the run state the program restores.
+REQUIRED_STATE = {'dynamics': ('rng', 'locations', 'orientations', 'scheme', 'counters'),
+                  'mcmc': ('rng', 'sampler')}
+
+
+def missing_fields(record, types, program='dynamics'):
+    """The first field an exact restart of ``program`` ('dynamics' or 'mcmc') needs that ``record`` lacks, as one
+    line, or None."""
+    snapshots = record.get('snapshots') or {}
+    absent = [name for name, _ in types if name not in snapshots]
+    if absent:
+        return 'snapshots holds no checksum of %s' % ', '.join(absent)
+    if not record.get('fingerprint'):
+        return 'the record holds no fingerprint of the run (fingerprint: was (absent))'
+    state = record.get('state')
+    if not isinstance(state, dict):
+        return 'the record holds no run state'
+    for key in REQUIRED_STATE.get(program, ()):
+        if state.get(key) is None:
+            return 'state.%s is absent' % key
+    if program == 'dynamics' and not isinstance(state.get('scheme'), dict):
+        return 'state.scheme is not a table'
+    return None
+
+
+def configuration_problem(record, locations, orientations):
+    """None when the configuration of ``record``'s state (when it holds one) is the snapshot's ``locations``
+    (Nb, 3) and ``orientations`` (Nb, 4) as read (quaternions renormalised by the reader: they agree to 1e-10);
+    else one line.  The record's exact numbers continue the run; a record whose numbers are another
+    configuration belongs to another snapshot."""
+    state = record.get('state') or {}
+    saved = state.get('locations'), state.get('orientations')
+    if saved[0] is None:
+        return None
+    scale = 1.0 + float(np.max(np.abs(locations))) if locations.size else 1.0
+    if saved[0].shape != locations.shape or not np.allclose(saved[0], locations, rtol=0, atol=1e-12 * scale):
+        return 'state.locations are not the positions of the snapshot'
+    if saved[1].shape != orientations.shape or not np.allclose(saved[1], orientations, rtol=0, atol=1e-10):
+        return 'state.orientations are not the orientations of the snapshot'
+    return None
+
+
+def run_problem(record, types, num_blobs=None, rollers=False):
     """None when ``record`` (already passed by :func:`record_problem`) fits a run of ``types`` ((ID, bodies) per
-    structure); else one line naming the field."""
+    structure) with ``num_blobs`` blobs (None: not checked) whose scheme moves rollers (``rollers``: the
+    Adams-Bashforth velocities are then per blob, (N, 3), else per body, (Nb, 6)); else one line naming the
+    field."""
     names = {name for name, _ in types}
     bodies = sum(count for _, count in types)
     for key in ('config_offsets', 'snapshots', 'stop_files'):
@@ -179,7 +235,7 @@ def run_problem(record, types):
         if value is not None and value.shape[0] != bodies:
             return 'state.%s holds %d bodies, this run has %d' % (key, value.shape[0], bodies)
     try:
-        _check_history(state.get('scheme'), bodies)
+        _check_history(state.get('scheme'), bodies, num_blobs, rollers)
         _check_sampler(state, bodies)
     except _Bad as bad:
         return str(bad)
@@ -207,10 +263,17 @@ def _check_sampler(state, bodies):
              'state.sampler.counters is %s, not seven integers >= 0' % _short(counters))
 
 
-def _check_history(history, bodies):
+def _is_float_array(value, ndim):
+    return isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim == ndim
+
+
+def _check_history(history, bodies, blobs=None, rollers=False):
     """The scheme history fields this package writes (``RunState.history``), when present: counts are integers
-    >= 0, the preconditioner's configuration (locations, orientations) of this run's bodies, the warm starts and
-    previous velocities flat or per body float arrays (a warm start of another size is ignored by the solve)."""
+    >= 0; the preconditioner's configuration (locations, orientations) of this run's bodies; the Adams-Bashforth
+    velocities ``previous_velocities`` of exactly the shape the scheme combines them with ((N, 3) for rollers,
+    (Nb, 6) else); the blob concentrations (N,); the warm starts flat float arrays (``first_guess``,
+    ``roller_torque_guess``; a warm start of another length is ignored by the solve) and ``earlier_guesses`` one or
+    two of them."""
     if history is None:
         return
     _require(isinstance(history, dict), 'state.scheme is a %s, not a table' % type(history).__name__)
@@ -227,15 +290,31 @@ def _check_history(history, bodies):
                                    and saved[0].shape == (bodies, 3) and saved[1].shape == (bodies, 4)),
                  'state.scheme.%s is not the locations (%d, 3) and orientations (%d, 4) of this run'
                  % (key, bodies, bodies))
-    for key in ('first_guess', 'roller_torque_guess', 'previous_velocities'):
+        if saved is not None:
+            _check_array(saved[0], 'state.scheme.%s[0]' % key, 3)
+            _check_array(saved[1], 'state.scheme.%s[1]' % key, 4)
+    for key in ('first_guess', 'roller_torque_guess'):
         value = history.get(key)
-        _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim <= 2
-                                   and (value.ndim < 2 or value.shape[0] == bodies)),
-                 'state.scheme.%s is not a float array of this run (%s)' % (key, _short(value)))
+        _require(value is None or _is_float_array(value, 1),
+                 'state.scheme.%s is not a flat float array (%s)' % (key, _short(value)))
+    velocities = history.get('previous_velocities')
+    if velocities is not None:
+        shape = (blobs, 3) if rollers else (bodies, 6)
+        _require(_is_float_array(velocities, 2) and (velocities.shape == shape or (rollers and blobs is None and
+                                                                                      velocities.shape[1] == 3)),
+                 'state.scheme.previous_velocities is %s, not the %s velocities %s of this run'
+                 % (_short(velocities), 'roller' if rollers else 'body', shape))
+    value = history.get('concentration_guess')
+    _require(value is None or (_is_float_array(value, 1) and (blobs is None or value.shape == (blobs,))),
+             'state.scheme.concentration_guess is not the %s blob concentrations of this run (%s)'
+             % (blobs if blobs is not None else 'N', _short(value)))
     value = history.get('earlier_guesses')
-    _require(value is None or (isinstance(value, np.ndarray) and value.dtype.kind == 'f' and value.ndim == 2
-                               and value.shape[0] <= 2),
+    _require(value is None or (_is_float_array(value, 2) and 1 <= value.shape[0] <= 2),
              'state.scheme.earlier_guesses is not one or two flat float arrays (%s)' % _short(value))
+    for key, value in history.items():
+        if isinstance(value, np.ndarray):
+            _require(value.dtype.kind != 'f' or bool(np.all(np.isfinite(value))),
+                     'state.scheme.%s holds NaN or infinite values' % key)
 
 
 def _kind(state_or_rng):

@@ -26,7 +26,8 @@ from multi_bodies.files.input_options import OPTION_TABLE
 from multi_bodies.files.run_inputs import file_digest, restart_inputs
 from multi_bodies.files.snapshots import clones_name, config_name
 
-from multi_bodies.run.record_checks import generator_problem, record_problem, run_problem
+from multi_bodies.run.record_checks import (configuration_problem, generator_problem, missing_fields,
+                                            record_problem, run_problem)
 from multi_bodies.run.run_state import RESTART_SUFFIX, RUN_SUFFIX, STATE_FORMAT, atomic_write, state_from_bytes
 
 
@@ -54,38 +55,52 @@ def _not_a_restart_file(path):
         % path)
 
 
+# The payload of every record this package writes holds the step, the run identifier, the snapshot checksums,
+# the fingerprint and the run state: hundreds of bytes.  A shorter one is damage or a forgery: the walk stops
+# there (a file of a million tiny records is refused at its first, not after a million reads).
+MIN_RECORD_PAYLOAD = 96
+
+
 def restart_index(path, report=warn_user):
     """Headers of the records of ``path``: list of (step, payload start, record end) in file order.
 
-    Reads only the headers.  A record cut by a hard stop, or bytes that are
-    not a record header, end the list; ``report`` gets one message saying
-    where.  Raises RestartFileError when ``path`` does not start with RESTART_MAGIC.
+    Reads only the headers (through a memory map, without reading the payloads).  A record cut by a hard stop,
+    bytes that are not a record header, or a record shorter than any record (``MIN_RECORD_PAYLOAD``) end the list;
+    ``report`` gets one message saying where.  Raises RestartFileError when ``path`` does not start with
+    RESTART_MAGIC.
     """
+    import mmap
     entries = []
     size = os.path.getsize(path)
     with open(path, 'rb') as f:
         if f.read(len(RESTART_MAGIC)) != RESTART_MAGIC:
             raise _not_a_restart_file(path)
-        position = len(RESTART_MAGIC)
-        while position < size:
-            header = f.read(RECORD_HEADER.size)
-            if len(header) < RECORD_HEADER.size:
-                report('%s: the record at byte %d is cut short (a hard stop while saving?); it is ignored'
-                       % (path, position))
-                break
-            tag, step, length, _ = RECORD_HEADER.unpack(header)
-            start = position + RECORD_HEADER.size
-            if tag != RECORD_TAG:
-                report('%s: byte %d does not start a record (the file is damaged); it and what follows are '
-                       'ignored' % (path, position))
-                break
-            if start + length > size:
-                report('%s: the record of step %d at byte %d is cut short (a hard stop while saving?); it is '
-                       'ignored' % (path, step, position))
-                break
-            entries.append((int(step), start, start + int(length)))
-            position = start + int(length)
-            f.seek(position)
+        if size <= len(RESTART_MAGIC):
+            return entries
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            position, header_size, unpack = len(RESTART_MAGIC), RECORD_HEADER.size, RECORD_HEADER.unpack_from
+            while position < size:
+                if position + header_size > size:
+                    report('%s: the record at byte %d is cut short (a hard stop while saving?); it is ignored'
+                           % (path, position))
+                    break
+                tag, step, length, _ = unpack(data, position)
+                start = position + header_size
+                if tag != RECORD_TAG:
+                    report('%s: byte %d does not start a record (the file is damaged); it and what follows are '
+                           'ignored' % (path, position))
+                    break
+                if start + length > size:
+                    report('%s: the record of step %d at byte %d is cut short (a hard stop while saving?); it is '
+                           'ignored' % (path, step, position))
+                    break
+                if length < MIN_RECORD_PAYLOAD:
+                    report('%s: the record of step %d at byte %d holds %d bytes, fewer than any record (%d): the file '
+                           'is damaged or not written by this package; it and what follows are ignored'
+                           % (path, step, position, length, MIN_RECORD_PAYLOAD))
+                    break
+                position = start + length
+                entries.append((step, start, position))
     return entries
 
 
@@ -298,15 +313,20 @@ def snapshot_mismatches(output_name, save_clones, types, record):
     return bad
 
 
+LAST_PAIRS_EXAMINED = 64  # records read back from the end to find the last complete pair (a restart message)
+
+
 def last_complete_pair(output_name, save_clones, types, report=warn_user):
     """(record, end) of the last record of ``output_name.restart`` whose snapshot is complete and unchanged.
 
-    (None, None) when there is none.  Records passed over are reported.
+    (None, None) when there is none among the last ``LAST_PAIRS_EXAMINED`` records (a run's last complete pair
+    is one of its last two records; reading further back would let a file of many damaged records cost minutes).
+    Records passed over are reported.
     """
     path = output_name + RESTART_SUFFIX
     if not os.path.isfile(path):
         return None, None
-    for entry in reversed(restart_index(path, report)):
+    for entry in reversed(restart_index(path, report)[-LAST_PAIRS_EXAMINED:]):
         problems = []
         record = read_restart_entry(path, entry, problems)
         if record is None:
@@ -321,12 +341,16 @@ def last_complete_pair(output_name, save_clones, types, report=warn_user):
     return None, None
 
 
-def check_restart(options, record, types, fingerprint, report=warn_user):
+def check_restart(options, record, types, fingerprint, report=warn_user, program='dynamics', configuration=None,
+                  num_blobs=None):
     """Decide whether a restart from ``initial_step`` is exact; returns True to use ``record``'s state.
 
     Refuses (UserInputError saying why and how to force) a restart without a record of that step, one whose
-    snapshot differs from its record (edited, or a lone snapshot of a stop between snapshot and record), and one
-    whose fingerprint (structures, blobs, radii, options) differs from this run's.  With ``restart_inexact True``
+    snapshot differs from its record (edited, or a lone snapshot of a stop between snapshot and record), one whose
+    record lacks what the restart of ``program`` ('dynamics' or 'mcmc') needs or does not fit the run (structures,
+    bodies, shapes, generator; the record's configuration not that of ``configuration``, the snapshot's
+    (locations, orientations) as read; ``num_blobs``: the run's blobs, for the shapes of per-blob history), and
+    one whose fingerprint (structures, blobs, radii, options) differs from this run's.  With ``restart_inexact True``
     each of these is a warning instead; the record's generator and history are then used only when the
     snapshot is the record's.
     """
@@ -347,7 +371,11 @@ def check_restart(options, record, types, fingerprint, report=warn_user):
             problems.append('the snapshot of step %d of %s differs from the one its record in %s was written with '
                             '(the file was edited or replaced)' % (k, ', '.join(bad), path))
             use_record = False
-        unfit = run_problem(record, types) or generator_problem(options, (record.get('state') or {}).get('rng'))
+        unfit = (missing_fields(record, types, program)
+                 or run_problem(record, types, num_blobs, rollers='rollers' in (getattr(options, 'scheme', '') or ''))
+                 or generator_problem(options, (record.get('state') or {}).get('rng'))
+                 or (configuration_problem(record, *configuration) if configuration is not None and not bad
+                     else None))
         if unfit:
             problems.append('the record of step %d in %s does not fit this run: %s' % (k, path, unfit))
             use_record = False
