@@ -43,6 +43,7 @@ import numpy as np  # noqa: E402
 
 from body.body import Body  # noqa: E402
 from boomerang import boomerang_model as bm  # noqa: E402
+from mobility.interface import registered_backends  # noqa: E402
 from sphere.single_body_integrators import SCHEMES, SingleBodyIntegrator  # noqa: E402
 
 
@@ -179,7 +180,8 @@ def main(argv=None):
     parser.add_argument('--data-dir', dest='data_dir', default=None,
                         help='data folder (default: DATA_DIR of config_local.py, else ./data)')
     parser.add_argument('--seed', type=int, default=None, help='seed of the random generator')
-    parser.add_argument('--implementation', default='python', choices=('python', 'C++'),
+    parser.add_argument('--implementation', default='python',
+                        choices=registered_backends('single_wall', dense_matrices=True),
                         help='dense blob mobility backend (default python)')
     args = parser.parse_args(argv)
 

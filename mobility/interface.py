@@ -143,11 +143,15 @@ class BlobMobility:
     near_field_domain : 'single_wall', 'no_wall' or None: the domain of the compiled near-field loop of the
         neighbour preconditioner (``_preconditioner_cpp.rigid_near_field``) when that loop reproduces this
         mobility's dense blocks (the C++ backend in those geometries); None otherwise.
+    relative_accuracy : float, how closely the products hold the laws of the exact mobility of the geometry
+        (symmetry ``x . M y = y . M x``, agreement of equivalent products), relative to ``|M|``: rounding
+        (1e-12) for the pair sums; a grid method states its discretisation's (the interface tests use it).
     """
     backend = 'abstract'
     has_rotation = False
     pairs_in_one_pass = False
     near_field_domain = None
+    relative_accuracy = 1e-12
 
     def __init__(self, geometry, eta, blob_radius):
         if not isinstance(geometry, Geometry):
@@ -328,6 +332,8 @@ class DirectMobility(BlobMobility):
         self.name = backend + _DOMAIN_SUFFIX[self.domain]  # the manual's implementation name
         self.precision = precision
         self.has_rotation = self.domain != 'free_surface'
+        # the GPU's fused multiply-adds change the last digits; single precision keeps about six
+        self.relative_accuracy = 1e-5 if precision == 'single' else 1e-10 if backend == 'pycuda' else 1e-12
         self._velocities = _direct.mobility_vector_product(self.name, precision)  # raises when not usable here
         self._couplings = {}
         self._matrix = self._cross = None

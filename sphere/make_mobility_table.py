@@ -33,7 +33,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import utils  # noqa: E402
 utils.prepare_script_path(__file__)
 
-from mobility.interface import Geometry, make_mobility  # noqa: E402
+from mobility.interface import Geometry, make_mobility, registered_backends  # noqa: E402
 from body.body import BodyArrays  # noqa: E402
 from multi_bodies.solver.body_solver import dense_body_mobility  # noqa: E402
 from multi_bodies.files.structure_generators import calibrated_shell  # noqa: E402
@@ -74,7 +74,8 @@ def table_rows(num_blobs=162, heights=DEFAULT_HEIGHTS, implementation='python'):
 def main(argv=None):
     parser = argparse.ArgumentParser(description='Tabulate the wall mobilities of a blob-shell sphere.')
     parser.add_argument('--blobs', type=int, default=162, help='blobs of the icosahedral shell (default 162)')
-    parser.add_argument('--implementation', default='python', choices=('python', 'C++'),
+    parser.add_argument('--implementation', default='python',
+                        choices=registered_backends('single_wall', dense_matrices=True),
                         help='dense blob mobility backend (same numbers; C++ is faster)')
     parser.add_argument('--output', default=None, help='output file (default mobility.<blobs>-blob.dat here)')
     args = parser.parse_args(argv)
