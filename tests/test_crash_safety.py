@@ -950,3 +950,34 @@ def test_an_interrupted_step_is_kept_as_the_step_before_it():
     loop = run_output.TimeLoop(0, 12, 4)
     loop.run(grid.append, advance, stop, beside.append)
     assert grid == [0, 4] and beside == [6] and loop.step == 6 and not loop.complete
+
+
+# ------------------------------------------------------------------ issue 48: refusals that name the way on, at once
+@pytest.mark.parametrize('save_clones', ['one_file_per_step', 'one_file'])
+def test_a_lone_snapshot_refusal_names_the_last_complete_step(tmp_path, save_clones):
+    """The docs promise it; in one_file mode the refusal after a kill between snapshot and record did not."""
+    folder = dynamic_scene(tmp_path / 'run', n_steps=40, n_save=4, save_clones=save_clones)
+    assert run(DYNAMIC, folder, {run_output.KILL_HOOK: '16'})[0] == -signal.SIGKILL
+    edit(folder, initial_step=16)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'record of step 16' in err and 'Traceback' not in err, err
+    assert 'the last step with a complete snapshot and record is 12' in err, err
+
+
+def test_a_restart_file_of_a_million_tiny_records_is_refused_at_the_first(tmp_path):
+    """A .restart of 10^6 forged tiny records took 53-186 s to refuse; a record shorter than any this package
+    writes now ends the walk through the file (the refusal reads one header, whatever follows)."""
+    import hashlib
+    from multi_bodies.run.restart_records import RECORD_HEADER, RECORD_TAG, RESTART_MAGIC, restart_index
+    folder = dynamic_scene(tmp_path / 'run', n_steps=8, n_save=4)
+    assert run(DYNAMIC, folder)[0] == 0
+    payload = b'{}'
+    record = RECORD_HEADER.pack(RECORD_TAG, 4, len(payload), hashlib.sha256(payload).digest()) + payload
+    path = folder / 'data' / 'run.restart'
+    path.write_bytes(RESTART_MAGIC + record * 10 ** 6)
+    reports = []
+    assert restart_index(str(path), reports.append) == []
+    assert len(reports) == 1 and 'fewer than any record' in reports[0], reports
+    edit(folder, initial_step=4)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 2 and 'no restart record of step 4' in err and 'Traceback' not in err, err

@@ -341,6 +341,12 @@ def last_complete_pair(output_name, save_clones, types, report=warn_user):
     return None, None
 
 
+def last_complete_step_text(output_name, save_clones, ids):
+    """' (the last step with a complete snapshot and record is k)' for a refusal, or '' when there is none."""
+    pair, _ = last_complete_pair(output_name, save_clones, [(name, 0) for name in ids], report=lambda text: None)
+    return ' (the last step with a complete snapshot and record is %d)' % pair['step'] if pair else ''
+
+
 def check_restart(options, record, types, fingerprint, report=warn_user, program='dynamics', configuration=None,
                   num_blobs=None):
     """Decide whether a restart from ``initial_step`` is exact; returns True to use ``record``'s state.
@@ -360,8 +366,7 @@ def check_restart(options, record, types, fingerprint, report=warn_user, program
     path = options.output_name + RESTART_SUFFIX
     problems, use_record = [], record is not None
     if record is None:
-        pair, _ = last_complete_pair(options.output_name, options.save_clones, types, report=lambda text: None)
-        last = ' (the last step with a complete snapshot and record is %d)' % pair['step'] if pair else ''
+        last = last_complete_step_text(options.output_name, options.save_clones, [name for name, _ in types])
         problems.append('%s has no restart record of step %d (none complete)%s, so the generator state and the scheme history '
                         'of that step are unknown (a run stopped between writing the snapshot and its record, or a '
                         'snapshot of another program)' % (path, k, last))

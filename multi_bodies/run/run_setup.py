@@ -129,10 +129,14 @@ def saved_or_input_configuration(options, spec, restart_record=None):
         clones = config_name(options.output_name, spec.ID)
         offsets = (restart_record or {}).get('config_offsets') or {}
         if spec.ID not in offsets or not os.path.isfile(clones):
+            from multi_bodies.run.restart_records import last_complete_step_text
+            last = last_complete_step_text(options.output_name, 'one_file',
+                                           [s.ID for s in all_structure_specs(options) + list(options.articulated)])
             raise utils.UserInputError(
                 '%s: initial_step %d restarts a save_clones one_file run, but %s%s has no record of step %d '
-                'for %s; restart from a saved step' % (options.where('initial_step'), restart_step,
-                                                      options.output_name, RESTART_SUFFIX, restart_step, clones))
+                'for %s%s; restart from a saved step' % (options.where('initial_step'), restart_step,
+                                                        options.output_name, RESTART_SUFFIX, restart_step, clones,
+                                                        last))
         return clones, read_config_snapshot(clones, offsets[spec.ID])
     elif restart_step > 0:
         clones = clones_name(options.output_name, spec.ID, options.initial_step)
