@@ -146,7 +146,7 @@ cplx *complex_grid(py::array_t<std::complex<double>> &grid, std::int64_t Nz, std
   return grid.mutable_data();
 }
 
-void solve_doubly_periodic(py::array_t<std::complex<double>> grid, py::dict cheb, py::dict modes, int tile) {
+void solve_doubly_periodic(py::array_t<std::complex<double>> grid, py::dict cheb, py::dict modes) {
   rmb_spectral::Chebyshev c;
   c.N = cheb["N"].cast<int>();
   c.H = cheb["H"].cast<double>();
@@ -183,9 +183,8 @@ void solve_doubly_periodic(py::array_t<std::complex<double>> grid, py::dict cheb
   m.kx = kx.data(), m.ky = ky.data(), m.dx = dx.data(), m.dy = dy.data(), m.kx_partner = kxp.data();
   m.ky_partner = kyp.data(), m.unpaired_x = ux.data(), m.unpaired_y = uy.data();
   cplx *g = complex_grid(grid, N, m.Ny, m.Nxh);
-  if (tile < 1) tile = 1;
   py::gil_scoped_release release;
-  rmb_spectral::solve_doubly_periodic(c, m, g, tile);
+  rmb_spectral::solve_doubly_periodic(c, m, g);
 }
 
 void solve_triply_periodic(py::array_t<std::complex<double>> grid, In<double> kz, In<double> ky, In<double> kx,
@@ -219,7 +218,7 @@ PYBIND11_MODULE(_spectral_cpp, m) {
         py::arg("grid").noconvert(), py::arg("Nx"), py::arg("ix"), py::arg("iy"), py::arg("iz"), py::arg("phi_x"),
         py::arg("phi_y"), py::arg("qz"), py::arg("dphi_x"), py::arg("dphi_y"), py::arg("dqz"));
   m.def("solve_doubly_periodic", &solve_doubly_periodic, "DP/DPBW/DPSC solve in place (all modes but k = 0)",
-        py::arg("grid").noconvert(), py::arg("cheb"), py::arg("modes"), py::arg("tile"));
+        py::arg("grid").noconvert(), py::arg("cheb"), py::arg("modes"));
   m.def("solve_triply_periodic", &solve_triply_periodic, "triply periodic solve in place", py::arg("grid").noconvert(),
         py::arg("kz"), py::arg("ky"), py::arg("kx"), py::arg("dz"), py::arg("dy"), py::arg("dx"), py::arg("eta"));
 }

@@ -121,25 +121,27 @@ inline void add_wall_correction(const Chebyshev &c, double kx, double ky, double
 // Work arrays of one thread: complex arrays laid out [j][t] (t = mode in the tile, fastest).
 class TileSolver {
  public:
-  TileSolver(const Chebyshev &c, int tile) : c_(c), T_(tile) {
-    const std::size_t n = static_cast<std::size_t>(c.N) * T_;
+  static constexpr int T = 16;       // modes per tile
+  static constexpr int T2 = 2 * T;   // doubles per tile row
+
+  explicit TileSolver(const Chebyshev &c) : c_(c) {
+    const std::size_t n = static_cast<std::size_t>(c.N) * T;
     values_.assign(3 * n, cplx(0.0));
     coef_.assign(3 * n, cplx(0.0));
     pressure_.assign(n, cplx(0.0));
     dpressure_.assign(n, cplx(0.0));
     work_.assign(n, cplx(0.0));
     pivot_.assign(n, 0.0), mult_.assign(n, 0.0), upper_.assign(n, 0.0), z0_.assign(n, 0.0), z1_.assign(n, 0.0);
-    for (auto *a : {&K_, &q_, &kx_, &ky_, &dx_, &dy_, &g_t0_, &g_t1_, &g_b0_, &g_b1_, &det_}) a->assign(T_, 0.0);
-    for (auto *a : {&c0_, &d0_, &top_, &bottom_}) a->assign(T_, cplx(0.0));
-    scratch_a_.assign(static_cast<std::size_t>(c.N / 2 + 1) * 2 * T_, 0.0);
-    scratch_b_.assign(static_cast<std::size_t>(c.N / 2 + 1) * 2 * T_, 0.0);
+    for (auto *a : {&K_, &q_, &kx_, &ky_, &dx_, &dy_, &g_t0_, &g_t1_, &g_b0_, &g_b1_, &det_}) a->assign(T, 0.0);
+    for (auto *a : {&c0_, &d0_, &top_, &bottom_}) a->assign(T, cplx(0.0));
+    scratch_a_.assign(static_cast<std::size_t>(c.N / 2 + 1) * 2 * T, 0.0);
+    scratch_b_.assign(static_cast<std::size_t>(c.N / 2 + 1) * 2 * T, 0.0);
   }
 
-  // Solve the modes iy, ix0 .. ix0 + count - 1 of the grid (3, N, Ny, Nxh) complex, in place.
+  // Solve the modes iy, ix0 .. ix0 + count - 1 (count <= T) of the grid (3, N, Ny, Nxh) complex, in place.
   void run(cplx *grid, const Modes &m, std::int64_t iy, std::int64_t ix0, int count) {
     const int N = c_.N;
     const std::int64_t plane = m.Ny * m.Nxh, comp = N * plane;
-    const int T = T_;
     // load node values
     for (int a = 0; a < 3; ++a)
       for (int k = 0; k < N; ++k) {
@@ -245,47 +247,63 @@ class TileSolver {
  private:
   // out[a][j][t] = sum_k matrix[j][k] in[a][k][t] for the three components, using the parity of the
   // Chebyshev-node transforms: matrix[j][N-1-k] = (-1)^j matrix[j][k] (forward, rows j) and
-  // matrix[N-1-k][j] = (-1)^j matrix[k][j] (backward), which halves the work.
+  // matrix[N-1-k][j] = (-1)^j matrix[k][j] (backward), which halves the work.  One tile row (2T doubles)
+  // is accumulated in four 8-double vectors (GCC vector extensions: SIMD registers where the target has
+  // them, plain code elsewhere).
+  typedef double v8 __attribute__((vector_size(64), aligned(8)));
+  static constexpr int V = T2 / 8;
+
+  static void load(v8 *acc, const double *row) {
+    for (int v = 0; v < V; ++v) __builtin_memcpy(&acc[v], row + 8 * v, sizeof(v8));
+  }
+  static void store(double *row, const v8 *acc) {
+    for (int v = 0; v < V; ++v) __builtin_memcpy(row + 8 * v, &acc[v], sizeof(v8));
+  }
+  static void fma_row(v8 *acc, double m, const double *row) {
+    v8 x[V];
+    load(x, row);
+    for (int v = 0; v < V; ++v) acc[v] += m * x[v];
+  }
+
   void transform(const double *matrix, const cplx *in, cplx *out, bool forward) const {
-    const int N = c_.N, T2 = 2 * T_, half = N / 2, mid = N % 2 ? N / 2 : -1;
-    std::vector<double> &sum = scratch_a_, &dif = scratch_b_;
+    const int N = c_.N, half = N / 2, mid = N % 2 ? N / 2 : -1;
+    double *sum = scratch_a_.data();
+    double *dif = scratch_b_.data();
     for (int a = 0; a < 3; ++a) {
-      const double *src = reinterpret_cast<const double *>(in + static_cast<std::size_t>(a) * N * T_);
-      double *dst = reinterpret_cast<double *>(out + static_cast<std::size_t>(a) * N * T_);
+      const double *src = reinterpret_cast<const double *>(in + static_cast<std::size_t>(a) * N * T);
+      double *dst = reinterpret_cast<double *>(out + static_cast<std::size_t>(a) * N * T);
       if (forward) {
-        // sum/dif of mirrored node values, then even rows from sums, odd rows from differences
+        // sums and differences of mirrored node values; even rows from the sums, odd rows from the differences
         for (int k = 0; k < half; ++k) {
-          const double *lo = src + k * T2, *hi = src + (N - 1 - k) * T2;
-          for (int t = 0; t < T2; ++t) sum[k * T2 + t] = lo[t] + hi[t], dif[k * T2 + t] = lo[t] - hi[t];
+          v8 lo[V], hi[V], x[V];
+          load(lo, src + k * T2);
+          load(hi, src + (N - 1 - k) * T2);
+          for (int v = 0; v < V; ++v) x[v] = lo[v] + hi[v];
+          store(sum + k * T2, x);
+          for (int v = 0; v < V; ++v) x[v] = lo[v] - hi[v];
+          store(dif + k * T2, x);
         }
         for (int j = 0; j < N; ++j) {
-          double *o = dst + j * T2;
-          const double *s = (j % 2) ? dif.data() : sum.data();
-          for (int t = 0; t < T2; ++t) o[t] = 0.0;
-          for (int k = 0; k < half; ++k) {
-            const double mjk = matrix[j * N + k];
-            for (int t = 0; t < T2; ++t) o[t] += mjk * s[k * T2 + t];
-          }
-          if (mid >= 0 && j % 2 == 0) {
-            const double mjk = matrix[j * N + mid];
-            for (int t = 0; t < T2; ++t) o[t] += mjk * src[mid * T2 + t];
-          }
+          v8 acc[V] = {};
+          const double *s = (j % 2) ? dif : sum;
+          const double *row = matrix + j * N;
+          for (int k = 0; k < half; ++k) fma_row(acc, row[k], s + k * T2);
+          if (mid >= 0 && j % 2 == 0) fma_row(acc, row[mid], src + mid * T2);
+          store(dst + j * T2, acc);
         }
       } else {
         // even and odd coefficient sums at the upper half of the nodes, mirrored to the lower half
         for (int k = 0; k < half + (mid >= 0); ++k) {
-          double *e = sum.data() + k * T2, *d = dif.data() + k * T2;
-          for (int t = 0; t < T2; ++t) e[t] = 0.0, d[t] = 0.0;
-          for (int j = 0; j < N; ++j) {
-            const double mkj = matrix[k * N + j];
-            const double *s = src + j * T2;
-            double *acc = (j % 2) ? d : e;
-            for (int t = 0; t < T2; ++t) acc[t] += mkj * s[t];
+          v8 even[V] = {}, odd[V] = {};
+          const double *row = matrix + k * N;
+          for (int j = 0; j < N; ++j) fma_row(j % 2 ? odd : even, row[j], src + j * T2);
+          v8 x[V];
+          for (int v = 0; v < V; ++v) x[v] = even[v] + odd[v];
+          store(dst + k * T2, x);
+          if (k != mid) {
+            for (int v = 0; v < V; ++v) x[v] = even[v] - odd[v];
+            store(dst + (N - 1 - k) * T2, x);
           }
-          double *lo = dst + k * T2, *hi = dst + (N - 1 - k) * T2;
-          for (int t = 0; t < T2; ++t) lo[t] = e[t] + d[t];
-          if (k != mid)
-            for (int t = 0; t < T2; ++t) hi[t] = e[t] - d[t];
         }
       }
     }
@@ -293,7 +311,7 @@ class TileSolver {
 
   // Chebyshev coefficients of d/dz: d_{N-1} = 0, d_{N-2} = 2(N-1) c_{N-1}/H, d_{j-1} = d_{j+1} + 2 j c_j/H, d_0 /= 2
   void derivative(const cplx *cf, cplx *d) const {
-    const int N = c_.N, T = T_;
+    const int N = c_.N;
     const double H = c_.H;
     for (int t = 0; t < T; ++t) d[(N - 1) * T + t] = 0.0;
     for (int t = 0; t < T; ++t) d[(N - 2) * T + t] = 2.0 * (N - 1) * cf[(N - 1) * T + t] / H;
@@ -305,7 +323,7 @@ class TileSolver {
   // Elimination of the two chains of I - q S1[:, :N] (q = K^2 H^2), the responses z0 = A^-1 e0,
   // z1 = A^-1 e1 and the 2 x 2 Schur complement of the boundary rows.
   void factor() {
-    const int N = c_.N, T = T_;
+    const int N = c_.N;
     const double H = c_.H;
     for (int j = 0; j < N; ++j)
       for (int t = 0; t < T; ++t) {
@@ -342,7 +360,7 @@ class TileSolver {
 
   template <class V>
   void chain_solve(V *y) const {
-    const int N = c_.N, T = T_;
+    const int N = c_.N;
     for (int j = 2; j < N; ++j)
       for (int t = 0; t < T; ++t) y[j * T + t] -= mult_[j * T + t] * y[(j - 2) * T + t];
     for (int t = 0; t < T; ++t) {
@@ -356,7 +374,7 @@ class TileSolver {
   // Solve for the right-hand side coefficients rhs (overwritten) with the boundary values top_, bottom_;
   // writes the coefficients of the solution (H^2 S1 x) to sol and, if given, of its derivative (H F1 x).
   void solve(cplx *rhs, cplx *sol, cplx *dsol) {
-    const int N = c_.N, T = T_;
+    const int N = c_.N;
     const double H = c_.H;
     chain_solve(rhs);
     for (int t = 0; t < T; ++t) {
@@ -392,7 +410,6 @@ class TileSolver {
   }
 
   const Chebyshev &c_;
-  int T_;
   std::vector<cplx> values_, coef_, pressure_, dpressure_, work_;
   std::vector<double> pivot_, mult_, upper_, z0_, z1_;
   std::vector<double> K_, q_, kx_, ky_, dx_, dy_, g_t0_, g_t1_, g_b0_, g_b1_, det_;
@@ -400,13 +417,14 @@ class TileSolver {
   mutable std::vector<double> scratch_a_, scratch_b_;
 };
 
-// All modes but k = 0 of a grid (3, N, Ny, Nxh) complex, in place; tiles of `tile` modes along kx.
-inline void solve_doubly_periodic(const Chebyshev &c, const Modes &m, cplx *grid, int tile) {
+// All modes but k = 0 of a grid (3, N, Ny, Nxh) complex, in place; tiles of TileSolver::T modes along kx.
+inline void solve_doubly_periodic(const Chebyshev &c, const Modes &m, cplx *grid) {
+  const int tile = TileSolver::T;
   const std::int64_t tiles_per_row = (m.Nxh + tile - 1) / tile;
   const std::int64_t n_tiles = tiles_per_row * m.Ny;
 #pragma omp parallel
   {
-    TileSolver solver(c, tile);
+    TileSolver solver(c);
 #pragma omp for schedule(dynamic, 4)
     for (std::int64_t i = 0; i < n_tiles; ++i) {
       const std::int64_t iy = i / tiles_per_row, ix0 = (i % tiles_per_row) * tile;

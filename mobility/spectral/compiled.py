@@ -22,7 +22,6 @@ from .chebyshev import ChebyshevSystem
 from .fourier import derivative_factors, partner_wavenumbers, unpaired, wavenumbers
 
 BLOCK_BYTES = 8 << 20    # row blocks of the real transforms along x
-TILE = 16                # modes per tile of the Chebyshev solves
 GEOMETRY_CODE = {'DP': 0, 'DPBW': 1, 'DPSC': 2}
 
 
@@ -178,7 +177,7 @@ class CompiledEngine:
         k0 = None
         if p.geometry != 'DP':
             k0 = spectrum[:, :, 0, 0].T.copy()            # (Nz, 3) node values of the xy-mean force density
-        _ext.solve_doubly_periodic(spectrum, self.cheb_data, self.modes, TILE)
+        _ext.solve_doubly_periodic(spectrum, self.cheb_data, self.modes)
         if p.geometry == 'DP':
             spectrum[:, :, 0, 0] = 0.0                    # no mean flow in the open geometry (as the library)
             return
