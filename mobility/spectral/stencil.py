@@ -211,9 +211,40 @@ def wrap_positions(parameters, r):
     return rel
 
 
+STENCIL_CHUNK = 1 << 16  # blobs per block while stencils are made (bounds the temporaries)
+
+
 def make_stencil(parameters, kernel, rel, derivative=False):
     """The :class:`Stencil` of ``kernel`` (a KernelParameters) for blobs at ``rel`` (n, 3), coordinates
-    relative to the grid origin (:func:`wrap_positions`); ``derivative``: also the derivative factors."""
+    relative to the grid origin (:func:`wrap_positions`); ``derivative``: also the derivative factors.
+    Made in blocks of :data:`STENCIL_CHUNK` blobs, the z slots padded to the widest block."""
+    n = rel.shape[0]
+    if n <= STENCIL_CHUNK:
+        return _make_stencil(parameters, kernel, rel, derivative)
+    parts = [_make_stencil(parameters, kernel, rel[start:start + STENCIL_CHUNK], derivative)
+             for start in range(0, n, STENCIL_CHUNK)]
+    width = max(part.iz.shape[1] for part in parts)
+    names = ('ix', 'iy', 'iz', 'phi_x', 'phi_y', 'phi_z', 'dphi_x', 'dphi_y', 'dphi_z')
+    out = {}
+    for name in names:
+        first = getattr(parts[0], name)
+        if first is None:
+            out[name] = None
+            continue
+        columns = width if name in ('iz', 'phi_z', 'dphi_z') else first.shape[1]
+        array = np.zeros((n, columns), dtype=first.dtype)
+        start = 0
+        for part in parts:
+            block = getattr(part, name)
+            array[start:start + block.shape[0], :block.shape[1]] = block
+            if name == 'iz' and block.shape[1] < columns:   # padded slots: a valid index, weight 0
+                array[start:start + block.shape[0], block.shape[1]:] = block[:, :1]
+            start += block.shape[0]
+        out[name] = array
+    return Stencil(**out)
+
+
+def _make_stencil(parameters, kernel, rel, derivative=False):
     p = parameters
     k = kernel
     ix, phi_x, dphi_x = _uniform_factors(rel[:, 0], p.hx, p.Nx, k.width[0], k.beta[0], k.alpha[0], k.norm[0],
