@@ -29,6 +29,7 @@ from .product_names import PRODUCT_KINDS as _PRODUCT_KINDS
 _BACKEND_MODULES = {'python': 'mobility.python_backend',
                     'C++': 'mobility.cpp_backend',
                     'pycuda': 'mobility.cuda_backend'}
+BACKEND_NAMES = tuple(_BACKEND_MODULES)  # the backends these names select (mobility.interface registers them)
 _ALIASES = {'numba': 'C++'}
 # domain suffix -> domain
 DOMAIN_SUFFIXES = (('_no_wall', 'no_wall'), ('_free_surface', 'free_surface'), ('', 'single_wall'))

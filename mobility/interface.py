@@ -569,25 +569,48 @@ def make_mobility(backend, geometry, eta, blob_radius, dense_matrices=False, **o
     return mobility
 
 
+def implementation_name(backend, geometry):
+    """The implementation name of ``backend`` in a direct ``geometry`` (a Geometry or a kind): ``C++``,
+    ``python_no_wall``, ``pycuda_free_surface``, ... (the backend's name and the geometry's suffix)."""
+    return backend + _DOMAIN_SUFFIX[_GEOMETRY_DOMAIN[getattr(geometry, 'kind', geometry)]]
+
+
+def _registered_names():
+    """{implementation name: (backend, geometry kind)} of the registered backends other than the manual's own
+    (``mobility.backends``) in the direct geometries they serve."""
+    return {implementation_name(backend, kind): (backend, kind) for backend in PREFERENCE
+            if backend not in _direct.BACKEND_NAMES for kind in _GEOMETRIES_OF[backend] if kind in DIRECT_GEOMETRIES}
+
+
+def implementation_names():
+    """Every implementation name an input file may give: the manual's (``python``, ``C++``, ``pycuda``, the
+    aliases ``numba`` and ``radii_*``, each with ``_no_wall`` and ``_free_surface``) and those of any other
+    registered backend in the direct geometries it serves (its name with the same suffixes)."""
+    return list(_direct.all_names()) + list(_registered_names())
+
+
 def implementation_geometry(name, periodic_length=(0.0, 0.0, 0.0)):
-    """``(backend, Geometry)`` of a manual implementation name (``C++``, ``python_no_wall``, ``numba``,
-    ``pycuda_free_surface``, ``radii_numba``, ...) with the pseudo-periodic box ``periodic_length``."""
-    backend, domain = _direct.split_domain(name)
+    """``(backend, Geometry)`` of an implementation name (``C++``, ``python_no_wall``, ``numba``,
+    ``pycuda_free_surface``, ``radii_numba``, ..., or a registered backend's name with a suffix) with the
+    pseudo-periodic box ``periodic_length``; an unknown name is a UserInputError listing the known ones."""
+    registered = _registered_names()
+    if name in registered:
+        backend, kind = registered[name]
+        return backend, Geometry(kind, periodic_length)
+    try:
+        backend, domain = _direct.split_domain(name)
+    except UserInputError:
+        raise UserInputError('unknown mobility implementation %r; known names: %s'
+                             % (name, ', '.join(implementation_names()))) from None
     return backend, Geometry(_DOMAIN_GEOMETRY[domain], periodic_length)
 
 
 def from_implementation_name(name, eta, blob_radius, periodic_length=(0.0, 0.0, 0.0), dense_matrices=False,
                              **options):
-    """The :class:`BlobMobility` of a manual implementation name (``C++``, ``python_no_wall``, ``numba``,
-    ``pycuda_free_surface``, ``radii_numba``, ...) with the pseudo-periodic box ``periodic_length``."""
+    """The :class:`BlobMobility` of an implementation name (:func:`implementation_geometry`) with the
+    pseudo-periodic box ``periodic_length``."""
     backend, geometry = implementation_geometry(name, periodic_length)
     return make_mobility(backend, geometry, eta, blob_radius, dense_matrices=dense_matrices, **options)
-
-
-def implementation_name(backend, geometry):
-    """The manual's implementation name of a direct ``backend`` in ``geometry`` (a Geometry or a kind):
-    ``C++``, ``python_no_wall``, ``pycuda_free_surface``, ..."""
-    return backend + _DOMAIN_SUFFIX[_GEOMETRY_DOMAIN[getattr(geometry, 'kind', geometry)]]
 
 
 def _direct_factory(backend):

@@ -442,6 +442,12 @@ def test_one_registry_line_adds_a_backend_everywhere(scratch_registry):
     with pytest.raises(UserInputError) as error:
         make_mobility('boxed_drag', Geometry('free_space'), 1.0, 0.5)
     assert 'backends that do: stokes_drag, ' in one_line(error)  # first in the order
+    # its implementation names (the geometry's suffix) are read by the input files and the model
+    from multi_bodies.files.input_options import mobility_implementation_names
+    assert 'stokes_drag_no_wall' in mobility_implementation_names()
+    assert 'boxed_drag' not in ''.join(mobility_implementation_names())  # no direct geometry: no name
+    named = from_implementation_name('stokes_drag_no_wall', 2.0, 0.25)
+    assert isinstance(named, StokesDrag) and named.geometry.kind == 'free_space'
 
 
 def test_the_preference_order_is_written_only_in_the_registry():

@@ -60,9 +60,9 @@ SCALE_RANGE = (1e-50, 1e50)
 
 
 def mobility_implementation_names():
-    """Names of the mobility registry (``mobility.backends``) and ``auto``, ``auto_no_wall``."""
-    from mobility.backends import all_names
-    return tuple(all_names()) + ('auto', 'auto_no_wall')
+    """Names of the mobility registry (``mobility.interface.implementation_names``) and ``auto``, ``auto_no_wall``."""
+    from mobility.interface import implementation_names
+    return tuple(implementation_names()) + ('auto', 'auto_no_wall')
 
 
 class Range:
