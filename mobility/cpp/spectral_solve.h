@@ -17,6 +17,7 @@
 #include <cmath>
 #include <complex>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "openmp_threads.h"
@@ -250,14 +251,33 @@ class TileSolver {
   // matrix[N-1-k][j] = (-1)^j matrix[k][j] (backward), which halves the work.  One tile row (2T doubles)
   // is accumulated in four 8-double vectors (GCC vector extensions: SIMD registers where the target has
   // them, plain code elsewhere).
+#if (defined(__GNUC__) || defined(__clang__)) && !defined(RMB_PLAIN_VECTORS)
   typedef double v8 __attribute__((vector_size(64), aligned(8)));
+#else
+  struct v8 {  // the same arithmetic, element by element, for compilers without vector extensions
+    double d[8];
+    v8 &operator+=(const v8 &o) {
+      for (int i = 0; i < 8; ++i) d[i] += o.d[i];
+      return *this;
+    }
+    friend v8 operator+(v8 a, const v8 &b) { return a += b; }
+    friend v8 operator-(v8 a, const v8 &b) {
+      for (int i = 0; i < 8; ++i) a.d[i] -= b.d[i];
+      return a;
+    }
+    friend v8 operator*(double m, v8 a) {
+      for (int i = 0; i < 8; ++i) a.d[i] *= m;
+      return a;
+    }
+  };
+#endif
   static constexpr int V = T2 / 8;
 
   static void load(v8 *acc, const double *row) {
-    for (int v = 0; v < V; ++v) __builtin_memcpy(&acc[v], row + 8 * v, sizeof(v8));
+    for (int v = 0; v < V; ++v) std::memcpy(&acc[v], row + 8 * v, sizeof(v8));
   }
   static void store(double *row, const v8 *acc) {
-    for (int v = 0; v < V; ++v) __builtin_memcpy(row + 8 * v, &acc[v], sizeof(v8));
+    for (int v = 0; v < V; ++v) std::memcpy(row + 8 * v, &acc[v], sizeof(v8));
   }
   static void fma_row(v8 *acc, double m, const double *row) {
     v8 x[V];
