@@ -24,6 +24,8 @@ from utils import UserInputError
 GEOMETRIES = ('TP', 'DP', 'DPBW', 'DPSC')
 # The usable range of the total ES exponent beta (outside it the radius fits are not trusted).
 BETA_RANGE = (4.0, 18.0)
+# Discretisation rules beyond the numbers of SpectralParameters (see its docstring).
+RULES = ('dpstokes', 'uammd')
 
 # ------------------------------------------------------------------ DoublyPeriodicStokes' tables
 # Force-only kernels: kernel type -> (w, beta/w).  With torques: type -> (w_m, w_d, beta_m/w_m, beta_d/w_d).
@@ -171,6 +173,10 @@ class SpectralParameters:
     dipole : KernelParameters of the torque (derivative) kernel, or None for a force-only discretisation.
     radius : the hydrodynamic radius the selection aimed at (length; for reports).
     selection : a word naming the rule that made these numbers ('dpstokes', 'libmobility', ...).
+    rules : the discretisation rules beyond these numbers: 'dpstokes' (DoublyPeriodicStokes': clamped kernel
+        edges, ghost folding by geometry, derivative kernels for torques, conjugate-averaged wall corrections
+        of unpaired modes; what this module's products implement) or 'uammd' (UAMMD's, behind libMobility:
+        see ``mobility.spectral.libmobility_parameters``).
     """
     geometry: str
     Nx: int
@@ -191,10 +197,13 @@ class SpectralParameters:
     radius: float = None
     selection: str = 'custom'
     notes: tuple = field(default=(), compare=False)
+    rules: str = 'dpstokes'
 
     def __post_init__(self):
         if self.geometry not in GEOMETRIES:
             raise UserInputError('spectral geometry must be one of %s, got %r' % (', '.join(GEOMETRIES), self.geometry))
+        if self.rules not in RULES:
+            raise UserInputError('spectral rules must be one of %s, got %r' % (', '.join(RULES), self.rules))
         for name in ('Nx', 'Ny', 'Nz'):
             object.__setattr__(self, name, int(getattr(self, name)))
         for name in ('hx', 'hy', 'Lx', 'Ly', 'z0', 'Lz', 'x0', 'y0'):

@@ -110,6 +110,9 @@ class SpectralStokes:
         eta = float(eta)
         if not np.isfinite(eta) or eta <= 0:
             raise UserInputError('spectral product: the viscosity must be positive and finite, got %r' % eta)
+        if parameters.rules != 'dpstokes':
+            raise UserInputError('spectral product: the %r discretisation rules are not implemented by '
+                                 'SpectralStokes (it implements DoublyPeriodicStokes\' rules)' % parameters.rules)
         self.parameters = parameters
         self.eta = eta
         self.path = choose_path(path)
