@@ -524,3 +524,27 @@ def test_the_model_holds_registry_mobilities_that_its_problems_use():
     assert problem.mobility is model.vector_mobility
     f = np.random.default_rng(11).normal(size=3 * model.num_blobs)
     np.testing.assert_array_equal(problem.M_dot(f), model.vector_mobility.velocities(problem.r_vectors, f))
+
+
+# ------------------------------------------------------------------ the worked examples of the docs
+def test_worked_example_of_the_interface_in_the_docs_runs():
+    """The Python example of doc/mobility.md, section 'The mobility interface' (its assert: the dense matrix is
+    the operator of M f)."""
+    text = (REPO / 'doc' / 'mobility.md').read_text(encoding='utf-8')
+    section = text[text.index('## The mobility interface'):text.index('## Speed')]
+    code = section[section.index('```python\n') + len('```python\n'):]
+    exec(compile(code[:code.index('```')], 'doc/mobility.md', 'exec'), {})
+
+
+def test_worked_example_of_adding_a_backend_runs(tmp_path):
+    """doc/adding_a_backend.md's example, in a process of its own (it registers a backend): it runs as written
+    and the new backend comes last in the order printed."""
+    import subprocess
+    import sys
+    text = (REPO / 'doc' / 'adding_a_backend.md').read_text(encoding='utf-8')
+    code = text[text.index('```python\n') + len('```python\n'):]
+    (tmp_path / 'example.py').write_text(code[:code.index('```')])
+    done = subprocess.run([sys.executable, 'example.py'], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env=dict(__import__('os').environ, PYTHONPATH=str(REPO)))
+    assert done.returncode == 0, done.stderr
+    assert "'stokes_drag']" in done.stdout
