@@ -25,7 +25,7 @@ needs_compiled = pytest.mark.skipif(not compiled_available(), reason='mobility._
 
 
 def _box(geometry, kernel='w6', torque=False, L=(24.0, 20.0), z=(0.0, 8.0)):
-    return dpstokes_parameters(RADIUS, geometry, L[0], L[1], z[0], z[1], kernel=kernel, has_torque=torque)
+    return dpstokes_parameters(RADIUS, geometry, L[0], L[1], z[0], z[1], kernel=kernel, has_torque=torque, warn=False)
 
 
 def _blobs(p, n, rng, z=None):
@@ -140,7 +140,7 @@ def test_triply_periodic_self_mobility_hasimoto(kernel, tolerance, L):
     node, mid-cell and in between.  The tolerance is the kernel's accuracy: the radius fit (DoublyPeriodicStokes
     reaches 2.4e-4 with w6 and 2.1e-3 with w4) plus the kernel's dependence on the position within a cell
     (measured up to 6e-3 for w4, 1.2e-4 for w6)."""
-    p = dpstokes_parameters(RADIUS, 'TP', L, L, 0.0, L, kernel=kernel)
+    p = dpstokes_parameters(RADIUS, 'TP', L, L, 0.0, L, kernel=kernel, warn=False)
     h = p.hx
     for position in ([L / 2, L / 2, L / 2], [0.5 * h, 0.5 * h, 0.5 * h], [0.25 * h, 0.3 * h, 0.77 * h]):
         M = _dense(p, np.array([position]))
@@ -155,7 +155,7 @@ def test_open_doubly_periodic_tends_to_free_space():
     errors, matrices = [], []
     for L in (32.0, 64.0, 128.0):
         r = np.array([[L / 2 + 0.3, L / 2 + 0.1, 0.2], [L / 2 - 3.7, L / 2 + 2.2, 1.5]])
-        M = _dense(dpstokes_parameters(RADIUS, 'DP', L, L, -4.0, 4.0), r)
+        M = _dense(dpstokes_parameters(RADIUS, 'DP', L, L, -4.0, 4.0, warn=False), r)
         rpy = mobility.rotne_prager_tensor(r, ETA, RADIUS)
         errors.append(np.max(np.abs(M - rpy)) / np.max(np.abs(rpy)))
         matrices.append(M)
@@ -171,7 +171,7 @@ def test_bottom_wall_tends_to_blake_with_images():
     import mobility
     for L, tolerance in ((64.0, 4e-3), (128.0, 1.2e-3)):
         r = np.array([[L / 2 + 0.3, L / 2 + 0.1, 4.0], [L / 2 - 3.7, L / 2 + 2.2, 6.0]])
-        M = _dense(dpstokes_parameters(RADIUS, 'DPBW', L, L, 0.0, 10.0), r)
+        M = _dense(dpstokes_parameters(RADIUS, 'DPBW', L, L, 0.0, 10.0, warn=False), r)
         blake = mobility.single_wall_fluid_mobility(r, ETA, RADIUS, periodic_length=(L, L, 0.0))
         lone = mobility.single_wall_fluid_mobility(r, ETA, RADIUS)
         error = np.max(np.abs(M - blake)) / np.max(np.abs(blake))
@@ -277,3 +277,16 @@ def test_stencils_made_in_blocks_give_the_same_product(monkeypatch):
     blocks.set_positions(r)
     for a, b in zip(whole.product(F, T), blocks.product(F, T)):
         assert _relative(b, a) < 1e-14
+
+
+def test_whole_cells_rule():
+    """Ly/h = 49.000000000000007: DoublyPeriodicStokes adds a cell (whole_cells_tolerance=0); by default the
+    ratio counts as 49 cells, with a warning that says so."""
+    radius = (32.0 / 49.5) / 0.6439997821994082     # h0 = 32/49.5: Nx = 49, h = 32/49
+    with pytest.warns(UserWarning, match='whole number of cells'):
+        p = dpstokes_parameters(radius, 'DPBW', 32.0, 32.0, 0.0, 8.0)
+    assert (p.Nx, p.Ny) == (49, 49) and p.Ly == pytest.approx(32.0, rel=1e-15)
+    library = dpstokes_parameters(radius, 'DPBW', 32.0, 32.0, 0.0, 8.0, whole_cells_tolerance=0.0)
+    assert library.Ny == 50 and library.Ly == pytest.approx(50 * 32.0 / 49, rel=1e-15)
+    genuine = dpstokes_parameters(radius, 'DPBW', 32.0, 30.3, 0.0, 8.0, warn=False)
+    assert genuine.Ny == 47 and genuine.Ly == pytest.approx(47 * 32.0 / 49, rel=1e-15)
