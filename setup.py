@@ -122,7 +122,7 @@ setup(
     packages=['body', 'mobility', 'mobility.spectral', 'multi_bodies', 'multi_bodies.solver', 'multi_bodies.files', 'multi_bodies.run',
               'multi_bodies.ensembles', 'multi_bodies.advice', 'multi_bodies.analysis', 'quaternion_integrator',
               'stochastic_forcing', 'many_bodyMCMC', 'boomerang', 'sphere', 'lubrication', 'read_input',
-              'articulated', 'constraint'],
+              'articulated', 'constraint', 'sksparse'],
     py_modules=['utils', 'general_application_utils', 'Lub_Solver'],
     package_data={'mobility': ['cpp/*.h', 'cuda/*.cu'], 'lubrication': ['tables/*.txt', 'tables/README.md']},
     ext_modules=extensions,

@@ -4,8 +4,8 @@ Each test copies a published example folder (``../shared/reference/lubrication/e
 temporary directory, shortens its input (``n_steps``; the copy only), and runs its ``main_*.py`` in a
 subprocess with the repository on PYTHONPATH.  Test devices, not parts of the package:
 
-* a stub ``sksparse.cholmod`` put on the subprocess's PYTHONPATH: the drivers import it at their top and
-  never use it (a user installs scikit-sparse, or deletes that line: doc/lubrication.md);
+* (no stub any more: the drivers' unused ``from sksparse.cholmod import cholesky`` finds the package's own
+  ``sksparse`` face, as after the README's install);
 * the two Python 3 fixes the reference README lists for Magnetic_Chain_With_Twist, applied to the copy:
   tabs expanded in ``main_chain.py``, ``r_vectors.size / 3`` -> ``// 3`` in its force file.
 
@@ -34,16 +34,6 @@ pytestmark = pytest.mark.skipif(not EXAMPLES.is_dir(), reason='the published lub
                                                               '../shared/reference/lubrication/examples')
 
 
-def stub_cholmod(directory):
-    """A stub package ``sksparse.cholmod`` under ``directory`` (the drivers import it and never use it)."""
-    package = directory / 'stub' / 'sksparse'
-    package.mkdir(parents=True)
-    (package / '__init__.py').write_text('"""Test stub: the published drivers import sksparse.cholmod unused."""\n')
-    (package / 'cholmod.py').write_text('def cholesky(*args, **kwargs):\n'
-                                        '    raise RuntimeError("test stub of sksparse.cholmod")\n')
-    return directory / 'stub'
-
-
 def set_option(text, name, value):
     """The input text with option ``name`` set to ``value`` (the line replaced)."""
     pattern = re.compile(r'^%s\s.*$' % re.escape(name), re.MULTILINE)
@@ -53,8 +43,7 @@ def set_option(text, name, value):
 
 def run_driver(folder, driver, input_file, timeout=600):
     """Run ``python driver --input-file input_file`` in ``folder``; returns the CompletedProcess."""
-    stub = stub_cholmod(folder.parent if folder.parent != folder else folder)
-    paths = [str(stub), str(REPO)] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]
+    paths = [str(REPO)] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths), OMP_NUM_THREADS='2')
     result = subprocess.run([sys.executable, driver, '--input-file', input_file], cwd=folder, env=env,
                             capture_output=True, text=True, timeout=timeout)

@@ -94,3 +94,98 @@ def test_general_application_utils_gmres_solves_with_the_published_keywords():
     with gau.Timer() as timer:
         pass
     assert timer.elapsed >= 0
+
+
+# ---------------------------------------------------------------------------------------------- names (issue 47)
+# Every name that the published drivers (Lubrication_Examples/*/main_*.py), force files (forces_numba, the
+# examples' force and multi_bodies_functions files) and example overrides import from the module paths this package
+# offers as faces, found in the published tree (July 2025): `from X import Y`, `import X as m` then `m.Y`.
+FACE_NAMES = {
+    'general_application_utils': ('static_var', 'timer', 'gmres', 'transfer_mobility', 'tensor_cross_vector',
+                                  'vector_cross_tensor', 'log_time_progress', 'Timer'),
+    'quaternion_integrator.quaternion': ('Quaternion',),
+    'read_input.read_input': ('ReadInput',),
+    'read_input.read_vertex_file': ('read_vertex_file',),
+    'read_input.read_clones_file': ('read_clones_file',),
+    'read_input.read_slip_file': ('read_slip_file',),
+    'mobility.mobility': ('rotne_prager_tensor', 'single_wall_fluid_mobility'),
+    'body.body': ('Body',),
+    'stochastic_forcing.stochastic_forcing': (),
+    'Lub_Solver': ('Lub_Solver',),
+    'sksparse.cholmod': ('cholesky',),
+    'articulated.articulated': ('Articulated', 'Constraint'),
+    'constraint.constraint': ('Constraint',),
+}
+
+
+@pytest.mark.parametrize('module', sorted(FACE_NAMES))
+def test_every_name_the_published_files_import_from_a_face_exists(module):
+    import importlib
+    face = importlib.import_module(module)
+    missing = [name for name in FACE_NAMES[module] if not hasattr(face, name)]
+    assert not missing, (module, missing)
+
+
+def test_static_var_and_timer_keep_their_values():
+    import general_application_utils as utils
+
+    @utils.static_var('counter', 0)
+    def count():
+        count.counter += 1
+        return count.counter
+    assert [count(), count(), count()] == [1, 2, 3]
+    utils.timer('x')
+    assert utils.timer.timers['x'][1] is not None  # running
+    utils.timer('x')
+    total, running = utils.timer.timers['x']
+    assert running is None and total >= 0
+    utils.timer('x', clean_all=True)
+    assert utils.timer.timers == {}
+
+
+@pytest.mark.parametrize('side', ['right', 'left', 'left_res'])
+def test_published_gmres_solves_with_the_preconditioner_on_either_side(side):
+    import general_application_utils as utils
+    rng = np.random.default_rng(5)
+    A = np.diag(np.linspace(1, 50, 40)) + 0.05 * rng.standard_normal((40, 40))
+    b = rng.standard_normal(40)
+    x, info = utils.gmres(A, b, tol=1e-12, M=np.diag(1 / np.diag(A)), PC_side=side, restart=40)
+    assert info == 0 and np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+def test_transfer_mobility_of_a_sphere_is_the_rigid_motion_law():
+    """A sphere's mobility diag(mu_t I, mu_r I) about its centre, seen from a point r away: translation block
+    mu_t I + mu_r (|r|^2 I - r r^T) and the way back returns the start.  The coupling block has the published
+    function's sign (its cross products take r = point_1 - point_2): that of the rigid-motion law u = omega x
+    (p - c) at the mirror point p = 2 point_1 - point_2; the face keeps it, so drivers get the published numbers."""
+    import general_application_utils as utils
+    mu_t, mu_r = 0.7, 0.3
+    centre, point = np.array([0.1, -0.2, 0.5]), np.array([1.0, 0.4, -0.3])
+    m1 = np.diag([mu_t] * 3 + [mu_r] * 3)
+    m2 = utils.transfer_mobility(m1, centre, point)
+    r = centre - point
+    np.testing.assert_allclose(m2[:3, :3], mu_t * np.eye(3) + mu_r * (r @ r * np.eye(3) - np.outer(r, r)), atol=1e-14)
+    torque = np.array([0.3, -1.1, 0.7])  # a pure torque about point: omega = mu_r T, u(point) = omega x (point - c)
+    mirror = 2 * centre - point
+    np.testing.assert_allclose(m2[:3, 3:] @ torque, np.cross(mu_r * torque, mirror - centre), atol=1e-14)
+    np.testing.assert_allclose(m2, m2.T, atol=1e-14)
+    np.testing.assert_allclose(utils.transfer_mobility(m2, point, centre), m1, atol=1e-13)
+
+
+def test_sksparse_cholmod_face_factors_as_cholmod():
+    """P (A + beta I) P^T = L L^T with L lower triangular, solves, log det; an indefinite matrix is refused."""
+    import scipy.sparse as sp
+    from sksparse.cholmod import cholesky, CholmodNotPositiveDefiniteError
+    B = sp.random(80, 80, density=0.06, random_state=3)
+    A = (B @ B.T + 0.1 * sp.identity(80)).tocsc()
+    factor = cholesky(A, beta=0.4)
+    M = A.toarray() + 0.4 * np.eye(80)
+    L, P = factor.L(), factor.P()
+    assert np.abs(sp.triu(L, 1)).max() == 0
+    np.testing.assert_allclose(M[P][:, P], (L @ L.T).toarray(), atol=1e-12)
+    rhs = np.random.default_rng(2).standard_normal((80, 2))
+    np.testing.assert_allclose(M @ factor(rhs), rhs, atol=1e-10)
+    assert factor.logdet() == pytest.approx(np.linalg.slogdet(M)[1], rel=1e-12)
+    np.testing.assert_array_equal(factor.apply_Pt(factor.apply_P(rhs[:, 0])), rhs[:, 0])
+    with pytest.raises(CholmodNotPositiveDefiniteError):
+        cholesky(sp.diags([2.0, -1.0, 3.0]).tocsc())
