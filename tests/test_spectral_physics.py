@@ -290,3 +290,33 @@ def test_whole_cells_rule():
     assert library.Ny == 50 and library.Ly == pytest.approx(50 * 32.0 / 49, rel=1e-15)
     genuine = dpstokes_parameters(radius, 'DPBW', 32.0, 30.3, 0.0, 8.0, warn=False)
     assert genuine.Ny == 47 and genuine.Ly == pytest.approx(47 * 32.0 / 49, rel=1e-15)
+
+
+@needs_compiled
+@pytest.mark.parametrize('geometry', ['DPBW', 'DPSC'])
+def test_uammd_solve_rules_same_in_both_paths(geometry):
+    """The two solve rules of UAMMD (p' by the Chebyshev recurrence; unpaired wall corrections not averaged
+    with their partner) give the same numbers in the compiled and the NumPy solve, and other numbers than
+    DoublyPeriodicStokes' rules where the grid has an unpaired y mode (the x-halved real inverse transform
+    averages unpaired x modes by itself; the two forms of p' agree to rounding)."""
+    import dataclasses
+    from mobility.spectral import reference
+    from mobility.spectral.compiled import CompiledEngine
+    base = _box(geometry, 'w6', False, L=(12.0, 12.0), z=(0.0, 6.0))
+    assert base.Ny % 2 == 0                      # an unpaired y mode: there the two rules differ
+    rng = np.random.default_rng(4)
+    force = rng.standard_normal((3, base.Nz, base.Ny, base.Nx))
+    force -= force.mean(axis=(2, 3), keepdims=True)   # no mean flow, which would dwarf the difference
+    results = {}
+    for rules in ('dpstokes', 'uammd'):
+        p = dataclasses.replace(base, rules=rules)
+        engine = CompiledEngine(p, ETA)
+        grid = engine._zeroed_grid()
+        grid[..., :p.Nx] = force
+        engine.solve(engine.forward())
+        engine.backward()
+        ours = grid[..., :p.Nx].copy()
+        expected = reference.solve(p, ETA, force.copy())
+        assert _relative(ours, expected) < 1e-12
+        results[rules] = expected
+    assert _relative(results['uammd'], results['dpstokes']) > 1e-10

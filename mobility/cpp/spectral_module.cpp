@@ -153,6 +153,8 @@ void solve_doubly_periodic(py::array_t<std::complex<double>> grid, py::dict cheb
   c.Lz = cheb["Lz"].cast<double>();
   c.eta = cheb["eta"].cast<double>();
   c.geometry = cheb["geometry"].cast<int>();
+  c.pressure_derivative_by_recurrence = cheb["pressure_derivative_by_recurrence"].cast<bool>();
+  c.unpaired_correction_as_is = cheb["unpaired_correction_as_is"].cast<bool>();
   const py::ssize_t N = c.N;
   if (N < 3) throw std::invalid_argument("_spectral_cpp: a Chebyshev grid needs N >= 3");
   // keep the arrays alive while the solve runs

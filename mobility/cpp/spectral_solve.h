@@ -32,6 +32,11 @@ struct Chebyshev {
   int N = 0;
   double H = 0.0, Lz = 0.0, eta = 1.0;
   int geometry = OPEN;
+  // Rules (DoublyPeriodicStokes: both false): the z-derivative of the pressure in the w equation by the
+  // Chebyshev recurrence of its coefficients instead of the integration matrix F x_p (UAMMD); the wall
+  // correction of an unpaired mode without the average with its conjugate partner (UAMMD's real inverse).
+  bool pressure_derivative_by_recurrence = false;
+  bool unpaired_correction_as_is = false;
   const double *forward = nullptr, *backward = nullptr;               // (N, N): values -> coefficients, back
   const double *s_low = nullptr, *s_diag = nullptr, *s_up = nullptr;  // S1[j, j-2], S1[j, j], S1[j, j+2]
   const double *s_c0 = nullptr, *s_d0 = nullptr;                      // S1[:, N], S1[:, N+1]
@@ -170,6 +175,7 @@ class TileSolver {
       for (int t = 0; t < T; ++t) rhs[j * T + t] += cplx(0.0, dx_[t]) * fx[j * T + t] + cplx(0.0, dy_[t]) * fy[j * T + t];
     for (int t = 0; t < T; ++t) top_[t] = 0.0, bottom_[t] = 0.0;
     solve(rhs, pressure_.data(), dpressure_.data());
+    if (c_.pressure_derivative_by_recurrence) derivative(pressure_.data(), dpressure_.data());
     std::vector<cplx> p_top(T, 0.0), p_bottom(T, 0.0);
     for (int j = 0; j < N; ++j) {
       const double sign = (j % 2) ? -1.0 : 1.0;
@@ -216,7 +222,7 @@ class TileSolver {
         const cplx b[3] = {wall_b[t], wall_b[T + t], wall_b[2 * T + t]};
         const cplx top[3] = {wall_t[t], wall_t[T + t], wall_t[2 * T + t]};
         cplx *u = values_.data() + t, *v = u + N * T, *w = v + N * T;
-        const bool partner = m.unpaired_x[ix] || m.unpaired_y[iy];
+        const bool partner = (m.unpaired_x[ix] || m.unpaired_y[iy]) && !c_.unpaired_correction_as_is;
         if (!partner) {
           add_wall_correction(c_, kx_[t], ky_[t], K_[t], b, top, 1.0, u, v, w, T);
         } else {

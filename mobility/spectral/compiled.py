@@ -90,7 +90,9 @@ class CompiledEngine:
             f_up = np.zeros(N)
             f_up[:N - 1] = cheb.F1[j[:N - 1], j[:N - 1] + 1]
             assert not np.any(cheb.F1[:, N])  # the c0 column of F1 is zero
+            uammd = p.rules == 'uammd'
             self.cheb_data = dict(N=N, H=cheb.H, Lz=p.Lz, eta=eta, geometry=GEOMETRY_CODE[p.geometry],
+                                  pressure_derivative_by_recurrence=uammd, unpaired_correction_as_is=uammd,
                                   forward=np.ascontiguousarray(cheb.forward),
                                   backward=np.ascontiguousarray(cheb.backward),
                                   s_low=cheb.s_low, s_diag=cheb.s_diag, s_up=cheb.s_up,

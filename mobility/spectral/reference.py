@@ -142,7 +142,8 @@ def solve_doubly_periodic(p, eta, grid):
     zero = np.zeros(Kl.size, dtype=complex)
     xp = cheb.solve(Kl, factors, dxl * fx + dyl * fy + cheb.derivative(fz), zero, zero)
     pc = cheb.values_of(xp)
-    dpc = cheb.derivatives_of(xp)
+    # p' in the w equation: DoublyPeriodicStokes takes F x_p, UAMMD the Chebyshev recurrence of p
+    dpc = cheb.derivative(pc) if p.rules == 'uammd' else cheb.derivatives_of(xp)
     p_top = pc.sum(axis=0)
     p_bottom = ((-1.0) ** np.arange(N)) @ pc
     # velocity: eta (D^2 - K^2) u = Dx p - fx (v, w alike) with the Robin conditions of the open fluid
@@ -165,8 +166,11 @@ def solve_doubly_periodic(p, eta, grid):
 
 
 def _needs_partner(p):
-    """(Ny * Nxh,) bool: modes whose conjugate partner has a raw wavenumber that is not minus theirs."""
+    """(Ny * Nxh,) bool: modes whose conjugate partner has a raw wavenumber that is not minus theirs (none
+    under UAMMD's rules, whose real inverse transform takes each stored mode's correction as it is)."""
     Nxh = p.Nx // 2 + 1
+    if p.rules == 'uammd':
+        return np.zeros(p.Ny * Nxh, dtype=bool)
     return (unpaired(p.Nx)[:Nxh][None, :] | unpaired(p.Ny)[:, None]).ravel()
 
 
