@@ -111,8 +111,8 @@ extensions = [
         ['mobility/cpp/spectral_module.cpp'],
         include_dirs=['mobility/cpp'],
         depends=['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h'],
-        # complex products and quotients inline (finite values only; no NaN recovery calls)
-        extra_compile_args=compile_args + ['-fcx-limited-range'],
+        # complex products and quotients inline (finite values only; no NaN recovery calls) where accepted
+        extra_compile_args=compile_args + (['-fcx-limited-range'] if compiler_accepts(['-fcx-limited-range']) else []),
         extra_link_args=link_args,
         cxx_std=17,
     ),
