@@ -9,13 +9,33 @@ import sys
 import time
 
 
+# A word of a message longer than this (a 100 MB token of a file, echoed by "cannot read '...'") is shown by its
+# first and last characters and its length: the message stays one readable line, whatever the file held.
+MESSAGE_WORD_CHARACTERS = 400
+
+
+def shorten_words(text, longest=MESSAGE_WORD_CHARACTERS):
+    """``text`` with every run of more than ``longest`` non-blank characters cut to its ends and its length."""
+    import re
+    if len(text) <= longest:
+        return text
+    return re.sub(r'\S{%d,}' % (longest + 1),
+                  lambda m: '%s...[%d characters]...%s' % (m.group()[:longest // 2], len(m.group()),
+                                                          m.group()[-longest // 4:]), text)
+
+
 class UserInputError(ValueError):
     """A mistake in what the user gave us (option, file, line, value).
 
     The message names the file, the line or option, what was expected and
     how to fix it.  The scripts catch this type, print the message and exit
-    with a non-zero status, without a traceback.
+    with a non-zero status, without a traceback.  A word of the message
+    longer than ``MESSAGE_WORD_CHARACTERS`` (a huge token echoed from a file)
+    is shortened to its ends and its length (:func:`shorten_words`).
     """
+
+    def __init__(self, message='', *args):
+        super().__init__(shorten_words(message) if isinstance(message, str) else message, *args)
 
 
 class SimulationStopped(RuntimeError):
@@ -171,6 +191,112 @@ def warn_user(message, stream=None):
     print('warning: %s' % message, file=sys.stderr if stream is None else stream, flush=True)
 
 
+# ------------------------------------------------------------------ memory an input or option asks for
+def format_bytes(n):
+    """'1.5 GiB' style text of a byte count."""
+    n = float(n)
+    for unit in ('B', 'KiB', 'MiB', 'GiB', 'TiB', 'PiB'):
+        if n < 1024 or unit == 'PiB':
+            return ('%d %s' % (n, unit)) if unit == 'B' else ('%.3g %s' % (n, unit))
+        n /= 1024.0
+
+
+def available_memory():
+    """Bytes of memory this process can still get (MemAvailable of /proc/meminfo, else the physical memory);
+    None when unknown."""
+    try:
+        with open('/proc/meminfo') as f:
+            for line in f:
+                if line.startswith('MemAvailable:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def refuse_if_too_big(need, what, where, fix, have=None):
+    """Raise UserInputError before anything is allocated or written when ``need`` bytes exceed the memory
+    available (``have``, default :func:`available_memory`); ``what`` says what needs it, ``where`` names the
+    option (file and line) or file, ``fix`` how to ask for less."""
+    have = available_memory() if have is None else have
+    if have is not None and need > have:
+        raise UserInputError('%s: %s needs about %s of memory, but %s are available; %s'
+                             % (where, what, format_bytes(need), format_bytes(have), fix))
+
+
+NPY_HEADER_BYTES = 65536  # numpy's own limit of a .npy header it reads without allow_pickle (max_header_size)
+
+
+def read_npz(path, names, what):
+    """The arrays ``names`` of the ``.npz`` file ``path`` (dict name -> array), each read only after what the file
+    declares was checked: a member ``<name>.npy`` of a zip archive, a numeric dtype (no object arrays: nothing is
+    unpickled), a declared shape whose bytes are exactly the member's declared size, all of them within the memory
+    available (``refuse_if_too_big``); then exactly that many bytes are inflated, so an archive that declares a
+    small member and inflates to gigabytes, or a header declaring 10^12 values, costs no more than the header.
+
+    ``what`` names the kind of file in the refusals (UserInputError naming ``path``).
+    """
+    import io
+    import zipfile
+    import numpy as np
+
+    def refuse(text):
+        return UserInputError('%s is not %s (%s); nothing in it was used' % (path, what, text))
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise refuse('it is %s' % kind)
+    try:
+        archive = zipfile.ZipFile(path)
+    except FileNotFoundError:
+        raise UserInputError('%s: no such file; give %s' % (path, what))
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError) as err:
+        raise refuse('not a .npz archive: %s' % err)
+    found, total = {}, 0
+    with archive:
+        for name in names:
+            try:
+                info = archive.getinfo(name + '.npy')
+                with archive.open(info) as member:
+                    head = io.BytesIO(member.read(NPY_HEADER_BYTES))
+                version = np.lib.format.read_magic(head)
+                if version not in ((1, 0), (2, 0), (3, 0)):
+                    raise ValueError('.npy version %s' % (version,))
+                shape, fortran, dtype = np.lib.format._read_array_header(head, version,
+                                                                          max_header_size=NPY_HEADER_BYTES)
+            except KeyError:
+                raise refuse('it holds no array %r' % name)
+            except (ValueError, OSError, zipfile.BadZipFile, EOFError, NotImplementedError, SyntaxError,
+                    TypeError) as err:
+                raise refuse('the header of %r cannot be read: %s' % (name, err))
+            if dtype.hasobject or dtype.fields is not None or dtype.kind not in 'biuf':
+                raise refuse('%r holds %s values, not numbers' % (name, dtype))
+            count = 1
+            for n in shape:
+                count *= int(n)
+            need = count * dtype.itemsize
+            if info.file_size != head.tell() + need:
+                raise refuse('%r declares %d values of shape %s (%d bytes), but its member holds %d bytes'
+                             % (name, count, tuple(shape), need, info.file_size - head.tell()))
+            total += need
+            found[name] = (info, head.tell(), shape, fortran, dtype, need)
+        refuse_if_too_big(total, 'reading %s' % ', '.join(names), path, 'give %s' % what)
+        arrays = {}
+        for name, (info, start, shape, fortran, dtype, need) in found.items():
+            try:
+                with archive.open(info) as member:
+                    member.read(start)
+                    data = member.read(need)
+            except (OSError, zipfile.BadZipFile, EOFError, ValueError) as err:
+                raise refuse('%r cannot be read: %s' % (name, err))
+            if len(data) != need:
+                raise refuse('%r is cut short' % name)
+            arrays[name] = np.frombuffer(data, dtype=dtype).reshape(shape, order='F' if fortran else 'C').copy()
+    return arrays
+
+
 def special_file_kind(path):
     """What is at ``path`` when it is there but is not a regular file (links followed): 'a folder', 'a FIFO',
     'a socket', 'a character device', 'a block device', 'a symbolic link to a missing file'; None for a regular
@@ -234,6 +360,8 @@ def prepare_script_path(script_file):
         # Ctrl-C while the script still imports (numpy, scipy, the backends): one line, no traceback;
         # fail_cleanly puts Python's own handler back when main starts.
         signal.signal(signal.SIGINT, _interrupted_while_starting)
+        if hasattr(signal, 'pthread_sigmask'):  # a Ctrl-C held back until the handler exists is answered now
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     folder = os.path.dirname(os.path.abspath(script_file))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != folder]
     package = os.path.basename(folder)
