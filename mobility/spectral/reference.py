@@ -157,9 +157,9 @@ def solve_doubly_periodic(p, eta, grid):
         u[:, 1, ~live] = cheb.mean_flow(-f[:, 1, ~live] / eta, p.geometry)
     values = cheb.to_values(u)                     # (Nz, 3, nk): node values, Fourier in x and y
     if p.geometry != 'DP':
+        kx_partner, ky_partner = _partner(p)
         values[:, :, live] += _wall_correction(p, eta, cheb, u[:, :, live], kx[live], ky[live], Kl,
-                                               _needs_partner(p)[live], _partner(p, kx, ky)[0][live],
-                                               _partner(p, kx, ky)[1][live])
+                                               _needs_partner(p)[live], kx_partner[live], ky_partner[live])
     values = values.reshape(N, 3, p.Ny, Nxh)
     out = fft.irfftn(values, s=(p.Ny, p.Nx), axes=(2, 3))
     return np.ascontiguousarray(out.transpose(1, 0, 2, 3))
@@ -174,7 +174,8 @@ def _needs_partner(p):
     return (unpaired(p.Nx)[:Nxh][None, :] | unpaired(p.Ny)[:, None]).ravel()
 
 
-def _partner(p, kx, ky):
+def _partner(p):
+    """Raw wavenumbers (kx, ky), each (Ny * Nxh,), of every stored mode's conjugate partner."""
     Nxh = p.Nx // 2 + 1
     kxp = np.broadcast_to(partner_wavenumbers(p.Nx, p.Lx)[:Nxh][None, :], (p.Ny, Nxh)).ravel()
     kyp = np.broadcast_to(partner_wavenumbers(p.Ny, p.Ly)[:, None], (p.Ny, Nxh)).ravel()
