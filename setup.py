@@ -118,6 +118,16 @@ extensions = [
     ),
 ]
 
+class parallel_build_ext(build_ext):
+    """pybind11's build_ext that compiles the extensions side by side: ``RMB_BUILD_JOBS`` jobs (default: the number
+    of CPUs), unless ``build_ext --parallel N`` (or ``-j N``) is given; ``RMB_BUILD_JOBS=1`` builds one at a time."""
+
+    def finalize_options(self):
+        super().finalize_options()
+        if not self.parallel:
+            self.parallel = max(1, int(os.environ.get('RMB_BUILD_JOBS') or os.cpu_count() or 1))
+
+
 setup(
     packages=['body', 'mobility', 'mobility.spectral', 'multi_bodies', 'multi_bodies.solver', 'multi_bodies.files', 'multi_bodies.run',
               'multi_bodies.ensembles', 'multi_bodies.advice', 'multi_bodies.analysis', 'quaternion_integrator',
@@ -126,5 +136,5 @@ setup(
     py_modules=['utils', 'general_application_utils', 'Lub_Solver'],
     package_data={'mobility': ['cpp/*.h', 'cuda/*.cu'], 'lubrication': ['tables/*.txt', 'tables/README.md']},
     ext_modules=extensions,
-    cmdclass={'build_ext': build_ext},
+    cmdclass={'build_ext': parallel_build_ext},
 )
