@@ -198,3 +198,42 @@ def test_two_bodies_at_the_same_position_are_refused_or_named(tmp_path):
     warning = [line for line in err.splitlines() if 'same position' in line]
     assert status == 0 and len(warning) == 1 and warning[0].startswith('warning:'), err
     assert 'body 0 of boomerang_N_15' in warning[0] and 'body 0 of shell_N_12_Rg_1' in warning[0]
+
+
+# ---------------------------------------------------------------------------------------------- charts
+def overlapping_tick_labels(figure):
+    """Pairs of visible tick labels (inside the axes' span) whose boxes overlap, on either axis."""
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    axes = figure.axes[0]
+    count = 0
+    for axis, (low, high) in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
+        ticks = list(zip(axis.get_majorticklocs(), axis.get_ticklabels(which='major'))) + \
+            list(zip(axis.get_minorticklocs(), axis.get_ticklabels(which='minor')))
+        boxes = [label.get_window_extent(renderer) for where, label in ticks
+                 if label.get_visible() and label.get_text() and min(low, high) <= where <= max(low, high)]
+        count += sum(boxes[i].overlaps(boxes[j]) for i in range(len(boxes)) for j in range(i + 1, len(boxes)))
+    return count
+
+
+@pytest.mark.parametrize('span', [(0.016, 0.4), (0.05, 0.12), (1e-3, 30.0)])
+def test_msd_and_fkt_charts_have_no_overlapping_tick_labels(span, monkeypatch):
+    """The MSD and F(k, t) charts (log time axis) labelled the minor ticks of a span under a decade, and the
+    labels ran into each other; now every visible label is clear of the others.  Negative control: without
+    hide_overlapping_tick_labels the first span overlaps."""
+    pytest.importorskip('matplotlib')
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from multi_bodies.analysis import tables
+    t = np.geomspace(*span, 25)
+    curves = [('x', t, 0.01 * t, None), ('y', t, 0.02 * t, 0.001 * t)]
+    for title, y_label in (('mean-square displacement', 'MSD'), ('intermediate scattering function', 'F(k,t)')):
+        figure = tables.build_chart(title, 'time', y_label, curves, log_x=True)
+        assert overlapping_tick_labels(figure) == 0, (span, title)
+        plt.close(figure)
+    if span == (0.016, 0.4):
+        monkeypatch.setattr(tables, 'hide_overlapping_tick_labels', lambda figure, axes: None)
+        figure = tables.build_chart('mean-square displacement', 'time', 'MSD', curves, log_x=True)
+        assert overlapping_tick_labels(figure) > 0
+        plt.close(figure)

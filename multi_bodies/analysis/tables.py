@@ -97,6 +97,16 @@ def draw_chart(path, title, x_label, y_label, curves, log_x=False, reference=Non
         import matplotlib.pyplot as plt
     except ImportError:
         return 'matplotlib is not installed: chart %s skipped (pip install matplotlib)' % path
+    figure = build_chart(title, x_label, y_label, curves, log_x=log_x, reference=reference)
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+    return None
+
+
+def build_chart(title, x_label, y_label, curves, log_x=False, reference=None):
+    """The matplotlib figure of :func:`draw_chart` (matplotlib imported by the caller), tick labels that would
+    overlap hidden (:func:`hide_overlapping_tick_labels`)."""
+    import matplotlib.pyplot as plt
     figure, axes = plt.subplots(figsize=(6, 4))
     for label, x, y, error in curves:
         if error is not None and np.any(np.isfinite(error)):
@@ -112,6 +122,25 @@ def draw_chart(path, title, x_label, y_label, curves, log_x=False, reference=Non
     axes.set_title(title)
     axes.legend(fontsize=8)
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
-    return None
+    hide_overlapping_tick_labels(figure, axes)
+    return figure
+
+
+def hide_overlapping_tick_labels(figure, axes, gap=3.0):
+    """Hide the tick labels that would overlap one another (a log axis over less than a decade labels its minor
+    ticks too: 2x10^-2, 3x10^-2, ... ran into each other): the major labels first, then the minor ones that fit,
+    each kept only if its box stays ``gap`` pixels clear of every label kept before."""
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    for axis in (axes.xaxis, axes.yaxis):
+        kept = []
+        for which in ('major', 'minor'):
+            for label in axis.get_ticklabels(which=which):
+                if not label.get_visible() or not label.get_text():
+                    continue
+                box = label.get_window_extent(renderer).expanded(1.0, 1.0)
+                box = box.from_extents(box.x0 - gap, box.y0 - gap, box.x1 + gap, box.y1 + gap)
+                if any(box.overlaps(other) for other in kept):
+                    label.set_visible(False)
+                else:
+                    kept.append(box)
