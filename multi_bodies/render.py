@@ -137,9 +137,22 @@ def render_matplotlib(scene, r_vectors, title, size):
     return frame
 
 
+def quiet_vtk_without_display():
+    """Without an X display (no ``DISPLAY``, Linux) VTK logs "bad X server connection" for every off-screen window,
+    although it renders without one; its warnings are then kept off stderr (its errors still show)."""
+    if not sys.platform.startswith('linux') or os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY'):
+        return
+    try:
+        from vtkmodules.vtkCommonCore import vtkLogger
+    except ImportError:
+        return
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
+
+
 def render_pyvista(scene, r_vectors, title, size):
     """Frame as an RGB array (H, W, 3) of uint8, rendered off-screen by pyvista."""
     import pyvista
+    quiet_vtk_without_display()
     plotter = pyvista.Plotter(off_screen=True, window_size=list(size))
     plotter.set_background(BACKGROUND_RGB)
     x0, x1, y0, y1 = scene.wall
