@@ -110,9 +110,11 @@ class SpectralStokes:
         eta = float(eta)
         if not np.isfinite(eta) or eta <= 0:
             raise UserInputError('spectral product: the viscosity must be positive and finite, got %r' % eta)
-        if parameters.rules != 'dpstokes':
-            raise UserInputError('spectral product: the %r discretisation rules are not implemented by '
-                                 'SpectralStokes (it implements DoublyPeriodicStokes\' rules)' % parameters.rules)
+        self._uammd = None
+        if parameters.rules == 'uammd':    # libMobility's (UAMMD's) rules: mobility.spectral.uammd, NumPy only
+            from .uammd import UammdStokes
+            self._uammd = UammdStokes(parameters, eta)
+            path = 'numpy'
         self.parameters = parameters
         self.eta = eta
         self.path = choose_path(path)
@@ -140,6 +142,11 @@ class SpectralStokes:
         start = time.perf_counter()
         p = self.parameters
         r = check_positions(p, r_vectors)
+        if self._uammd is not None:
+            self._uammd.set_positions(r)
+            self.n_blobs, self._prepared = r.shape[0], True
+            self.timings['prepare'] = time.perf_counter() - start
+            return
         rel = wrap_positions(p, r)
         self._monopole = self._dipole = None
         monopole = make_stencil(p, p.monopole, rel)
@@ -167,6 +174,10 @@ class SpectralStokes:
         if T is not None and not self.has_torque:
             raise UserInputError('spectral product: torques need a discretisation with a dipole kernel '
                                  '(has_torque=True)')
+        if self._uammd is not None:
+            U, W = self._uammd.product(F, T)
+            self.timings.update(self._uammd.timings)
+            return U, W
         if self._engine is not None:
             U, W, timings = self._engine.product(F, T, want_rotation=self.has_torque)
             self.timings.update(timings)
