@@ -54,7 +54,7 @@ from utils import UserInputError
 
 from mobility.interface import Geometry, make_mobility, registered_backends
 
-__all__ = ['LibMobilityError', 'SelfMobility', 'NBody', 'PERIODICITIES']
+__all__ = ['LibMobilityError', 'SelfMobility', 'NBody', 'DPStokes', 'PERIODICITIES', 'PARAMETER_SELECTIONS']
 
 # The periodicity strings of libMobility's constructors.
 PERIODICITIES = ('open', 'unspecified', 'single_wall', 'two_walls', 'periodic')
@@ -350,7 +350,7 @@ class _Solver:
 def _direct_mobility(geometry, eta, radius):
     """The first backend of the registry's preference order that serves ``geometry`` and runs here."""
     reasons = []
-    for backend in registered_backends():
+    for backend in registered_backends(geometry):
         try:
             return make_mobility(backend, geometry, eta, radius)
         except UserInputError as err:
@@ -512,7 +512,8 @@ class NBody(_Solver):
         size = self._batch_size
         if size == n:
             return _interface_product(self._mobility, shifted, forces, torques, self._include_angular)
-        if not self._include_angular and forces is not None and size <= _DENSE_BATCH_SIZE:
+        if (not self._include_angular and forces is not None and size <= _DENSE_BATCH_SIZE
+                and self._mobility.backend in registered_backends(dense_matrices=True)):
             # many small batches: the dense blocks of every batch at once, one stacked matrix-vector product
             stack = self._mobility.dense_matrix(shifted.reshape(n // size, size, 3))
             return np.einsum('bij,bj->bi', stack, forces.reshape(n // size, 3 * size)).reshape(n, 3), None
@@ -549,3 +550,184 @@ def _rfd_drift(solver, positions, prefactor, step):
     linear = scale * (plus_U - minus_U)
     angular = None if plus_W is None else scale * (plus_W - minus_W)
     return linear, angular
+
+
+# ------------------------------------------------------------------ the spectral product
+_DP_GEOMETRY = {'open': 'doubly_periodic_open', 'single_wall': 'doubly_periodic_wall',
+                'two_walls': 'doubly_periodic_slit', 'periodic': 'triply_periodic'}
+_DP_KIND = {'open': 'DP', 'single_wall': 'DPBW', 'two_walls': 'DPSC', 'periodic': 'TP'}
+PARAMETER_SELECTIONS = ('libmobility', 'dpstokes')
+# libMobility's open-z check: |sum_i F_ic| / sum_i (|F_ix| + |F_iy| + |F_iz|) above this is refused
+NET_FORCE_TOLERANCE = 1e-6
+
+
+class DPStokes(_Solver):
+    """The spectral (force-coupling) product, periodic in x and y (``mobility.spectral``).
+
+    ``DPStokes("periodic", "periodic", Z)``, Z ``open``, ``single_wall`` (wall at zmin), ``two_walls`` (walls
+    at zmin and zmax), or ``periodic`` (triply periodic; this package's extension, with
+    ``parameter_selection="dpstokes"``).  By default libMobility's own grid and kernel selection and UAMMD's
+    discretisation rules (``mobility.spectral.libmobility_parameters``, ``mobility.spectral.uammd``), which
+    give libMobility's numbers; ``parameter_selection="dpstokes"`` takes the DoublyPeriodicStokes CPU code's
+    selection (``mobility.spectral.dpstokes_parameters``) with the kernel named by ``kernel``.  Through the
+    package's mobility interface (backend ``spectral``).
+    """
+    _solver_name = 'DPStokes'
+
+    def _check_periodicity(self, x, y, z):
+        if x != 'periodic' or y != 'periodic' or z not in _DP_GEOMETRY:
+            raise LibMobilityError("[DPStokes] This is a doubly periodic solver: periodicityX and periodicityY must be "
+                                   "'periodic' and periodicityZ one of 'open', 'single_wall', 'two_walls' (or "
+                                   "'periodic', this package's triply periodic extension), got (%r, %r, %r)"
+                                   % (x, y, z))
+        self._z_mode = z
+
+    def _default_parameters(self):
+        return None
+
+    def setParameters(self, Lx, Ly, zmin, zmax, allowChangingBoxSize=False, delta=1e-3, allowUnsafeForces=False,
+                      parameter_selection='libmobility', kernel=None):
+        """DPStokes' parameters (libMobility's keywords and defaults, and two extension keywords).
+
+        Lx, Ly : the periods (lengths); zmin, zmax : the z extent (walls at zmin, and zmax with two_walls; the
+            heights of the blobs with open z; the z period zmax - zmin with ``periodic``);
+        allowChangingBoxSize : whether Lx, Ly may change to fit the grid (libMobility's selection: whole
+            numbers of its nominal cell; DoublyPeriodicStokes' selection: Ly, and the TP z period, enlarged to
+            whole cells, a length already whole up to round-off unchanged);
+        delta : random-finite-difference step of divM in units of the hydrodynamic radius;
+        allowUnsafeForces : skip the open-z (and triply periodic) net-force check;
+        parameter_selection : 'libmobility' (default: libMobility's grid, kernel and discretisation, its
+            numbers) or 'dpstokes' (the DoublyPeriodicStokes CPU code's grid and kernel tables);
+        kernel : with 'dpstokes' only: 'w6' (default), 'w5', 'w4' force only; 'w6', 'w5', 'w6w5', 'w6w4',
+            'w5w4' with includeAngular (monopole, then dipole width).
+        """
+        values = {}
+        for name, value in (('Lx', Lx), ('Ly', Ly), ('zmin', zmin), ('zmax', zmax)):
+            try:
+                values[name] = float(value)
+            except (TypeError, ValueError):
+                raise LibMobilityError('[DPStokes] %s must be a number, got %r' % (name, value)) from None
+            if not np.isfinite(values[name]):
+                raise LibMobilityError('[DPStokes] %s must be finite, got %r' % (name, value))
+        if values['Lx'] <= 0 or values['Ly'] <= 0:
+            raise LibMobilityError('[DPStokes] Lx and Ly must be positive, got %g and %g'
+                                   % (values['Lx'], values['Ly']))
+        if not values['zmax'] > values['zmin']:
+            raise LibMobilityError('[DPStokes] zmax (%g) must exceed zmin (%g)' % (values['zmax'], values['zmin']))
+        if parameter_selection not in PARAMETER_SELECTIONS:
+            raise LibMobilityError('[DPStokes] parameter_selection must be one of %s, got %r'
+                                   % (', '.join(PARAMETER_SELECTIONS), parameter_selection))
+        if parameter_selection == 'libmobility':
+            if kernel is not None:
+                raise LibMobilityError("[DPStokes] kernel= goes with parameter_selection='dpstokes'; libMobility's "
+                                       'selection takes w = 4 force-only and w = 6 with includeAngular')
+            if self._z_mode == 'periodic':
+                raise LibMobilityError("[DPStokes] This is a doubly periodic solver: periodicityZ 'periodic' (this "
+                                       "package's triply periodic extension) needs parameter_selection='dpstokes'")
+        values.update(allowChangingBoxSize=bool(allowChangingBoxSize), delta=self._positive(delta, 'delta'),
+                      allowUnsafeForces=bool(allowUnsafeForces), parameter_selection=parameter_selection,
+                      kernel='w6' if kernel is None else kernel)
+        self._requested = values
+
+    def _configure(self):
+        from mobility.spectral import dpstokes_parameters
+        from mobility.spectral.libmobility_parameters import libmobility_parameters
+        requested = self._requested
+        if requested is None:
+            raise LibMobilityError('[DPStokes] call setParameters(Lx, Ly, zmin, zmax) before initialize')
+        self._delta = requested['delta']
+        self._allow_unsafe = requested['allowUnsafeForces']
+        self._wall_bounds = (requested['zmin'], requested['zmax'])
+        try:
+            if requested['parameter_selection'] == 'libmobility':
+                parameters, stored = libmobility_parameters(
+                    self._radius, self._z_mode, requested['Lx'], requested['Ly'], requested['zmin'],
+                    requested['zmax'], include_angular=self._include_angular,
+                    allow_changing_box_size=requested['allowChangingBoxSize'])
+                requested.update(stored)    # libMobility keeps these: a second initialize widens z again
+            else:
+                parameters = dpstokes_parameters(
+                    self._radius, _DP_KIND[self._z_mode], requested['Lx'], requested['Ly'], requested['zmin'],
+                    requested['zmax'], kernel=requested['kernel'], has_torque=self._include_angular,
+                    whole_cells_tolerance=1e-9, warn=False)
+                self._check_box_unchanged(parameters)
+            kind = _DP_GEOMETRY[self._z_mode]
+            if kind == 'triply_periodic':
+                geometry = Geometry(kind, (parameters.Lx, parameters.Ly, parameters.Lz))
+            else:
+                geometry = Geometry(kind, (parameters.Lx, parameters.Ly, 0.0), z_bounds=self._wall_bounds)
+            self._mobility = make_mobility('spectral', geometry, self._eta, self._radius, parameters=parameters)
+        except LibMobilityError:
+            raise
+        except UserInputError as err:
+            raise LibMobilityError(_dpstokes_message(err)) from None
+        self.parameters = parameters
+
+    def _check_box_unchanged(self, parameters):
+        """With allowChangingBoxSize False the DoublyPeriodicStokes selection must keep the lengths."""
+        requested = self._requested
+        if requested['allowChangingBoxSize']:
+            return
+        changes = [('Ly', requested['Ly'], parameters.Ly)]
+        if self._z_mode == 'periodic':
+            changes.append(('zmax - zmin', requested['zmax'] - requested['zmin'], parameters.Lz))
+        for name, asked, used in changes:
+            if abs(used - asked) > 1e-12 * asked:
+                raise LibMobilityError("[DPStokes] parameter_selection='dpstokes' makes %s a whole number of cells "
+                                       "(h = %.17g): %.17g instead of %.17g; pass allowChangingBoxSize=True or that "
+                                       'length' % (name, parameters.hx, used, asked))
+
+    def _check_positions(self, positions):
+        from mobility.spectral.product import check_positions
+        zmin, zmax = self._wall_bounds
+        z = positions[:, 2]
+        if self._z_mode in ('single_wall', 'two_walls'):
+            below = np.flatnonzero(z < zmin)
+            if below.size:
+                raise LibMobilityError('[DPStokes] A particle has passed through a wall: particle %d at z = %.17g is '
+                                       'below the bottom wall at zmin = %.17g' % (below[0], z[below[0]], zmin))
+        if self._z_mode == 'two_walls':
+            above = np.flatnonzero(z > zmax)
+            if above.size:
+                raise LibMobilityError('[DPStokes] A particle has passed through a wall: particle %d at z = %.17g is '
+                                       'above the top wall at zmax = %.17g' % (above[0], z[above[0]], zmax))
+        if positions.shape[0]:
+            try:
+                check_positions(self.parameters, positions)
+            except UserInputError as err:
+                raise LibMobilityError(_dpstokes_message(err)) from None
+
+    def _check_net(self, values, what):
+        """libMobility's open-z check: each component's net sum against the total magnitude."""
+        if values is None or self._allow_unsafe or self._z_mode not in ('open', 'periodic'):
+            return
+        total = np.sum(np.abs(values))
+        if total == 0:
+            return
+        net = np.abs(values.sum(axis=0)) / total
+        if np.any(net > NET_FORCE_TOLERANCE):
+            raise LibMobilityError('[DPStokes] The %s on the particles must add up to zero with periodicityZ %r (net '
+                                   '%s / total = %.3g > %g: %s); pass allowUnsafeForces=True in setParameters to '
+                                   'compute anyway' % (what, self._z_mode, what, float(net.max()), NET_FORCE_TOLERANCE,
+                                                       'the k = 0 mode is dropped' if self._z_mode == 'open'
+                                                       else 'the mean is dropped'))
+
+    def _grand_product(self, positions, forces, torques):
+        self._check_net(forces, 'forces')
+        self._check_net(torques, 'torques')
+        try:
+            return _interface_product(self._mobility, positions, forces, torques, self._include_angular)
+        except LibMobilityError:
+            raise
+        except UserInputError as err:
+            raise LibMobilityError(_dpstokes_message(err)) from None
+
+    def _drift(self, positions, prefactor):
+        if prefactor == 0.0:
+            return _Solver._drift(self, positions, prefactor)
+        return _rfd_drift(self, positions, prefactor, self._delta * self._radius)
+
+
+def _dpstokes_message(err):
+    text = str(err)
+    return text if text.startswith('[DPStokes]') else '[DPStokes] ' + text

@@ -12,11 +12,14 @@ What the numbers are checked against (never the face's own output):
 * the package's own products through another backend (NBody must equal them to round-off);
 * statistics with a tolerance from the standard error, each with a negative control that must fail.
 """
+import json
+
 import numpy as np
 import pytest
 
+from conftest import REFERENCE_DIR
 from mobility import interface
-from mobility.libmobility import LibMobilityError, NBody, SelfMobility
+from mobility.libmobility import DPStokes, LibMobilityError, NBody, SelfMobility
 
 ETA = 0.7
 RADIUS = 0.9
@@ -447,3 +450,163 @@ def test_reinitialize_restarts_the_seeded_streams_and_scales_with_the_prefactor(
     solver.setPositions(_blobs(2))
     twice, _ = solver.sqrtMdotW(2.0)
     np.testing.assert_allclose(twice, 2 * once, rtol=1e-12)
+
+
+# ------------------------------------------------------------------ DPStokes: DoublyPeriodicStokes' selection
+DPSTOKES_DIR = REFERENCE_DIR / 'dpstokes'
+Z_OF_GEOMETRY = {'TP': 'periodic', 'DP': 'open', 'DPBW': 'single_wall', 'DPSC': 'two_walls'}
+KERNEL_OF_TYPE = {False: {0: 'w6', 1: 'w5', 2: 'w4'}, True: {0: 'w6', 1: 'w5', 3: 'w6w5', 4: 'w6w4', 5: 'w5w4'}}
+
+
+def _dpstokes_cases():
+    found = []
+    for name in ('random', 'pair', 'roller'):
+        for path in sorted((DPSTOKES_DIR / name).glob('*.json')):
+            if path.with_suffix('.npz').exists():
+                found.append((name, path))
+    return found
+
+
+DPSTOKES_CASES = _dpstokes_cases()
+
+
+def _dpstokes_solver(run):
+    """The README's call sequence of ``DPStokes`` for one run block of a reference JSON."""
+    solver = DPStokes('periodic', 'periodic', Z_OF_GEOMETRY[run['geometry']])
+    solver.setParameters(Lx=run['Lx_requested'], Ly=run['Ly_requested'], zmin=run['zmin'], zmax=run['zmax_requested'],
+                         allowChangingBoxSize=True, allowUnsafeForces=True, parameter_selection='dpstokes',
+                         kernel=KERNEL_OF_TYPE[run['has_torque']][run['kernType']])
+    solver.initialize(viscosity=run['eta'], hydrodynamicRadius=run['radius'], includeAngular=run['has_torque'])
+    return solver
+
+
+def test_dpstokes_reference_folder_present():
+    if not DPSTOKES_DIR.is_dir():
+        pytest.skip('DoublyPeriodicStokes reference data not found at %s' % DPSTOKES_DIR)
+    assert DPSTOKES_CASES, 'no reference files under %s' % DPSTOKES_DIR
+
+
+@pytest.mark.parametrize('case', DPSTOKES_CASES, ids=[path.stem for _, path in DPSTOKES_CASES])
+def test_dpstokes_selection_reproduces_every_reference_file(case):
+    """Every file of ../shared/reference/dpstokes (held-back files dropped there too) through the face, by the
+    README's call sequence; every output array to 1e-10 relative (max |ours - ref| / max |ref|)."""
+    kind, path = case
+    meta = json.loads(path.read_text())
+    with np.load(path.with_suffix('.npz')) as archive:
+        data = {key: archive[key] for key in archive.files}
+    compared = []
+    if kind in ('random', 'roller'):
+        run = meta['force_only_run' if kind == 'random' else 'run']
+        solver = _dpstokes_solver(run)
+        solver.setPositions(data['positions'])
+        U, W = solver.Mdot(data['forces'])
+        assert W is None and U.shape == data['positions'].shape
+        compared.append(('U_F', U, data['U_F']))
+    if kind == 'random':
+        solver = _dpstokes_solver(meta['force_torque_run'])
+        solver.setPositions(data['positions'])
+        for suffix, (U, W) in (('FT', solver.Mdot(data['forces'], data['torques'])),
+                               ('Fonly', solver.Mdot(data['forces'])),
+                               ('Tonly', solver.Mdot(torques=data['torques']))):
+            compared += [('U_' + suffix, U, data['U_' + suffix]), ('W_' + suffix, W, data['W_' + suffix])]
+    if kind == 'pair':
+        run = meta['run']
+        solver = _dpstokes_solver(run)
+        M = data['M']
+        columns = np.asarray(data['columns']).astype(int)
+        for i_s in range(M.shape[0]):
+            for i_z in range(M.shape[1]):
+                solver.setPositions(data['positions'][i_s, i_z])
+                ours = np.zeros_like(M[i_s, i_z])
+                for j, column in enumerate(columns):
+                    unit = np.zeros(12)
+                    unit[column] = 1.0
+                    if run['has_torque']:
+                        U, W = solver.Mdot(unit[:6].reshape(2, 3), unit[6:].reshape(2, 3))
+                        ours[:, j] = np.concatenate((U.ravel(), W.ravel()))
+                    else:
+                        U, _ = solver.Mdot(unit[:6].reshape(2, 3))
+                        ours[:, j] = U.ravel()
+                compared.append(('M[%d, %d]' % (i_s, i_z), ours, M[i_s, i_z]))
+    errors = {name: np.max(np.abs(ours - ref)) / np.max(np.abs(ref)) for name, ours, ref in compared}
+    worst = max(errors, key=errors.get)
+    assert errors[worst] < 1e-10, '%s: %s off by %.3g relative' % (path.stem, worst, errors[worst])
+
+
+def _small_dpstokes(z='single_wall', include_angular=False, selection='dpstokes', seed=3, **options):
+    solver = DPStokes('periodic', 'periodic', z)
+    parameters = dict(Lx=16.0, Ly=16.0, zmin=0.0, zmax=6.0)
+    if selection == 'dpstokes':
+        parameters.update(parameter_selection='dpstokes')
+    parameters.update(options)
+    solver.setParameters(**parameters)
+    solver.initialize(viscosity=ETA, hydrodynamicRadius=RADIUS, includeAngular=include_angular, seed=seed)
+    return solver
+
+
+def test_dpstokes_constructor_and_parameters():
+    for periodicity in [('open', 'periodic', 'open'), ('periodic', 'periodic', 'unspecified'),
+                        ('periodic', 'open', 'single_wall')]:
+        with pytest.raises(RuntimeError, match='doubly periodic solver'):
+            DPStokes(*periodicity)
+    with pytest.raises(RuntimeError, match='doubly periodic solver'):       # the extension needs the dpstokes tables
+        DPStokes('periodic', 'periodic', 'periodic').setParameters(16.0, 16.0, 0.0, 8.0)
+    with pytest.raises(RuntimeError, match='kernel'):
+        DPStokes('periodic', 'periodic', 'open').setParameters(16.0, 16.0, 0.0, 8.0, kernel='w6')
+    with pytest.raises(RuntimeError, match='parameter_selection'):
+        DPStokes('periodic', 'periodic', 'open').setParameters(16.0, 16.0, 0.0, 8.0, parameter_selection='uammd')
+    with pytest.raises(RuntimeError, match='setParameters'):
+        DPStokes('periodic', 'periodic', 'open').initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    with pytest.raises(RuntimeError, match='kernel'):
+        _small_dpstokes(include_angular=True, kernel='w4')                 # w4 has no torque pair
+    with pytest.raises(RuntimeError, match='whole number of cells'):     # 16.3 is not whole cells of the w6 grid
+        _small_dpstokes(Ly=16.3)
+    assert DPStokes.precision == 'double'
+
+
+def test_dpstokes_wall_checks():
+    bottom = _small_dpstokes('single_wall')
+    bottom.setPositions([[1.0, 2.0, 0.0]])                  # on the wall: accepted
+    with pytest.raises(RuntimeError, match='passed through a wall'):
+        bottom.setPositions([[1.0, 2.0, 3.0], [0.0, 0.0, -1e-9]])
+    slit = _small_dpstokes('two_walls')
+    with pytest.raises(RuntimeError, match='passed through a wall'):
+        slit.setPositions([[1.0, 2.0, 6.0 + 1e-9]])
+    with pytest.raises(RuntimeError, match='passed through a wall'):
+        slit.setPositions([[1.0, 2.0, -0.1]])
+
+
+def test_dpstokes_open_net_force_check():
+    solver = _small_dpstokes('open')
+    solver.setPositions([[1.0, 2.0, 3.0], [5.0, 1.0, 2.0]])
+    with pytest.raises(RuntimeError, match='DPStokes'):
+        solver.Mdot([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    U, _ = solver.Mdot([[1.0, 0.5, 0.0], [-1.0, -0.5, 0.0]])          # zero net force: fine
+    assert U.shape == (2, 3)
+    with pytest.raises(RuntimeError, match='DPStokes'):                 # the Lanczos vectors have a net force
+        solver.sqrtMdotW()
+    unsafe = _small_dpstokes('open', allowUnsafeForces=True)
+    unsafe.setPositions([[1.0, 2.0, 3.0], [5.0, 1.0, 2.0]])
+    unsafe.Mdot([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert unsafe.sqrtMdotW()[0].shape == (2, 3)
+
+
+@pytest.mark.parametrize('selection', ['dpstokes', 'libmobility'])
+def test_dpstokes_langevin_at_zero_temperature_and_seeds(selection):
+    positions = [[1.0, 2.0, 3.0], [5.0, 1.0, 2.0]]
+    F = np.array([[0.3, -1.0, 0.2], [1.0, 0.4, -0.7]])
+    T = np.array([[0.1, 0.2, -0.3], [0.0, 0.5, 0.1]])
+
+    def run(seed):
+        solver = _small_dpstokes('single_wall', include_angular=True, selection=selection, seed=seed)
+        solver.setPositions(positions)
+        U, W = solver.LangevinVelocities(0.1, 0.0, F, T)
+        U_ref, W_ref = solver.Mdot(F, T)
+        np.testing.assert_array_equal(U, U_ref)
+        np.testing.assert_array_equal(W, W_ref)
+        return solver.sqrtMdotW(0.7) + solver.divM(0.5)
+
+    first, again, other = run(11), run(11), run(12)
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(first[0], other[0])
