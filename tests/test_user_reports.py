@@ -237,3 +237,20 @@ def test_msd_and_fkt_charts_have_no_overlapping_tick_labels(span, monkeypatch):
         figure = tables.build_chart('mean-square displacement', 'time', 'MSD', curves, log_x=True)
         assert overlapping_tick_labels(figure) > 0
         plt.close(figure)
+
+
+def test_a_velocity_file_may_start_with_the_number_of_bodies(tmp_path):
+    """The published rollers_pillars gives its pillars' velocity file a first line '7' (the number of bodies); it
+    was refused.  Now a leading line holding the number of bodies alone is skipped: the table equals the one
+    without it, and a first line with another number is still an error naming the file."""
+    from multi_bodies.files.structure_files import read_body_table
+    from utils import UserInputError
+    rows = '1 2 3 4 5 6\n0 0 0 0 0 0.5\n-1 0 0 0 0 0\n'
+    (tmp_path / 'plain.dat').write_text(rows)
+    (tmp_path / 'counted.dat').write_text('3\n' + rows)
+    (tmp_path / 'wrong.dat').write_text('4\n' + rows)
+    plain = read_body_table(str(tmp_path / 'plain.dat'), 3, 'velocity')
+    np.testing.assert_array_equal(read_body_table(str(tmp_path / 'counted.dat'), 3, 'velocity'), plain)
+    assert plain.shape == (3, 6) and plain[1, 5] == 0.5
+    with pytest.raises(UserInputError, match='wrong.dat, line 1: expected six numbers'):
+        read_body_table(str(tmp_path / 'wrong.dat'), 3, 'velocity')

@@ -15,7 +15,9 @@ lines are skipped.
 * ``.slip``: first line the number of blobs; then ``n`` lines ``ux uy uz``,
   the active slip of each blob in the body frame.
 * force file (scheme ``mobility``): one line per body ``Fx Fy Fz Tx Ty Tz``.
-* velocity file (scheme ``resistance``): one line per body ``vx vy vz wx wy wz``.
+* velocity file (scheme ``resistance``, and the fourth file of a ``structure`` line): one line per body
+  ``vx vy vz wx wy wz``.  Either may start with a line holding the number of bodies alone (the published
+  ``rollers_pillars`` velocity file does).
 
 Every reader raises ``utils.UserInputError`` naming the file and line and
 what was expected when a file is missing, is not UTF-8 text or is
@@ -173,6 +175,8 @@ def read_body_table(path, num_bodies, kind, referenced_from=None):
     """
     expected = 'Fx Fy Fz Tx Ty Tz' if kind == 'force' else 'vx vy vz wx wy wz'
     rows = _meaningful_lines(path, kind, referenced_from)
+    if rows and len(rows[0][1]) == 1 and rows[0][1][0] == str(num_bodies):
+        rows = rows[1:]  # a leading count line, as in the published rollers_pillars velocity file
     table = []
     for number, tokens in rows:
         if len(tokens) != 6:
