@@ -228,14 +228,18 @@ def refuse_if_too_big(need, what, where, fix, have=None):
 
 
 NPY_HEADER_BYTES = 65536  # numpy's own limit of a .npy header it reads without allow_pickle (max_header_size)
+# Numbers a program wrote compress a few times at most; a member that inflates more than ZIP_BOMB_RATIO times, to
+# more than ZIP_BOMB_BYTES, is a zip bomb (refused before it is inflated).
+ZIP_BOMB_RATIO, ZIP_BOMB_BYTES = 1000, 1 << 26
 
 
 def read_npz(path, names, what):
     """The arrays ``names`` of the ``.npz`` file ``path`` (dict name -> array), each read only after what the file
     declares was checked: a member ``<name>.npy`` of a zip archive, a numeric dtype (no object arrays: nothing is
     unpickled), a declared shape whose bytes are exactly the member's declared size, all of them within the memory
-    available (``refuse_if_too_big``); then exactly that many bytes are inflated, so an archive that declares a
-    small member and inflates to gigabytes, or a header declaring 10^12 values, costs no more than the header.
+    available (``refuse_if_too_big``), no member inflating ``ZIP_BOMB_RATIO`` times beyond ``ZIP_BOMB_BYTES``;
+    then exactly that many bytes are inflated, so an archive that declares a small member and inflates to
+    gigabytes, or a header declaring 10^12 values, costs no more than the header.
 
     ``what`` names the kind of file in the refusals (UserInputError naming ``path``).
     """
@@ -262,10 +266,10 @@ def read_npz(path, names, what):
                 with archive.open(info) as member:
                     head = io.BytesIO(member.read(NPY_HEADER_BYTES))
                 version = np.lib.format.read_magic(head)
-                if version not in ((1, 0), (2, 0), (3, 0)):
+                readers = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+                if version not in readers:
                     raise ValueError('.npy version %s' % (version,))
-                shape, fortran, dtype = np.lib.format._read_array_header(head, version,
-                                                                          max_header_size=NPY_HEADER_BYTES)
+                shape, fortran, dtype = readers[version](head, max_header_size=NPY_HEADER_BYTES)
             except KeyError:
                 raise refuse('it holds no array %r' % name)
             except (ValueError, OSError, zipfile.BadZipFile, EOFError, NotImplementedError, SyntaxError,
@@ -277,6 +281,9 @@ def read_npz(path, names, what):
             for n in shape:
                 count *= int(n)
             need = count * dtype.itemsize
+            if info.file_size > ZIP_BOMB_BYTES and info.file_size > ZIP_BOMB_RATIO * max(info.compress_size, 1):
+                raise refuse('%r inflates from %d to %d bytes, more than %d times: a zip bomb, not data'
+                             % (name, info.compress_size, info.file_size, ZIP_BOMB_RATIO))
             if info.file_size != head.tell() + need:
                 raise refuse('%r declares %d values of shape %s (%d bytes), but its member holds %d bytes'
                              % (name, count, tuple(shape), need, info.file_size - head.tell()))

@@ -32,12 +32,18 @@ def main(argv=None):
     parser.add_argument('--slope-mu', type=float, default=None,
                         help='draw 4 kT mu t for the in-plane MSD x + y with this mobility')
     args = parser.parse_args(argv)
-    try:
-        data = np.load(args.msd_file)
-        times, msd, error = data['times'], data['msd'], data['msd_error']
-    except (OSError, KeyError, ValueError) as err:
-        raise utils.UserInputError('%s is not an MSD file of calculate_boomerang_msd_from_trajectories.py (%s)'
-                                   % (args.msd_file, err))
+    what = 'an MSD file of calculate_boomerang_msd_from_trajectories.py'
+    # sizes, shapes and dtypes checked as declared, before anything is inflated (a zip bomb, a header of 10^12
+    # values): utils.read_npz
+    data = utils.read_npz(args.msd_file, ('times', 'msd', 'msd_error'), what)
+    times, msd, error = data['times'], data['msd'], data['msd_error']
+    lags = times.shape[0] if times.ndim == 1 else -1
+    if lags < 1 or msd.shape != (lags, 6, 6) or error.shape != (lags, 6, 6):
+        raise utils.UserInputError('%s is not %s: times %s, msd %s and msd_error %s, where (L,), (L, 6, 6) and '
+                                   '(L, 6, 6) with L >= 1 lags were expected'
+                                   % (args.msd_file, what, times.shape, msd.shape, error.shape))
+    if not all(np.all(np.isfinite(a)) for a in (times, msd, error)):
+        raise utils.UserInputError('%s is not %s: it holds NaN or infinite values' % (args.msd_file, what))
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot

@@ -153,7 +153,14 @@ class MCMCRun:
         """The Monte Carlo loop; returns the exit status."""
         options, sampler = self.options, self.sampler
         restart = options.initial_step > 0
-        write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart, log=self.log)
+        try:
+            write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart,
+                            log=self.log)
+        except OSError as err:  # a full disk or a file-size limit before the first save: one line, the file named
+            print('error: run stopped before its first step: %s'
+                  % run_output.write_error_line(err, 'the first files of the run', options.initial_step, None,
+                                                again=options.initial_step), file=sys.stderr, flush=True)
+            return 1
         writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
                                            options.where('save_clones'), restart=restart,
                                            restart_from=(self.restart, self.restart_end),

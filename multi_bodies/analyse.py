@@ -85,7 +85,29 @@ def parse_arguments(argv):
                         'the smallest spacing that keeps the buffer under 1 GiB)')
     parser.add_argument('--unwrap', action='store_true', help='undo periodic jumps (trajectories saved in the box)')
     parser.add_argument('--no-charts', action='store_true', help='write the tables only')
-    return parser.parse_args(argv)
+    return check_arguments(parser.parse_args(argv))
+
+
+def check_arguments(args):
+    """Refuse, naming the flag, a count or length that cannot be meant (zero, negative, NaN, infinite) before
+    anything is read; the memory the accumulators need is checked where they are made."""
+    def flag(name):
+        return '--' + name.replace('_', '-')
+    for name, low in (('bins', 1), ('k_index_max', 1), ('stride', 1), ('blocks', 1), ('discard', 0),
+                      ('max_lag', 1), ('origin_every', 1)):
+        value = getattr(args, name)
+        if value is not None and value < low:
+            raise UserInputError('%s %d: it must be an integer >= %d' % (flag(name), value, low))
+    for name in ('r_max', 'frame_interval'):
+        value = getattr(args, name)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise UserInputError('%s %r: it must be a positive finite number' % (flag(name), value))
+    if args.periodic_length is not None and not all(np.isfinite(v) and v >= 0 for v in args.periodic_length):
+        raise UserInputError('--periodic-length %s: each length must be 0 (not periodic) or a positive finite number'
+                             % ' '.join('%r' % v for v in args.periodic_length))
+    if args.green is not None and not 0 <= args.green[0] <= args.green[1]:
+        raise UserInputError('--green %d %d: it needs 0 <= i0 <= i1' % tuple(args.green))
+    return args
 
 
 def load_sources(args):
@@ -157,9 +179,11 @@ def main(argv=None):
         r_max = args.r_max or (0.5 * periodic.min() if len(periodic) else None)
         if r_max is None:
             raise UserInputError('g(r) in a box without periodic axes needs --r-max')
-        accumulators['gr'] = PairCorrelation(box, r_max, args.bins, args.dimension)
+        accumulators['gr'] = PairCorrelation(box, r_max, args.bins, args.dimension, where='--bins %d' % args.bins,
+                                             blocks=args.blocks)
     if args.sk:
-        accumulators['sk'] = StructureFactor(box, args.k_index_max, args.dimension, green=args.green)
+        accumulators['sk'] = StructureFactor(box, args.k_index_max, args.dimension, green=args.green,
+                                             where='--k-index-max %d' % args.k_index_max, blocks=args.blocks)
     shell_k = None
     if args.fkt or args.msd:
         frames = min((s.n_frames - args.discard + args.stride - 1) // args.stride for s in sources)
@@ -174,7 +198,8 @@ def main(argv=None):
                             else [base * n for n in (1, 2, 4, 8)])
             except ValueError:
                 raise UserInputError('--k-values expects numbers separated by commas, got %r' % args.k_values)
-            wavevectors, groups, shell_k, collective = shell_wavevectors(box, k_values, args.dimension)
+            wavevectors, groups, shell_k, collective = shell_wavevectors(box, k_values, args.dimension,
+                                                                         where='--k-values')
         accumulators['time'] = TimeCorrelations(interval * args.stride, lag_list(max_lag), box, wavevectors,
                                                 groups, args.dimension, collective=collective, msd=args.msd,
                                                 unwrap=args.unwrap, origin_every=args.origin_every)

@@ -65,7 +65,7 @@ SCHEMES = STATIC_SCHEMES
 
 
 def save_table(path, table):
-    np.savetxt(path, table, delimiter='  ')
+    run_output.save_table(path, table)
 
 
 def run_body_mobility(options, system, configuration):
@@ -211,11 +211,11 @@ def write_results(options, setup, force_table=None, velocity_table=None):
     """Solve the static problem and write its files (the lock of ``output_name`` held, earlier files set aside)."""
     system = setup.system
     copy = options.output_name + '.inputfile'
-    if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
-        shutil.copyfile(options.input_file, copy)
     configuration = system.start_configuration
-    write_bodies_info(options.output_name + '.bodies_info', setup.types, system.num_blobs)
     try:
+        if not (os.path.exists(copy) and os.path.samefile(options.input_file, copy)):
+            shutil.copyfile(options.input_file, copy)
+        write_bodies_info(options.output_name + '.bodies_info', setup.types, system.num_blobs)
         if options.scheme == 'body_mobility':
             return run_body_mobility(options, system, configuration)
         if options.scheme == 'mobility':
@@ -227,6 +227,11 @@ def write_results(options, setup, force_table=None, velocity_table=None):
     except np.linalg.LinAlgError as err:  # a singular blob mobility: blobs of a body merged in double precision
         print('error: the blob mobility is singular (%s): the blobs of a body coincide in double precision, '
               'for example a body very far from the origin; check the clones files' % err, file=sys.stderr)
+        return 1
+    except OSError as err:  # a full disk or a file-size limit: one line naming the file
+        print('error: cannot write %s (%s); free space (or raise the file-size limit) and run again'
+              % (getattr(err, 'filename2', None) or err.filename or 'the outputs of %s' % options.output_name,
+                 err.strerror or err), file=sys.stderr)
         return 1
 
 

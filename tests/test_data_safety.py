@@ -17,6 +17,7 @@ import io
 import os
 import pickle
 import shutil
+import subprocess
 import sys
 import textwrap
 from pathlib import Path
@@ -964,3 +965,255 @@ def test_a_record_that_does_not_fit_the_run_is_a_one_line_refusal(tmp_path, scen
 
 def snapshot_tree(folder):
     return {str(p.relative_to(folder)): p.read_bytes() for p in Path(folder).rglob('*') if p.is_file()}
+
+
+# ------------------------------------------------------------------ ensemble.py --aggregate on hostile folders (issue 48)
+@pytest.fixture(scope='module')
+def finished_ensemble(tmp_path_factory):
+    """A small ensemble (one point, two replicas) run to the end: the aggregate's input."""
+    root = tmp_path_factory.mktemp('ensemble')
+    plan = small_plan(root)
+    for spec in runner.replica_specs(plan):
+        assert runner.run_replica(spec)['status'] == 'done'
+    return Path(plan['output_dir'])
+
+
+def _manifest_edit(change):
+    def edit(folder):
+        path = folder / runner.MANIFEST_NAME
+        manifest = json.loads(path.read_text())
+        change(manifest)
+        path.write_text(json.dumps(manifest))
+    return edit
+
+
+def _corrupt_snapshot(data):
+    def edit(folder):
+        path = sorted(folder.rglob('*.clones'))[-1]
+        path.write_bytes(data(path.read_bytes()))
+    return edit
+
+
+AGGREGATE_CASES = {
+    'snapshot NaN': (_corrupt_snapshot(lambda b: b.replace(b'0.0', b'nan', 1) if b'0.0' in b else b'1\nnan 0 1 1 0 0 0\n'),
+                     'holds a NaN or infinite number'),
+    'snapshot garbage': (_corrupt_snapshot(lambda b: b'\xff\xfe garbage\n'), 'not a snapshot'),
+    'snapshot short': (_corrupt_snapshot(lambda b: b'3\n0 0 1 1 0 0 0\n'), 'the count line says 3 bodies'),
+    'point out of range': (_manifest_edit(lambda m: m['replicas'][0].update(point=7)), 'has point 7, not one of'),
+    'point not a number': (_manifest_edit(lambda m: m['replicas'][0].update(point='x')), "has point 'x'"),
+    'junk vary': (_manifest_edit(lambda m: m.update(vary=[['g', 1, 2, 3]])), 'vary is not a list'),
+    'junk vary name': (_manifest_edit(lambda m: m.update(vary=[[7, ['1']]])), 'vary is not a list'),
+    'junk overrides': (_manifest_edit(lambda m: m['points'][0].update(overrides={'g': 1})), 'overrides of point'),
+    'deeply nested': (lambda folder: (folder / runner.MANIFEST_NAME).write_text('[' * 100000 + ']' * 100000),
+                      'is not a valid ensemble manifest'),
+    'not UTF-8': (lambda folder: (folder / runner.MANIFEST_NAME).write_bytes(b'{"replicas": "\xff"}'),
+                  'is not a valid ensemble manifest'),
+}
+
+
+@pytest.mark.parametrize('case', sorted(AGGREGATE_CASES))
+def test_aggregate_of_a_damaged_ensemble_is_a_one_line_refusal(finished_ensemble, tmp_path, case):
+    """ensemble.py --aggregate with a corrupt replica snapshot, a manifest point out of range, a junk vary or
+    deeply nested JSON once ended in a traceback; now each is one line naming the file (exit 2)."""
+    edit, words = AGGREGATE_CASES[case]
+    folder = tmp_path / 'ens'
+    shutil.copytree(finished_ensemble, folder)
+    edit(folder)
+    script = importlib.import_module('multi_bodies.ensemble')
+    err = io.StringIO()
+    import contextlib
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        with pytest.raises(SystemExit) as stop:
+            utils.fail_cleanly(script.main, ['--aggregate', str(folder), '--no-charts'])
+    assert stop.value.code == 2, err.getvalue()
+    lines = [line for line in err.getvalue().splitlines() if line.strip()]
+    assert len(lines) == 1 and words in lines[0] and 'Traceback' not in lines[0], err.getvalue()
+    assert not (folder / 'summary.csv').exists()
+
+
+def test_aggregate_of_the_finished_ensemble_runs(finished_ensemble, tmp_path):
+    """Control: the undamaged copy aggregates."""
+    from multi_bodies.ensembles import ensemble_statistics
+    folder = tmp_path / 'ens'
+    shutil.copytree(finished_ensemble, folder)
+    statistics = ensemble_statistics.aggregate(str(folder), charts=False, log=lambda *a: None)
+    assert len(statistics) == 1 and (folder / 'summary.csv').exists()
+
+
+# ------------------------------------------------------------------ hostile inputs bounded up front (issue 48)
+PEAK_MARGIN_KIB = 100 * 1024  # a refused hostile input costs less than 100 MB above the interpreter's own peak
+
+
+def peak_kib(arguments, cwd):
+    """(exit status, stderr, peak resident KiB) of ``arguments`` run as a grandchild, its peak measured alone."""
+    probe = ('import resource, subprocess, sys; p = subprocess.run(sys.argv[1:], capture_output=True, text=True); '
+             'sys.stderr.write(p.stderr); print(p.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)')
+    from run_scenes import child_environment
+    done = subprocess.run([sys.executable, '-c', probe] + list(arguments), cwd=str(cwd), capture_output=True,
+                          text=True, timeout=300, env=child_environment())
+    status, peak = done.stdout.split()[-2:]
+    return int(status), done.stderr, int(peak)
+
+
+def npy_member(shape, data=b''):
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {'descr': '<f8', 'fortran_order': False, 'shape': shape})
+    return header.getvalue() + data
+
+
+def _msd_file(kind, path):
+    import zipfile
+    if kind == 'header of 10^12 values':  # 884 bytes that declare 8 TB
+        with zipfile.ZipFile(path, 'w') as archive:
+            for name, shape in (('times', (10 ** 12,)), ('msd', (10 ** 12, 6, 6)), ('msd_error', (10 ** 12, 6, 6))):
+                archive.writestr(name + '.npy', npy_member(shape))
+    elif kind == 'zip bomb':  # a few hundred kB that inflate to 300 MB (honest headers)
+        lags = 10 ** 6
+        with zipfile.ZipFile(path, 'w', compression=zipfile.ZIP_DEFLATED) as archive:
+            for name, shape in (('times', (lags,)), ('msd', (lags, 6, 6)), ('msd_error', (lags, 6, 6))):
+                with archive.open(name + '.npy', 'w', force_zip64=True) as member:
+                    member.write(npy_member(shape))
+                    left = int(np.prod(shape)) * 8
+                    zeros = bytes(1 << 22)
+                    while left > 0:
+                        member.write(zeros[:min(left, len(zeros))])
+                        left -= len(zeros)
+    else:  # 'wrong msd shape'
+        np.savez(path, times=np.arange(5.0), msd=np.ones((5, 6)), msd_error=np.ones((5, 6, 6)))
+
+
+def _analysis_run(folder):
+    from test_analysis import ideal_gas, write_run
+    (folder / 'data').mkdir(parents=True)
+    write_run(folder / 'data', ideal_gas(12, 40, (8, 8, 2), seed=70), one_file=True)
+    (folder / 'in.dat').write_text('scheme stochastic_first_order_RFD\ndt 0.1\nn_save 5\nperiodic_length 8 8 0\n'
+                                   'output_name data/run\nsave_clones one_file\nstructure b.vertex blobs.clones\n')
+
+
+ANALYSE = str(REPO_ROOT / 'multi_bodies' / 'analyse.py')
+HOSTILE = {  # case: (script, its arguments, words of the one error line)
+    'msd header of 10^12 values': ('plot', ['msd.npz'], 'declares 1000000000000 values'),
+    'msd zip bomb': ('plot', ['msd.npz'], 'a zip bomb'),
+    'msd wrong msd shape': ('plot', ['msd.npz'], 'msd (5, 6)'),
+    'analyse bins 10^9': ('analyse', ['--gr', '--bins', '1000000000'], '--bins 1000000000: g(r) in'),
+    'analyse k-index-max 10^5': ('analyse', ['--sk', '--k-index-max', '100000'], '--k-index-max 100000: S(k)'),
+    'analyse k-values 10^6': ('analyse', ['--fkt', '--k-values', '1e6'], '--k-values: the box of wavevectors'),
+    'analyse stride 0': ('analyse', ['--msd', '--stride', '0'], '--stride 0: it must be an integer >= 1'),
+    'analyse NaN positions': ('analyse', ['--msd'], 'run.blobs.config: the snapshot at byte'),
+    'HydroGrid cells 100000 100000': ('dynamic', ['--input-file', 'inputfile.dat'], 'cells 100000 100000: S(k)'),
+}
+
+
+@pytest.mark.parametrize('case', sorted(HOSTILE))
+def test_a_hostile_input_is_refused_in_one_line_within_its_memory_bound(tmp_path, case):
+    """An allocation that data or options size is bounded before it is made: --bins 1e9 once grew to 19 GB, a
+    HydroGrid cells 100000 100000 asked for 37 GiB, an 884-byte .npz declared 10^12 floats, a 2.3 MB zip bomb
+    inflated to 2.35 GB before its refusal, --stride 0 divided by zero, NaN positions gave a NaN MSD and exit 0.
+    Each is now one line naming the option or file (exit 2), and costs under 100 MB above the same script's peak
+    when it does nothing (--help: the imports)."""
+    script, arguments, words = HOSTILE[case]
+    folder = tmp_path / 'case'
+    folder.mkdir()
+    if script == 'plot':
+        _msd_file(case[4:], folder / 'msd.npz')
+        command = [str(REPO_ROOT / 'boomerang' / 'plot_boomerang_msd.py')]
+        arguments = arguments + ['--output', str(folder / 'msd.png')]
+    elif script == 'analyse':
+        _analysis_run(folder)
+        if 'NaN' in case:
+            path = folder / 'data' / 'run.blobs.config'
+            lines = path.read_text().splitlines()
+            lines[3] = 'nan ' + lines[3].split(None, 1)[1]
+            path.write_text('\n'.join(lines) + '\n')
+        command = [ANALYSE]
+        arguments = ['--input-file', 'in.dat', '--no-charts'] + arguments
+    else:
+        from test_analysis import make_hydrogrid_run
+        make_hydrogrid_run(folder)
+        path = folder / 'inputfile.dat'
+        path.write_text(path.read_text().replace('cells 8 8', 'cells 100000 100000'))
+        command = [str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')]
+    status, err, peak = peak_kib([sys.executable] + command + arguments, folder)
+    _, _, idle = peak_kib([sys.executable] + command + ['--help'], folder)
+    lines = [line for line in err.splitlines() if line.startswith('error:')]
+    assert status == 2 and 'Traceback' not in err and len(lines) == 1 and words in lines[0], err
+    assert peak < idle + PEAK_MARGIN_KIB, (peak, idle)
+    if script == 'dynamic':
+        assert not (folder / 'data').exists()
+
+
+@pytest.mark.parametrize('output_name, words', [
+    ('/proc/run', '/proc/run.lock: cannot create the lock file'),
+    ('data/' + 'x' * 300, 'output_name is'),
+    ('/'.join(['d'] * 2000) + '/run', 'choose a shorter output_name'),
+    ('x' * 10 ** 7, 'choose a shorter output_name'),
+], ids=['proc', '300 characters', '2000 folders deep', '10 MB'])
+def test_an_output_name_the_file_system_cannot_hold_is_one_line(tmp_path, output_name, words):
+    """/proc/run, a 300-character name, 2,000 folders deep (a RecursionError in makedirs) and a 10 MB name: one
+    line naming output_name, short (a huge word of a message is cut to its ends), nothing written."""
+    folder = driven_scene(tmp_path / 'run')
+    (folder / 'input.dat').write_text(set_options_text(folder, output_name=output_name))
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err[:2000]
+    assert 'input.dat, line' in err and words in err and len(err) < 2000, err[:2000]
+    assert not (folder / 'd').exists() and not (folder / 'data').exists()
+
+
+@pytest.mark.parametrize('where', ['option value', 'option name', 'clones token'])
+def test_an_error_line_never_echoes_a_huge_token(tmp_path, where):
+    """A 100 MB token was echoed whole in the error line; now a word of a message longer than 400 characters is
+    shown by its ends and its length (10 MB here, the same rule)."""
+    folder = driven_scene(tmp_path / 'run')
+    token = 'x' * 10 ** 7
+    if where == 'option value':
+        (folder / 'input.dat').write_text(set_options_text(folder, dt=token))
+    elif where == 'option name':
+        (folder / 'input.dat').write_text(set_options_text(folder) + token + ' 1\n')
+    else:
+        (folder / 'a.clones').write_text('1\n%s 0 2 1 0 0 0\n' % token)
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err[:2000]
+    assert len(err) < 2000 and ' characters]...' in err, err[:2000]
+
+
+@pytest.mark.parametrize('program', ['dynamic', 'static', 'mcmc'])
+def test_a_full_disk_before_the_first_save_is_one_line_naming_the_file(tmp_path, program):
+    """A disk full before the first save (here a 100-byte file-size limit: the .inputfile copy fails) gave a
+    traceback; now one line names the file (exit 1)."""
+    import resource
+    import signal
+    from test_crash_safety import mcmc_scene
+    from run_scenes import child_environment
+    folder = (mcmc_scene if program == 'mcmc' else driven_scene)(tmp_path / 'run')
+    if program == 'static':
+        (folder / 'input.dat').write_text(set_options_text(folder, scheme='mobility'))
+    script = {'dynamic': ['multi_bodies', 'multi_bodies.py'], 'static': ['multi_bodies', 'multi_bodies_utilities.py'],
+              'mcmc': ['many_bodyMCMC', 'many_body_MCMC.py']}[program]
+
+    def limited():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100, 100))
+    arguments = [sys.executable, str(REPO_ROOT.joinpath(*script))] + \
+        (['input.dat'] if program == 'mcmc' else ['--input-file', 'input.dat'])
+    done = subprocess.run(arguments, cwd=str(folder), env=child_environment(), capture_output=True, text=True,
+                          preexec_fn=limited, timeout=300)
+    lines = [line for line in done.stderr.splitlines() if line.startswith('error:')]
+    assert done.returncode == 1 and 'Traceback' not in done.stderr and len(lines) == 1, done.stderr
+    assert 'cannot write data/run.inputfile' in lines[0] and 'File too large' in lines[0], done.stderr
+
+
+@pytest.mark.parametrize('edit, words', [
+    (lambda folder: (folder / 'input.dat').write_text(set_options_text(folder, nonlinear_solver_tolerance='1e-17')),
+     'nonlinear_solver_tolerance must be at least 2.2205e-16'),
+    (lambda folder: (folder / 'blob.vertex').write_text('1\n0 0 0 1e-300\n'),
+     'blob.vertex, line 2: blob radius 1e-300 in the fourth column; a radius must lie between 1e-50 and 1e+50'),
+])
+def test_numbers_a_solver_cannot_take_are_refused(tmp_path, edit, words):
+    """nonlinear_solver_tolerance 1e-17 (SciPy's least squares raised) and a blob radius of 1e-300 (NaN in the
+    Lanczos noise) gave tracebacks; now one line each, before anything is written."""
+    folder = articulated_scene(tmp_path / 'run') if 'nonlinear' in words else driven_scene(tmp_path / 'run')
+    edit(folder)
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert words in err, err
+    assert not (folder / 'data').exists()

@@ -43,9 +43,9 @@ import time
 import numpy as np
 
 from multi_bodies.analysis import tables
-from multi_bodies.analysis.structure_factor import StructureFactor, half_space
+from multi_bodies.analysis.structure_factor import StructureFactor, half_space, structure_factor_memory
 from multi_bodies.analysis.time_correlations import TimeCorrelations
-from utils import UserInputError
+from utils import UserInputError, refuse_if_too_big
 
 NAMELIST_NAME = 'hydroGridOptions.nml'
 VARIABLES = {1: 'all', 5: 'green', 6: 'red'}
@@ -129,6 +129,8 @@ def selected_wavevector_indices(group, what):
     pairs = _index_pairs(group.get('selectedwavenumbers', ''), what + ' selectedWavenumbers')
     if count < 0:
         (x0, x1), (y0, y1) = pairs[:2]
+        refuse_if_too_big(8.0 * 6 * max(x1 - x0 + 1, 0) * max(y1 - y0 + 1, 0), 'the wavevector ranges %d..%d, '
+                          '%d..%d' % (x0, x1, y0, y1), what + ' selectedWavenumbers', 'select fewer wavevectors')
         grid = np.stack(np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1), indexing='ij'), -1).reshape(-1, 2)
     else:
         grid = np.array(pairs[:count], dtype=int).reshape(-1, 2)
@@ -153,7 +155,11 @@ class HydroGridPlan:
         if not 0 <= options.green_particles[0] <= options.green_particles[1]:
             raise UserInputError('%s: green_particles i0 i1 needs 0 <= i0 <= i1, got %d %d'
                                  % ((options.where('green_particles'),) + tuple(options.green_particles)))
-        self.n_max = np.maximum(np.asarray(options.cells, dtype=int) // 2, 1)
+        self.n_max = np.maximum(np.asarray(options.cells, dtype=np.int64) // 2, 1)
+        # S(k) of the cells' wavevectors: refused here, before the run writes anything, when it cannot fit
+        refuse_if_too_big(structure_factor_memory(self.n_max), 'S(k) on the wavevectors of %d x %d cells'
+                          % tuple(options.cells), '%s: cells %d %d' % ((options.where('cells'),) + tuple(options.cells)),
+                          'give fewer cells (the wavevectors |n_x| <= cells_x / 2, |n_y| <= cells_y / 2)')
         self.green = tuple(options.green_particles) if options.green_particles[1] > options.green_particles[0] \
             else None
         self.sample_every, self.save_every = int(options.sample_HydroGrid), int(options.save_HydroGrid)
@@ -197,7 +203,8 @@ class HydroGridPlan:
 
     def accumulators(self, options, time_step):
         """(StructureFactor, TimeCorrelations or None) for samples ``time_step`` apart."""
-        structure = StructureFactor(options.periodic_length, self.n_max, 2, green=self.green)
+        structure = StructureFactor(options.periodic_length, self.n_max, 2, green=self.green,
+                                    where='%s: cells' % options.where('cells'))
         correlations = None
         if len(self.fkt_indices) and self.max_lag >= 1:
             box = np.asarray(options.periodic_length[:2], dtype=float)
@@ -250,9 +257,9 @@ class AlsoSampleStructureFactors:
     ``lcm(n_save, sample_HydroGrid)`` steps (said in the log when it differs).
     """
 
-    def __init__(self, snapshot_writer, options, log=print):
+    def __init__(self, snapshot_writer, options, log=print, plan=None):
         self.snapshot_writer, self.options, self.log = snapshot_writer, options, log
-        self.plan = HydroGridPlan(options, log=log)
+        self.plan = HydroGridPlan(options, log=log) if plan is None else plan  # a run makes it with its checks
         interval = options.n_save * self.plan.sample_every // math.gcd(options.n_save, self.plan.sample_every)
         if interval != self.plan.sample_every:
             log('sample_HydroGrid %d: samples are taken when the run saves (n_save %d), so every %d steps'

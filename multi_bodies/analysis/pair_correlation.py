@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from multi_bodies.analysis.trajectories import BlockSums
-from utils import UserInputError
+from utils import UserInputError, refuse_if_too_big
 
 
 def _check_box(periodic_length, dimension, r_max):
@@ -145,10 +145,14 @@ class PairCorrelation:
     dimension : 2 (in the plane x, y: distances of the x, y coordinates) or 3.
     """
 
-    def __init__(self, periodic_length, r_max, n_bins=100, dimension=2):
+    def __init__(self, periodic_length, r_max, n_bins=100, dimension=2, where='g(r)', blocks=10):
         self.box = _check_box(periodic_length, dimension, r_max)
         if int(n_bins) < 1:
-            raise UserInputError('g(r) needs at least one bin, got %d' % n_bins)
+            raise UserInputError('%s: g(r) needs at least one bin, got %d' % (where, n_bins))
+        # per bin: its edge, the block sums and weights (twice while a block is added), a frame's histogram and
+        # the work arrays of the pair histogram: refused before anything is allocated (``where``: the option)
+        refuse_if_too_big(int(n_bins) * 8 * (6 + 4 * blocks), 'g(r) in %d bins' % int(n_bins), where,
+                          'ask for fewer bins')
         self.dimension, self.r_max, self.n_bins = dimension, float(r_max), int(n_bins)
         self.edges = np.linspace(0.0, self.r_max, self.n_bins + 1)
         self.counts = BlockSums((self.n_bins,))

@@ -26,7 +26,7 @@ O(chunk x n_max^2).
 import numpy as np
 
 from multi_bodies.analysis.trajectories import BlockSums, block_mean_and_error
-from utils import UserInputError
+from utils import UserInputError, refuse_if_too_big
 
 PARTICLE_CHUNK = 4096
 
@@ -127,19 +127,39 @@ def density_modes(positions, box, n_max):
     return total
 
 
+def structure_factor_memory(n_max, blocks=10, pairs=4):
+    """Bytes the S(k) accumulator of the index box ``n_max`` (d,) needs at most: per wavevector of the box grid
+    its indices, wavevector and |k| (3 d + 2 doubles), the density modes of a frame (complex, three species, the
+    sum and its copy), and the block sums of ``pairs`` species pairs over ``blocks`` blocks (sums and weights,
+    twice while a block is added)."""
+    n_max = [int(m) for m in np.atleast_1d(n_max)]
+    grid = 1
+    for m in n_max[:-1]:
+        grid *= 2 * m + 1
+    grid *= n_max[-1] + 1
+    return grid * (8 * (3 * len(n_max) + 2) + 16 * 3 * 3 + 8 * pairs * (1 + 4 * blocks))
+
+
 class StructureFactor:
     """Accumulator of S_ab(k) over frames on the half-space box wavevectors (see module docstring).
 
     periodic_length : (3,); n_max : largest |index| per axis (int or (d,)); dimension : 2 or 3;
-    green : (i0, i1) or None; radial_width : bin width of |k| (default 2 pi / largest box length).
+    green : (i0, i1) or None; radial_width : bin width of |k| (default 2 pi / largest box length);
+    where : the option that sets ``n_max`` (its file and line, or the command-line flag), for the refusal of a
+    box of wavevectors that does not fit in memory (:func:`structure_factor_memory`, checked before anything is
+    allocated); blocks : blocks of frames of the error bars.
     """
 
-    def __init__(self, periodic_length, n_max=16, dimension=2, green=None, radial_width=None):
+    def __init__(self, periodic_length, n_max=16, dimension=2, green=None, radial_width=None, where='S(k)',
+                 blocks=10):
         self.box = check_periodic(periodic_length, dimension)
         self.dimension = dimension
-        self.n_max = np.broadcast_to(np.asarray(n_max, dtype=int), (dimension,)).copy()
+        self.n_max = np.broadcast_to(np.asarray(n_max, dtype=np.int64), (dimension,)).copy()
         if np.any(self.n_max < 1):
-            raise UserInputError('the largest wavevector index must be at least 1, got %s' % self.n_max)
+            raise UserInputError('%s: the largest wavevector index must be at least 1, got %s' % (where, self.n_max))
+        refuse_if_too_big(structure_factor_memory(self.n_max, blocks), 'S(k) on the wavevectors of |n| <= %s'
+                          % ' x '.join(str(int(m)) for m in self.n_max), where,
+                          'ask for fewer wavevectors (the largest index of every axis)')
         grid, keep, _ = box_wavevectors(periodic_length, self.n_max, dimension)
         self.keep = keep
         self.indices = grid[keep]

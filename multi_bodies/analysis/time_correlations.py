@@ -27,7 +27,7 @@ import numpy as np
 
 from multi_bodies.analysis.structure_factor import half_space
 from multi_bodies.analysis.trajectories import BlockSums, block_mean_and_error
-from utils import UserInputError
+from utils import UserInputError, refuse_if_too_big
 
 BUFFER_BYTES = 1024 ** 3
 
@@ -42,23 +42,30 @@ def lag_list(max_lag, count=48):
     return np.unique(np.concatenate([[0], np.round(np.logspace(0, np.log10(max_lag), count)).astype(int)]))
 
 
-def shell_wavevectors(periodic_length, k_values, dimension=2, per_shell=12):
+def shell_wavevectors(periodic_length, k_values, dimension=2, per_shell=12, where='F(k,t)'):
     """Wavevectors (n_k, d) and their shell index (n_k,) for each target wavenumber of ``k_values``.
 
     Periodic box (x, y in the plane; x, y, z in 3-d): the half-space box wavevectors with
     ``| |k| - k_target | <= w / 2``, ``w = 2 pi / largest length`` (at most ``per_shell`` of them, evenly
     picked); the shell's |k| is their mean.  Otherwise: k_target along each axis (self part only).
-    Returns wavevectors, groups, shell |k| (n_shells,), periodic (bool).
+    Returns wavevectors, groups, shell |k| (n_shells,), periodic (bool).  ``where`` (the option giving
+    ``k_values``) names the refusal of a wavenumber that is not a positive finite number, or whose box of
+    candidate wavevectors does not fit in memory (checked before it is made).
     """
     box = np.asarray(periodic_length, dtype=float).reshape(3)[:dimension]
     vectors, groups, magnitudes = [], [], []
     periodic = bool(np.all(box > 0))
     for shell, target in enumerate(np.atleast_1d(np.asarray(k_values, dtype=float))):
-        if not target > 0:
-            raise UserInputError('wavenumbers must be positive, got %g' % target)
+        if not (target > 0 and np.isfinite(target)):
+            raise UserInputError('%s: wavenumbers must be positive finite numbers, got %g' % (where, target))
         if periodic:
             width = 2.0 * np.pi / box.max()
-            n_max = np.ceil((target + width) * box / (2.0 * np.pi)).astype(int)
+            reach = (target + width) * box / (2.0 * np.pi)
+            with np.errstate(over='ignore'):
+                candidates = float(np.prod(2.0 * np.ceil(reach) + 1.0))
+            refuse_if_too_big(candidates * 8 * (3 * dimension + 2), 'the box of wavevectors around |k| = %g (%.3g '
+                              'of them)' % (target, candidates), where, 'ask for smaller wavenumbers')
+            n_max = np.ceil(reach).astype(int)
             ranges = [np.arange(-m, m + 1) for m in n_max]
             grid = np.stack(np.meshgrid(*ranges, indexing='ij'), axis=-1).reshape(-1, dimension)
             grid = grid[half_space(grid)]

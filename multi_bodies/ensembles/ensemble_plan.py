@@ -219,29 +219,69 @@ def _atomic_write_text(path, text):
     os.replace(part, path)
 
 
+MANIFEST_BYTES = 1 << 26  # a manifest lists points and replicas in a few hundred bytes each
+
+
 def read_manifest(output_dir):
-    """The manifest ``output_dir/ensemble.json`` as a dict; UserInputError when missing or unreadable."""
+    """The manifest ``output_dir/ensemble.json`` as a dict; UserInputError when missing or unreadable.
+
+    Every field the runner, ``--aggregate`` and ``analyse.py`` use is checked before any is used: ``points`` a
+    list of {name inside the folder, overrides: list of [option, value]}, ``vary`` a list of [option(s), values],
+    ``replicas`` a list of {folder inside the folder, point: an index of ``points``, output_basename a file name}.
+    A manifest larger than ``MANIFEST_BYTES`` or nested too deeply to read is refused before it is parsed."""
     path = os.path.join(output_dir, MANIFEST_NAME)
     try:
-        with open(path) as f:
-            manifest = json.load(f)
+        if os.path.getsize(path) > MANIFEST_BYTES:
+            raise UserInputError('%s holds %d bytes, more than an ensemble manifest (%d at most); it is not this '
+                                 "package's manifest" % (path, os.path.getsize(path), MANIFEST_BYTES))
+        with open(path, 'rb') as f:
+            manifest = json.loads(f.read().decode('utf-8'))
     except FileNotFoundError:
         raise UserInputError('%s not found: %s is not the output folder of an ensemble (run ensemble.py '
                              '--input-file ... --output-dir %s first)' % (path, output_dir, output_dir))
-    except ValueError as err:
-        raise UserInputError('%s is not a valid ensemble manifest (%s)' % (path, err))
+    except (ValueError, RecursionError) as err:  # JSON, UTF-8, or a document nested too deeply to read
+        raise UserInputError('%s is not a valid ensemble manifest (%s)' % (path, type(err).__name__ if
+                                                                          isinstance(err, RecursionError) else err))
+    except OSError as err:
+        raise UserInputError('%s cannot be read (%s)' % (path, err.strerror or err))
     if not isinstance(manifest, dict) or 'replicas' not in manifest:
         raise UserInputError('%s is not an ensemble manifest (no replica list)' % path)
     manifest['output_dir'] = os.path.abspath(output_dir)
-    for point in manifest.get('points') or []:
-        _check_inside(manifest['output_dir'], point.get('name') if isinstance(point, dict) else None,
-                      'point name', path)
+
+    def refuse(text):
+        return UserInputError('%s: %s; the manifest was changed by hand or is not this ensemble\'s, so nothing is '
+                              'read or written' % (path, text))
+    points = manifest.get('points')
+    if points is None:
+        points = manifest['points'] = []
+    if not isinstance(points, list):
+        raise refuse('points is not a list')
+    for index, point in enumerate(points):
+        if not isinstance(point, dict):
+            raise refuse('point %d is not a table' % index)
+        _check_inside(manifest['output_dir'], point.get('name'), 'point name', path)
+        overrides = point.get('overrides', [])
+        if not (isinstance(overrides, list) and all(isinstance(o, list) and len(o) == 2 and isinstance(o[0], str)
+                                                    and isinstance(o[1], (str, int, float)) for o in overrides)):
+            raise refuse('the overrides of point %s are not a list of [option, value] pairs' % point.get('name'))
+        point.setdefault('overrides', overrides)
+    vary = manifest.get('vary', [])
+    if not (isinstance(vary, list) and all(isinstance(v, list) and len(v) == 2 and isinstance(v[0], str)
+                                           and isinstance(v[1], list) for v in vary)):
+        raise refuse('vary is not a list of [option, values] pairs')
+    manifest['vary'] = vary
     if not isinstance(manifest['replicas'], list):
-        raise UserInputError('%s is not an ensemble manifest (the replica list is not a list)' % path)
-    for replica in manifest['replicas']:
-        folder = replica.get('folder') if isinstance(replica, dict) else None
+        raise refuse('the replica list is not a list')
+    for index, replica in enumerate(manifest['replicas']):
+        if not isinstance(replica, dict):
+            raise refuse('replica %d is not a table' % index)
+        folder = replica.get('folder')
         _check_inside(manifest['output_dir'], folder, 'replica folder', path)
         _check_basename(os.path.join(manifest['output_dir'], folder), replica.get('output_basename'), path)
+        point = replica.get('point', 0 if len(points) == 1 else None)
+        if not (isinstance(point, int) and not isinstance(point, bool) and 0 <= point < len(points)):
+            raise refuse('replica %s has point %r, not one of the %d points' % (folder, point, len(points)))
+        replica['point'] = point
     return manifest
 
 

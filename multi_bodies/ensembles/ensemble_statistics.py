@@ -37,7 +37,8 @@ from multi_bodies.ensembles import ensemble_runner
 from multi_bodies.files import snapshots
 from multi_bodies.run import run_output
 from multi_bodies.files.input_options import parse_input_text
-from utils import UserInputError
+import utils
+from utils import UserInputError, read_text_file
 
 MSD_QUANTITIES = ('msd_xy', 'msd_z', 'msd_location', 'msd_orientation')
 
@@ -80,8 +81,8 @@ def replica_trajectories(output_dir, replica):
     """
     folder = os.path.join(output_dir, replica['folder'])
     input_path = os.path.join(folder, ensemble_runner.REPLICA_INPUT_NAME)
-    with open(input_path) as f:
-        options = parse_input_text(f.read(), input_path)
+    options = parse_input_text(read_text_file(input_path, 'replica input file', 'run the ensemble again to write '
+                                              'it'), input_path)
     output_name = os.path.join(folder, replica.get('output_basename') or os.path.basename(options.output_name))
     trajectories = {}
     for structure_id in dict.fromkeys(spec.ID for spec in options.structures):
@@ -127,6 +128,18 @@ def aggregate(output_dir, bins=40, height_range=None, max_lag=None, discard=0, c
     mean, stderr)}, 'msd': {ID: {'lag_time', quantity: (mean, stderr)}},
     'info': {counter: (mean, stderr)}}}``.
     """
+    if int(bins) < 1:
+        raise UserInputError('--bins %d: the height histogram needs at least one bin' % bins)
+    # per bin and replica: the counts and the density (a row of the table), twice while they are averaged
+    utils.refuse_if_too_big(32 * int(bins) * 4, 'the height histogram of %d bins' % int(bins), '--bins %d' % bins,
+                            'ask for fewer bins')
+    if max_lag is not None and int(max_lag) < 1:
+        raise UserInputError('--max-lag %d: the largest lag must be at least 1 saved frame' % max_lag)
+    if int(discard) < 0:
+        raise UserInputError('--discard %d: it must be 0 or more saved frames' % discard)
+    if height_range is not None and not (np.all(np.isfinite(height_range)) and height_range[1] > height_range[0]):
+        raise UserInputError('--height-range %s: give two finite heights LOW < HIGH'
+                             % ' '.join('%r' % float(v) for v in height_range))
     manifest = ensemble_runner.read_manifest(output_dir)
     output_dir = manifest['output_dir']
     by_point, missing = _finished_replicas(manifest)

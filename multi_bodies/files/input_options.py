@@ -190,7 +190,9 @@ OPTION_TABLE = {
     'solver_tolerance': _option('float', 1e-8, SD, Range(0, 1, True, True, fix='a relative tolerance, e.g. 1e-8')),
     # articulated schemes only (max-norm of the joint residuals, length units)
     'nonlinear_solver_tolerance': _option('float', 1e-8, ('dynamic',),
-                                          Range(0, low_open=True, fix='the largest joint residual, e.g. 1e-8')),
+                                          Range(2.2205e-16, text='at least 2.2205e-16 (the machine epsilon)',
+                                                fix='the largest joint residual, e.g. 1e-8; the correction\'s '
+                                                    'least-squares solve cannot stop below the round-off')),
     'rf_delta': _option('float', 1e-3, ('stochastic',), Range(0, low_open=True, fix='1e-3 is the default')),
     'save_clones': _option('str', 'one_file_per_step', DM, _SAVE_CLONES),
     'periodic_length': _option('floats3', (0.0, 0.0, 0.0), SDM),

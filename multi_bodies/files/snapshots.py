@@ -84,11 +84,13 @@ def write_clones_file(path, locations, orientations, comment=None):
         with open(part, 'w') as f:
             f.write(format_clones(locations, orientations, comment))
         os.replace(part, path)
-    except BaseException:  # a full disk or a file-size limit: no empty or half-written .part is left
+    except BaseException as err:  # a full disk or a file-size limit: no empty or half-written .part is left
         try:
             os.remove(part)
         except OSError:
             pass
+        if isinstance(err, OSError) and err.filename is None:  # a write on a full disk names no file
+            err.filename = path
         raise
 
 
@@ -124,17 +126,31 @@ def read_clones_file(path, referenced_from=None):
     return table[:, :3].copy(), normalise_quaternions(table[:, 3:], path)
 
 
+SHORTEST_BODY_LINE = 14  # '0 0 0 1 0 0 0' and its end of line: a body line is never shorter
+
+
 def read_config_snapshot(path, offset):
-    """The snapshot starting at byte ``offset`` of a ``.config``: locations (n, 3), unit quaternions (n, 4)."""
-    with open(path) as f:
+    """The snapshot starting at byte ``offset`` of a ``.config``: locations (n, 3), unit quaternions (n, 4).
+
+    Raises UserInputError naming the file and byte when there is no complete snapshot there (a count line
+    announcing more bodies than the rest of the file can hold is refused before anything is read), and when a
+    number is NaN or infinite."""
+    with open(path, 'rb') as f:
+        size = os.fstat(f.fileno()).st_size
         f.seek(offset)
         try:
             count = int(f.readline().split()[0])
+            if count < 0 or count * SHORTEST_BODY_LINE > size - offset:
+                raise ValueError('the count line announces more bodies than the file holds')
             rows = [f.readline().split() for _ in range(count)]
             data = np.array(rows, dtype=float).reshape(count, 7)
         except (ValueError, IndexError):
             raise UserInputError('%s: no complete snapshot at byte %d (the file was changed after the run?); '
                                  'restart from another saved step' % (path, offset))
+    if not np.all(np.isfinite(data)):
+        raise UserInputError('%s: the snapshot at byte %d holds a NaN or infinite number (body %d); the file was '
+                             'changed after the run, or the run wrote it while it failed'
+                             % (path, offset, int(np.argmin(np.all(np.isfinite(data), axis=1)))))
     return data[:, :3].copy(), normalise_quaternions(data[:, 3:], path)
 
 
@@ -142,15 +158,16 @@ def read_config_snapshot(path, offset):
 def _numeric_rows(path):
     """(line number, list of float) of the lines of ``path`` that hold numbers (comments removed)."""
     rows = []
-    with open(path) as f:
+    with open(path, 'rb') as f:  # bytes: a byte that is not UTF-8 is a word that is not a number, not a traceback
         for number, raw in enumerate(f, start=1):
-            tokens = raw.split('#', 1)[0].split()
+            tokens = raw.split(b'#', 1)[0].split()
             if not tokens:
                 continue
             try:
                 rows.append((number, [float(t) for t in tokens]))
             except ValueError:
-                raise UserInputError("%s, line %d: cannot read '%s' as numbers" % (path, number, raw.strip()))
+                raise UserInputError("%s, line %d: cannot read '%s' as numbers"
+                                     % (path, number, raw.strip().decode('utf-8', 'replace')))
     return rows
 
 
@@ -233,25 +250,41 @@ def read_config_series(path):
         raise UserInputError('%s holds no complete snapshot' % path)
     if len({len(b) for b in blocks}) != 1:
         raise UserInputError('%s: the snapshots hold different numbers of bodies' % path)
+    _finite_frames(np.concatenate(blocks), path)
     return (np.stack([b[:, :3] for b in blocks]),
             np.stack([normalise_quaternions(b[:, 3:], path) for b in blocks]))
 
 
 # ------------------------------------------------------------------ raw (n, 7) frames (ensemble statistics)
+def _finite_frames(frames, path):
+    """``frames`` (..., 7) when every number is finite; else UserInputError naming ``path``."""
+    if not np.all(np.isfinite(frames)):
+        raise UserInputError('%s holds a NaN or infinite number; the file was changed after the run, or the run '
+                             'wrote it while it failed' % path)
+    return frames
+
+
 def read_clones_frame(path):
     """One ``.clones`` snapshot as written: array (n, 7) of ``x y z s p1 p2 p3`` (not renormalised).
 
-    Raises ValueError when the file is empty or has fewer rows than its count line says.
+    Raises UserInputError (a ValueError) naming the file when it is empty, has fewer rows than its count line
+    says, rows of another length, words that are not numbers, or NaN and infinite numbers.
     """
-    with open(path) as f:
-        rows = [line.split('#', 1)[0].split() for line in f]
+    with open(path, 'rb') as f:
+        rows = [line.split(b'#', 1)[0].split() for line in f]
     rows = [row for row in rows if row]
     if not rows:
-        raise ValueError('%s: empty clones file' % path)
-    count = int(rows[0][0])
-    if len(rows) - 1 < count:
-        raise ValueError('%s: the count line says %d bodies but %d rows follow' % (path, count, len(rows) - 1))
-    return np.array(rows[1:count + 1], dtype=float).reshape(count, 7)
+        raise UserInputError('%s: empty clones file' % path)
+    try:
+        count = int(rows[0][0])
+        if count < 0 or len(rows) - 1 < count:
+            raise UserInputError('%s: the count line says %d bodies but %d rows follow' % (path, count, len(rows) - 1))
+        frame = np.array(rows[1:count + 1], dtype=float).reshape(count, 7)
+    except (ValueError, TypeError) as err:
+        if isinstance(err, UserInputError):
+            raise
+        raise UserInputError('%s: not a snapshot of x y z s p1 p2 p3 rows after a count line (%s)' % (path, err))
+    return _finite_frames(frame, path)
 
 
 def clones_frame_steps(output_name, structure_id):
@@ -277,13 +310,18 @@ def read_clones_frames(output_name, structure_id):
     if not frames:
         return np.zeros(0, dtype=int), np.zeros((0, 0, 7))
     if len({frame.shape for frame in frames}) != 1:
-        raise ValueError('%s.%s: the number of bodies changes between snapshots' % (output_name, structure_id))
+        raise UserInputError('%s.%s: the number of bodies changes between snapshots' % (output_name, structure_id))
     return np.array(steps, dtype=int), np.stack(frames)
 
 
 def read_config_frames(path):
-    """All complete snapshots of a ``save_clones one_file`` series as written: (F, n, 7) (not renormalised)."""
+    """All complete snapshots of a ``save_clones one_file`` series as written: (F, n, 7) (not renormalised).
+
+    Raises UserInputError naming the file when the snapshots hold different numbers of bodies or a NaN or
+    infinite number."""
     frames = _config_blocks(path)
     if not frames:
         return np.zeros((0, 0, 7))
-    return np.stack(frames)
+    if len({len(frame) for frame in frames}) != 1:
+        raise UserInputError('%s: the snapshots hold different numbers of bodies' % path)
+    return _finite_frames(np.stack(frames), path)

@@ -149,6 +149,12 @@ def read_vertex_file(path, referenced_from=None, return_radii=False):
         bad = int(np.argmax(radii <= 0))
         raise UserInputError("%s, line %d: blob radius %r in the fourth column; a radius must be positive"
                              % (path, rows[1 + bad][0], float(radii[bad])))
+    from multi_bodies.files.input_options import SCALE_RANGE  # the range of the blob_radius option
+    if radii is not None and np.any((radii < SCALE_RANGE[0]) | (radii > SCALE_RANGE[1])):
+        bad = int(np.argmax((radii < SCALE_RANGE[0]) | (radii > SCALE_RANGE[1])))
+        raise UserInputError("%s, line %d: blob radius %r in the fourth column; a radius must lie between %g and %g, "
+                             "as blob_radius (beyond that eta a^3 over- or underflows in double precision); rescale "
+                             "the units" % ((path, rows[1 + bad][0], float(radii[bad])) + SCALE_RANGE))
     if radii is not None and not return_radii:
         raise UserInputError("%s: the vertex file gives a radius per blob (fourth column), which this program "
                              "does not use; remove the fourth column" % path)

@@ -60,6 +60,10 @@ class DynamicRun:
                                                           options.save_body_mobility else ''),
                 options.where('scheme'), 'choose an iterative scheme (without _dense_algebra) and leave '
                 'save_blobs_mobility and save_body_mobility False, or fewer blobs')
+        self.hydrogrid_plan = None
+        if options.call_HydroGrid:  # its namelist read and its memory checked before anything is written
+            from multi_bodies.analysis.hydrogrid import HydroGridPlan
+            self.hydrogrid_plan = HydroGridPlan(options, log=log)
         self.fingerprint = run_output.run_fingerprint(options, self.types, self.bodies)
         use_record = True
         if options.initial_step > 0:  # exact, or refused (restart_inexact forces it, with a warning)
@@ -124,24 +128,13 @@ class DynamicRun:
         options, model, scheme = self.options, self.system, self.scheme
         state = self.start_state
         restart = options.initial_step > 0
-        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart, log=self.log)
-        write_articulated_copies(options)
-        writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
-                                           options.where('save_clones'), restart=restart,
-                                           restart_from=(self.restart, self.restart_end),
-                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
-        self.writer = writer
-        if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
-            from multi_bodies.run.vtk_output import AlsoWriteVtk
-            writer = AlsoWriteVtk(writer, options, self.types, model)
-        concentration = None
-        if options.save_concentration:  # phoretic runs: output_name.concentration (doc/phoretic.md)
-            from multi_bodies.run.concentration_output import AlsoWriteConcentration
-            writer = concentration = AlsoWriteConcentration(writer, options, model, keep=self.concentration_keep,
-                                                            log=self.log)
-        if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
-            from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
-            writer = AlsoSampleStructureFactors(writer, options, log=self.log)
+        try:
+            writer, concentration = self.start_files(restart)
+        except OSError as err:  # a full disk or a file-size limit before the first save: one line, the file named
+            self.log_error('error: run stopped before its first step: %s'
+                           % run_output.write_error_line(err, 'the first files of the run', options.initial_step,
+                                                         None, again=options.initial_step))
+            return 1
         first, last = options.initial_step, options.n_steps
         progress = run_output.Progress(options.scheme, first, last)
         status, stopped_line = 0, None
@@ -233,6 +226,30 @@ class DynamicRun:
                                % (stopped_line, loop.last_saved, loop.last_saved))
         return status
 
+    def start_files(self, restart):
+        """The files a run writes before its time loop, and its writer: (writer, the ``.concentration`` writer or
+        None).  Raises OSError when a file cannot be written."""
+        options, model = self.options, self.system
+        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart, log=self.log)
+        write_articulated_copies(options)
+        writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
+                                           options.where('save_clones'), restart=restart,
+                                           restart_from=(self.restart, self.restart_end),
+                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
+        self.writer = writer
+        if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
+            from multi_bodies.run.vtk_output import AlsoWriteVtk
+            writer = AlsoWriteVtk(writer, options, self.types, model)
+        concentration = None
+        if options.save_concentration:  # phoretic runs: output_name.concentration (doc/phoretic.md)
+            from multi_bodies.run.concentration_output import AlsoWriteConcentration
+            writer = concentration = AlsoWriteConcentration(writer, options, model, keep=self.concentration_keep,
+                                                            log=self.log)
+        if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
+            from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
+            writer = AlsoSampleStructureFactors(writer, options, log=self.log, plan=self.hydrogrid_plan)
+        return writer, concentration
+
     def save_mobilities(self, step, configuration):
         """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities at the saved step's ``configuration``
         (SPEC 2.1)."""
@@ -240,13 +257,13 @@ class DynamicRun:
         stem = '%s.%%s.%s.dat' % (self.options.output_name, str(step).zfill(8))
         M, M_inv, _, N = system.dense_matrices(configuration, inverse=self.options.save_body_mobility)
         if self.options.save_blobs_mobility:
-            np.savetxt(stem % 'blobs_mobility', M, delimiter='  ')
+            run_output.save_table(stem % 'blobs_mobility', M)
         if self.options.save_body_mobility:
             if system.has_fixed_bodies:  # obstacles: the free bodies' mobility with the prescribed ones held
                 from multi_bodies.solver.obstacles import dense_mixed_body_mobility
                 N = dense_mixed_body_mobility(M_inv, system.dense_matrices(configuration, inverse=False)[2],
                                               system.fixed_bodies)[0]
-            np.savetxt(stem % 'body_mobility', N, delimiter='  ')
+            run_output.save_table(stem % 'body_mobility', N)
 
     def log_error(self, text):
         import sys

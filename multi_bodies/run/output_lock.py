@@ -139,12 +139,12 @@ def kind_of(mode):
     return 'not a regular file'
 
 
-def _not_a_lock_file(path, kind):
-    return UserInputError('%s is %s, not a lock file; nothing was read or written through it. Remove it (or choose '
-                          'another output name)' % (path, kind))
+def _not_a_lock_file(path, kind, where=None):
+    return UserInputError('%s%s is %s, not a lock file; nothing was read or written through it. Remove it (or '
+                          'choose another output name)' % ('%s: ' % where if where else '', path, kind))
 
 
-def _open(path):
+def _open(path, where=None):
     """Open (creating) the lock file ``path`` without following a link or blocking on a FIFO; None when it exists
     and the system has no flock.  Raises UserInputError for a path that is not a regular file."""
     try:
@@ -152,10 +152,10 @@ def _open(path):
     except FileNotFoundError:
         kind = None
     except OSError as err:
-        raise UserInputError('%s: cannot use it as a lock file (%s); choose another output name'
-                             % (path, err.strerror or err))
+        raise UserInputError('%s%s: cannot use it as a lock file (%s); choose another output name'
+                             % ('%s: ' % where if where else '', path, err.strerror or err))
     if kind is not None:
-        raise _not_a_lock_file(path, kind)
+        raise _not_a_lock_file(path, kind, where)
     flags = (os.O_RDWR | os.O_CREAT | getattr(os, 'O_NOFOLLOW', 0) | getattr(os, 'O_NONBLOCK', 0)
              | (os.O_EXCL if fcntl is None else 0))
     try:
@@ -164,24 +164,25 @@ def _open(path):
         return None
     except OSError as err:
         if err.errno == errno.ELOOP:  # made a link between the check and the open
-            raise _not_a_lock_file(path, 'a symbolic link')
-        raise UserInputError('%s: cannot create the lock file (%s); choose another output name or change the '
-                             "folder's permissions" % (path, err.strerror or err))
+            raise _not_a_lock_file(path, 'a symbolic link', where)
+        raise UserInputError('%s%s: cannot create the lock file (%s); choose another output name or change the '
+                             "folder's permissions" % ('%s: ' % where if where else '', path, err.strerror or err))
     kind = kind_of(os.fstat(descriptor).st_mode)
     if kind is not None:  # replaced by a FIFO or device between the check and the open
         os.close(descriptor)
-        raise _not_a_lock_file(path, kind)
+        raise _not_a_lock_file(path, kind, where)
     return descriptor
 
 
-def acquire(path, refusal, log=None):
+def acquire(path, refusal, log=None, where=None):
     """Take the lock file ``path``; returns its open descriptor.
 
     ``refusal(holder_text)`` builds the UserInputError raised when another live
-    process holds it; ``log`` gets one line when a stale lock is taken over.
+    process holds it; ``log`` gets one line when a stale lock is taken over; ``where`` (the option's file and
+    line) starts the messages about a path that cannot be a lock file.
     """
     for _ in range(5):
-        descriptor = _open(path)
+        descriptor = _open(path, where)
         if descriptor is None:
             raise refusal('named in %s' % path)
         if not _try_flock(descriptor):
@@ -258,9 +259,9 @@ class HeldLock:
 
 
 @contextlib.contextmanager
-def hold_lock(path, refusal, log=None):
+def hold_lock(path, refusal, log=None, where=None):
     """Hold the lock file ``path`` for the ``with`` block (see :func:`acquire`); yields a :class:`HeldLock`."""
-    held = HeldLock(path, acquire(path, refusal, log))
+    held = HeldLock(path, acquire(path, refusal, log, where))
     try:
         yield held
     finally:
@@ -292,24 +293,70 @@ def run_file_holder(output_name):
         return None
 
 
+# Room left in a path for what a run adds to output_name: '.set_aside/<time>_earlier_run_<id>/' and a snapshot
+# name '.<structure ID>.<step>.clones' (an ID is a file name: up to the system's longest name).
+SUFFIX_ROOM = 120
+
+
+def _path_limits(folder):
+    """(longest path, longest file name) in bytes where ``folder`` lies (POSIX pathconf; 4096 and 255 else)."""
+    limits = []
+    for name, default in (('PC_PATH_MAX', 4096), ('PC_NAME_MAX', 255)):
+        try:
+            limits.append(int(os.pathconf(folder, name)))
+        except (OSError, ValueError, AttributeError):
+            limits.append(default)
+    return limits
+
+
+def _existing_parent(folder):
+    while folder and not os.path.isdir(folder):
+        parent = os.path.dirname(folder)
+        if parent == folder:
+            break
+        folder = parent
+    return folder or os.curdir
+
+
 def prepare_output_directory(output_name, where='output_name'):
     """Create the folder of ``output_name`` and check that files can be written there.
 
     Raises UserInputError naming ``where`` (the option's file and line) when
-    the folder cannot be created, is a file, or is read-only.
+    the name is longer than the file system allows (with room for the suffixes a run adds), the folder cannot be
+    created, is a file, or is read-only.  Missing folders are made one by one (any depth, no recursion).
     """
     if '\x00' in output_name:  # no file name can hold it (open() would raise ValueError)
         raise UserInputError('%s: output_name %r holds a NUL byte, which no file name can hold; write the output '
                              'name in plain text' % (where, output_name))
     folder = os.path.dirname(output_name) or os.curdir
+    path_max, name_max = _path_limits(_existing_parent(os.path.abspath(folder)))
+    full = len(os.fsencode(os.path.abspath(output_name)))
+    longest = max((len(os.fsencode(part)) for part in output_name.split(os.sep)), default=0)
+    if full + SUFFIX_ROOM > path_max or longest + SUFFIX_ROOM // 2 > name_max:
+        raise UserInputError('%s: output_name is %d bytes long as a full path, with a name of %d bytes in it: the '
+                             'file system takes paths of %d bytes and names of %d, and a run adds up to %d bytes '
+                             '(.set_aside folders, .<ID>.<step>.clones); choose a shorter output_name'
+                             % (where, full, longest, path_max, name_max, SUFFIX_ROOM))
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise UserInputError('%s: output_name %s needs the folder %s, but that is a file; choose another '
                              'output_name or remove the file' % (where, output_name, folder))
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError as err:
-        raise UserInputError('%s: cannot create the output folder %s (%s); choose another output_name'
-                             % (where, folder, err.strerror or err))
+    missing, parent = [], folder
+    while parent and not os.path.isdir(parent):
+        missing.append(parent)
+        up = os.path.dirname(parent)
+        if up == parent:
+            break
+        parent = up
+    for path in reversed(missing):
+        try:
+            os.mkdir(path)
+        except FileExistsError:
+            if not os.path.isdir(path):
+                raise UserInputError('%s: output_name %s needs the folder %s, but that is a file; choose another '
+                                     'output_name or remove the file' % (where, output_name, path))
+        except OSError as err:
+            raise UserInputError('%s: cannot create the output folder %s (%s); choose another output_name'
+                                 % (where, folder, err.strerror or err))
     if not os.access(folder, os.W_OK | os.X_OK):
         raise UserInputError('%s: the output folder %s is not writable; choose another output_name or change '
                              'its permissions' % (where, folder))
@@ -334,7 +381,7 @@ def output_lock(options, log=print):
         return UserInputError('%s: output_name %s is in use by another run (%s); wait for it to end or choose '
                               'another output_name' % (options.where('output_name'), name, holder))
     try:
-        with hold_lock(name + LOCK_SUFFIX, refusal, log) as held:
+        with hold_lock(name + LOCK_SUFFIX, refusal, log, where=options.where('output_name')) as held:
             writer = run_file_holder(name)
             if writer is not None and holder_alive(writer):
                 raise UserInputError('%s: output_name %s is in use by another run (%s, named in %s.run; its lock '

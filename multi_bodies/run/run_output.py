@@ -49,7 +49,8 @@ import re
 
 import numpy as np
 
-from utils import UserInputError
+import utils
+from utils import UserInputError, available_memory, format_bytes  # noqa: F401 (re-exported)
 from multi_bodies.run.output_lock import LockLost, prepare_output_directory  # noqa: F401 (re-exported)
 from multi_bodies.files.snapshots import (append_config_snapshot, clones_name, config_name,  # noqa: F401
                                           format_clones, read_config_snapshot, truncate_config,
@@ -101,37 +102,9 @@ def check_periodic_length(options):
 
 
 # ------------------------------------------------------------------ resources
-def format_bytes(n):
-    """'1.5 GiB' style text of a byte count."""
-    n = float(n)
-    for unit in ('B', 'KiB', 'MiB', 'GiB', 'TiB', 'PiB'):
-        if n < 1024 or unit == 'PiB':
-            return ('%d %s' % (n, unit)) if unit == 'B' else ('%.3g %s' % (n, unit))
-        n /= 1024.0
-
-
-def available_memory():
-    """Bytes of memory this process can still get (MemAvailable of /proc/meminfo, else the physical memory);
-    None when unknown."""
-    try:
-        with open('/proc/meminfo') as f:
-            for line in f:
-                if line.startswith('MemAvailable:'):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
-    except (ValueError, OSError, AttributeError):
-        return None
-
-
 def refuse_if_too_big(need, what, where, fix):
-    """Raise UserInputError before anything is written when ``need`` bytes exceed the memory available."""
-    have = available_memory()
-    if have is not None and need > have:
-        raise UserInputError('%s: %s needs about %s of memory, but %s are available; %s'
-                             % (where, what, format_bytes(need), format_bytes(have), fix))
+    """``utils.refuse_if_too_big`` with the memory :func:`available_memory` of this module gives."""
+    utils.refuse_if_too_big(need, what, where, fix, have=available_memory())
 
 
 def dense_memory(num_blobs, num_bodies):
@@ -159,6 +132,17 @@ def warn_if_large_output(options, types, record_bytes, log):
     if files > FILES_WARNING or size > BYTES_WARNING:
         log('warning: %s: this run will write about %d files and %s (%d saves); raise n_save or use save_clones '
             'one_file to write fewer' % (options.where('n_save'), files, format_bytes(size), saves))
+
+
+def save_table(path, table):
+    """``np.savetxt`` of ``table`` (two spaces between numbers) to ``path``; an OSError names ``path`` (a write that
+    fails on a full disk names no file by itself)."""
+    try:
+        np.savetxt(path, table, delimiter='  ')
+    except OSError as err:
+        if err.filename is None:
+            err.filename = path
+        raise
 
 
 def write_bodies_info(path, types, num_blobs):
@@ -738,14 +722,16 @@ class TimeLoop:
         return ((self.step - 1) // self.n_save) * self.n_save if self.step > self.first else self.first
 
 
-def write_error_line(err, what, step, last_saved):
-    """One line for an OSError while writing outputs (full disk, file-size limit, a lock taken, ...)."""
-    name = getattr(err, 'filename', None)
+def write_error_line(err, what, step, last_saved, again=0):
+    """One line for an OSError while writing outputs (full disk, file-size limit, a lock taken, ...): the file
+    (``what`` when the error names none), the step, what is complete and the ``initial_step`` to run again with
+    (``last_saved``, or ``again`` when no step was saved)."""
+    name = getattr(err, 'filename2', None) or getattr(err, 'filename', None)  # a copy's target, else the file
     hint = getattr(err, 'hint', 'free space (or raise the file-size limit) and restart')
     return ('cannot write %s at step %d (%s); %s. %s%s with initial_step %s'
             % (name or what, step, err.strerror or err,
                'outputs are complete up to step %s' % last_saved if last_saved is not None else 'no step was saved',
-               hint[0].upper(), hint[1:], last_saved if last_saved is not None else 0))
+               hint[0].upper(), hint[1:], last_saved if last_saved is not None else again))
 
 
 def finish_run(output_name, start, first, step, restart, write_info_lines, stopped_line=None):

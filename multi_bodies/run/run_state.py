@@ -420,8 +420,10 @@ def atomic_write(path, data, binary=False):
         with open(part, 'wb' if binary else 'w') as f:
             f.write(data)
         os.replace(part, path)
-    except BaseException:
+    except BaseException as err:
         _remove_quietly(part)
+        if isinstance(err, OSError) and err.filename is None:  # a write on a full disk names no file
+            err.filename = path
         raise
 
 
