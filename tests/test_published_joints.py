@@ -160,21 +160,9 @@ def test_articulated_schemes_move_plain_bodies_as_the_rigid_schemes(tmp_path, mo
 # whose rate is set in links_deriv_updated during a tumble and zeroed there afterwards, links_deriv keeping its last
 # value.  Reading links_deriv, or restoring with the solve's links (two joints that no rigid pair can hold at once),
 # made the published folder jump 28 to 600 length units per tumble.
-TUMBLE_OVERRIDE = '''
-import numpy as np
-import multi_bodies_functions
-from multi_bodies_functions import *
-from articulated.articulated import *
-from constraint.constraint import *
-
-def torque_pair(bodies, r_vectors, *args, **kwargs):
-    torque = kwargs.get('omega_one_roller')
-    out = np.zeros((2 * len(bodies), 3))
-    for i, b in enumerate(bodies):
-        out[2 * i + 1] = (1 if i % 2 == 0 else -1) * np.dot(b.orientation.rotation_matrix(), torque)
-    return out
-multi_bodies_functions.calc_body_body_forces_torques_python = torque_pair
-
+# The imports and the constant torque between body and flagellum of OVERRIDE (above), then the tumbling joints.
+TUMBLE_OVERRIDE = OVERRIDE[:OVERRIDE.index('CALLS = []')] + OVERRIDE[OVERRIDE.index('def torque_between'):
+                                                                   OVERRIDE.index('original_init')] + '''
 base_init = Constraint.__init__
 def init(self, bodies, ind_bodies, articulated_body, links, constraint_extra=None):
     base_init(self, bodies, ind_bodies, articulated_body, links, constraint_extra)

@@ -2,7 +2,6 @@
 answer.  Each test says which report it answers; the scenes are copies of the shipped examples
 (``tests/run_scenes.py``) with the one feature of the report.
 """
-import os
 
 import numpy as np
 import pytest
