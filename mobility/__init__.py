@@ -22,6 +22,10 @@ Public functions (names kept from the published code, so user scripts work):
   ``available_implementations()``; names as in the manual (python, C++,
   pycuda, each also with _no_wall).
 
+The package itself reaches every blob mobility through :mod:`mobility.interface` (one ``BlobMobility`` per
+backend and geometry, one registry with one preference order; floor 2, above these functions, which are the
+backends' look-ups and the function forms scripts written against the published code call).
+
 Shapes and units: ``r_vectors`` (N, 3) in length units, the wall at z = 0;
 ``eta`` viscosity; ``a`` blob radius; vectors flat (3N,) interleaved
 (x0, y0, z0, x1, ...); results are velocities (or angular velocities) in the
