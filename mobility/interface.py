@@ -140,6 +140,8 @@ class BlobMobility:
     periodic_length : (3,) read-only array, the box of the geometry (0: not periodic along that axis)
     has_rotation : bool, whether :meth:`coupling` and :meth:`product` give angular velocities and take torques
     pairs_in_one_pass : bool, whether :meth:`paired_velocities` makes both products in one pass over the pairs
+    product_in_one_pass : bool, whether :meth:`product` gives ``U`` and ``W`` from forces and torques in one
+        product (the spectral backend) rather than as the sum of the couplings
     near_field_domain : 'single_wall', 'no_wall' or None: the domain of the compiled near-field loop of the
         neighbour preconditioner (``_preconditioner_cpp.rigid_near_field``) when that loop reproduces this
         mobility's dense blocks (the C++ backend in those geometries); None otherwise.
@@ -150,6 +152,7 @@ class BlobMobility:
     backend = 'abstract'
     has_rotation = False
     pairs_in_one_pass = False
+    product_in_one_pass = False
     near_field_domain = None
     relative_accuracy = 1e-12
 
