@@ -22,8 +22,8 @@ distance/radius, as the published ``Spectral_Multiblob_Roller`` folder does: see
 ``noise`` ('lanczos', or 'fluctuating': the exact triply periodic noise of
 ``mobility.spectral.fluctuations`` at about half a product's cost).
 
-``product(r, F, T)`` gives U and W of one spectral product (``product_in_one_pass``); ``matrix_from_products``
-builds the (symmetric part of the) matrix column by column from products (3N products: small systems only).
+``product(r, F, T)`` gives U and W of one spectral product (``product_in_one_pass``); ``dense_matrix`` builds
+the (symmetric part of the) matrix column by column from products (3N products: small systems only).
 
 The stencils of the last positions are kept and made again when the positions change (compared entry by
 entry with a copy), so repeated products at one configuration (Krylov iterations, Lanczos) pay the
@@ -164,12 +164,13 @@ class SpectralMobility(BlobMobility):
                                  'torques')
         return self._grand(r_vectors, forces, torques)
 
-    def matrix_from_products(self, r_vectors):
+    def dense_matrix(self, r_vectors):
         """The symmetric part of ``M_UF`` (3N, 3N) at ``r_vectors`` (N, 3), column by column (3N products).
 
         For small systems (the dense schemes, the static problems' body mobility): the spectral product has no
-        closed-form blocks, so it is no ``dense_matrix`` backend (``mobility_blobs_implementation``; a
-        per-body block alone in the periodic box is not what the preconditioners need either).  In the
+        closed-form blocks, so it is not registered with dense matrices (``mobility_blobs_implementation``), and
+        stacks of bodies (nb, n, 3) are refused (a body alone in the periodic box is not what the
+        preconditioners need: runs take their blocks from the direct geometry's mobility).  In the
         Chebyshev geometries the product is symmetric only to the discretisation's accuracy
         (``relative_accuracy``), so the symmetric part ``(M + M^T)/2`` is returned (a Cholesky factor exists).
         """

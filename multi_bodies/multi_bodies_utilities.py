@@ -76,7 +76,7 @@ def run_body_mobility(options, system, configuration):
                                                                                system.fixed_bodies)
         else:
             body_mobility, slip_mobility = body_solver.dense_body_mobility(system.arrays, configuration,
-                                                                           system.blobs_mobility)
+                                                                           system.dense_mobility)
     print('Time to compute body mobility = %s' % timer.elapsed)
     save_table(options.output_name + '.body_mobility.dat', body_mobility)
     save_table(options.output_name + '.body_slip_mobility.dat', slip_mobility)
@@ -146,7 +146,7 @@ def run_resistance(options, system, configuration, velocity_table=None):
     slip = system.slip(configuration) if system.has_slip else np.zeros((system.num_blobs, 3))
     with utils.Timer() as timer:
         force_torque, lambda_blobs = body_solver.solve_resistance_problem(
-            system.arrays, configuration, velocities, slip, system.blobs_mobility)
+            system.arrays, configuration, velocities, slip, system.dense_mobility)
     print('Time to solve resistance problem = %s' % timer.elapsed)
     save_table(options.output_name + '.force.dat', force_torque)
     write_velocity_field(options, system, system.blob_positions(configuration), lambda_blobs)

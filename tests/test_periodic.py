@@ -143,15 +143,152 @@ def test_lanczos_noise_of_the_chebyshev_product_is_the_root_of_its_symmetric_par
         assert np.linalg.norm(noise - wall_root @ z) / np.linalg.norm(root @ z) > 10 * asymmetry
 
 
-def test_matrix_from_products_is_the_symmetric_part_of_the_products():
-    """``matrix_from_products`` of the spectral backend: (M + M^T)/2 of its own products (in TP M itself, to
-    round-off); per-body stacks are refused in one line, and ``dense_matrix`` (blocks backends) too."""
+def test_dense_matrix_is_the_symmetric_part_of_the_products():
+    """``dense_matrix`` of the spectral backend: (M + M^T)/2 of its own products (in TP M itself, to round-off);
+    per-body stacks are refused in one line."""
     for kind in ('triply_periodic', 'doubly_periodic_wall'):
         mobility = spectral(kind)
         r = blobs(3, 4)
         M = matrix_of(mobility, r)
-        assert np.allclose(mobility.matrix_from_products(r), 0.5 * (M + M.T), rtol=0, atol=1e-14 * np.abs(M).max())
+        assert np.allclose(mobility.dense_matrix(r), 0.5 * (M + M.T), rtol=0, atol=1e-14 * np.abs(M).max())
     with pytest.raises(UserInputError, match='per-body dense blocks'):
-        mobility.matrix_from_products(r[None])
-    with pytest.raises(UserInputError, match='builds no dense matrices'):
-        mobility.dense_matrix(r)
+        mobility.dense_matrix(r[None])
+
+
+# ====================================================================== input files
+def write_rollers(folder, locations, options, structure='blob.vertex rollers.clones'):
+    from multi_bodies.files.snapshots import write_clones_file
+    from multi_bodies.files.structure_files import write_vertex_file
+    write_vertex_file(folder / 'blob.vertex', np.zeros((1, 3)))
+    locations = np.asarray(locations, dtype=float).reshape(-1, 3)
+    write_clones_file(folder / 'rollers.clones', locations, np.tile([1.0, 0, 0, 0], (len(locations), 1)))
+    base = {'scheme': 'deterministic_forward_euler_rollers', 'dt': 0.01, 'n_steps': 2, 'n_save': 1, 'eta': 1.0,
+            'g': 1.0, 'blob_radius': 1.0, 'repulsion_strength_wall': 1.0, 'debye_length_wall': 0.25,
+            'omega_one_roller': '0 1 0', 'mobility_vector_prod_implementation': 'spectral',
+            'periodic_length': '16 16 0', 'spectral_kernel': 'w5w4', 'output_name': 'run', 'seed': 1}
+    base.update(options)
+    text = ''.join('%s %s\n' % (name, value) for name, value in base.items() if value is not None)
+    (folder / 'input.dat').write_text(text + 'structure %s\n' % structure)
+
+
+def run_script(folder, monkeypatch, script='multi_bodies'):
+    import importlib
+    module = importlib.import_module('multi_bodies.' + script)
+    monkeypatch.chdir(folder)
+    return module.main(['--input-file', 'input.dat'])
+
+
+TWO_ROLLERS = [[4.0, 4.0, 1.6], [9.0, 5.0, 2.1]]
+
+
+@pytest.mark.parametrize('options, fragment', [
+    ({'mobility_vector_prod_implementation': 'C++', 'spectral_kernel': None, 'spectral_geometry': 'triply_periodic'},
+     'spectral_geometry is an option of the spectral product'),
+    ({'spectral_geometry': 'doubly_periodic_slit'}, 'needs spectral_z_bounds'),
+    ({'spectral_geometry': 'doubly_periodic_open'}, 'needs spectral_z_bounds'),
+    ({'spectral_z_bounds': '0.5 8'}, 'the bottom wall is at z = 0'),
+    ({'spectral_z_bounds': '3 2'}, 'zmin < zmax'),
+    ({'periodic_length': '16 13 0'}, 'whole number of cells'),
+    ({'periodic_length': '16 16 16', 'spectral_geometry': 'doubly_periodic_wall'}, 'not periodic in z'),
+    ({'periodic_length': '0 16 0'}, 'periodic in x and y'),
+    ({'spectral_geometry': 'triply_periodic'}, 'needs periodic_length Lx Ly Lz'),
+    ({'spectral_noise': 'fluctuating', 'scheme': 'stochastic_first_order_rollers', 'kT': 0.1},
+     'triply periodic box only'),
+    ({'spectral_kernel': 'w4'}, "no dipole kernel for the rollers"),
+    ({'domain': 'no_wall'}, 'the walls are those of spectral_geometry'),
+    ({'mobility_blobs_implementation': 'spectral'}, "unknown mobility_blobs_implementation 'spectral'"),
+])
+def test_refusals_are_one_line_naming_file_and_line(tmp_path, monkeypatch, options, fragment):
+    write_rollers(tmp_path, TWO_ROLLERS, options)
+    with pytest.raises(UserInputError) as refused:
+        run_script(tmp_path, monkeypatch)
+    message = str(refused.value)
+    assert fragment in message and message.startswith('input.dat, line') and '\n' not in message, message
+    assert not (tmp_path / 'run.info').exists()
+
+
+def test_rigid_bodies_refuse_a_kernel_pair_and_periodic_z_over_the_wall(tmp_path, monkeypatch):
+    write_rollers(tmp_path, TWO_ROLLERS, {'scheme': 'deterministic_forward_euler', 'spectral_kernel': 'w6w4'})
+    with pytest.raises(UserInputError, match='rigid bodies use the force-only kernels'):
+        run_script(tmp_path, monkeypatch)
+
+
+def test_whole_cells_refusal_names_the_period_that_fits(tmp_path, monkeypatch):
+    """The grid of blob_radius 1, kernel w5w4 has h = 16/Nx; Ly = 13 is not whole cells: the message gives the
+    box that is, and that box runs."""
+    write_rollers(tmp_path, TWO_ROLLERS, {'periodic_length': '16 13 0'})
+    with pytest.raises(UserInputError) as refused:
+        run_script(tmp_path, monkeypatch)
+    fitted = str(refused.value).split('Use periodic_length ')[1].split(' (')[0]
+    Lx, Ly, _ = (float(v) for v in fitted.split())
+    assert Lx == 16.0 and abs(Ly - 13.0) < 0.7
+    write_rollers(tmp_path, TWO_ROLLERS, {'periodic_length': fitted})
+    assert run_script(tmp_path, monkeypatch) == 0
+
+
+def test_a_restart_with_another_geometry_is_refused(tmp_path, monkeypatch):
+    """The spectral options are in the restart fingerprint: the same run restarted with another top wall stops."""
+    write_rollers(tmp_path, TWO_ROLLERS, {'spectral_geometry': 'doubly_periodic_slit', 'spectral_z_bounds': '0 8',
+                                          'n_steps': 4, 'n_save': 2})
+    assert run_script(tmp_path, monkeypatch) == 0
+    write_rollers(tmp_path, TWO_ROLLERS, {'spectral_geometry': 'doubly_periodic_slit', 'spectral_z_bounds': '0 9',
+                                          'n_steps': 4, 'n_save': 2, 'initial_step': 2})
+    with pytest.raises(UserInputError, match='spectral_z_bounds: was'):
+        run_script(tmp_path, monkeypatch)
+
+
+def test_a_record_older_than_an_option_counts_it_at_its_default():
+    from multi_bodies.run.restart_records import fingerprint_changes
+    current = {'scheme': "'x'", 'spectral_geometry': "'auto'", 'spectral_z_bounds': 'None'}
+    assert fingerprint_changes({'scheme': "'x'"}, current) == []
+    assert fingerprint_changes({'scheme': "'x'"}, dict(current, spectral_geometry="'triply_periodic'"))
+
+
+def test_slit_top_wall_invalidates_and_the_open_box_stops_the_run(tmp_path, monkeypatch):
+    """A roller through the top wall of a slit is an invalid configuration (the step is redone); a roller that
+    leaves the heights of an open box stops the run with one line, its .info written (exit status 1)."""
+    from multi_bodies.files.input_options import parse_input_text
+    from multi_bodies.run.run_setup import prepare
+    from body.body import Configuration
+    write_rollers(tmp_path, TWO_ROLLERS, {'spectral_geometry': 'doubly_periodic_slit', 'spectral_z_bounds': '0 8'})
+    monkeypatch.chdir(tmp_path)
+    options = parse_input_text((tmp_path / 'input.dat').read_text(), 'input.dat', 'dynamic')
+    model = prepare(options, 'dynamics', log=lambda line: None).system
+    up = Configuration(np.array([[4.0, 4.0, 8.2], [9.0, 5.0, 2.1]]), np.tile([1.0, 0, 0, 0], (2, 1)))
+    assert list(model.invalid_bodies(up)) == [0]
+    # the default physics pushes down from the top wall as up from the bottom one
+    r = np.array([[0, 0, 1.5], [0, 0, 6.5]])
+    f = model.blob_forces(r)[:, 2]
+    assert np.isclose(f[0] + f[1], -2 * 1.0) and f[1] < -1.0
+    write_rollers(tmp_path, [[4.0, 4.0, 7.9], [9.0, 5.0, 4.0]],
+                  {'spectral_geometry': 'doubly_periodic_open', 'spectral_z_bounds': '0 8', 'g': -100.0,
+                   'n_steps': 20})
+    assert run_script(tmp_path, monkeypatch) == 1
+    assert 'outside the heights [0, 8]' in (tmp_path / 'run.info').read_text()
+
+
+def test_worked_example_runs_as_written():
+    """doc/periodic.md's rollers in a slit: the commands of its block, run from the repository root as written;
+    every saved height lies between the walls, and the run logged the slit it made."""
+    import re
+    import shutil
+    import subprocess
+    import sys
+    text = open(os.path.join(REPO_ROOT, 'doc', 'periodic.md'), encoding='utf-8').read()
+    section = text[text.index('## A worked example'):]
+    block = re.search(r'```\n(.*?)```', section, re.S).group(1)
+    assert 'inputfile_slit.dat' in block
+    folder = os.path.join(REPO_ROOT, 'multi_bodies', 'examples', 'slit_rollers')
+    shutil.rmtree(os.path.join(folder, 'data'), ignore_errors=True)
+    try:
+        done = subprocess.run(['bash', '-e', '-c', block.replace('python3 ', sys.executable + ' ')], cwd=REPO_ROOT,
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert 'spectral product: doubly_periodic_slit, periods 30 30 0, z bounds 0 5' in done.stdout
+        snapshots = sorted(name for name in os.listdir(os.path.join(folder, 'data')) if name.endswith('.clones'))
+        assert len(snapshots) == 6
+        for name in snapshots:
+            z = np.loadtxt(os.path.join(folder, 'data', name), skiprows=1)[:, 2]
+            assert np.all((z > 0) & (z < 5)), name
+    finally:
+        shutil.rmtree(os.path.join(folder, 'data'), ignore_errors=True)

@@ -65,6 +65,12 @@ def mobility_implementation_names():
     return tuple(implementation_names()) + ('auto', 'auto_no_wall')
 
 
+def vector_product_names():
+    """The names of ``mobility_implementation_names`` and ``spectral`` (the periodic and confined boxes of
+    doc/periodic.md: a matrix-free product without dense blocks, so not a ``mobility_blobs_implementation``)."""
+    return mobility_implementation_names() + ('spectral',)
+
+
 class Range:
     """Allowed numbers: ``low`` <(=) value <(=) ``high`` (None: no bound).
 
@@ -128,7 +134,7 @@ class Option(namedtuple('Option', ['kind', 'default', 'rule', 'used_by', 'progra
                         defaults=(True,))):
     """One row of OPTION_TABLE.
 
-    kind : str, int, float, floats3, floats9 (one to nine), ints2, grid9, bool, optional_str, optional_int
+    kind : str, int, float, floats2, floats3, floats9 (one to nine), ints2, grid9, bool, optional_str, optional_int
     default : the value when the file does not set the option
     rule : Range, Choice or None, checked whatever the program
     used_by : tuple of usage tags (see above); () = no effect
@@ -184,7 +190,7 @@ OPTION_TABLE = {
     'repulsion_strength': _option('float', 1.0, SDM),
     'debye_length': _option('float', 1.0, SDM, Range(0, low_open=True, fix='the repulsion laws divide by it')),
     'mobility_blobs_implementation': _option('str', 'python', SD, Choice(mobility_implementation_names)),
-    'mobility_vector_prod_implementation': _option('str', 'python', SD, Choice(mobility_implementation_names)),
+    'mobility_vector_prod_implementation': _option('str', 'python', SD, Choice(vector_product_names)),
     'blob_blob_force_implementation': _option('str', 'None', SD, Choice(_FORCE_IMPLEMENTATIONS)),
     'body_body_force_torque_implementation': _option('str', 'None', SDM, Choice(('None', 'python'))),
     'solver_tolerance': _option('float', 1e-8, SD, Range(0, 1, True, True, fix='a relative tolerance, e.g. 1e-8')),
@@ -199,6 +205,12 @@ OPTION_TABLE = {
     'omega_one_roller': _option('floats3', (0.0, 0.0, 0.0), ('rollers',)),
     'free_kinematics': _option('bool', True, ('rollers',)),
     'domain': _option('str', 'single_wall', ('rollers',), Choice(('single_wall', 'no_wall', 'in_plane'))),
+    # mobility_vector_prod_implementation spectral only (doc/periodic.md; checked by multi_bodies.solver.periodic)
+    'spectral_geometry': _option('str', 'auto', SD, Choice(('auto', 'triply_periodic', 'doubly_periodic_open',
+                                                            'doubly_periodic_wall', 'doubly_periodic_slit'))),
+    'spectral_z_bounds': _option('floats2', None, SD),
+    'spectral_kernel': _option('str', 'w6', SD, Choice(('w6', 'w5', 'w4', 'w6w5', 'w6w4', 'w5w4'))),
+    'spectral_noise': _option('str', 'lanczos', ('stochastic',), Choice(('lanczos', 'fluctuating'))),
     # gravity tilt (radians) of the published reader: passed to the hooks as the keyword tilt_angle
     'tilt_angle': _option('float', 0.0, SDM),
     # radius of a multiblob roller that the published Multi_Blob_Two_Rollers program hard-codes (1.0): a hook keyword
@@ -436,6 +448,16 @@ def _convert(kind, name, value, where):
         if len(words) != 1 or words[0] not in ('True', 'False'):
             fail('True or False')
         return words[0] == 'True'
+    if kind == 'floats2':
+        try:
+            numbers = tuple(finite(w, 'two numbers') for w in words)
+        except UserInputError:
+            raise
+        except ValueError:
+            fail('two numbers')
+        if len(numbers) != 2:
+            fail('two numbers')
+        return numbers
     if kind in ('floats3', 'floats9'):  # floats9: one to nine numbers (background_Laplace), zero-padded where used
         what, fewest, most = ('three numbers', 3, 3) if kind == 'floats3' else ('one to nine numbers', 1, 9)
         try:
@@ -684,8 +706,8 @@ def check_hydrogrid(options, program=None):
 
 def check_periodic_box(options):
     """A periodic z axis needs free space: above a wall it has no meaning (SPEC §8)."""
-    if options.periodic_length[2] <= 0:
-        return
+    if options.periodic_length[2] <= 0 or options.mobility_vector_prod_implementation == 'spectral':
+        return  # the spectral product's geometry is checked with its options (multi_bodies.solver.periodic)
     implementations = (options.mobility_vector_prod_implementation, options.mobility_blobs_implementation)
     wall = any(not name.endswith('_no_wall') for name in implementations)
     if 'rollers' in options.scheme and options.domain != 'no_wall':

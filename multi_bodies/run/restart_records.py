@@ -189,8 +189,7 @@ def run_fingerprint(options, types, bodies, directory=None):
             found.update(_body_fingerprint(name, bodies[start]))
         start += count
     for name in DYNAMICS_OPTIONS:
-        value = getattr(options, name, None)
-        found[name] = repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
+        found[name] = _option_text(getattr(options, name, None))
     for kind, name, path in restart_inputs(options, os.getcwd() if directory is None else directory):
         found['%s file %s' % (kind, name)] = file_digest(path)
     return found
@@ -217,10 +216,20 @@ def _body_fingerprint(name, body):
     return found
 
 
+def _option_text(value):
+    return repr(tuple(value) if isinstance(value, (list, np.ndarray)) else value)
+
+
 def fingerprint_changes(recorded, current):
-    """'what changed' lines between a record's fingerprint and this run's (empty when they agree)."""
+    """'what changed' lines between a record's fingerprint and this run's (empty when they agree).
+
+    An option of the table that a record lacks (the option is newer than the record) counts as its default: the
+    version that wrote the record ran as the default does."""
     changes = []
     for name in list(recorded) + [n for n in current if n not in recorded]:
+        if name not in recorded and name in DYNAMICS_OPTIONS \
+                and current.get(name) == _option_text(OPTION_TABLE[name].default):
+            continue
         if recorded.get(name) != current.get(name):
             changes.append('%s: was %s, now %s' % (name, recorded.get(name, '(absent)'), current.get(name, '(absent)')))
     return changes

@@ -37,7 +37,8 @@ from body.body import Configuration, as_configuration, reference_slip_in_lab_fra
 from body.geometry import Quaternion
 from mobility.interface import (BlobMobility, Geometry, from_implementation_name, implementation_geometry,
                                 make_mobility, published_function, registered_backends)
-from multi_bodies.solver import body_solver, corotated_preconditioner, noise_factor, obstacles, rollers, user_hooks
+from multi_bodies.solver import body_solver, corotated_preconditioner, noise_factor, obstacles, periodic, rollers
+from multi_bodies.solver import user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
@@ -119,6 +120,11 @@ class Model:
         The user's ``calc_blob_blob_forces_pycuda`` of a ``forces_pycuda_user_defined.py`` (None: the hooks').
     surface : multi_bodies.solver.surface.Surface or None
         Phoretic and slip-length data of the blobs (``.Laplace``, ``.slip_length`` files; doc/phoretic.md).
+    spectral : multi_bodies.solver.periodic.SpectralDomain or None
+        The periodic or confined domain of ``vector_product_name`` ``spectral`` (doc/periodic.md): it makes
+        ``vector_mobility`` (force-only kernel), ``roller_mobility`` (kernel pair) and ``blobs_mobility`` (the
+        preconditioners' blocks: ``blobs_name``'s backend in the domain's direct geometry), and says which
+        configurations are invalid; None for the direct products.
 
     The blob mobilities (``mobility.interface.BlobMobility``, configured once with ``eta``, the blob radius or
     the vertex files' per-blob radii, and the box) are ``vector_mobility`` (``vector_product_name`` with
@@ -138,7 +144,7 @@ class Model:
                  domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
                  check_wall=True, lanczos_max_iterations=1000, vector_mobility=None, blobs_mobility=None,
                  pycuda_blob_blob_forces=None, surface=None, preconditioner='auto',
-                 lanczos_preconditioner='block_diagonal'):
+                 lanczos_preconditioner='block_diagonal', spectral=None):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__
@@ -162,10 +168,18 @@ class Model:
         set_(self, 'vector_product_name', vector_product_name)
         set_(self, 'blobs_name', blobs_name)
         radius = body_solver.blob_radius_argument(body_arrays, self.blob_radius)  # one number, or per-blob radii
-        set_(self, 'vector_mobility', vector_mobility if vector_mobility is not None
-             else from_implementation_name(vector_product_name, self.eta, radius, self.periodic_length))
-        set_(self, 'blobs_mobility', blobs_mobility if blobs_mobility is not None
-             else from_implementation_name(blobs_name, self.eta, radius, dense_matrices=True))
+        set_(self, 'spectral', spectral)
+        if spectral is not None and np.ndim(radius):
+            raise UserInputError('the spectral product has one kernel width: every blob needs the radius '
+                                 'blob_radius (remove the fourth column of the vertex files)')
+        if vector_mobility is None:
+            vector_mobility = (spectral.mobility(self.eta, radius) if spectral is not None
+                               else from_implementation_name(vector_product_name, self.eta, radius, self.periodic_length))
+        if blobs_mobility is None:
+            blobs_mobility = (spectral.block_mobility(blobs_name, self.eta, radius) if spectral is not None
+                              else from_implementation_name(blobs_name, self.eta, radius, dense_matrices=True))
+        set_(self, 'vector_mobility', vector_mobility)
+        set_(self, 'blobs_mobility', blobs_mobility)
         # (M v1, M v2) in one pass over the pairs where the backend offers it under its own name (C++, C++_no_wall:
         # the aliases keep their products unpaired, so their runs repeat to the bit), else None
         set_(self, 'paired_mobility_product', self.vector_mobility.paired_velocities
@@ -234,6 +248,10 @@ class Model:
         """The couplings of single-blob rollers: the ``mobility_vector_prod_implementation`` backend in the
         geometry of ``domain`` (``in_plane``: :class:`rollers.InPlaneMobility` over the wall's), one blob radius,
         the run's box (made on first use: a free-surface name is refused only by the roller schemes)."""
+        if self._roller_mobility is None and self.spectral is not None:  # the kernel pair: U and W in one product
+            roller = self.spectral.mobility(self.eta, self.blob_radius, rotation=True)
+            object.__setattr__(self, '_roller_mobility', rollers.InPlaneMobility(roller) if self.domain == 'in_plane'
+                               else roller)
         if self._roller_mobility is None:
             backend, geometry = implementation_geometry(self.vector_product_name, self.periodic_length)
             if geometry.kind == 'free_surface':
@@ -310,10 +328,16 @@ class Model:
         return Configuration(np.array([b.location for b in bodies]), np.array([b.orientation.entries for b in bodies]))
 
     def invalid_bodies(self, configuration, r_vectors=None):
-        """Indices of bodies with a blob centre below the wall (z < 0) at ``configuration`` (empty without a wall)."""
+        """Indices of bodies with a blob centre below the wall (z < 0) at ``configuration`` (empty without a wall).
+
+        With the spectral product, the domain's walls (also the top wall of a slit); a blob leaving the heights of
+        the spectral grid stops the run (``SpectralDomain.invalid_bodies``)."""
         if not self.check_wall:
             return np.zeros(0, dtype=int)
-        return self.arrays.check_positions(self.blob_positions(configuration) if r_vectors is None else r_vectors)
+        r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        if self.spectral is not None:
+            return self.spectral.invalid_bodies(self.arrays, r_vectors)
+        return self.arrays.check_positions(r_vectors)
 
     # -------------------------------------------------------------- physics
     def blob_forces(self, r_vectors):
@@ -473,6 +497,9 @@ class Model:
         tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``.
         """
         tolerance = self.tolerance if tolerance is None else float(tolerance)
+        mobility = getattr(problem, 'mobility', None)
+        if getattr(mobility, 'noise_method', None) == 'fluctuating':  # exact: no Krylov space, no preconditioner
+            return mobility.noise(problem.r_vectors, z, factor=factor)
         if preconditioner is None:
             matvec, L_mult = problem.M_dot, None
         else:
@@ -500,10 +527,17 @@ class Model:
     def dense_matrices(self, configuration, inverse=True):
         """Dense algebra at ``configuration``: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
 
-        ``M`` from the blobs backend, ``N = pinv(K^T M^{-1} K)`` (body_solver.dense_matrices).
+        ``M`` from :attr:`dense_mobility`, ``N = pinv(K^T M^{-1} K)`` (body_solver.dense_matrices).
         """
-        return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.blobs_mobility,
+        return body_solver.dense_matrices(self.arrays, as_configuration(configuration), self.dense_mobility,
                                           inverse=inverse)
+
+    @property
+    def dense_mobility(self):
+        """The mobility whose dense matrix of all blobs the dense schemes and static problems use: the blobs
+        backend, or with the spectral product the product itself (its matrix built from 3N products, the
+        symmetric part: ``SpectralMobility.dense_matrix``)."""
+        return self.blobs_mobility if self.spectral is None else self.vector_mobility
 
     def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None):
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
@@ -524,11 +558,11 @@ class Model:
         _, force_torque, slip = self.forces_and_slip(configuration)
         if self.has_fixed_bodies:
             M, _, K, _ = body_solver.dense_matrices(self.arrays, as_configuration(configuration),
-                                                    self.blobs_mobility, inverse=False)
+                                                    self.dense_mobility, inverse=False)
             return obstacles.dense_mixed_solution(M, K, self.fixed_bodies, self.prescribed_velocities,
                                                   force_torque, slip)[0]
         return body_solver.dense_mobility_velocities(self.arrays, configuration, force_torque, slip,
-                                                     self.blobs_mobility)
+                                                     self.dense_mobility)
 
     # -------------------------------------------------------------- rollers (multi_bodies.solver.rollers)
     def roller_product(self, kind):
@@ -689,10 +723,24 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                                 lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
         if log is not None:
             log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)
-    checked('mobility_vector_prod_implementation', lambda: from_implementation_name(
-        product, options.eta, options.blob_radius, options.periodic_length))
-    checked('mobility_blobs_implementation', lambda: from_implementation_name(
-        blobs, options.eta, options.blob_radius, dense_matrices=True))
+    periodic.check_spectral_options(options)
+    spectral = None
+    check_wall = wall_is_seen(options, product, blobs, script)
+    if product == periodic.SPECTRAL:  # doc/periodic.md
+        spectral = periodic.spectral_domain(options, rollers=script == 'dynamics' and 'rollers' in options.scheme)
+        check_wall = spectral.checks_heights
+        checked('mobility_blobs_implementation', lambda: spectral.block_mobility(blobs, options.eta,
+                                                                                 options.blob_radius))
+        if log is not None:
+            log('spectral product: %s, periods %s, z bounds %s, kernel %s, noise %s; preconditioner blocks: %s in %s'
+                % (spectral.kind, ' '.join('%g' % v for v in spectral.periodic_length),
+                   'none' if spectral.z_bounds is None else '%g %g' % spectral.z_bounds, spectral.kernel,
+                   spectral.noise, implementation_geometry(blobs)[0], spectral.block_geometry().kind))
+    else:
+        checked('mobility_vector_prod_implementation', lambda: from_implementation_name(
+            product, options.eta, options.blob_radius, options.periodic_length))
+        checked('mobility_blobs_implementation', lambda: from_implementation_name(
+            blobs, options.eta, options.blob_radius, dense_matrices=True))
     checked('blob_blob_force_implementation', lambda: mbf.blob_blob_force_calculator(
         forces, pycuda_forces=pycuda_forces, radii_given=body_arrays.radii_given))
     checked('body_body_force_torque_implementation', lambda: mbf.body_body_force_calculator(body_body))
@@ -701,6 +749,6 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                  periodic_length=options.periodic_length, omega_one_roller=options.omega_one_roller,
                  free_kinematics=options.free_kinematics, domain=options.domain, print_residual=print_residual,
                  articulated=articulated, nonlinear_tolerance=options.nonlinear_solver_tolerance,
-                 check_wall=wall_is_seen(options, product, blobs, script), pycuda_blob_blob_forces=pycuda_forces,
+                 check_wall=check_wall, pycuda_blob_blob_forces=pycuda_forces,
                  surface=surface, preconditioner=options.preconditioner,
-                 lanczos_preconditioner=options.lanczos_preconditioner)
+                 lanczos_preconditioner=options.lanczos_preconditioner, spectral=spectral)

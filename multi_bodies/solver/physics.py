@@ -43,33 +43,42 @@ PAIR_CHUNK_ELEMENTS = 262144  # pairs per chunk in the all-pairs sums (bounded m
 
 
 def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0,
-                         blob_radius=1.0, blob_mass=1.0, **kwargs):
+                         blob_radius=1.0, blob_mass=1.0, top_wall=None, **kwargs):
     """Gravity and soft wall repulsion on every blob, shape (N, 3).
 
     Gravity ``(0, 0, -g blob_mass)``; the wall potential
     ``U = eps + eps (a - z)/b`` for ``z < a`` and ``eps exp(-(z - a)/b)``
     otherwise gives ``f_z = (eps/b) exp(-(z - a)/b)`` (``eps/b`` below ``a``),
     with ``eps = repulsion_strength_wall``, ``b = debye_length_wall``, ``a = blob_radius``.
+    ``top_wall`` (the height of the top wall of a slit, doc/periodic.md; None without): the same repulsion
+    from that wall, with ``top_wall - z`` in place of ``z``, pushing down.
     """
     r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
     z = r_vectors[:, 2]
     eps, b, a = repulsion_strength_wall, debye_length_wall, blob_radius
     forces = np.zeros_like(r_vectors)
     forces[:, 2] = -g * blob_mass + np.where(z > a, (eps / b) * np.exp(-(z - a) / b), eps / b)
+    if top_wall is not None:
+        gap = top_wall - z
+        forces[:, 2] -= np.where(gap > a, (eps / b) * np.exp(-(gap - a) / b), eps / b)
     return forces
 
 
 def blob_external_potential(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, blob_radius=1.0,
-                            blob_mass=1.0, **kwargs):
+                            blob_mass=1.0, top_wall=None, **kwargs):
     """Energy of gravity and of the soft wall of every blob (the potential of ``blob_external_forces``).
 
     r_vectors (N, 3) -> energies (N,): ``g blob_mass z + eps exp(-(z - a)/b)``
-    for ``z >= a`` and ``g blob_mass z + eps + eps (a - z)/b`` below.
+    for ``z >= a`` and ``g blob_mass z + eps + eps (a - z)/b`` below; with ``top_wall`` the same wall energy of
+    the gap ``top_wall - z`` added.
     """
     z = np.asarray(r_vectors, dtype=float).reshape(-1, 3)[:, 2]
     eps, b, a = repulsion_strength_wall, debye_length_wall, blob_radius
-    return (g * blob_mass * z + eps * np.exp(-np.maximum(z - a, 0.0) / b)
-            + (eps / b) * np.maximum(a - z, 0.0))
+
+    def wall(gap):
+        return eps * np.exp(-np.maximum(gap - a, 0.0) / b) + (eps / b) * np.maximum(a - gap, 0.0)
+    energy = g * blob_mass * z + wall(z)
+    return energy if top_wall is None else energy + wall(top_wall - z)
 
 
 def blob_external_force(r_vectors, *args, **kwargs):
@@ -414,6 +423,8 @@ def body_body_force_calculator(implementation, pair_force_torque=None, python_fo
 PUBLISHED_HOOK_KEYWORDS = ('g', 'repulsion_strength_wall', 'debye_length_wall', 'repulsion_strength', 'debye_length',
                            'periodic_length', 'blob_radius', 'blob_mass', 'eta', 'a', 'particle_radius',
                            'omega_one_roller', 'tilt_angle', 'kT')
+# Keywords of this package's own physics that the published code never passes (its hooks take **kwargs).
+PACKAGE_HOOK_KEYWORDS = ('top_wall',)
 
 
 def physics_keywords(options):
@@ -421,15 +432,18 @@ def physics_keywords(options):
 
     ``blob_mass`` is 1; ``a`` is ``blob_radius`` (the published name); ``particle_radius`` (length) is the
     option of that name (default 1.0, the value the published Multi_Blob_Two_Rollers program sets);
-    ``omega_one_roller`` (3,) in 1/time; ``tilt_angle`` in radians; ``periodic_length`` (3,).
+    ``omega_one_roller`` (3,) in 1/time; ``tilt_angle`` in radians; ``periodic_length`` (3,); and
+    ``PACKAGE_HOOK_KEYWORDS``: ``top_wall``, the height of the top wall of a spectral slit (None otherwise,
+    doc/periodic.md).
     """
+    from multi_bodies.solver.periodic import top_wall_height
     return dict(g=options.g, repulsion_strength_wall=options.repulsion_strength_wall,
                 debye_length_wall=options.debye_length_wall, repulsion_strength=options.repulsion_strength,
                 debye_length=options.debye_length, periodic_length=np.array(options.periodic_length, dtype=float),
                 blob_radius=options.blob_radius, blob_mass=1.0, eta=options.eta, a=options.blob_radius,
                 particle_radius=options.particle_radius,
                 omega_one_roller=np.array(options.omega_one_roller, dtype=float),
-                tilt_angle=options.tilt_angle, kT=options.kT)
+                tilt_angle=options.tilt_angle, kT=options.kT, top_wall=top_wall_height(options))
 
 
 def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_blob_forces=None,

@@ -127,7 +127,9 @@ def roller_velocities(model, configuration, torque_guess=None):
 
     Forces: one-blob plus blob-blob.  ``free_kinematics``: torque ``8 pi eta a^3 omega_one_roller`` per
     blob; otherwise the torque of :class:`RollerSpinProblem` (GMRES started from ``torque_guess``, the
-    normalised torque of the last solve).  Then ``v = M_UF F + M_UT T``, shape (N, 3).
+    normalised torque of the last solve).  Then ``v = M_UF F + M_UT T``, shape (N, 3): one product where the
+    mobility gives U and W of forces and torques together (``product_in_one_pass``: the spectral product), else
+    the two couplings.
     """
     r_vectors = model.blob_positions(configuration)
     forces = model.blob_forces(r_vectors).reshape(-1)
@@ -144,9 +146,12 @@ def roller_velocities(model, configuration, torque_guess=None):
         torques, iterations = result.constraint_force_torque.reshape(-1), result.iterations
         if result.normalised_solution is not None:
             torque_guess = result.normalised_solution
-    velocity = roller.coupling('trans_times_force', r_vectors, forces)
-    if np.any(torques != 0):
-        velocity = velocity + roller.coupling('trans_times_torque', r_vectors, torques)
+    if roller.product_in_one_pass and np.any(torques != 0):  # the spectral product: U of (F, T) in one product
+        velocity = roller.product(r_vectors, forces, torques)[0]
+    else:
+        velocity = roller.coupling('trans_times_force', r_vectors, forces)
+        if np.any(torques != 0):
+            velocity = velocity + roller.coupling('trans_times_torque', r_vectors, torques)
     return RollerVelocities(np.asarray(velocity).reshape(-1, 3), torque_guess, iterations)
 
 
