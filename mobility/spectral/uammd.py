@@ -35,6 +35,7 @@ from .libmobility_parameters import simpson_normalisation
 from .stencil import Stencil
 
 BLOB_CHUNK = 8192
+EXPANSION_KEPT = 1 << 22   # chain factors repeated per right-hand side are kept up to this many entries each
 
 
 # ------------------------------------------------------------------ kernels and stencils
@@ -173,6 +174,7 @@ class UammdSolver:
         Kl = K[self.live]
         N, H = cheb.N, cheb.H
         self._factors = cheb.factor(Kl)
+        self._expanded = {}
         q = self._factors[3]
         self._top_rows = (H * H) * Kl[None, :] * cheb.R2[:, None] + H * cheb.R1[:, None]
         self._bottom_rows = (H * H) * Kl[None, :] * cheb.L2[:, None] + H * cheb.L1[:, None]
@@ -187,8 +189,13 @@ class UammdSolver:
         self.z = p.z_nodes()
 
     def _expand(self, copies):
-        """The chain factors repeated for ``copies`` right-hand sides per wavenumber (columns m*copies)."""
-        return tuple(np.repeat(f, copies, axis=-1) for f in self._factors)
+        """The chain factors repeated for ``copies`` right-hand sides per wavenumber (columns m*copies), kept."""
+        if copies in self._expanded:
+            return self._expanded[copies]
+        expanded = tuple(np.repeat(f, copies, axis=-1) for f in self._factors)
+        if expanded[0].size <= EXPANSION_KEPT:
+            self._expanded[copies] = expanded
+        return expanded
 
     def _solve(self, rhs, top, bottom):
         """Coefficients (N, c, m) of the solutions of ``c`` problems per wavenumber: rhs (N, c, m), top and
