@@ -13,6 +13,8 @@ What the numbers are checked against (never the face's own output):
 * statistics with a tolerance from the standard error, each with a negative control that must fail.
 """
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -610,3 +612,235 @@ def test_dpstokes_langevin_at_zero_temperature_and_seeds(selection):
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(first[0], other[0])
+
+
+# ------------------------------------------------------------------ DPStokes: libMobility's own selection
+LIBMOBILITY_DIR = REFERENCE_DIR / 'libmobility'
+EPS_100 = 100 * np.finfo(np.float64).eps          # libMobility's tolerance for a module declaring "double"
+WALL_ETA = 1 / 4 / np.sqrt(np.pi)                 # libMobility's test_wall_mobility: eta, a = 1, box 76.8
+# Heights checked: every one with RMB_LIBMOBILITY_FULL=1 (3,888 products, about ten minutes on 2 cores; all passed
+# when written); by default a spread subset near the wall and in the bulk, so the tests stay near a minute.
+FULL_SWEEP = bool(os.environ.get('RMB_LIBMOBILITY_FULL'))
+SUBSET = {('self', True): [1, 5, 10, 17, 25, 35, 47, 59], ('self', False): [2, 20, 59],
+          ('pair', True): [1, 6, 13, 25], ('pair', False): [3, 25]}
+
+
+def _wall_solver(z_mode, shift, include_angular=False):
+    """libMobility's test_wall_mobility set-up: DPStokes over [0, 19.2] + shift in a 76.8 box, default selection."""
+    solver = DPStokes('periodic', 'periodic', z_mode)
+    solver.setParameters(Lx=76.8, Ly=76.8, zmin=0 + shift, zmax=19.2 + shift, allowChangingBoxSize=False)
+    solver.initialize(viscosity=WALL_ETA, hydrodynamicRadius=1.0, includeAngular=include_angular)
+    return solver
+
+
+def _compute_M(solver, n):
+    """Column i = Mdot(e_i), forces only (libMobility's tests/utils compute_M)."""
+    M = np.zeros((3 * n, 3 * n))
+    for i in range(3 * n):
+        unit = np.zeros(3 * n)
+        unit[i] = 1.0
+        M[:, i] = solver.Mdot(unit.reshape(n, 3))[0].reshape(-1)
+    return M
+
+
+def _load_libmobility(name):
+    path = LIBMOBILITY_DIR / (name + '.npz')
+    if not path.exists():
+        pytest.skip('libMobility reference matrices not found at %s' % LIBMOBILITY_DIR)
+    with np.load(path) as archive:
+        return archive['M'], archive['heights'].ravel()
+
+
+def _indices(kind, count, shift):
+    return list(range(count)) if FULL_SWEEP else SUBSET[(kind, shift == 0)]
+
+
+@pytest.mark.parametrize('shift', [0, 5.4, -10])
+@pytest.mark.parametrize('z_mode, tag', [('single_wall', 'bw'), ('two_walls', 'sc')])
+def test_libmobility_self_mobility_linear(z_mode, tag, shift):
+    """libMobility's self-mobility files (w = 4, bottom wall / slit) at 100 eps, as its test compares them: the
+    diagonal of M / (1/(6 pi eta a)) with rtol = atol = 100 eps.  (The xy entries of the stored matrices, 1e-8
+    to 1e-7, which libMobility's test does not compare, differ from ours by a factor 0.376; see
+    doc/libmobility.md.)"""
+    M_ref, heights = _load_libmobility('self_mobility_%s_w4' % tag)
+    solver = _wall_solver(z_mode, shift)
+    for i in _indices('self', heights.size, shift):
+        solver.setPositions(np.array([[76.8 / 2, 76.8 / 2, heights[i] + shift]]))
+        M = _compute_M(solver, 1) / (1 / (6 * np.pi * WALL_ETA * 1.0))
+        assert np.allclose(np.diag(M), np.diag(M_ref[i]), rtol=EPS_100, atol=EPS_100), \
+            (i, heights[i], np.abs(np.diag(M) - np.diag(M_ref[i])).max())
+
+
+@pytest.mark.parametrize('shift', [0, 5.4, -10])
+@pytest.mark.parametrize('z_mode, tag', [('single_wall', 'bw'), ('two_walls', 'sc')])
+def test_libmobility_pair_mobility_linear(z_mode, tag, shift):
+    """libMobility's pair-mobility files: every entry of M / (1/(6 pi eta)) within 100 eps (absolute)."""
+    M_ref, heights = _load_libmobility('pair_mobility_%s_w4' % tag)
+    solver = _wall_solver(z_mode, shift)
+    separations = [3.0, 4.0, 8.0] if (FULL_SWEEP or shift == 0) else [4.0]
+    for d in separations:
+        i = [3.0, 4.0, 8.0].index(d)
+        for k in _indices('pair', heights.size, shift):
+            x = 76.8 / 2
+            solver.setPositions(np.array([[x + d / 2, x, heights[k] + shift], [x - d / 2, x, heights[k] + shift]]))
+            M = _compute_M(solver, 2) / (1 / (6 * np.pi * WALL_ETA))
+            difference = np.abs(M - M_ref[i, k][0:6, 0:6])
+            assert np.all(difference < EPS_100), (d, k, heights[k], difference.max())
+
+
+def test_libmobility_selection_check_values():
+    """The numbers of libMobility's selection for a = 1 (interface note, section 4)."""
+    from mobility.spectral.libmobility_parameters import libmobility_parameters
+    p, _ = libmobility_parameters(1.0, 'single_wall', 16.0, 16.0, -6.0, 6.0)
+    assert (p.Nx, p.Ny) == (20, 20) and p.hx == pytest.approx(0.8, rel=1e-15)
+    assert p.monopole.beta == pytest.approx((6.4875,) * 3, abs=1e-4)
+    p, _ = libmobility_parameters(1.0, 'single_wall', 76.8, 76.8, 0.0, 19.2)
+    assert (p.Nx, p.Ny) == (92, 92) and p.hx == pytest.approx(0.834783, abs=1e-6)
+    assert p.monopole.beta[0] == pytest.approx(7.2377, abs=1e-4)
+    p, _ = libmobility_parameters(1.0, 'single_wall', 76.8, 76.8, 0.0, 19.2, include_angular=True)
+    assert (p.Nx, p.Ny) == (132, 132) and p.hx == pytest.approx(0.581818, abs=1e-6)
+    assert p.monopole.beta[0] == pytest.approx(8.0822, abs=1e-4)
+    assert p.dipole.beta[0] == pytest.approx(13.5060, abs=1e-4)
+    assert p.monopole.width[0] == 6 and p.dipole.width[0] == 6
+    # the z extents and Nz of the 16 x 16, z in [-6, 6] example (force only)
+    for z_mode, extent, nz in (('open', (-8.4, 8.4), 33), ('single_wall', (-6.0, 8.4), 29),
+                               ('two_walls', (-6.0, 6.0), None)):
+        p, stored = libmobility_parameters(1.0, z_mode, 16.0, 16.0, -6.0, 6.0)
+        assert (p.z0, p.z0 + p.Lz) == pytest.approx(extent, abs=1e-12)
+        assert (stored['zmin'], stored['zmax']) == pytest.approx(extent, abs=1e-12)
+        if nz is not None:
+            assert p.Nz == nz
+        assert p.Nz % 2 == 1
+    # allowChangingBoxSize: the box becomes whole nominal cells and the nominal beta stays
+    p, stored = libmobility_parameters(1.0, 'single_wall', 16.0, 15.0, 0.0, 6.0, allow_changing_box_size=True)
+    h = 1.0 / 1.205
+    assert (p.Nx, p.Ny) == (20, 18) and (stored['Lx'], stored['Ly']) == pytest.approx((20 * h, 18 * h), rel=1e-15)
+    assert p.monopole.beta == pytest.approx((1.785 * 4,) * 3, rel=1e-15)
+    # the grid is centred on x = y = 0
+    assert (p.x0, p.y0) == pytest.approx((-10 * h, -9 * h), rel=1e-15)
+
+
+def test_libmobility_selection_non_square_refits_per_direction():
+    from mobility.spectral.libmobility_parameters import libmobility_parameters
+    p, _ = libmobility_parameters(1.0, 'two_walls', 16.0, 19.0, 0.0, 8.0)
+    assert p.hx != p.hy
+    assert p.monopole.beta[0] != p.monopole.beta[1]
+    assert p.monopole.beta[2] == min(p.monopole.beta[:2])
+    assert p.monopole.alpha[2] == pytest.approx(2.0 * min(p.hx, p.hy), rel=1e-15)
+    with pytest.raises(RuntimeError, match='Could not find'):
+        solver = DPStokes('periodic', 'periodic', 'single_wall')
+        solver.setParameters(Lx=16.0, Ly=2.68, zmin=0.0, zmax=8.0)      # Ny = 4: hy = 0.67, beta(a/(4 hy)) < 4
+        solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    with pytest.raises(RuntimeError, match='DPStokes.*too small'):
+        solver = DPStokes('periodic', 'periodic', 'two_walls')
+        solver.setParameters(Lx=16.0, Ly=16.0, zmin=0.0, zmax=1.5)
+        solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+
+
+def test_libmobility_initialize_keeps_the_widened_extent():
+    """libMobility stores the widened z extent: a second initialize without setParameters widens it again."""
+    solver = DPStokes('periodic', 'periodic', 'single_wall')
+    solver.setParameters(Lx=16.0, Ly=16.0, zmin=-6.0, zmax=6.0)
+    solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    first = solver.parameters.z0 + solver.parameters.Lz
+    solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    assert first == pytest.approx(8.4, abs=1e-12)
+    assert solver.parameters.z0 + solver.parameters.Lz == pytest.approx(8.4 + 2.4, abs=1e-12)
+    solver.setParameters(Lx=16.0, Ly=16.0, zmin=-6.0, zmax=6.0)
+    solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    assert solver.parameters.z0 + solver.parameters.Lz == pytest.approx(8.4, abs=1e-12)
+
+
+def test_libmobility_single_wall_accepts_blobs_above_zmax():
+    """libMobility's DPStokes with one wall refuses only z < zmin (its test passes z = 5.5 with zmax = 5)."""
+    solver = DPStokes('periodic', 'periodic', 'single_wall')
+    solver.setParameters(Lx=16.0, Ly=16.0, zmin=0.0, zmax=5.0)
+    solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0)
+    solver.setPositions([[0.0, 0.0, 5.5]])
+    assert np.all(np.isfinite(solver.Mdot([[1.0, 0.0, 0.0]])[0]))
+    with pytest.raises(RuntimeError, match='passed through a wall'):
+        solver.setPositions([[0.0, 0.0, -0.01]])
+
+
+def _grand_M(solver, n):
+    size = 6 * n
+    M = np.zeros((size, size))
+    for c in range(size):
+        unit = np.zeros(size)
+        unit[c] = 1.0
+        U, W = solver.Mdot(unit[:3 * n].reshape(n, 3), unit[3 * n:].reshape(n, 3))
+        M[:, c] = np.concatenate((U.ravel(), W.ravel()))
+    return M
+
+
+def test_libmobility_angular_path_by_laws():
+    """With torques (w = 6 kernels, spectral curl; libMobility's angular files are not shipped): the grand
+    mobility is symmetric to the discretisation's level (measured 1e-7 to 5e-6 relative; the Chebyshev
+    geometries' spreading and Clenshaw-Curtis-weighted interpolation are not exact adjoints) and positive
+    definite, and the rotational self-mobility far from the box's periodic images agrees with the
+    Rotne-Prager-Blake one (Swan and Brady 2007) to the kernel's accuracy (measured <= 0.32% in a 16 box at
+    heights 1.5 to 5; periodic images of a torque enter at O((a/L)^3)).  A wrong factor 2 in the curl, a
+    lost image or a transposed coupling fails one of these."""
+    solver = DPStokes('periodic', 'periodic', 'single_wall')
+    solver.setParameters(Lx=16.0, Ly=16.0, zmin=0.0, zmax=10.0)
+    solver.initialize(viscosity=ETA, hydrodynamicRadius=RADIUS, includeAngular=True)
+    for h in (1.5, 3.0, 5.0):
+        solver.setPositions([[0.3, -0.2, h]])
+        M = _grand_M(solver, 1)
+        scale = np.abs(M).max()
+        assert np.abs(M - M.T).max() < 2e-5 * scale
+        assert np.linalg.eigvalsh(0.5 * (M + M.T)).min() > 0
+        np.testing.assert_allclose(np.diag(M)[3:], _wall_self_mobility(h)[3:], rtol=1e-2)
+        assert np.abs(np.diag(M)[3:] / _wall_self_mobility(h)[3:] - 1).max() > 1e-5   # not the wall product itself
+    solver.setPositions([[0.3, -0.2, 2.0], [2.9, 1.1, 3.1]])
+    M = _grand_M(solver, 2)
+    assert np.abs(M - M.T).max() < 2e-5 * np.abs(M).max()
+    assert np.linalg.eigvalsh(0.5 * (M + M.T)).min() > 0
+    # forces and torques superpose, and W has the shape of the torques
+    F = np.array([[0.2, -1.0, 0.5], [0.1, 0.3, -0.2]])
+    T = np.array([[1.0, 0.4, -0.3], [-0.5, 0.2, 0.7]])
+    U, W = solver.Mdot(F, T)
+    U_F, W_F = solver.Mdot(F)
+    U_T, W_T = solver.Mdot(torques=T.reshape(-1))
+    assert W_T.shape == (6,)
+    np.testing.assert_allclose(U, U_F + U_T.reshape(2, 3), rtol=1e-12, atol=1e-15 * np.abs(U).max())
+    np.testing.assert_allclose(W, W_F + W_T.reshape(2, 3), rtol=1e-12, atol=1e-15 * np.abs(W).max())
+
+
+# ------------------------------------------------------------------ the manual's script
+def test_the_libmobility_script_of_the_manual_runs(tmp_path, monkeypatch, capsys):
+    """doc/libmobility.md's libMobility-style script (setParameters, initialize, setPositions, Mdot, sqrtMdotW,
+    divM, LangevinVelocities) runs as written; its only line naming this package is the import, which is
+    libMobility's import with the module changed."""
+    text = (Path(__file__).resolve().parents[1] / 'doc' / 'libmobility.md').read_text()
+    script = text.split('<!-- libmobility-script -->', 1)[1].split('```python', 1)[1].split('```', 1)[0]
+    lines = script.splitlines()
+    assert [line for line in lines if line.startswith(('import ', 'from '))] == [
+        'import numpy as np', 'from mobility.libmobility import DPStokes']
+    assert sum('mobility.' in line for line in lines) == 1
+    for call in ('setParameters', 'initialize', 'setPositions', 'Mdot', 'sqrtMdotW', 'LangevinVelocities'):
+        assert '.%s(' % call in script
+    monkeypatch.chdir(tmp_path)
+    exec(compile(script, 'doc/libmobility.md', 'exec'), {'__name__': '__main__'})
+    out = capsys.readouterr().out
+    assert 'sedimentation speed of blob 0' in out and 'heights after 3 steps' in out
+
+
+def test_dpstokes_selection_whole_cells_up_to_round_off():
+    """DoublyPeriodicStokes' selection with a box of whole cells up to round-off (radius 0.9, L = 26: h = 26/45
+    and 26 / h = 45.00000000000001, where the library adds a cell): no extra cell, even with
+    allowChangingBoxSize=False; a genuine fraction is enlarged with allowChangingBoxSize=True only."""
+    from mobility.spectral import dpstokes_parameters
+    exact = dpstokes_parameters(RADIUS, 'DPBW', 26.0, 26.0, 0.0, 6.0, whole_cells_tolerance=0.0, warn=False)
+    assert (exact.Nx, exact.Ny) == (45, 46)                      # the library's own rule adds a cell here
+    solver = _small_dpstokes(Lx=26.0, Ly=26.0)
+    assert (solver.parameters.Nx, solver.parameters.Ny) == (45, 45)
+    assert solver.parameters.Ly == pytest.approx(26.0, rel=1e-15)
+    enlarged = _small_dpstokes(Lx=32.0, Ly=31.5, allowChangingBoxSize=True)
+    h = enlarged.parameters.hx
+    assert enlarged.parameters.Ny == int(np.ceil(31.5 / h)) and enlarged.parameters.Ly == pytest.approx(
+        enlarged.parameters.Ny * h, rel=1e-15)
+    with pytest.raises(RuntimeError, match='allowChangingBoxSize'):
+        _small_dpstokes(Lx=32.0, Ly=31.5)
+    with pytest.raises(RuntimeError, match='kernel'):
+        _small_dpstokes(kernel='w3')
