@@ -618,8 +618,8 @@ def test_dpstokes_langevin_at_zero_temperature_and_seeds(selection):
 LIBMOBILITY_DIR = REFERENCE_DIR / 'libmobility'
 EPS_100 = 100 * np.finfo(np.float64).eps          # libMobility's tolerance for a module declaring "double"
 WALL_ETA = 1 / 4 / np.sqrt(np.pi)                 # libMobility's test_wall_mobility: eta, a = 1, box 76.8
-# Heights checked: every one with RMB_LIBMOBILITY_FULL=1 (3,888 products, about ten minutes on 2 cores; all passed
-# when written); by default a spread subset near the wall and in the bulk, so the tests stay near a minute.
+# Heights checked: every one with RMB_LIBMOBILITY_FULL=1 (3,888 products, many minutes; all passed
+# when written); by default a spread subset near the wall and in the bulk (about 300 products).
 FULL_SWEEP = bool(os.environ.get('RMB_LIBMOBILITY_FULL'))
 SUBSET = {('self', True): [1, 5, 10, 17, 25, 35, 47, 59], ('self', False): [2, 20, 59],
           ('pair', True): [1, 6, 13, 25], ('pair', False): [3, 25]}
