@@ -313,7 +313,7 @@ def special_file_kind(path):
         mode = os.stat(path).st_mode
     except FileNotFoundError:
         return 'a symbolic link to a missing file' if os.path.islink(path) else None
-    except OSError:
+    except (OSError, ValueError):  # ValueError: a NUL byte, which no path holds (the caller says it is missing)
         return None
     for test, kind in ((stat.S_ISREG, None), (stat.S_ISDIR, 'a folder'), (stat.S_ISFIFO, 'a FIFO'),
                        (stat.S_ISSOCK, 'a socket'), (stat.S_ISCHR, 'a character device'),
@@ -330,6 +330,8 @@ def read_text_file(path, what, hint):
     ``hint`` says how to give another one.  A folder, a FIFO or device (never read: it could block for ever), a
     dangling link, a missing file, an unreadable file and bytes that are not UTF-8 each get their own message.
     """
+    if '\x00' in str(path):
+        raise UserInputError("%s %r holds a NUL byte, which no file name can hold; %s" % (what, str(path), hint))
     kind = special_file_kind(path)
     if kind is not None:
         raise UserInputError("%s '%s' is %s, not a file; %s" % (what, path, kind, hint))

@@ -1217,3 +1217,14 @@ def test_numbers_a_solver_cannot_take_are_refused(tmp_path, edit, words):
     assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
     assert words in err, err
     assert not (folder / 'data').exists()
+
+
+def test_a_nul_byte_in_a_file_name_of_the_input_is_one_line(tmp_path):
+    """Found by the fuzzer (issue 48): a NUL byte in a slip file's name made os.stat raise ValueError (a
+    traceback) when the reader asked what the path was."""
+    folder = driven_scene(tmp_path / 'run')
+    text = (folder / 'input.dat').read_text().replace('a.slip', 'a.s\x00lip')
+    (folder / 'input.dat').write_text(text)
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert 'holds a NUL byte' in err, err

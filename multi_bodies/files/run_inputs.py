@@ -52,7 +52,7 @@ def file_digest(path):
             for chunk in iter(lambda: f.read(1 << 20), b''):
                 digest.update(chunk)
         return 'sha256 %s' % digest.hexdigest()[:16]
-    except OSError:
+    except (OSError, ValueError):  # ValueError: a NUL byte in the name
         return 'missing'
 
 
