@@ -40,7 +40,7 @@ from run_scenes import REPO_ROOT, child_environment, set_options  # noqa: E402
 
 DYNAMIC = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
 MCMC = str(REPO_ROOT / 'many_bodyMCMC' / 'many_body_MCMC.py')
-CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '9'))
+CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '10'))
 
 
 # ------------------------------------------------------------------ scenes
@@ -108,8 +108,7 @@ def outputs(folder, mcmc=False):
     """{name: bytes} of the snapshots and counters of ``folder/data`` (the series only, nothing set aside)."""
     data = Path(folder) / 'data'
     found = {p.name: p.read_bytes() for p in data.iterdir()
-             if p.is_file() and (p.name.endswith('.clones') or p.name.endswith('.config')
-                                 or p.name.endswith('.concentration'))}
+             if p.is_file() and p.name.endswith(('.clones', '.config', '.concentration', '.vtp', '.pvd'))}
     info = data / ('run.MCMC_info' if mcmc else 'run.info')
     found['info'] = b'\n'.join(info.read_bytes().splitlines()[:3])
     return found
@@ -139,15 +138,37 @@ def wait_for_record(process, folder, step, timeout=60.0, path=None):
 
 
 # ------------------------------------------------------------------ the crash test
+# The kinds of scene the chains cycle through (issue 48: every kind of state a record carries): Brownian
+# Adams-Bashforth, Monte Carlo, an ensemble replica, a phoretic run with .concentration, an articulated chain,
+# a slip and a prescribed velocity, rollers, VTK output, a slip-length surface, the midpoint scheme.
+CHAIN_KINDS = ('dynamic', 'mcmc', 'replica', 'phoretic', 'articulated', 'driven', 'rollers', 'vtk', 'slip_length',
+               'midpoint')
+
+
+def chain_scene(program):
+    """(scene maker (folder, n_steps, n_save, save_clones), script, structure IDs) of a kind of chain."""
+    from test_data_safety import articulated_scene, driven_scene, surface_scene
+    return {'dynamic': (dynamic_scene, DYNAMIC, ('a', 'b')),
+            'mcmc': (mcmc_scene, MCMC, ('a',)),
+            'phoretic': (phoretic_scene, DYNAMIC, ('a',)),
+            'articulated': (articulated_scene, DYNAMIC, ('chain',)),
+            'driven': (driven_scene, DYNAMIC, ('a', 'b')),
+            'rollers': (lambda folder, **o: dynamic_scene(folder, scheme='stochastic_adams_bashforth_rollers', **o),
+                        DYNAMIC, ('a', 'b')),
+            'vtk': (lambda folder, **o: dynamic_scene(folder, save_vtk=True, **o), DYNAMIC, ('a', 'b')),
+            'slip_length': (lambda folder, **o: surface_scene(folder, 'slip_length', **o), DYNAMIC, ('a',)),
+            'midpoint': (lambda folder, **o: dynamic_scene(folder, scheme='deterministic_midpoint', kT=0, **o),
+                         DYNAMIC, ('a', 'b'))}[program]
+
+
 def one_chain(tmp_path, rng, index, counts):
     """One chain: a run killed at a drawn moment, continued, compared with the uninterrupted run."""
     how = ['SIGKILL', 'SIGTERM', 'SIGINT', 'between'][int(rng.integers(4))]
-    if index % 4 == 2:
+    program = CHAIN_KINDS[index % len(CHAIN_KINDS)]
+    if program == 'replica':
         return replica_chain(tmp_path, rng, index, counts, how)
-    program = ['dynamic', 'mcmc', None, 'phoretic'][index % 4]
-    save_clones = ['one_file_per_step', 'one_file'][(index // 4) % 2]
-    scene, script, ids = {'dynamic': (dynamic_scene, DYNAMIC, ('a', 'b')), 'mcmc': (mcmc_scene, MCMC, ('a',)),
-                          'phoretic': (phoretic_scene, DYNAMIC, ('a',))}[program]
+    save_clones = ['one_file_per_step', 'one_file'][(index // len(CHAIN_KINDS)) % 2]
+    scene, script, ids = chain_scene(program)
     n_steps, n_save = (4000, 40) if program == 'mcmc' else (40, 4)
     reference = scene(tmp_path / ('reference_%d' % index), n_steps=n_steps, n_save=n_save, save_clones=save_clones)
     assert run(script, reference)[0] == 0
@@ -205,7 +226,7 @@ def replica_outputs(spec):
 
 def replica_chain(tmp_path, rng, index, counts, how):
     """A replica killed (child process) at a drawn moment; the runner resumes it by itself."""
-    save_clones = ['one_file_per_step', 'one_file'][(index // 4) % 2]
+    save_clones = ['one_file_per_step', 'one_file'][(index // len(CHAIN_KINDS)) % 2]
     reference = replica_scene(tmp_path / ('reference_%d' % index), save_clones, n_steps=40, n_save=4)
     assert runner.run_replica(reference)['status'] == 'done'
     killed = replica_scene(tmp_path / ('chain_%d' % index), save_clones, n_steps=40, n_save=4)

@@ -120,7 +120,16 @@ WORDS = ['True', 'False', 'None', 'none', 'python', 'C++', 'C++_no_wall', 'pytho
          'auto', 'one_file', 'mobility', 'resistance', 'body_mobility', 'deterministic_forward_euler',
          'deterministic_forward_euler_rollers', 'stochastic_first_order_RFD', 'data/other', 'no_wall', 'a b',
          '', '#', 'Structures', 'Structures/force.dat', 'Structures/force.dat/run', '\u00e9t\u00e9', '\x00']
+# issue 48: words no user means but a file can hold: a 100 kB token, an output name 2,000 folders deep
+WORDS += ['y' * 100000, '/'.join(['d'] * 2000) + '/run', 'data/' + 'z' * 300, '/proc/run']
 ENCODINGS = ['utf-16', 'utf-32', 'latin-1', 'cp1252', 'utf-8-sig']
+# issue 48: hostile lines appended to an input file (each bounded up front, or refused, in one line)
+HOSTILE_LINES = ['call_HydroGrid True\ncells 100000 100000\nperiodic_length 30 30 0',
+                 'nonlinear_solver_tolerance 1e-17', 'save_concentration True', 'restart_inexact True',
+                 'initial_step 1', 'random_state Structures/force.dat']
+# issue 48: a file replaced by something that is not a file (path mutations), and the extra paths they may hit
+PATH_KINDS = ['fifo', 'dangling link', 'folder']
+PATH_ONLY = ['user_defined_functions.py', 'data/run.lock', 'data/chain.lock']
 LIMITS = {'n_steps': 3, 'cells': 4000}
 
 
@@ -189,7 +198,31 @@ def mutate(data, mutation):
         return b''
     elif kind == 'known':
         return mutate_known(data, value)
+    elif kind == 'hostile line':
+        return data + b'\n' + value.encode() + b'\n'
+    elif kind == 'huge token':  # a number or word of the file replaced by a megabyte of one character
+        candidates = [(n, span) for n, line in enumerate(lines) for span in _number_tokens(line)]
+        if not candidates:
+            return data + b'\n' + b'w' * 10 ** 6
+        n, (start, end) = candidates[a % len(candidates)]
+        lines[n] = lines[n][:start] + value.encode() * 10 ** 6 + lines[n][end:]
     return b'\n'.join(lines)
+
+
+def mutate_path(path, kind):
+    """Replace ``path`` (a Path) by a FIFO, a dangling symbolic link or a folder."""
+    if path.is_symlink() or path.exists():
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if kind == 'fifo':
+        os.mkfifo(str(path))
+    elif kind == 'dangling link':
+        path.symlink_to(path.parent / 'no_such_target')
+    else:
+        path.mkdir()
 
 
 # Mutations of an input file whose meaning is known (a case holds one of them and nothing else): label ->
@@ -248,6 +281,9 @@ def mutations():
         st.tuples(st.just('garbage'), index, index, garbage),
         st.tuples(st.just('encoding'), index, index, st.sampled_from(ENCODINGS)),
         st.tuples(st.just('empty'), index, index, st.just('')),
+        st.tuples(st.just('hostile line'), index, index, st.sampled_from(HOSTILE_LINES)),
+        st.tuples(st.just('huge token'), index, index, st.sampled_from(['9', 'q'])),
+        st.tuples(st.just('path'), index, index, st.sampled_from(PATH_KINDS)),
     )
 
 
@@ -261,7 +297,9 @@ def cases(draw):
         label = draw(st.sampled_from(sorted(KNOWN_REFUSED) + list(HARMLESS)))
         target = draw(st.sampled_from([dynamic_input, static_input]))
         return [(target, ('known', 0, 0, label))], dynamic_input, static_input
-    edits = draw(st.lists(st.tuples(st.sampled_from(files), mutations()), min_size=1, max_size=3))
+    edits = draw(st.lists(st.tuples(st.sampled_from(list(files) + PATH_ONLY), mutations()), min_size=1, max_size=3))
+    edits = [(name, mutation) for name, mutation in edits if name in files or mutation[0] == 'path']
+    assume(edits)
     return edits, dynamic_input, static_input
 
 
@@ -331,6 +369,8 @@ MESSAGES = collections.Counter()  # status-2 messages with names and numbers bla
 def within_limits(folder):
     """False when a mutation made the scene expensive (a long run or a huge grid), which is not a mistake."""
     for name in INPUTS:
+        if not (folder / name).is_file() or (folder / name).is_symlink():
+            continue
         try:
             text = (folder / name).read_bytes().decode('utf-8')
             options = parse_input_text(text, name)
@@ -429,7 +469,10 @@ def test_scripts_survive_mutated_inputs(earlier_run, tmp_path_factory, case):
     try:
         for name, mutation in edits:
             path = folder / name
-            path.write_bytes(mutate(path.read_bytes(), mutation))
+            if mutation[0] == 'path':
+                mutate_path(path, mutation[3])
+            elif path.is_file() and not path.is_symlink():  # (a file a path mutation replaced is left as it is)
+                path.write_bytes(mutate(path.read_bytes(), mutation))
         assume(within_limits(folder))
         start = time.perf_counter()
         run_both(folder, dynamic_input, static_input, edits)
