@@ -111,10 +111,10 @@ class SpectralStokes:
         if not np.isfinite(eta) or eta <= 0:
             raise UserInputError('spectral product: the viscosity must be positive and finite, got %r' % eta)
         self._uammd = None
-        if parameters.rules == 'uammd':    # libMobility's (UAMMD's) rules: mobility.spectral.uammd, NumPy only
+        if parameters.rules == 'uammd':    # libMobility's (UAMMD's) rules: mobility.spectral.uammd
             from .uammd import UammdStokes
-            self._uammd = UammdStokes(parameters, eta)
-            path = 'numpy'
+            self._uammd = UammdStokes(parameters, eta, choose_path(path), workers)
+            path = self._uammd.path
         self.parameters = parameters
         self.eta = eta
         self.path = choose_path(path)

@@ -17,9 +17,11 @@ UAMMD's discretisation differs from DoublyPeriodicStokes' (``rules == 'dpstokes'
    Fourier-Chebyshev space (i kx, i ky zero at unpaired modes; d/dz by the recurrence) is added to the force
    coefficients; angular velocities interpolate half the spectral curl of the velocity with that kernel.
 
-Only doubly periodic geometries (DP, DPBW, DPSC): libMobility's solver has no triply periodic mode.  A NumPy
-implementation (vectorised over blobs and wavenumbers); shapes as in :mod:`mobility.spectral.reference`:
-grids (3, Nz, Ny, Nx), z index 0 at the top.  Floor 1 of the house.
+Only doubly periodic geometries (DP, DPBW, DPSC): libMobility's solver has no triply periodic mode.  This
+module makes the stencils (1-2) for both paths and computes the whole product in NumPy (vectorised over blobs
+and wavenumbers); force-only products can also run on the core's compiled engine, whose solve has rules 3 and
+4.  Shapes as in :mod:`mobility.spectral.reference`: grids (3, Nz, Ny, Nx), z index 0 at the top.  Floor 1 of
+the house.
 """
 import time
 
@@ -262,13 +264,15 @@ class UammdSolver:
 class UammdStokes:
     """The product ``[U; W] = M [F; T]`` with UAMMD's rules, for ``SpectralStokes`` (which checks the inputs).
 
-    parameters : SpectralParameters with ``rules == 'uammd'`` and a doubly periodic geometry; eta : viscosity.
-    ``set_positions(r (N, 3) checked floats)``; ``product(forces (N, 3) or None, torques (N, 3) or None) ->
-    (U (N, 3), W (N, 3) or None)``; ``timings`` (seconds of the phases of the last product).
+    parameters : SpectralParameters with ``rules == 'uammd'`` and a doubly periodic geometry; eta : viscosity;
+    path : 'compiled' or 'numpy'.  ``set_positions(r (N, 3) checked floats)``; ``product(forces (N, 3) or None,
+    torques (N, 3) or None) -> (U (N, 3), W (N, 3) or None)``; ``timings`` (seconds of the phases of the last
+    product).  A force-only discretisation runs on the core's compiled engine where asked (its solve has the
+    rules' pressure derivative and wall corrections; the stencils are made here), one with torques on NumPy
+    (the spectral curl is not compiled); ``path`` says which.
     """
-    path = 'numpy'
 
-    def __init__(self, parameters, eta):
+    def __init__(self, parameters, eta, path='numpy', workers=None):
         p = parameters
         if p.rules != 'uammd':
             raise UserInputError('UammdStokes computes the uammd rules, got parameters with rules %r' % p.rules)
@@ -283,6 +287,11 @@ class UammdStokes:
         self.timings = {}
         self.n_blobs = 0
         self._stencils = None
+        self.path = 'compiled' if path == 'compiled' and p.dipole is None else 'numpy'
+        self._engine = None
+        if self.path == 'compiled':
+            from .compiled import CompiledEngine
+            self._engine = CompiledEngine(p, eta, workers)
 
     @property
     def has_torque(self):
@@ -293,6 +302,12 @@ class UammdStokes:
         start = time.perf_counter()
         p = self.parameters
         r = np.asarray(r, dtype=float)
+        if self._engine is not None:
+            self._engine.prepare(self.monopole.stencil(p, r), None)
+            self._stencils = [None, None]
+            self.n_blobs = r.shape[0]
+            self.timings['prepare'] = time.perf_counter() - start
+            return
         stencils = []
         for kernel in (self.monopole, self.dipole):
             if kernel is None:
@@ -321,6 +336,10 @@ class UammdStokes:
         """``(U, W)`` (N, 3) each (W None without a torque kernel) from forces F and torques T, (N, 3) or None."""
         if self._stencils is None:
             raise UserInputError('spectral product: call set_positions before product')
+        if self._engine is not None:
+            U, _, timings = self._engine.product(F, None, want_rotation=False)
+            self.timings.update(timings)
+            return U, None
         p = self.parameters
         clock = time.perf_counter
         t0 = clock()
