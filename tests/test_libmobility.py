@@ -844,3 +844,25 @@ def test_dpstokes_selection_whole_cells_up_to_round_off():
         _small_dpstokes(Lx=32.0, Ly=31.5)
     with pytest.raises(RuntimeError, match='kernel'):
         _small_dpstokes(kernel='w3')
+
+
+@pytest.mark.parametrize('z_mode', ['open', 'single_wall', 'two_walls'])
+def test_libmobility_selection_compiled_path_equals_numpy_path(z_mode):
+    """Force-only products of libMobility's selection run on the core's compiled engine with this package's
+    UAMMD stencils; the NumPy path (mobility.spectral.uammd) gives the same numbers to round-off."""
+    from mobility.spectral import SpectralStokes, compiled_available
+    from mobility.spectral.libmobility_parameters import libmobility_parameters
+    if not compiled_available():
+        pytest.skip('the compiled spectral extension is not built')
+    p, _ = libmobility_parameters(RADIUS, z_mode, 16.0, 19.0, 0.0, 7.0)
+    rng = np.random.default_rng(5)
+    r = np.column_stack((rng.uniform(-20, 20, 12), rng.uniform(-20, 20, 12), rng.uniform(0.0, 7.0, 12)))
+    F = rng.standard_normal((12, 3))
+    F -= F.mean(axis=0)
+    results = []
+    for path in ('compiled', 'numpy'):
+        stokes = SpectralStokes(p, ETA, path=path)
+        assert stokes.path == path
+        stokes.set_positions(r)
+        results.append(stokes.product(F)[0])
+    np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-13 * np.abs(results[1]).max())
