@@ -2,8 +2,13 @@
 
 `pip install -e .` builds everything on a machine with a C++ compiler.
 OpenMP is used when the compiler accepts -fopenmp; the build still succeeds
-without it (the kernels then run on one thread).  Set RMB_NATIVE=0 to build
-without -march=native (for a binary that must run on other processors).
+without it (the kernels then run on one thread).  The pair kernels are compiled
+once for each vector instruction set (scalar, AVX2, AVX-512 on x86-64; NEON, SVE
+on ARM: mobility/cpp/simd_targets.h) and the one the CPU runs is chosen at
+import (mobility/cpp/simd_dispatch.h; RMB_SIMD forces one), so a build runs at
+full speed on other processors.  RMB_NATIVE=1 adds -march=native (the rest of
+the code then also uses every instruction of the building machine, and the
+binary runs only on processors that have them).
 The pair laws of all three extensions and of the CUDA kernels are in one
 header, mobility/cpp/pair_laws.h (shipped as package data of ``mobility``).
 """
@@ -35,7 +40,7 @@ def compiler_accepts(flags):
 compile_args = ['-O3', '-fno-math-errno', '-fno-trapping-math', '-ffp-contract=fast']
 link_args = []
 if sys.platform != 'win32':
-    if os.environ.get('RMB_NATIVE', '1') != '0' and compiler_accepts(['-march=native']):
+    if os.environ.get('RMB_NATIVE', '0') == '1' and compiler_accepts(['-march=native']):
         compile_args.append('-march=native')
     if compiler_accepts(['-fopenmp']):
         compile_args.append('-fopenmp')
@@ -44,7 +49,9 @@ if sys.platform != 'win32':
         print('setup.py: the compiler does not accept -fopenmp; building the kernels single-threaded')
 
 HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobility/cpp/openmp_threads.h',
-           'mobility/cpp/fast_exp.h', 'mobility/cpp/blob_arrays.h', 'mobility/cpp/dense_matrices.h']
+           'mobility/cpp/fast_exp.h', 'mobility/cpp/blob_arrays.h', 'mobility/cpp/dense_matrices.h',
+           'mobility/cpp/blob_pair_formulas.inc', 'mobility/cpp/simd_dispatch.h', 'mobility/cpp/simd_targets.h',
+           'mobility/cpp/simd_vector.inc', 'mobility/cpp/mobility_kernels.inc']
 extensions = [
     Pybind11Extension(
         'mobility._mobility_cpp',
@@ -58,8 +65,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._forces_cpp',
         ['multi_bodies/solver/cpp/forces_module.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=HEADERS,
+        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
+        depends=HEADERS + ['multi_bodies/solver/cpp/forces_kernels.inc'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -67,8 +74,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._preconditioner_cpp',
         ['multi_bodies/solver/cpp/preconditioner_module.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=HEADERS,
+        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
+        depends=HEADERS + ['multi_bodies/solver/cpp/near_field_kernels.inc'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -76,8 +83,8 @@ extensions = [
     Pybind11Extension(
         'multi_bodies.solver._surface_cpp',
         ['multi_bodies/solver/cpp/surface_module.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=HEADERS,
+        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
+        depends=HEADERS + ['multi_bodies/solver/cpp/surface_kernels.inc'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -100,8 +107,8 @@ extensions = [
     Pybind11Extension(
         'many_bodyMCMC._energy_cpp',
         ['many_bodyMCMC/cpp/energy_module.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=HEADERS,
+        include_dirs=['mobility/cpp', 'many_bodyMCMC/cpp'],
+        depends=HEADERS + ['many_bodyMCMC/cpp/energy_kernels.inc'],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
         cxx_std=17,
@@ -110,7 +117,9 @@ extensions = [
         'mobility._spectral_cpp',
         ['mobility/cpp/spectral_module.cpp'],
         include_dirs=['mobility/cpp'],
-        depends=['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h'],
+        depends=['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h',
+                 'mobility/cpp/spectral_spread.inc', 'mobility/cpp/spectral_solve.inc',
+                 'mobility/cpp/spectral_kernels.inc'] + HEADERS,
         # complex products and quotients inline (finite values only; no NaN recovery calls) where accepted
         extra_compile_args=compile_args + (['-fcx-limited-range'] if compiler_accepts(['-fcx-limited-range']) else []),
         extra_link_args=link_args,
@@ -134,7 +143,7 @@ setup(
               'stochastic_forcing', 'many_bodyMCMC', 'boomerang', 'sphere', 'lubrication', 'read_input',
               'articulated', 'constraint', 'sksparse'],
     py_modules=['utils', 'general_application_utils', 'Lub_Solver'],
-    package_data={'mobility': ['cpp/*.h', 'cuda/*.cu'], 'lubrication': ['tables/*.txt', 'tables/README.md']},
+    package_data={'mobility': ['cpp/*.h', 'cpp/*.inc', 'cuda/*.cu'], 'lubrication': ['tables/*.txt', 'tables/README.md']},
     ext_modules=extensions,
     cmdclass={'build_ext': parallel_build_ext},
 )

@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <cstring>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #ifdef _OPENMP
@@ -32,24 +33,20 @@
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
-namespace {
-
+namespace rmb_energy {
 struct PairLaw {
   rmb::SoftRepulsion repulsion;
   double Lx, Ly, Lz;
 };
+}  // namespace rmb_energy
 
-using rmb::FastExp;
+// total_sum and cross_sum, compiled once per vector path (the chosen one runs: mobility/cpp/simd_dispatch.h)
+#define RMB_SIMD_KERNELS "energy_kernels.inc"
+#include "simd_targets.h"
 
-template <bool periodic>
-inline double pair_energy(double rx, double ry, double rz, const PairLaw &law) {
-  if (periodic) {
-    rx = rmb::minimum_image(rx, law.Lx);
-    ry = rmb::minimum_image(ry, law.Ly);
-    rz = rmb::minimum_image(rz, law.Lz);
-  }
-  return rmb::blob_blob_energy(std::sqrt(rx * rx + ry * ry + rz * rz), law.repulsion, FastExp());
-}
+namespace {
+
+using rmb_energy::PairLaw;
 
 PairLaw make_law(const Array &periodic_length, double repulsion_strength, double debye_length, double blob_radius) {
   if (periodic_length.size() != 3) throw std::invalid_argument("periodic_length must hold 3 numbers");
@@ -62,44 +59,6 @@ long count_rows(const Array &r, const char *name) {
   if (!(r.ndim() == 2 && r.shape(1) == 3) && !(r.ndim() == 1 && r.shape(0) % 3 == 0))
     throw std::invalid_argument(std::string(name) + " must have shape (N, 3)");
   return static_cast<long>(r.size() / 3);
-}
-
-template <bool periodic>
-double total_sum(const std::vector<double> &x, const std::vector<double> &y, const std::vector<double> &z,
-                 const PairLaw &law) {
-  const long n = static_cast<long>(x.size());
-  double total = 0.0;
-  const bool use_threads = static_cast<double>(n) * n > 2e5;  // a parallel region costs ~1e5 pairs
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : total) if (use_threads)
-  for (long i = 0; i < n; ++i) {
-    const double xi = x[i], yi = y[i], zi = z[i];
-    const double *xj = x.data(), *yj = y.data(), *zj = z.data();
-    double row = 0.0;
-#pragma omp simd reduction(+ : row)
-    for (long j = i + 1; j < n; ++j) row += pair_energy<periodic>(xj[j] - xi, yj[j] - yi, zj[j] - zi, law);
-    total += row;
-  }
-  return total;
-}
-
-template <bool periodic>
-double cross_sum(const double *tp, long m, const std::vector<double> &x, const std::vector<double> &y,
-                 const std::vector<double> &z, long exclude_start, long exclude_stop, const PairLaw &law) {
-  const long n = static_cast<long>(x.size());
-  const double *xj = x.data(), *yj = y.data(), *zj = z.data();
-  double total = 0.0;
-  const bool use_threads = static_cast<double>(m) * n > 2e5;
-#pragma omp parallel for schedule(static) reduction(+ : total) if (use_threads)
-  for (long t = 0; t < m; ++t) {
-    const double xt = tp[3 * t], yt = tp[3 * t + 1], zt = tp[3 * t + 2];
-    double row = 0.0;
-#pragma omp simd reduction(+ : row)
-    for (long j = 0; j < exclude_start; ++j) row += pair_energy<periodic>(xj[j] - xt, yj[j] - yt, zj[j] - zt, law);
-#pragma omp simd reduction(+ : row)
-    for (long j = exclude_stop; j < n; ++j) row += pair_energy<periodic>(xj[j] - xt, yj[j] - yt, zj[j] - zt, law);
-    total += row;
-  }
-  return total;
 }
 
 void split_coordinates(const double *rp, long n, std::vector<double> &x, std::vector<double> &y,
@@ -118,7 +77,12 @@ double pair_energy_total(const Array &r_vectors, const Array &periodic_length, d
   std::vector<double> x, y, z;
   split_coordinates(r_vectors.data(), n, x, y, z);
   py::gil_scoped_release release;
-  return is_periodic(law) ? total_sum<true>(x, y, z, law) : total_sum<false>(x, y, z, law);
+  double total = 0.0;
+  if (is_periodic(law))
+    RMB_SIMD_DISPATCH(total_sum<true>(x, y, z, law, total));
+  else
+    RMB_SIMD_DISPATCH(total_sum<false>(x, y, z, law, total));
+  return total;
 }
 
 // Sum over target blobs t and source blobs j outside [exclude_start, exclude_stop) of u(r_j - t).
@@ -135,8 +99,12 @@ double pair_energy_cross(const Array &targets, const Array &sources, long exclud
   split_coordinates(sources.data(), n, x, y, z);
   const double *tp = targets.data();
   py::gil_scoped_release release;
-  return is_periodic(law) ? cross_sum<true>(tp, m, x, y, z, exclude_start, exclude_stop, law)
-                          : cross_sum<false>(tp, m, x, y, z, exclude_start, exclude_stop, law);
+  double total = 0.0;
+  if (is_periodic(law))
+    RMB_SIMD_DISPATCH(cross_sum<true>(tp, m, x, y, z, exclude_start, exclude_stop, law, total));
+  else
+    RMB_SIMD_DISPATCH(cross_sum<false>(tp, m, x, y, z, exclude_start, exclude_stop, law, total));
+  return total;
 }
 
 
@@ -144,6 +112,13 @@ double pair_energy_cross(const Array &targets, const Array &sources, long exclud
 
 PYBIND11_MODULE(_energy_cpp, m) {
   m.doc() = "C++ (OpenMP) blob-blob soft-repulsion energies of the Monte Carlo sampler";
+  try {
+    rmb_simd::chosen();  // RMB_SIMD naming a path that cannot run here stops the import with its one line
+  } catch (const std::invalid_argument &err) {
+    throw py::import_error(err.what());
+  }
+  m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
+        "The vector path of the energy sums (mobility/cpp/simd_dispatch.h).");
   m.def("pair_energy_total", &pair_energy_total, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"),
         "Sum over blob pairs i < j of the soft repulsion energy; r_vectors (N, 3).");

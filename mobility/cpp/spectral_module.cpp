@@ -14,6 +14,12 @@
 #include "spectral_solve.h"
 #include "spectral_spread.h"
 
+// The spreading, interpolation and solves, compiled once per vector path (the chosen one runs:
+// simd_dispatch.h).
+#define RMB_SIMD_KERNELS "spectral_kernels.inc"
+#include "pair_laws.h"
+#include "simd_targets.h"
+
 namespace py = pybind11;
 using rmb_spectral::cplx;
 
@@ -89,7 +95,7 @@ void spread_forces(py::array_t<double> grid, std::int64_t Nx, In<std::int32_t> i
   const double *f = data_of(forces, 3 * s.n, "forces");
   rmb_spectral::Stripes st = stripes_of(order, start, s.n);
   py::gil_scoped_release release;
-  rmb_spectral::spread_forces(s, st, f, g);
+  RMB_SIMD_DISPATCH(spread_forces(s, st, f, g));
 }
 
 void spread_torques(py::array_t<double> grid, std::int64_t Nx, In<std::int32_t> ix, In<std::int32_t> iy,
@@ -104,7 +110,7 @@ void spread_torques(py::array_t<double> grid, std::int64_t Nx, In<std::int32_t> 
   const double *t = data_of(torques, 3 * s.n, "torques");
   rmb_spectral::Stripes st = stripes_of(order, start, s.n);
   py::gil_scoped_release release;
-  rmb_spectral::spread_torques(s, st, t, g);
+  RMB_SIMD_DISPATCH(spread_torques(s, st, t, g));
 }
 
 py::array_t<double> interpolate_velocities(py::array_t<double> grid, std::int64_t Nx, In<std::int32_t> ix,
@@ -116,7 +122,7 @@ py::array_t<double> interpolate_velocities(py::array_t<double> grid, std::int64_
   double *u = U.mutable_data();
   {
     py::gil_scoped_release release;
-    rmb_spectral::interpolate_velocities(s, s.phi_z, g, u);
+    RMB_SIMD_DISPATCH(interpolate_velocities(s, s.phi_z, g, u));
   }
   return U;
 }
@@ -133,7 +139,7 @@ py::array_t<double> interpolate_rotations(py::array_t<double> grid, std::int64_t
   double *w = W.mutable_data();
   {
     py::gil_scoped_release release;
-    rmb_spectral::interpolate_rotations(s, s.phi_z, dq, g, w);
+    RMB_SIMD_DISPATCH(interpolate_rotations(s, s.phi_z, dq, g, w));
   }
   return W;
 }
@@ -186,7 +192,7 @@ void solve_doubly_periodic(py::array_t<std::complex<double>> grid, py::dict cheb
   m.ky_partner = kyp.data(), m.unpaired_x = ux.data(), m.unpaired_y = uy.data();
   cplx *g = complex_grid(grid, N, m.Ny, m.Nxh);
   py::gil_scoped_release release;
-  rmb_spectral::solve_doubly_periodic(c, m, g);
+  RMB_SIMD_DISPATCH(solve_doubly_periodic(c, m, g));
 }
 
 void solve_triply_periodic(py::array_t<std::complex<double>> grid, In<double> kz, In<double> ky, In<double> kx,
@@ -196,14 +202,22 @@ void solve_triply_periodic(py::array_t<std::complex<double>> grid, In<double> kz
   if (dz.size() != Nz || dy.size() != Ny || dx.size() != Nxh)
     throw std::invalid_argument("_spectral_cpp: derivative factors disagree with the wavenumbers");
   py::gil_scoped_release release;
-  rmb_spectral::solve_triply_periodic(g, Nz, Ny, Nxh, kz.data(), ky.data(), kx.data(), dz.data(), dy.data(), dx.data(),
-                                      eta);
+  const double *kzp = kz.data(), *kyp = ky.data(), *kxp = kx.data(), *dzp = dz.data(), *dyp = dy.data(),
+               *dxp = dx.data();
+  RMB_SIMD_DISPATCH(solve_triply_periodic(g, Nz, Ny, Nxh, kzp, kyp, kxp, dzp, dyp, dxp, eta));
 }
 
 }  // namespace
 
 PYBIND11_MODULE(_spectral_cpp, m) {
   m.doc() = "Compiled steps of the spectral Stokes product (mobility.spectral.compiled drives them)";
+  try {
+    rmb_simd::chosen();  // RMB_SIMD naming a path that cannot run here stops the import with its one line
+  } catch (const std::invalid_argument &err) {
+    throw py::import_error(err.what());
+  }
+  m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
+        "The vector path of the spreading, interpolation and solves (mobility/cpp/simd_dispatch.h).");
   m.def("max_threads", &rmb::max_threads, "OpenMP threads the kernels may use");
   // the grids are written in place: never accept a converted copy
   m.def("spread_forces", &spread_forces, "grid += forces spread with a monopole stencil", py::arg("grid").noconvert(),

@@ -169,14 +169,17 @@ def write_info(path, counters, extra_lines=()):
     ``invalid_configuration_count``, ``deterministic_iterations_count`` and
     ``stochastic_iterations_count`` (0 when absent), padded as the published
     code pads them, so readers of published ``.info`` files keep working.
-    Further counters follow in the same ``name = value`` form; ``extra_lines``
-    are written last, as they are.
+    Further counters follow in the same ``name = value`` form, then
+    ``cpu_kernels``, the vector path of the compiled kernels
+    (:func:`mobility.simd.describe`); ``extra_lines`` are written last, as they are.
     """
+    from mobility import simd
     known = [key for key, _ in INFO_KEYS]
     lines = ['%-30s = %d' % (key, int(counters.get(key, 0))) for key in known]
     for key, value in counters.items():
         if key not in known:
             lines.append('%-30s = %s' % (key, value))
+    lines.append('%-30s = %s' % ('cpu_kernels', simd.describe()))
     lines.extend(extra_lines)
     atomic_write(path, '\n'.join(lines) + '\n')
 

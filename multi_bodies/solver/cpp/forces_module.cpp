@@ -30,6 +30,10 @@
 #include "fast_exp.h"
 #include "pair_laws.h"
 
+// blob_blob_pair_sums, compiled once per vector path (the chosen one runs: mobility/cpp/simd_dispatch.h)
+#define RMB_SIMD_KERNELS "forces_kernels.inc"
+#include "simd_targets.h"
+
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
@@ -64,27 +68,8 @@ Array blob_blob_forces_any(const Array &r_vectors, const Array &periodic_length,
     // one thread for small systems: a parallel region costs more than ~1e5 pairs
     const bool use_threads = static_cast<double>(n) * n > 2e5;
     const double *px = x.data(), *py = y.data(), *pz = z.data(), *pa = Radii ? a.data() : nullptr;
-#pragma omp parallel for schedule(dynamic, 16) if (use_threads)
-    for (long i = 0; i < n; ++i) {
-      double *ax = accumulators.data() + static_cast<std::size_t>(rmb::thread_index()) * 3 * n;
-      double *ay = ax + n, *az = ay + n;
-      double fx = 0.0, fy = 0.0, fz = 0.0;
-      const double xi = px[i], yi = py[i], zi = pz[i], ai = Radii ? pa[i] : 0.0;
-#pragma omp simd reduction(+ : fx, fy, fz)
-      for (long j = i + 1; j < n; ++j) {
-        const double rx = rmb::minimum_image(px[j] - xi, Lx);
-        const double ry = rmb::minimum_image(py[j] - yi, Ly);
-        const double rz = rmb::minimum_image(pz[j] - zi, Lz);
-        const double distance = std::sqrt(rx * rx + ry * ry + rz * rz);
-        const double m = Radii ? rmb::blob_blob_force_factor(
-                                     distance, rmb::soft_repulsion(repulsion_strength, debye_length, ai + pa[j]),
-                                     rmb::FastExp())
-                               : rmb::blob_blob_force_factor(distance, law, rmb::FastExp());
-        fx -= m * rx, fy -= m * ry, fz -= m * rz;
-        ax[j] += m * rx, ay[j] += m * ry, az[j] += m * rz;
-      }
-      ax[i] += fx, ay[i] += fy, az[i] += fz;
-    }
+    RMB_SIMD_DISPATCH(blob_blob_pair_sums<Radii>(n, px, py, pz, pa, Lx, Ly, Lz, law, repulsion_strength, debye_length,
+                                                 accumulators.data(), use_threads));
 #pragma omp parallel for schedule(static) if (use_threads)
     for (long k = 0; k < n; ++k) {
       for (int c = 0; c < 3; ++c) {
@@ -265,6 +250,13 @@ Array minimum_images(const Array &d, const Array &periodic_length) {
 
 PYBIND11_MODULE(_forces_cpp, m) {
   m.doc() = "C++ (OpenMP) blob-blob soft repulsion: all pairs, or the pairs within a cutoff (cell list)";
+  try {
+    rmb_simd::chosen();  // RMB_SIMD naming a path that cannot run here stops the import with its one line
+  } catch (const std::invalid_argument &err) {
+    throw py::import_error(err.what());
+  }
+  m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
+        "The vector path of the all-pairs loop (mobility/cpp/simd_dispatch.h).");
   m.def("blob_blob_forces", &blob_blob_forces, py::arg("r_vectors"), py::arg("periodic_length"),
         py::arg("repulsion_strength"), py::arg("debye_length"), py::arg("blob_radius"),
         "Forces (N, 3) of the default soft repulsion between all blob pairs; r_vectors (N, 3).");

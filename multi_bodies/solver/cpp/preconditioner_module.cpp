@@ -26,14 +26,19 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
-#include "blob_pair_kernels.h"  // the blob mobility of the mobility backends (mobility/cpp)
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "blob_pair_kernels.h"  // the blob mobility of the mobility backends (mobility/cpp)
+#include "openmp_threads.h"
+
+// near_field_loop, compiled once per vector path (the chosen one runs: mobility/cpp/simd_dispatch.h)
+#define RMB_SIMD_KERNELS "near_field_kernels.inc"
+#include "simd_targets.h"
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -481,89 +486,6 @@ py::tuple incomplete_cholesky_blocks(const Index &starts, const Index &diag_offs
 
 }  // namespace
 
-namespace {
-
-#if defined(__AVX512F__)
-using rmb::load8;
-using rmb::store8;
-#endif
-
-// The sources of every target body gathered into contiguous arrays (positions in units of a, shifted, raised;
-// damped forces), so that the inner loop runs over all of a body's near sources at once (long SIMD loops).
-// Each pair is evaluated once, for both of its directions (the mobility is symmetric): the target's velocity
-// in registers, the source's in an accumulator of its slot, added to the blob's row at the end.  OpenMP over
-// the target bodies, so that a body's slots are written by one thread.
-template <bool Wall>
-void near_field_loop(long B, const double *X, const double *Y, const double *Z, const double *damping,
-                     const double *F, const long long *off, const long long *start, const long long *partner,
-                     const double *S, double factor, double *out) {
-  std::vector<long long> first(B + 1, 0);
-  for (long b = 0; b < B; ++b) {
-    long long count = 0;
-    for (long long q = start[b]; q < start[b + 1]; ++q) count += off[partner[q] + 1] - off[partner[q]];
-    first[b + 1] = first[b] + (count + 7) / 8 * 8;  // whole vectors of eight
-  }
-  const long long total = first[B];
-  // the padding: sources far away (1e8 radii along x, at height 1) with zero force, which add exactly zero to
-  // the targets; their slots (blob -1) are not added back
-  std::vector<double> sx(total, 1e8), sy(total, 0.0), sz(total, 1.0), fx(total, 0.0), fy(total, 0.0),
-      fz(total, 0.0), ax(total, 0.0), ay(total, 0.0), az(total, 0.0);
-  std::vector<long long> blob(total, -1);
-  for (long b = 0; b < B; ++b) {
-    long long k = first[b];
-    for (long long q = start[b]; q < start[b + 1]; ++q)
-      for (long long j = off[partner[q]]; j < off[partner[q] + 1]; ++j, ++k) {
-        sx[k] = X[j] + S[3 * q], sy[k] = Y[j] + S[3 * q + 1], sz[k] = Z[j] + S[3 * q + 2];
-        fx[k] = F[3 * j], fy[k] = F[3 * j + 1], fz[k] = F[3 * j + 2];
-        blob[k] = j;
-      }
-  }
-  const double *SX = sx.data(), *SY = sy.data(), *SZ = sz.data(), *FX = fx.data(), *FY = fy.data(), *FZ = fz.data();
-  double *AX = ax.data(), *AY = ay.data(), *AZ = az.data();
-#pragma omp parallel for schedule(dynamic, 1)
-  for (long b = 0; b < B; ++b) {
-    for (long long i = off[b]; i < off[b + 1]; ++i) {
-      double u0 = 0.0, u1 = 0.0, u2 = 0.0;
-      const double xi = X[i], yi = Y[i], zi = Z[i], gx = F[3 * i], gy = F[3 * i + 1], gz = F[3 * i + 2];
-      long long lo = first[b];
-      const long long hi = first[b + 1];
-#if defined(__AVX512F__)
-      {  // eight sources at a time in explicit vectors, with the backends' vector reciprocal square root
-        using V = rmb::double8;
-        const V vx = V{} + xi, vy = V{} + yi, vz = V{} + zi, vgx = V{} + gx, vgy = V{} + gy, vgz = V{} + gz;
-        V w0{}, w1{}, w2{};
-        for (; lo < hi; lo += 8) {
-          const V rx = vx - load8(SX + lo), ry = vy - load8(SY + lo), rz = vz - load8(SZ + lo);
-          V s0{}, s1{}, s2{};
-          rmb::trans_times_force_pair_both<Wall, V>(rx, ry, rz, vz, load8(SZ + lo), load8(FX + lo), load8(FY + lo),
-                                                    load8(FZ + lo), vgx, vgy, vgz, w0, w1, w2, s0, s1, s2);
-          store8(AX + lo, load8(AX + lo) + s0);
-          store8(AY + lo, load8(AY + lo) + s1);
-          store8(AZ + lo, load8(AZ + lo) + s2);
-        }
-        for (int k = 0; k < 8; ++k) u0 += w0[k], u1 += w1[k], u2 += w2[k];
-      }
-#endif
-#pragma omp simd reduction(+ : u0, u1, u2)
-      for (long long k = lo; k < hi; ++k) {
-        double v0 = 0.0, v1 = 0.0, v2 = 0.0, s0 = 0.0, s1 = 0.0, s2 = 0.0;
-        rmb::trans_times_force_pair_both<Wall, double>(xi - SX[k], yi - SY[k], zi - SZ[k], zi, SZ[k], FX[k], FY[k],
-                                                       FZ[k], gx, gy, gz, v0, v1, v2, s0, s1, s2);
-        u0 += v0, u1 += v1, u2 += v2;
-        AX[k] += s0, AY[k] += s1, AZ[k] += s2;
-      }
-      out[3 * i] = u0, out[3 * i + 1] = u1, out[3 * i + 2] = u2;
-    }
-  }
-  for (long long k = 0; k < total; ++k)
-    if (blob[k] >= 0) out[3 * blob[k]] += AX[k], out[3 * blob[k] + 1] += AY[k], out[3 * blob[k] + 2] += AZ[k];
-  const long N = off[B];
-  for (long i = 0; i < N; ++i)
-    for (int k = 0; k < 3; ++k) out[3 * i + k] *= factor * damping[i];
-}
-
-}  // namespace
-
 py::array_t<double> rigid_near_field(const Array &x, double a, double eta, bool wall, const Index &offsets,
                                      const Index &target_start, const Index &partners, const Array &shifts,
                                      const Array &forces) {
@@ -599,16 +521,25 @@ py::array_t<double> rigid_near_field(const Array &x, double a, double eta, bool 
   const double factor = 1.0 / (8.0 * M_PI * eta * a);
   {
     py::gil_scoped_release release;
-    wall ? near_field_loop<true>(B, X.data(), Y.data(), Z.data(), damping.data(), F.data(), off, start, partner,
-                                 S.data(), factor, o)
-         : near_field_loop<false>(B, X.data(), Y.data(), Z.data(), damping.data(), F.data(), off, start, partner,
-                                  S.data(), factor, o);
+    if (wall)
+      RMB_SIMD_DISPATCH(near_field_loop<true>(B, X.data(), Y.data(), Z.data(), damping.data(), F.data(), off, start,
+                                              partner, S.data(), factor, o));
+    else
+      RMB_SIMD_DISPATCH(near_field_loop<false>(B, X.data(), Y.data(), Z.data(), damping.data(), F.data(), off, start,
+                                               partner, S.data(), factor, o));
   }
   return out;
 }
 
 PYBIND11_MODULE(_preconditioner_cpp, m) {
   m.doc() = "Per-body dense blocks of the block-diagonal preconditioner (multi_bodies/solver/cpp)";
+  try {
+    rmb_simd::chosen();  // RMB_SIMD naming a path that cannot run here stops the import with its one line
+  } catch (const std::invalid_argument &err) {
+    throw py::import_error(err.what());
+  }
+  m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
+        "The vector path of the near-field loop (mobility/cpp/simd_dispatch.h).");
   m.def("block_product", &block_product, py::arg("blocks"), py::arg("x"), py::arg("out"), py::arg("start"),
         py::arg("transpose") = false, py::arg("lower") = false,
         "out[start + k m : start + (k + 1) m] = B_k x[...] (B_k^T with transpose; lower: read the lower triangle)");

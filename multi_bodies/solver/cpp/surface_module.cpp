@@ -42,37 +42,22 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
-#include "blob_pair_kernels.h"  // the free-space RPY of the mobility backends (mobility/cpp)
-
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
+
+#include "blob_pair_kernels.h"  // the free-space RPY of the mobility backends (mobility/cpp)
+#include "openmp_threads.h"
+
+// The loops, compiled once per vector path (the chosen one runs: mobility/cpp/simd_dispatch.h)
+#define RMB_SIMD_KERNELS "surface_kernels.inc"
+#include "simd_targets.h"
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 namespace {
-
-struct Sums {
-  double single = 0.0, dbl = 0.0, dip[3] = {0.0, 0.0, 0.0}, grad[3] = {0.0, 0.0, 0.0};
-};
-
-// Add the terms of one source at separation d (3) with normal n (3).
-inline void add_pair(Sums &s, const double *d, const double *n, double ws, double wd, double wp, double wg,
-                     bool want_s, bool want_d, bool want_p, bool want_g) {
-  const double r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-  const double inv_r = 1.0 / std::sqrt(r2);
-  const double inv_r3 = inv_r * inv_r * inv_r;
-  if (want_s) s.single += ws * inv_r;
-  const double rn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
-  if (want_d) s.dbl += wd * rn * inv_r3;
-  if (want_p)
-    for (int k = 0; k < 3; ++k) s.dip[k] += wp * inv_r3 * d[k];
-  if (want_g) {
-    const double f = wg * inv_r3, c = 3.0 * rn * inv_r * inv_r;
-    for (int k = 0; k < 3; ++k) s.grad[k] += f * (n[k] - c * d[k]);
-  }
-}
 
 const double *optional(const Array &a, long n, const char *name, bool &want) {
   want = a.size() > 0;
@@ -95,28 +80,7 @@ py::tuple layers(const Array &x, const Array &normals, const Array &ws, const Ar
          *out_g = grad.mutable_data();
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
-      Sums s;
-      const double *xi = X + 3 * i;
-      for (long j = 0; j < N; ++j) {
-        const double *xj = X + 3 * j, *nj = Nn + 3 * j;
-        const double ws_j = want_s ? s_[j] : 0.0, wd_j = want_d ? d_[j] : 0.0;
-        const double wp_j = want_p ? p_[j] : 0.0, wg_j = want_g ? g_[j] : 0.0;
-        if (j != i) {
-          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
-          add_pair(s, d, nj, ws_j, wd_j, wp_j, wg_j, want_s, want_d, want_p, want_g);
-        }
-        if (wall) {
-          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] + xj[2]};
-          const double n_image[3] = {nj[0], nj[1], -nj[2]};
-          add_pair(s, d, n_image, ws_j, wd_j, wp_j, wg_j, want_s, want_d, want_p, want_g);
-        }
-      }
-      out_s[i] = s.single;
-      out_d[i] = s.dbl;
-      for (int k = 0; k < 3; ++k) out_p[3 * i + k] = s.dip[k], out_g[3 * i + k] = s.grad[k];
-    }
+    RMB_SIMD_DISPATCH(layers_loop(N, X, Nn, s_, d_, p_, g_, want_s, want_d, want_p, want_g, wall, out_s, out_d, out_p, out_g));
   }
   return py::make_tuple(single, dbl, dip, grad);
 }
@@ -133,25 +97,7 @@ py::array_t<double> stokes_double_layer(const Array &x, const Array &normals, co
   const double a2 = a * a, self2 = 1e-28, factor = -3.0 / (4.0 * M_PI);
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
-      double s[3] = {0.0, 0.0, 0.0};
-      const double *xi = X + 3 * i;
-      for (long j = 0; j < N; ++j) {
-        const double *xj = X + 3 * j, *n = Nn + 3 * j, *vj = V + 3 * j;
-        const double r[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
-        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-        if (r2 < self2) continue;
-        const double inv_r2 = 1.0 / r2, inv_r5 = inv_r2 * inv_r2 * std::sqrt(inv_r2);
-        const double rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
-        const double rv = r[0] * vj[0] + r[1] * vj[1] + r[2] * vj[2];
-        const double nv = n[0] * vj[0] + n[1] * vj[1] + n[2] * vj[2];
-        const double c = W[j] * inv_r5, b = (2.0 / 3.0) * a2;
-        const double radial = c * ((1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn * rv + b * nv);
-        for (int k = 0; k < 3; ++k) s[k] += radial * r[k] + c * b * (rv * n[k] + rn * vj[k]);
-      }
-      for (int k = 0; k < 3; ++k) O[3 * i + k] = factor * s[k];
-    }
+    RMB_SIMD_DISPATCH(stokes_double_layer_loop(N, X, Nn, W, V, O, a2, self2, factor));
   }
   return out;
 }
@@ -171,29 +117,7 @@ py::array_t<double> stokes_double_layer_blocks(const Array &targets, const Array
   const long row_length = 3 * ns;
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
-    for (long pi = 0; pi < P * nt; ++pi) {
-      const long p = pi / nt, i = pi % nt;
-      const double *xi = T + 3 * pi;
-      double *rows = O + (p * 3 * nt + 3 * i) * row_length;  // the three rows of target i
-      for (long j = 0; j < ns; ++j) {
-        const long sj = p * ns + j;
-        const double *xj = S + 3 * sj, *n = Nn + 3 * sj;
-        const double r[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
-        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-        double block[3][3] = {{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}};
-        if (r2 >= self2) {
-          const double inv_r2 = 1.0 / r2, scale = factor * W[sj] * inv_r2 * inv_r2 * std::sqrt(inv_r2);
-          const double rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
-          const double radial = (1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn;
-          for (int k = 0; k < 3; ++k)
-            for (int l = 0; l < 3; ++l)
-              block[k][l] = scale * (radial * r[k] * r[l] + b * (r[k] * n[l] + n[k] * r[l] + (k == l ? rn : 0.0)));
-        }
-        for (int k = 0; k < 3; ++k)
-          for (int l = 0; l < 3; ++l) rows[k * row_length + 3 * j + l] = block[k][l];
-      }
-    }
+    RMB_SIMD_DISPATCH(stokes_double_layer_blocks_loop(P, nt, ns, T, S, Nn, W, O, a2, self2, factor, b, row_length));
   }
   return out;
 }
@@ -230,46 +154,7 @@ py::array_t<double> slip_length_near_field(const Array &x, const Array &normals,
   const double factor = -3.0 / (4.0 * M_PI), b2 = (2.0 / 3.0) * a2;
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
-      const double *xi = X + 3 * i;
-      double m0 = 0.0, m1 = 0.0, m2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
-      for (long q = start[body[i]]; q < start[body[i] + 1]; ++q) {
-        const long first = off[partner[q]], last = off[partner[q] + 1];
-        const double tx = (xi[0] - S[3 * q]) * inv_a, ty = (xi[1] - S[3 * q + 1]) * inv_a,
-                     tz = (xi[2] - S[3 * q + 2]) * inv_a;
-#pragma omp simd reduction(+ : m0, m1, m2)
-        for (long j = first; j < last; ++j) {
-          const double rx = tx - X[3 * j] * inv_a, ry = ty - X[3 * j + 1] * inv_a, rz = tz - X[3 * j + 2] * inv_a;
-          const double r2 = rx * rx + ry * ry + rz * rz;
-          double c_iso, c_rr;  // r = 0 (coinciding blobs of two bodies): a zero reciprocal, as the backends
-          rmb::rpy_trans_trans_coefficients(r2, r2 > 0.0 ? 1.0 / std::sqrt(r2) : 0.0, c_iso, c_rr);
-          const double lx = L[3 * j], ly = L[3 * j + 1], lz = L[3 * j + 2];
-          const double rl = c_rr * (rx * lx + ry * ly + rz * lz);
-          m0 += c_iso * lx + rl * rx;
-          m1 += c_iso * ly + rl * ry;
-          m2 += c_iso * lz + rl * rz;
-        }
-        if (!dl[q]) continue;
-#pragma omp simd reduction(+ : d0, d1, d2)
-        for (long j = first; j < last; ++j) {
-          const double rx = xi[0] - X[3 * j], ry = xi[1] - X[3 * j + 1], rz = xi[2] - X[3 * j + 2];
-          const double nx = Nn[3 * j], ny = Nn[3 * j + 1], nz = Nn[3 * j + 2];
-          const double vx = V[3 * j], vy = V[3 * j + 1], vz = V[3 * j + 2];
-          const double r2 = rx * rx + ry * ry + rz * rz;
-          const double inv_r2 = r2 >= self2 ? 1.0 / r2 : 0.0, inv_r5 = inv_r2 * inv_r2 * std::sqrt(inv_r2);
-          const double rn = rx * nx + ry * ny + rz * nz, rv = rx * vx + ry * vy + rz * vz;
-          const double nv = nx * vx + ny * vy + nz * vz;
-          const double c = W[j] * inv_r5, cb = c * b2;
-          const double radial = c * ((1.0 - (10.0 / 3.0) * a2 * inv_r2) * rn * rv + b2 * nv);
-          d0 += radial * rx + cb * (rv * nx + rn * vx);
-          d1 += radial * ry + cb * (rv * ny + rn * vy);
-          d2 += radial * rz + cb * (rv * nz + rn * vz);
-        }
-      }
-      const double m[3] = {m0, m1, m2}, d[3] = {d0, d1, d2};
-      for (int k = 0; k < 3; ++k) O[3 * i + k] = mobility_unit * m[k] - factor * d[k];
-    }
+    RMB_SIMD_DISPATCH(slip_length_near_field_loop(N, X, Nn, W, L, V, S, dl, O, a2, inv_a, mobility_unit, self2, factor, b2, start, off, partner, body));
   }
   return out;
 }
@@ -298,35 +183,7 @@ py::tuple laplace_blocks_and_moments(const Array &x, const Array &normals, const
   double *out_blocks = blocks.mutable_data(), *out_moments = moments.mutable_data();
   {
     py::gil_scoped_release release;
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
-      const double *xi = X + 3 * i;
-      double *row = out_moments + i * B * m;
-      for (long k = 0; k < B * m; ++k) row[k] = 0.0;
-      const long bi = body[i];
-      for (long j = 0; j < N; ++j) {
-        const double *xj = X + 3 * j, *nj = Nn + 3 * j;
-        double kernel = 0.0;
-        if (j != i) {
-          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
-          const double inv_r = 1.0 / std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-          kernel += S[j] * inv_r - D[j] * (d[0] * nj[0] + d[1] * nj[1] + d[2] * nj[2]) * inv_r * inv_r * inv_r;
-        }
-        if (wall) {
-          const double d[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] + xj[2]};
-          const double inv_r = 1.0 / std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-          kernel += S[j] * inv_r - D[j] * (d[0] * nj[0] + d[1] * nj[1] - d[2] * nj[2]) * inv_r * inv_r * inv_r;
-        }
-        const long bj = body[j];
-        const double *zj = Z + j * m;
-        double *target = row + bj * m;
-        for (long k = 0; k < m; ++k) target[k] += kernel * zj[k];
-        if (bj == bi) {
-          const long n = off[bi + 1] - off[bi];
-          out_blocks[block_start[bi] + (i - off[bi]) * n + (j - off[bi])] = kernel;
-        }
-      }
-    }
+    RMB_SIMD_DISPATCH(laplace_blocks_and_moments_loop(N, B, m, X, Nn, S, D, Z, body, block_start, off, out_blocks, out_moments, wall));
   }
   return py::make_tuple(blocks, moments);
 }
@@ -335,6 +192,13 @@ py::tuple laplace_blocks_and_moments(const Array &x, const Array &normals, const
 
 PYBIND11_MODULE(_surface_cpp, m) {
   m.doc() = "Laplace layers (laplace_kernels.py) and the Stokes double layer (slip_length.py) on the blobs";
+  try {
+    rmb_simd::chosen();  // RMB_SIMD naming a path that cannot run here stops the import with its one line
+  } catch (const std::invalid_argument &err) {
+    throw py::import_error(err.what());
+  }
+  m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
+        "The vector path of the surface loops (mobility/cpp/simd_dispatch.h).");
   m.def("layers", &layers, py::arg("x"), py::arg("normals"), py::arg("single"), py::arg("double_"),
         py::arg("dipole"), py::arg("grad_double"), py::arg("wall"),
         "(single (N,), double (N,), dipole (N, 3), grad_double (N, 3)); empty densities are not computed");
