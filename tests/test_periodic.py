@@ -292,3 +292,272 @@ def test_worked_example_runs_as_written():
             assert np.all((z > 0) & (z < 5)), name
     finally:
         shutil.rmtree(os.path.join(folder, 'data'), ignore_errors=True)
+
+
+# ====================================================================== runs on the spectral product
+def spectral_model(bodies, kind, L, z_bounds, kernel, tolerance=1e-10, blobs='C++', physics=None, **extra):
+    """A Model of ``bodies`` with the spectral product in ``kind`` (blob radius 1, eta 1, the default physics with
+    g = 1 per blob unless ``physics`` says otherwise)."""
+    from body.body import bodies_to_arrays
+    from multi_bodies import multi_bodies_functions as mbf
+    from multi_bodies.solver.model import Model
+    from multi_bodies.solver.periodic import SpectralDomain
+    Lz = L if kind == 'triply_periodic' else 0.0
+    values = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=0.25, repulsion_strength=1.0,
+                  debye_length=1.0, periodic_length=np.array([L, L, Lz]), blob_radius=1.0, blob_mass=1.0,
+                  top_wall=z_bounds[1] if kind == 'doubly_periodic_slit' else None)
+    values.update(physics or {})
+    domain = SpectralDomain(Geometry(kind, (L, L, Lz), None if kind == 'triply_periodic' else z_bounds), kernel)
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        return Model(bodies, bodies_to_arrays(bodies, [len(bodies)]), mbf.load_user_hooks('/nonexistent'), values,
+                     1.0, 1.0, tolerance, vector_product_name='spectral', blobs_name=blobs,
+                     periodic_length=(L, L, Lz), spectral=domain, **extra)
+
+
+def direct_model(bodies, L, tolerance=1e-10, **extra):
+    """The same bodies with the C++ wall product and the published pseudo-periodic box (L, L, 0)."""
+    from body.body import bodies_to_arrays
+    from multi_bodies import multi_bodies_functions as mbf
+    from multi_bodies.solver.model import Model
+    values = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=0.25, repulsion_strength=1.0,
+                  debye_length=1.0, periodic_length=np.array([L, L, 0.0]), blob_radius=1.0, blob_mass=1.0)
+    return Model(bodies, bodies_to_arrays(bodies, [len(bodies)]), mbf.load_user_hooks('/nonexistent'), values, 1.0,
+                 1.0, tolerance, vector_product_name='C++', blobs_name='C++', periodic_length=(L, L, 0.0), **extra)
+
+
+def roller_bodies(locations):
+    from body.body import Body
+    bodies = [Body(np.array(l, dtype=float), np.array([1.0, 0, 0, 0]), np.zeros((1, 3)), 1.0) for l in locations]
+    for body in bodies:
+        body.ID, body.body_length = 'roller', 2.0
+    return bodies
+
+
+def tetrahedra(locations, seed=0):
+    """Rigid bodies of 4 blobs of radius 1 at the corners of a tetrahedron of edge 3.25 (random orientations)."""
+    from body.body import Body
+    reference = 1.15 * np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1.0]])
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for location in locations:
+        q = rng.standard_normal(4)
+        body = Body(np.array(location, dtype=float), q / np.linalg.norm(q), reference, 1.0)
+        body.ID, body.body_length = 'tetrahedron', 5.0
+        bodies.append(body)
+    return bodies
+
+
+def run_steps(model, scheme_name, steps, dt=0.05):
+    from multi_bodies.files.input_options import options_with
+    from quaternion_integrator.schemes import make_scheme
+    scheme = make_scheme(scheme_name, dt, options_with(kT=0.0, rf_delta=1e-3, update_PC=1))
+    state = scheme.init(model, model.start_configuration)
+    for _ in range(steps):
+        state = scheme.step(model, state, np.random.default_rng(0))
+    return state.configuration
+
+
+ROLLERS = [[10.0, 10.0, 3.0], [14.0, 11.0, 4.0], [12.0, 15.0, 3.5], [30.0, 31.0, 5.0]]
+TETRAHEDRA = [[10.0, 10.0, 4.0], [15.0, 11.0, 5.0], [30.0, 31.0, 4.5]]
+
+
+def test_roller_trajectories_above_the_wall_follow_the_wall_geometry():
+    """4 rollers (torque about y, gravity) in a doubly periodic box of side 128 above the wall: 3 steps of
+    deterministic_forward_euler_rollers agree with the pseudo-periodic wall product's to 3e-3 of the displacement
+    (doc/periodic.md: 2.1e-3 at L = 128 with the w6 pair, the far periodic images that the first ring of the
+    pseudo-periodic sum lacks; 1.2e-2 at L = 64); each roller step pays one spectral product."""
+    bodies = roller_bodies(ROLLERS)
+    spectral_run = spectral_model(bodies, 'doubly_periodic_wall', 128.0, (0.0, 9.1740639106166668), 'w6',
+                                  omega_one_roller=(0.0, 1.0, 0.0))
+    direct_run = direct_model(bodies, 128.0, omega_one_roller=(0.0, 1.0, 0.0))
+    start = spectral_run.start_configuration.locations
+    moved_s = run_steps(spectral_run, 'deterministic_forward_euler_rollers', 3).locations - start
+    moved_d = run_steps(direct_run, 'deterministic_forward_euler_rollers', 3).locations - start
+    assert np.abs(moved_d).max() > 5e-3
+    assert np.abs(moved_s - moved_d).max() < 3e-3 * np.abs(moved_d).max()
+    stokes = spectral_run.roller_mobility.stokes
+    calls = []
+    product = stokes.product
+    stokes.product = lambda *args: calls.append(1) or product(*args)
+    spectral_run.roller_velocities(spectral_run.start_configuration)
+    assert len(calls) == 1
+
+
+@pytest.mark.parametrize('kernel, accuracy', [('w6', 5e-3), ('w4', 5e-3)])
+def test_rigid_body_trajectories_above_the_wall_follow_the_wall_geometry(kernel, accuracy):
+    """3 rigid tetrahedra of 4 blobs (blobs at 2.66 a from each other) in a box of side 64 above the wall: 2 steps of
+    deterministic_forward_euler agree with the pseudo-periodic wall product's to 5e-3 of the displacement
+    (doc/periodic.md: 3.5e-3 for w6, 3.8e-3 for w4, the kernel's pair mobility at near contact against
+    Rotne-Prager's; not a box effect: the same at L = 128)."""
+    bodies = tetrahedra(TETRAHEDRA)
+    spectral_run = spectral_model(bodies, 'doubly_periodic_wall', 64.0, (0.0, 9.1740639106166668), kernel)
+    direct_run = direct_model(bodies, 64.0)
+    start = spectral_run.start_configuration
+    end_s, end_d = run_steps(spectral_run, 'deterministic_forward_euler', 2), run_steps(direct_run,
+                                                                                      'deterministic_forward_euler', 2)
+    moved_d = end_d.locations - start.locations
+    assert np.abs(moved_d).max() > 1e-3
+    assert np.abs(end_s.locations - end_d.locations).max() < accuracy * np.abs(moved_d).max()
+
+
+@pytest.mark.parametrize('kind', ['triply_periodic', 'doubly_periodic_open', 'doubly_periodic_wall',
+                                  'doubly_periodic_slit'])
+def test_static_problems_agree_with_the_dense_solve(kind):
+    """The mobility problem of 3 tetrahedra solved by GMRES over the spectral product equals the dense solve
+    N (K^T M^-1 ...) of the same product's matrix: to the solver tolerance in the triply periodic box (M symmetric
+    to round-off), to the product's asymmetry elsewhere (the dense matrix is its symmetric part); and the
+    resistance problem of those velocities gives back the forces."""
+    bodies = tetrahedra([[6.0, 6.0, 4.0], [11.0, 7.0, 5.0], [8.0, 12.0, 4.5]], seed=3)
+    model = spectral_model(bodies, kind, 24.0, (0.0, 9.0), 'w4', tolerance=1e-12)
+    configuration = model.start_configuration
+    iterative = model.deterministic_velocities(configuration).velocities
+    dense = model.dense_velocities(configuration)
+    scale = np.abs(dense).max()
+    accuracy = 1e-9 if kind == 'triply_periodic' else model.vector_mobility.relative_accuracy
+    assert np.abs(iterative - dense).max() < accuracy * scale, np.abs(iterative - dense).max() / scale
+    from multi_bodies.solver import body_solver
+    force_torque = model.forces_torques(configuration)
+    back, _ = body_solver.solve_resistance_problem(model.arrays, configuration, dense,
+                                                   np.zeros((model.num_blobs, 3)), model.dense_mobility)
+    assert np.allclose(back, force_torque, rtol=0, atol=1e-8 * np.abs(force_torque).max())
+
+
+# ====================================================================== Gibbs-Boltzmann
+# Scene of the equilibrium tests (the one of tests/test_stochastic.py): a = 1, eta = 1/(6 pi) (so mu0 = 1), kT = 1,
+# weight 2 per blob, wall repulsion eps = 2, b = 0.25; in the slit the same repulsion from the top wall at 5.
+# Rollers without torque, 100 in a 40 x 40 box (4 apart: the heights of independent blobs, the bodies' time averages
+# nearly independent), w5w4 kernel pair, stochastic_trapezoidal_rollers, dt 0.01, 250 steps (four relaxation
+# times of the heights), Lanczos to 1e-3.
+GB_G, GB_EPS, GB_B, GB_ETA = 2.0, 2.0, 0.25, 1.0 / (6.0 * np.pi)
+
+
+def gb_energy(z, top):
+    def wall(gap):
+        return np.where(gap < 1.0, GB_EPS + GB_EPS * (1.0 - gap) / GB_B, GB_EPS * np.exp(-(gap - 1.0) / GB_B))
+    energy = GB_G * z + wall(z)
+    return energy if top is None else energy + wall(top - z)
+
+
+def gb_quadrature(top, upper=12.0):
+    """The exact height density exp(-U/kT) on a fine grid: (grid, cdf, mean, 8 equiprobable bin edges)."""
+    grid = np.linspace(1e-4, upper if top is None else top, 200001)
+    density = np.exp(-gb_energy(grid, top))
+    cdf = np.cumsum(density)
+    cdf /= cdf[-1]
+    mean = np.trapezoid(grid * density, grid) / np.trapezoid(density, grid)
+    edges = np.concatenate(([-np.inf], np.interp(np.arange(1, 8) / 8.0, cdf, grid), [np.inf]))
+    return grid, cdf, mean, edges
+
+
+def gb_run(kind, top_or_zmax, drift=True, n=100, L=40.0, steps=250, dt=0.01, seed=3):
+    """Per-body time averages of z and of the 8 bins, the in-plane displacements over windows of 10 steps, and
+    the model (single-blob rollers started from an exact equilibrium sample)."""
+    from multi_bodies.files.input_options import options_with
+    from quaternion_integrator.schemes import make_scheme
+    top = top_or_zmax if kind == 'doubly_periodic_slit' else None
+    grid, cdf, _, edges = gb_quadrature(top)
+    rng = np.random.default_rng(100 + seed)
+    side = int(np.ceil(np.sqrt(n)))
+    locations = [[(k // side + 0.5) * L / side, (k % side + 0.5) * L / side, np.interp(rng.random(), cdf, grid)]
+                 for k in range(n)]
+    from body.body import bodies_to_arrays
+    from multi_bodies import multi_bodies_functions as mbf
+    from multi_bodies.solver.model import Model
+    from multi_bodies.solver.periodic import SpectralDomain
+    bodies = roller_bodies(locations)
+    physics = dict(g=GB_G, repulsion_strength_wall=GB_EPS, debye_length_wall=GB_B, repulsion_strength=1.0,
+                   debye_length=1.0, periodic_length=np.array([L, L, 0.0]), blob_radius=1.0, blob_mass=1.0,
+                   top_wall=top)
+    domain = SpectralDomain(Geometry(kind, (L, L, 0.0), (0.0, top_or_zmax)), 'w5w4')
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        model = Model(bodies, bodies_to_arrays(bodies, [n]), mbf.load_user_hooks('/nonexistent'), physics, GB_ETA,
+                      1.0, 1e-3, vector_product_name='spectral', blobs_name='python', periodic_length=(L, L, 0.0),
+                      spectral=domain)
+    scheme = make_scheme('stochastic_trapezoidal_rollers', dt, options_with(kT=1.0, rf_delta=1e-3, update_PC=1))
+    scheme.thermal_drift = drift
+    state = scheme.init(model, model.start_configuration)
+    generator = np.random.default_rng(seed)
+    z_sum, bins, windows = np.zeros(n), np.zeros((n, 8)), []
+    window_start = state.configuration.locations[:, :2].copy()
+    for step in range(steps):
+        state = scheme.step(model, state, generator)
+        z = state.configuration.locations[:, 2]
+        z_sum += z
+        bins[np.arange(n), np.clip(np.searchsorted(edges, z) - 1, 0, 7)] += 1
+        if (step + 1) % 10 == 0:
+            windows.append(state.configuration.locations[:, :2] - window_start)
+            window_start = state.configuration.locations[:, :2].copy()
+    return z_sum / steps, bins / steps, np.array(windows), model
+
+
+def z_scores(per_body, exact):
+    per_body = np.asarray(per_body)
+    return (per_body.mean(axis=0) - exact) / (per_body.std(axis=0, ddof=1) / np.sqrt(per_body.shape[0]))
+
+
+def assert_gibbs_boltzmann(z_means, bins, exact_mean, label):
+    """Mean height within 4 standard errors and the 8-bin chi^2 below 24 (chi^2 with 7 degrees of freedom,
+    p = 0.001); standard errors from the spread of the bodies' time averages."""
+    score = z_scores(z_means, exact_mean)
+    chi2 = float(np.sum(z_scores(bins, 1.0 / 8.0) ** 2))
+    assert abs(score) < 4.0, '%s: <z> %.4f, exact %.4f, z-score %.2f' % (label, z_means.mean(), exact_mean, score)
+    assert chi2 < 24.0, '%s: histogram chi^2 %.1f' % (label, chi2)
+
+
+def mean_parallel_self_mobility(model, top):
+    """<M_xx> of one blob alone in the model's box, averaged over the exact height density (quadrature over 101
+    heights of the spectral product itself: the rate of in-plane diffusion at equilibrium, kT <M_xx>)."""
+    grid, cdf, _, _ = gb_quadrature(top)
+    heights = np.interp((np.arange(101) + 0.5) / 101, cdf, grid)
+    mobility = model.roller_mobility
+    M_xx = np.array([mobility.velocities(np.array([[1.0, 1.0, h]]), np.array([1.0, 0, 0]))[0] for h in heights])
+    return M_xx.mean()  # the heights are equiprobable quantiles: the mean is the average over the density
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('kind, height', [('doubly_periodic_slit', 5.0), ('doubly_periodic_wall', 8.0)])
+def test_brownian_rollers_keep_the_gibbs_boltzmann_heights(kind, height):
+    """Heights of Brownian blobs in the doubly periodic box above the wall and in the slit (both walls felt: the
+    density has the top wall's repulsion, quadrature) keep the exact equilibrium, and the blobs diffuse in the
+    plane at the equilibrium rate kT <M_xx> (4 standard errors; a frozen integrator would keep the heights of
+    its exact start)."""
+    top = height if kind == 'doubly_periodic_slit' else None
+    z_means, bins, windows, model = gb_run(kind, height)
+    assert_gibbs_boltzmann(z_means, bins, gb_quadrature(top)[2], kind)
+    per_body = np.mean(np.sum(windows ** 2, axis=2), axis=0) / (4.0 * 10 * 0.01)
+    expected = mean_parallel_self_mobility(model, top)
+    score = (per_body.mean() - expected) / (per_body.std(ddof=1) / np.sqrt(per_body.size))
+    assert abs(score) < 4.0, (per_body.mean(), expected, score)
+
+
+@pytest.mark.slow
+def test_dropping_the_drift_leaves_the_equilibrium_of_the_slit():
+    """Negative control: the slit run without the random-finite-difference drift fails the same check."""
+    z_means, bins, _, _ = gb_run('doubly_periodic_slit', 5.0, drift=False)
+    with pytest.raises(AssertionError):
+        assert_gibbs_boltzmann(z_means, bins, gb_quadrature(5.0)[2], 'slit without drift')
+
+
+def test_published_roller_scene_shortened_runs(tmp_path, monkeypatch):
+    """multi_bodies/examples/spectral_rollers (the published Spectral_Multiblob_Roller scene built the same way:
+    32 rollers of 12 blobs at the published density, the folder's forces, stochastic_Slip_Trapz, the published
+    domain height): 4 steps run, every solve and Lanczos converged, and the rollers roll along +x (a torque about
+    +y above a wall)."""
+    import shutil
+    example = os.path.join(REPO_ROOT, 'multi_bodies', 'examples', 'spectral_rollers')
+    for name in ('inputfile_spectral_rollers.dat', 'rollers.clones', 'shell_N_12_Rh_1_0155.vertex',
+                 'user_defined_functions.py'):
+        shutil.copy(os.path.join(example, name), tmp_path / name)
+    (tmp_path / 'input.dat').write_text((tmp_path / 'inputfile_spectral_rollers.dat').read_text())
+    assert run_script(tmp_path, monkeypatch) == 0
+    info = (tmp_path / 'data' / 'run.info').read_text()
+    assert 'lanczos_not_converged_count    = 0' in info and 'invalid_configuration_count    = 0' in info
+    lines = (tmp_path / 'data' / 'run.rollers.config').read_text().splitlines()
+    frames = []
+    while lines:
+        count = int(lines[0])
+        frames.append(np.array([line.split() for line in lines[1:count + 1]], dtype=float))
+        lines = lines[count + 1:]
+    assert len(frames) == 3 and np.mean(frames[-1][:, 0] - frames[0][:, 0]) > 0.0
