@@ -561,3 +561,105 @@ def test_published_roller_scene_shortened_runs(tmp_path, monkeypatch):
         frames.append(np.array([line.split() for line in lines[1:count + 1]], dtype=float))
         lines = lines[count + 1:]
     assert len(frames) == 3 and np.mean(frames[-1][:, 0] - frames[0][:, 0]) > 0.0
+
+
+# ====================================================================== every scheme, the static script
+def write_bodies(folder, options, rollers=False):
+    """Two tetrahedra (or three rollers) in a 16 x 16 box above the wall, an input with ``options``."""
+    from multi_bodies.files.snapshots import write_clones_file
+    from multi_bodies.files.structure_files import write_vertex_file
+    if rollers:
+        write_vertex_file(folder / 'body.vertex', np.zeros((1, 3)))
+        locations = np.array([[4.0, 4.0, 1.6], [9.0, 5.0, 2.1], [6.0, 11.0, 1.8]])
+    else:
+        write_vertex_file(folder / 'body.vertex', 1.15 * np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1],
+                                                                   [-1, -1, 1.0]]))
+        locations = np.array([[4.0, 4.0, 2.6], [10.0, 9.0, 3.1]])
+    write_clones_file(folder / 'bodies.clones', locations, np.tile([1.0, 0, 0, 0], (len(locations), 1)))
+    base = {'dt': 0.01, 'n_steps': 2, 'n_save': 1, 'eta': 1.0, 'g': 1.0, 'blob_radius': 1.0, 'kT': 0.05,
+            'repulsion_strength_wall': 1.0, 'debye_length_wall': 0.25, 'mobility_vector_prod_implementation':
+            'spectral', 'mobility_blobs_implementation': 'C++', 'periodic_length': '16 16 0',
+            'spectral_z_bounds': '0 8', 'spectral_kernel': 'w5w4' if rollers else 'w4', 'solver_tolerance': 1e-6,
+            'output_name': 'run', 'seed': 2, 'omega_one_roller': '0 1 0' if rollers else None}
+    base.update(options)
+    text = ''.join('%s %s\n' % item for item in base.items() if item[1] is not None)
+    (folder / 'input.dat').write_text(text + 'structure body.vertex bodies.clones\n')
+
+
+def every_scheme():
+    from multi_bodies.files.input_options import DYNAMIC_SCHEMES
+    return [name for name in DYNAMIC_SCHEMES if not name.startswith('lubrication')]
+
+
+@pytest.mark.parametrize('scheme', every_scheme())
+def test_every_scheme_runs_on_the_spectral_product(scheme, tmp_path, monkeypatch):
+    """Every dynamic scheme (rigid, dense, roller, articulated; the lubrication schemes are refused) runs two steps
+    over a wall on the spectral product, the deterministic and stochastic ones, keeping every blob above the wall."""
+    rollers = 'rollers' in scheme
+    kT = None if scheme.startswith('deterministic') or scheme.startswith('articulated') else 0.05
+    write_bodies(tmp_path, {'scheme': scheme, 'kT': kT, 'free_kinematics': None if not rollers else 'True'},
+                 rollers=rollers)
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        assert run_script(tmp_path, monkeypatch) == 0
+    final = np.loadtxt(tmp_path / 'run.bodies.00000002.clones', skiprows=1, ndmin=2)
+    assert np.all(np.isfinite(final)) and np.all(final[:, 2] > 1.0)
+
+
+def test_the_lubrication_schemes_are_refused(tmp_path, monkeypatch):
+    write_bodies(tmp_path, {'scheme': 'lubrication_EM'}, rollers=True)
+    with pytest.raises(UserInputError, match='lubrication schemes take their far field'):
+        run_script(tmp_path, monkeypatch)
+
+
+@pytest.mark.parametrize('kind', ['triply_periodic', 'doubly_periodic_slit'])
+def test_the_static_script_on_the_spectral_product(kind, tmp_path, monkeypatch):
+    """multi_bodies_utilities.py: the mobility problem (GMRES) and the body mobility (dense, from the products)
+    give the same velocities for the same forces; the resistance problem of those velocities gives back the forces;
+    the velocity field is refused in one line (no source-target product)."""
+    options = {'scheme': 'mobility', 'kT': None, 'dt': None, 'n_steps': None, 'n_save': None, 'seed': None,
+               'solver_tolerance': 1e-10}
+    if kind == 'triply_periodic':
+        options.update(periodic_length='16 16 16', spectral_z_bounds=None)
+    else:
+        options.update(spectral_geometry='doubly_periodic_slit')
+    write_bodies(tmp_path, options)
+    forces = np.array([[0.1, 0.0, -1.0, 0.0, 0.2, 0.0], [0.0, -0.3, -1.0, 0.1, 0.0, 0.0]])
+    np.savetxt(tmp_path / 'force.dat', forces)
+    (tmp_path / 'input.dat').write_text((tmp_path / 'input.dat').read_text() + 'force_file force.dat\n')
+    assert run_script(tmp_path, monkeypatch, 'multi_bodies_utilities') == 0
+    velocities = np.loadtxt(tmp_path / 'run.velocities.dat')
+    text = (tmp_path / 'input.dat').read_text().replace('scheme mobility', 'scheme body_mobility')
+    (tmp_path / 'input.dat').write_text(text)
+    assert run_script(tmp_path, monkeypatch, 'multi_bodies_utilities') == 0
+    N = np.loadtxt(tmp_path / 'run.body_mobility.dat')
+    accuracy = 1e-8 if kind == 'triply_periodic' else 5e-4
+    assert np.abs(N @ forces.ravel() - velocities.ravel()).max() < accuracy * np.abs(velocities).max()
+    np.savetxt(tmp_path / 'velocity.dat', velocities)
+    (tmp_path / 'input.dat').write_text(text.replace('scheme body_mobility', 'scheme resistance').replace(
+        'force_file force.dat', 'velocity_file velocity.dat'))
+    assert run_script(tmp_path, monkeypatch, 'multi_bodies_utilities') == 0
+    back = np.loadtxt(tmp_path / 'run.force.dat')
+    assert np.abs(back - forces).max() < (1e-7 if kind == 'triply_periodic' else 2e-3) * np.abs(forces).max()
+    (tmp_path / 'input.dat').write_text(text.replace('scheme body_mobility', 'scheme mobility')
+                                        + 'plot_velocity_field 0 16 4 0 16 4 2 2 1\n')
+    with pytest.raises(UserInputError) as refused:
+        run_script(tmp_path, monkeypatch, 'multi_bodies_utilities')
+    assert 'source-target' in str(refused.value) and '\n' not in str(refused.value)
+
+
+def test_fluctuating_noise_in_a_run(tmp_path, monkeypatch):
+    """spectral_noise fluctuating in a triply periodic run: the Brownian slip without Lanczos iterations, the same
+    run twice with one seed gives the same trajectory."""
+    options = {'scheme': 'stochastic_Slip_Trapz', 'periodic_length': '16 16 16', 'spectral_z_bounds': None,
+               'spectral_noise': 'fluctuating', 'g': 0.0, 'n_steps': 3}
+    runs = []
+    for k in range(2):
+        folder = tmp_path / str(k)
+        folder.mkdir()
+        write_bodies(folder, options)
+        assert run_script(folder, monkeypatch) == 0
+        runs.append((folder / 'run.bodies.00000003.clones').read_text())
+        info = (folder / 'run.info').read_text()
+        assert 'stochastic_iterations_count    = 0' in info
+    assert runs[0] == runs[1]

@@ -213,6 +213,17 @@ def spectral_domain(options, rollers=False, blob_radius=None):
     other options that cannot go with it.  ``rollers``: a roller scheme (torques: a kernel pair); ``blob_radius``:
     the radius of the spectral kernel (default ``options.blob_radius``)."""
     where = options.where
+    scheme = options.scheme
+    surface = [spec.where for spec in list(options.structures) + list(options.obstacles)
+               if spec.laplace_file or spec.slip_length_file]
+    if surface:
+        raise UserInputError('%s: .Laplace and .slip_length bodies solve their surface problems with the wall\'s '
+                             'direct kernels; the spectral product does not serve them (use a direct '
+                             'mobility_vector_prod_implementation)' % surface[0])
+    if scheme.startswith('lubrication'):
+        raise UserInputError('%s: the lubrication schemes take their far field from the wall tables, not from the '
+                             'spectral product; use a direct mobility_vector_prod_implementation'
+                             % where('mobility_vector_prod_implementation'))
     kind = spectral_geometry_kind(options)
     Lx, Ly, Lz = options.periodic_length
     if Lx <= 0 or Ly <= 0:
@@ -258,17 +269,6 @@ def spectral_domain(options, rollers=False, blob_radius=None):
     if options.spectral_noise == 'fluctuating' and kind != 'triply_periodic':
         raise UserInputError('%s: spectral_noise fluctuating (exact noise) exists in the triply periodic box only; '
                              'use lanczos in %s' % (where('spectral_noise'), kind))
-    scheme = options.scheme
-    surface = [spec.where for spec in list(options.structures) + list(options.obstacles)
-               if spec.laplace_file or spec.slip_length_file]
-    if surface:
-        raise UserInputError('%s: .Laplace and .slip_length bodies solve their surface problems with the wall\'s '
-                             'direct kernels; the spectral product does not serve them (use a direct '
-                             'mobility_vector_prod_implementation)' % surface[0])
-    if scheme.startswith('lubrication'):
-        raise UserInputError('%s: the lubrication schemes take their far field from the wall tables, not from the '
-                             'spectral product; use a direct mobility_vector_prod_implementation'
-                             % where('mobility_vector_prod_implementation'))
     if rollers and options.domain == 'no_wall':
         raise UserInputError('%s: domain no_wall: with the spectral product the walls are those of spectral_geometry '
                              '(%s); remove the line' % (where('domain'), kind))
