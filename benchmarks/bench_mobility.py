@@ -94,8 +94,8 @@ def main():
         if b not in usable:
             print('# %s: not usable here (%s)' % (b, unusable_reason(b)))
     if 'C++' in usable:
-        from mobility import cpp_backend
-        print('# C++ backend: %d OpenMP threads' % cpp_backend.max_threads())
+        from mobility import cpp_backend, simd
+        print('# C++ backend: %d OpenMP threads, kernel path %s' % (cpp_backend.max_threads(), simd.describe()))
 
     rows = []
     for n in ([] if args.radii_only else sorted(set(args.sizes) | set(args.gpu_sizes))):

@@ -7,6 +7,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -215,6 +216,17 @@ py::tuple simd_math_check(const Array &x, double L) {
   return py::make_tuple(rsqrt, image);
 }
 
+// Floating-point operations per second of an FMA loop on the chosen path (benchmarks/roofline.py).
+double fma_peak(int threads, double seconds) {
+  if (threads < 1) throw std::invalid_argument("threads must be at least 1");
+  double rate = 0.0;
+  {
+    py::gil_scoped_release release;
+    RMB_SIMD_DISPATCH(fma_peak(threads, seconds, rate));
+  }
+  return rate;
+}
+
 py::list simd_paths() {
   py::list names;
   for (int path : rmb_simd::usable_paths()) names.append(rmb_simd::path_name(path));
@@ -231,6 +243,9 @@ PYBIND11_MODULE(_mobility_cpp, m) {
   }
   m.def("simd_path", []() { return std::string(rmb_simd::path_name(rmb_simd::chosen())); },
         "The vector path the kernels run (scalar, avx2, avx512, neon or sve), chosen at import (RMB_SIMD forces one).");
+  m.def("fma_peak", &fma_peak, py::arg("threads"), py::arg("seconds") = 0.2,
+        "Double-precision operations per second of chains of fused multiply-adds on the chosen path's vectors, "
+        "on `threads` threads (the peak of the roofline in benchmarks/roofline.py).");
   m.def("simd_paths", &simd_paths, "The vector paths this build holds and this CPU runs, best first.");
   m.def("simd_math_check", &simd_math_check, py::arg("x"), py::arg("periodic_length"),
         "(1/sqrt(x), minimum_image(x, L)) computed by the chosen path's vector math (for the tests).");
