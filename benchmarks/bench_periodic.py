@@ -130,7 +130,7 @@ def run_variant(name, folder, box, blob_radius, steps, seed):
     print('%-16s set-up %7.2f s | per step: wall %8.2f s, CPU %8.2f s, products %6.1f, GMRES %5.1f deterministic + '
           '%5.1f noise/RFD, Lanczos %5.1f | peak RSS %.2f GB'
           % (name, setup, wall / steps, cpu / steps, counting.products / steps,
-             c.gmres_iterations_deterministic / steps, c.gmres_iterations_stochastic / steps,
+             (c.gmres_iterations - c.gmres_stochastic_iterations) / steps, c.gmres_stochastic_iterations / steps,
              c.lanczos_iterations / steps, peak_memory_gb()))
     sys.stdout.flush()
     return state
