@@ -688,3 +688,17 @@ def test_obstacles_and_prescribed_kinematics_on_the_spectral_product(tmp_path, m
     dense = model.dense_velocities(configuration)
     assert np.all(iterative[2] == 0) and np.all(dense[2] == 0)
     assert np.abs(iterative - dense).max() < model.vector_mobility.relative_accuracy * np.abs(dense).max()
+
+
+@pytest.mark.parametrize('options, fragment', [
+    ({'spectral_geometry': 'doubly_periodic_open', 'spectral_z_bounds': '1.8 8'},
+     'outside the heights [1.8, 8] of the spectral grid'),
+    ({'spectral_geometry': 'doubly_periodic_slit', 'spectral_z_bounds': '0 2'},
+     'through a wall (below z = 0 or above the top wall at z = 2)'),
+])
+def test_a_start_outside_the_domain_is_refused_in_one_line(tmp_path, monkeypatch, options, fragment):
+    write_rollers(tmp_path, TWO_ROLLERS, options)
+    with pytest.raises(UserInputError) as refused:
+        run_script(tmp_path, monkeypatch)
+    message = str(refused.value)
+    assert fragment in message and message.startswith('input.dat, line') and '\n' not in message, message

@@ -298,16 +298,23 @@ def check_start(options, model, types):
     """Refuse a start with a blob centre below the wall (when the wall is seen), naming the structure line."""
     if not model.check_wall:
         return
-    invalid = model.invalid_bodies(model.start_configuration)
+    try:
+        invalid = model.invalid_bodies(model.start_configuration)
+    except utils.SimulationStopped as err:  # the spectral grid's heights (doc/periodic.md)
+        raise utils.UserInputError('%s: the start: %s' % (options.where('spectral_z_bounds'),
+                                                          str(err).split('; restart')[0]))
     if invalid.size:
         first = int(invalid[0])
         start = 0
+        where = ('below the wall (z < 0)' if getattr(model, 'spectral', None) is None
+                 or model.spectral.top_wall is None else
+                 'through a wall (below z = 0 or above the top wall at z = %g)' % model.spectral.top_wall)
         for (structure_id, count), spec in zip(types, all_structure_specs(options) +
                                                list(options.articulated)):
             if first < start + count:
-                raise utils.UserInputError('%s: body %d of %s starts with a blob centre below the wall (z < 0); '
-                                           '%d bodies are affected. Move the bodies up in the clones file.'
-                                           % (spec.where, first - start, structure_id, invalid.size))
+                raise utils.UserInputError('%s: body %d of %s starts with a blob centre %s; '
+                                           '%d bodies are affected. Move the bodies in the clones file.'
+                                           % (spec.where, first - start, structure_id, where, invalid.size))
             start += count
 
 
