@@ -393,3 +393,41 @@ def dpstokes_parameters(radius, geometry, Lx, Ly, zmin, zmax, kernel='w6', has_t
     return SpectralParameters(geometry=geometry, Nx=Nx, Ny=Ny, Nz=Nz, hx=h, hy=h, Lx=Lx, Ly=Ly_used, z0=z0, Lz=Lz,
                               hz=hz, monopole=monopole, dipole=dipole, z_range=z_range, radius=radius,
                               selection='dpstokes', notes=tuple(notes))
+
+
+def refined_parameters(parameters, factor):
+    """The same kernels on a grid ``factor`` times finer (an integer >= 1): a convergence check of the product.
+
+    The continuous kernels (their beta, half-width alpha, normalisation and support) are kept and the spacing
+    divided by ``factor``, so each kernel covers ``factor`` times as many grid points; the periods and the z
+    extent are unchanged, and the Chebyshev Nz follows from the new spacing by the rule of
+    :func:`dpstokes_parameters` (TP: ``factor`` times the z cells).  As ``factor`` grows the product converges
+    to the force-coupling mobility of the continuous kernels (the grid's position dependence and the
+    quadrature error vanish).  Returns :class:`SpectralParameters` (selection ``'<selection> refined xN'``).
+    """
+    import dataclasses
+    m = int(factor)
+    if m != factor or m < 1:
+        raise UserInputError('refined_parameters: the factor must be a whole number >= 1, got %r' % (factor,))
+    p = parameters
+    if m == 1:
+        return p
+    hx, hy = p.hx / m, p.hy / m
+
+    def finer(kernel):
+        if kernel is None:
+            return None
+        spacing = (hx, hy, p.hz / m if p.geometry == 'TP' else hx)
+        return dataclasses.replace(kernel, width=tuple(int(round(2 * t / h)) for t, h in
+                                                       zip(kernel.threshold, spacing)))
+    changes = dict(Nx=p.Nx * m, Ny=p.Ny * m, hx=hx, hy=hy, monopole=finer(p.monopole), dipole=finer(p.dipole),
+                   selection='%s refined x%d' % (p.selection, m))
+    if p.geometry == 'TP':
+        changes.update(Nz=p.Nz * m, hz=p.hz / m)
+    else:
+        half = p.Lz / 2.0
+        h = min(hx, hy)
+        if h >= half:
+            raise UserInputError('refined_parameters: the z extent %g is too small for the spacing %g' % (p.Lz, h))
+        changes['Nz'] = nearest_smooth(int(math.ceil(math.pi / (math.acos(-h / half) - math.pi / 2)))) + 1
+    return dataclasses.replace(p, **changes)
