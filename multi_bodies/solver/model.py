@@ -736,6 +736,9 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                 % (spectral.kind, ' '.join('%g' % v for v in spectral.periodic_length),
                    'none' if spectral.z_bounds is None else '%g %g' % spectral.z_bounds, spectral.kernel,
                    spectral.noise, implementation_geometry(blobs)[0], spectral.block_geometry().kind))
+            if spectral.kind in ('triply_periodic', 'doubly_periodic_open') and options.g != 0:
+                log('  note: %s has no mean flow (a net force on the suspension, as gravity g = %g, moves nothing on '
+                    'average); doc/periodic.md' % (spectral.kind, options.g))
     else:
         checked('mobility_vector_prod_implementation', lambda: from_implementation_name(
             product, options.eta, options.blob_radius, options.periodic_length))
