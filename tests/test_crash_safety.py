@@ -1,8 +1,8 @@
 """No lost or mixed frames; restarts exact or refused (issue 17).
 
-The crash test kills small runs (dynamic, Monte Carlo, an ensemble replica, a phoretic run with its
-``.concentration`` file; both
-``save_clones`` modes) with SIGKILL, SIGTERM and SIGINT at moments drawn from a
+The crash test kills small runs of 19 kinds (``CHAIN_KINDS``: dynamic runs of the deterministic, Brownian,
+roller, articulated, obstacle and dense schemes, a phoretic run with its ``.concentration`` file, a slip-length
+surface, VTK output, Monte Carlo, an ensemble replica; both ``save_clones`` modes) with SIGKILL, SIGTERM and SIGINT at moments drawn from a
 fixed seed, including between a snapshot and its record (the test hook
 ``RMB_TEST_KILL_BETWEEN_SNAPSHOT_AND_RECORD=<step>`` makes the writer SIGKILL
 itself there).  Each chain is continued as a user would (``initial_step`` =
@@ -12,7 +12,7 @@ uninterrupted run: every continuation equals it bit for bit (snapshots and
 counters) or was refused with a message.  Law: a deterministic program with
 the same state gives the same bytes.
 
-The CI version runs ``CHAINS`` chains (under a minute).  The longer run::
+The CI version runs ``CHAINS`` chains, one of each kind of scene (about a minute).  The longer run::
 
     RMB_CRASH_CHAINS=200 PYTHONPATH=. OMP_NUM_THREADS=1 python3 -m pytest -q -p no:cacheprovider \
         tests/test_crash_safety.py -k crash_chains -s
@@ -40,7 +40,7 @@ from run_scenes import REPO_ROOT, child_environment, set_options  # noqa: E402
 
 DYNAMIC = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
 MCMC = str(REPO_ROOT / 'many_bodyMCMC' / 'many_body_MCMC.py')
-CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '10'))
+CHAINS = int(os.environ.get('RMB_CRASH_CHAINS', '19'))
 
 
 # ------------------------------------------------------------------ scenes
@@ -142,7 +142,19 @@ def wait_for_record(process, folder, step, timeout=60.0, path=None):
 # Adams-Bashforth, Monte Carlo, an ensemble replica, a phoretic run with .concentration, an articulated chain,
 # a slip and a prescribed velocity, rollers, VTK output, a slip-length surface, the midpoint scheme.
 CHAIN_KINDS = ('dynamic', 'mcmc', 'replica', 'phoretic', 'articulated', 'driven', 'rollers', 'vtk', 'slip_length',
-               'midpoint')
+               'midpoint', 'obstacle', 'stochastic_first_order_RFD', 'Fixman', 'stochastic_traction_AB',
+               'stochastic_Slip_Mid', 'stochastic_GDC_RFD', 'stochastic_trapezoidal_rollers',
+               'articulated_deterministic_midpoint', 'deterministic_forward_euler_dense_algebra')
+
+
+def obstacle_scene(folder, **options):
+    """A free one-blob body with an active slip beside an obstacle (deterministic Adams-Bashforth)."""
+    from test_data_safety import driven_scene
+    folder = driven_scene(folder, scheme='deterministic_adams_bashforth', kT=0, **options)
+    text = (folder / 'input.dat').read_text().replace('structure blob.vertex b.clones None b.velocity',
+                                                      'obstacle blob.vertex b.clones')
+    (folder / 'input.dat').write_text(text)
+    return folder
 
 
 def chain_scene(program):
@@ -158,7 +170,11 @@ def chain_scene(program):
             'vtk': (lambda folder, **o: dynamic_scene(folder, save_vtk=True, **o), DYNAMIC, ('a', 'b')),
             'slip_length': (lambda folder, **o: surface_scene(folder, 'slip_length', **o), DYNAMIC, ('a',)),
             'midpoint': (lambda folder, **o: dynamic_scene(folder, scheme='deterministic_midpoint', kT=0, **o),
-                         DYNAMIC, ('a', 'b'))}[program]
+                         DYNAMIC, ('a', 'b')),
+            'obstacle': (obstacle_scene, DYNAMIC, ('a', 'b')),
+            'articulated_deterministic_midpoint': (lambda folder, **o: articulated_scene(
+                folder, scheme='articulated_deterministic_midpoint', **o), DYNAMIC, ('chain',))}.get(
+        program, (lambda folder, **o: dynamic_scene(folder, scheme=program, **o), DYNAMIC, ('a', 'b')))
 
 
 def one_chain(tmp_path, rng, index, counts):
@@ -1010,3 +1026,18 @@ def test_a_restart_file_of_a_million_tiny_records_is_refused_at_the_first(tmp_pa
     edit(folder, initial_step=4)
     status, _, err = run(DYNAMIC, folder)
     assert status == 2 and 'no restart record of step 4' in err and 'Traceback' not in err, err
+
+
+def test_a_process_that_lives_on_after_its_run_is_not_taken_for_a_writer(tmp_path):
+    """run.run names the process of the last segment so that a removed lock lets no second writer in; a process
+    that lives on after its run (a notebook, an ensemble worker: here this test's own process) marks its segment
+    ended when it lets the lock go, so a restart from another process is not refused."""
+    import json
+    from test_data_safety import run_dynamic
+    folder = dynamic_scene(tmp_path / 'run', n_steps=8, n_save=4)
+    assert run_dynamic(folder)[0] == 0  # in this process, which lives on
+    segment = json.loads((folder / 'data' / 'run.run').read_text())['segments'][-1]
+    assert segment['pid'] == os.getpid() and segment.get('ended')
+    edit(folder, initial_step=4, n_steps=12)
+    status, _, err = run(DYNAMIC, folder)
+    assert status == 0, err

@@ -17,8 +17,10 @@ anything but a regular file is refused in one line (it is never followed,
 opened for reading or written).
 
 Removing the lock file of a live run does not let a second writer in: a run
-also names its process in ``output_name.run`` (:func:`holder_record`), and a
-new writer refuses an output name whose ``.run`` names another live process;
+also names its process in ``output_name.run`` (:func:`holder_record`; the
+segment is marked ended when the run lets its lock go), and a new writer
+refuses an output name whose ``.run`` names another live process in a
+segment that has not ended;
 the live run notices at its next save that its lock file is gone
 (:meth:`HeldLock.check`) and stops with one line.
 """
@@ -280,17 +282,49 @@ def _new_folders(folder):
     return missing
 
 
+RUN_FILE_BYTES = 1 << 20  # a .run file lists the segments of one run: a few hundred bytes each
+
+
+def _read_run_file(path):
+    if not stat.S_ISREG(os.lstat(path).st_mode) or os.path.getsize(path) > RUN_FILE_BYTES:
+        raise ValueError('not a run file')
+    with open(path) as f:
+        document = json.load(f)
+    if not (isinstance(document, dict) and isinstance(document.get('segments'), list) and document['segments']
+            and isinstance(document['segments'][-1], dict)):
+        raise ValueError('not a run file')
+    return document
+
+
 def run_file_holder(output_name):
-    """The process the last segment of ``output_name.run`` names (dict), or None (no such file, unreadable)."""
+    """The process the last segment of ``output_name.run`` names (dict) while that segment has not ended, or None
+    (ended, no such file, unreadable)."""
+    try:
+        document = _read_run_file(output_name + RUN_SUFFIX)
+    except (OSError, ValueError, RecursionError, UnicodeDecodeError):
+        return None
+    segment = document['segments'][-1]
+    return None if segment.get('ended') else dict(segment, run_id=document.get('run_id'))
+
+
+def mark_run_ended(output_name):
+    """Say in ``output_name.run`` that this process's segment has ended (a process that lives on after its run, a
+    notebook or an ensemble worker, is then not taken for a writer of the output name); quiet when it cannot."""
     path = output_name + RUN_SUFFIX
     try:
-        if not stat.S_ISREG(os.lstat(path).st_mode) or os.path.getsize(path) > 1 << 20:
-            return None
-        with open(path) as f:
-            document = json.load(f)
-        return dict(document['segments'][-1], run_id=document.get('run_id'))
-    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, RecursionError):
-        return None
+        document = _read_run_file(path)
+        segment = document['segments'][-1]
+        me = holder_record()
+        if segment.get('pid') != me['pid'] or segment.get('host') != me['host'] or \
+                segment.get('process_start') != me.get('process_start'):
+            return
+        segment['ended'] = time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())
+        part = path + '.part'
+        with open(part, 'w') as f:
+            f.write(json.dumps(document, indent=1) + '\n')
+        os.replace(part, path)
+    except (OSError, ValueError, RecursionError, UnicodeDecodeError):
+        pass
 
 
 # Room left in a path for what a run adds to output_name: '.set_aside/<time>_earlier_run_<id>/' and a snapshot
@@ -388,7 +422,10 @@ def output_lock(options, log=print):
                                      'file %s%s was removed while it runs); wait for it to end or choose another '
                                      'output_name' % (options.where('output_name'), name, _describe(writer), name,
                                                       name, LOCK_SUFFIX))
-            yield held
+            try:
+                yield held
+            finally:
+                mark_run_ended(name)  # before the lock goes: the next writer sees an ended segment
     finally:
         for folder in created:  # deepest first; a folder that holds outputs is kept
             try:
