@@ -26,7 +26,8 @@ import numpy as np
 
 from body.geometry import Quaternion
 from lubrication import brownian, integrators
-from multi_bodies.solver.body_solver import solve
+from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.solver.solves import Solver
 
 
 class Lub_Solver:
@@ -38,7 +39,8 @@ class Lub_Solver:
     a : sphere radius (length); eta : viscosity.
     cutoff : pair cutoff, centre distance in units of a (the input option ``Lub_Cut``, 4.5 by default).
     periodic_length : (3,) box lengths, 0 for non-periodic axes.
-    debye_length : the gap clamp in units of a (the input option ``firm_delta``; published default 1e-4).
+    debye_length : the gap clamp in units of a (the input option ``firm_delta``; None: its default, the published
+        1e-4).
 
     Attributes set by the drivers: ``kT`` (energy), ``dt`` (time), ``tolerance`` (GMRES and Lanczos).
     After ``Set_R_Mats()``: ``Delta_R``, ``R_Sup``, ``R_MB`` (scipy.sparse, 6N x 6N, force per velocity,
@@ -46,14 +48,14 @@ class Lub_Solver:
     ``counts`` (work of the last step: far-field products, GMRES and Lanczos iterations, factorisations).
     """
 
-    def __init__(self, bodies, a, eta, cutoff, periodic_length, debye_length=1e-4):
+    def __init__(self, bodies, a, eta, cutoff, periodic_length, debye_length=None):
         self.bodies = bodies
         self.a, self.eta, self.cutoff = float(a), float(eta), float(cutoff)
         self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3)
-        self.debye_cut = float(debye_length)
+        self.debye_cut = float(OPTION_TABLE['firm_delta'].default if debye_length is None else debye_length)
         self.kT = 0.0
         self.dt = 0.0
-        self.tolerance = 1e-8
+        self.tolerance = OPTION_TABLE['solver_tolerance'].default
         self.num_rejections_wall = 0
         self.num_rejections_jump = 0
         self.Delta_R = self.R_Sup = self.R_MB = None
@@ -107,14 +109,17 @@ class Lub_Solver:
         """``U = (I + M Delta_R)^-1 (X + M Xm)`` (6N,) by preconditioned GMRES; returns ``(U, residuals)``.
 
         X : velocities (6N,) or None; Xm : forces and torques (6N,) or None.  ``residuals`` is a list with
-        the final relative residual (the published code returned GMRES's residual history).
+        the final relative residual (the published code returned GMRES's residual history): a solve stopped at
+        ``its_out`` iterations is returned as it stands, its residual above ``tolerance``, as published.  (The
+        steps below stop with ``utils.SimulationStopped`` at a solve that does not converge.)
         """
         problem = self._problem()
         rhs = problem.rhs(force_torque=None if Xm is None else np.asarray(Xm, dtype=float).reshape(-1),
                           velocity=None if X is None else np.asarray(X, dtype=float).reshape(-1))
         preconditioner = problem.preconditioner(self.tolerance) if PC_flag else None
-        result = solve(problem, rhs, preconditioner, x0=X0, tolerance=self.tolerance, maxiter=its_out,
-                       print_residual=print_residual)
+        solver = Solver(self.tolerance, print_residual=print_residual, not_converged='flag')
+        result = solver.solve(problem, rhs, preconditioner, x0=X0, maxiter=its_out, kind='lubrication',
+                              what='the lubrication problem')
         return result.velocities.reshape(-1), [result.residual]
 
     def Torque_from_Omega(self, Om, F):

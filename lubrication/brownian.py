@@ -36,12 +36,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from multi_bodies.solver.body_solver import SolutionParts, solve
+from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.solves import SOLVER_TOLERANCE
 from stochastic_forcing import lanczos_square_root
 from utils import UserInputError
 
 from . import assembly, resistance
-from .problem import LubricationProblem, far_field_mobility, far_field_product
+from .problem import LubricationProblem, far_field_mobility, far_field_product, solver_and_tolerance
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
 PUBLISHED_RFD_DELTA = 1e-3
@@ -102,14 +103,15 @@ class NearFieldRoot:
     """``Delta_R^1/2 W`` for W (6N,) at one configuration (see the module note for the two methods).
 
     Delta_R : sparse (6N, 6N) symmetric positive semidefinite; method : ``'cholesky'`` or ``'lanczos'``;
-    shift : ``s`` of the Cholesky (force per velocity); tolerance : of the Lanczos iteration.
+    shift : ``s`` of the Cholesky (force per velocity); tolerance : of the Lanczos iteration (None: the option
+    table's ``solver_tolerance``).
     Counters: ``factorisations`` (0 or 1), ``products`` (sparse products of the Lanczos).
     """
 
-    def __init__(self, Delta_R, method='cholesky', shift=0.0, tolerance=1e-8):
+    def __init__(self, Delta_R, method='cholesky', shift=0.0, tolerance=None):
         self.Delta_R = Delta_R.tocsr()
         self.size = Delta_R.shape[0]
-        self.method, self.tolerance = method, tolerance
+        self.method, self.tolerance = method, SOLVER_TOLERANCE if tolerance is None else float(tolerance)
         self.factorisations, self.products = 0, 0
         self.root = None
         if method == 'cholesky' and self.size:
@@ -171,7 +173,7 @@ class TransposedLubricationProblem:
     def solution(self, x):
         return SolutionParts(None, np.asarray(x, dtype=float).reshape(self.num_bodies, 6), None)
 
-    def preconditioner(self, tolerance=1e-8, forward=None):
+    def preconditioner(self, tolerance, forward=None):
         """The transpose of ``forward`` (a :class:`LubricationPreconditioner`; None: the published one at this
         problem's configuration), a LinearOperator."""
         forward = self.problem.preconditioner(tolerance) if forward is None else forward
@@ -210,12 +212,15 @@ def brownian_rhs(problem, near_root, W_far, W_near, kT, dt, tolerance):
     return problem.rhs(force_torque=near_force, velocity=far.noise), far.iterations
 
 
-def brownian_velocities(problem, near_root, W_far, W_near, kT, dt, tolerance=1e-8, preconditioner=None):
-    """:data:`BrownianIncrement` of ``problem`` (see :func:`brownian_rhs`), by the package's one solve."""
+def brownian_velocities(problem, near_root, W_far, W_near, kT, dt, tolerance=None, preconditioner=None, solver=None):
+    """:data:`BrownianIncrement` of ``problem`` (see :func:`brownian_rhs`), by the package's one solve (``solver``,
+    ``tolerance``: see :func:`lubrication.problem.solver_and_tolerance`)."""
+    solver, tolerance = solver_and_tolerance(solver, tolerance)
     rhs, lanczos = brownian_rhs(problem, near_root, W_far, W_near, kT, dt, tolerance)
     if preconditioner is None:
         preconditioner = problem.preconditioner(tolerance)
-    result = solve(problem, rhs, preconditioner, tolerance=tolerance)
+    result = solver.solve(problem, rhs, preconditioner, tolerance=tolerance, kind='lubrication',
+                          what='the lubrication problem')
     return BrownianIncrement(result.velocities, rhs, lanczos, result.iterations)
 
 
@@ -226,7 +231,7 @@ def translational_direction(W):
     return W.reshape(-1)
 
 
-def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None, preconditioner=None):
+def thermal_drift(settings, locations, W, kT, tolerance=None, problem=None, preconditioner=None, solver=None):
     """``kT div M_lub`` estimated by one random finite difference: (N, 6) velocities (mean over W is the drift).
 
     settings : :class:`LubricationSettings`; locations : (N, 3); W : (6N,) standard Gaussian (only its
@@ -234,15 +239,19 @@ def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None, prec
     four far-field products, two assemblies of Delta_R.  ``problem`` at ``locations`` is reused if given;
     ``preconditioner`` (a :class:`LubricationPreconditioner`, e.g. one kept from a configuration nearby) serves
     both solves, transposed for the first (None: the published one built at ``locations``, twice).
+    ``solver``, ``tolerance``: see :func:`lubrication.problem.solver_and_tolerance`; both solves take the published
+    GMRES iterates (as this drift has always been solved).
     """
+    solver, tolerance = solver_and_tolerance(solver, tolerance)
+    solver = solver.replace(minimal_residual=False)
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     if problem is None:
         problem = settings.problem(locations)
     W = translational_direction(W)
     delta = settings.delta
     transposed = TransposedLubricationProblem(problem)
-    V = solve(transposed, W, transposed.preconditioner(tolerance, preconditioner),
-              tolerance=tolerance).velocities.reshape(-1)
+    V = solver.solve(transposed, W, transposed.preconditioner(tolerance, preconditioner), tolerance=tolerance,
+                     kind='lubrication', what='the transposed lubrication problem').velocities.reshape(-1)
     move = W.reshape(-1, 6)[:, :3]
     plus = settings.problem(locations + 0.5 * delta * move)
     minus = settings.problem(locations - 0.5 * delta * move)
@@ -252,7 +261,8 @@ def thermal_drift(settings, locations, W, kT, tolerance=1e-8, problem=None, prec
     rhs = kT * problem.rhs(force_torque=-dDeltaR_MV, velocity=dM_V)
     if preconditioner is None:
         preconditioner = problem.preconditioner(tolerance)
-    return solve(problem, rhs, preconditioner, tolerance=tolerance).velocities
+    return solver.solve(problem, rhs, preconditioner, tolerance=tolerance, kind='lubrication',
+                        what='the lubrication problem').velocities
 
 
 def far_field_drift(settings, locations, W, kT):

@@ -26,7 +26,10 @@ Method (Sprinkle et al., Soft Matter 16, 7982, 2020; J. Chem. Phys. 147, 244103,
 
 Every step function takes ``kept``: None for the published solves (each builds its preconditioner, a sparse LU,
 at its configuration and starts from zero), or a :class:`KeptSolves` that keeps the preconditioners between
-solves and steps and gives the solves first guesses (the package's schemes under ``preconditioner auto``).
+solves and steps and gives the solves first guesses (the package's schemes under ``preconditioner auto``); and
+``solver``: the ``multi_bodies.solver.solves.Solver`` that makes every solve (a scheme's step passes its own, which
+counts the solves and stops the run at one that does not converge; None: one that stops such a solve, with the
+least-residual iterate where ``kept`` is given), and ``tolerance`` (None: the solver's).
 """
 from collections import namedtuple
 
@@ -35,11 +38,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from body.geometry import rotate_quaternions
-from multi_bodies.solver.body_solver import SolutionParts, kept_fewest, solve
+from multi_bodies.solver.body_solver import SolutionParts, kept_fewest
 from stochastic_forcing import lanczos_square_root
 
 from .brownian import NearFieldRoot, brownian_rhs, far_field_drift, thermal_drift
-from .problem import LubricationPreconditioner, far_field_product
+from .problem import LubricationPreconditioner, far_field_product, solver_and_tolerance
 
 StepResult = namedtuple('StepResult', ['locations', 'orientations', 'rejected_wall', 'rejected_jump', 'velocities',
                                        'torques', 'counts'])
@@ -156,18 +159,20 @@ def _first_guess(guess, rhs):
     return None if guess is None or norm == 0.0 else np.asarray(guess, dtype=float).reshape(-1) / norm
 
 
-def _solve(problem, rhs, tolerance, counts, kept=None, orientations=None, guess=None, predictor=False):
-    """Velocities (N, 6) of ``problem`` for ``rhs``: with ``kept`` None the published solve (a preconditioner built
-    here, from zero); else the kept preconditioner, the first guess ``guess`` (velocities or None) and GMRES's
-    least-true-residual iterate (``krylov.gmres(minimal_residual=True)``); a
-    ``predictor`` solve (at a step's start) may build the kept preconditioner and counts towards its wear."""
+def _solve(solver, problem, rhs, tolerance, counts, kept=None, orientations=None, guess=None, predictor=False):
+    """Velocities (N, 6) of ``problem`` for ``rhs`` by ``solver``: with ``kept`` None the published solve (a
+    preconditioner built here, from zero); else the kept preconditioner, the first guess ``guess`` (velocities or
+    None) and the solver's iterate (the least true residual under ``preconditioner auto``); a ``predictor`` solve
+    (at a step's start) may build the kept preconditioner and counts towards its wear."""
     if kept is None:
         preconditioner = problem.preconditioner(tolerance)
         counts['factorisations'] += preconditioner.factor is not None
-        result = solve(problem, rhs, preconditioner, tolerance=tolerance)
+        result = solver.solve(problem, rhs, preconditioner, tolerance=tolerance, kind='lubrication',
+                              what='the lubrication problem')
     else:
-        result = solve(problem, rhs, kept.preconditioner(problem, orientations, counts, start=predictor),
-                       x0=_first_guess(guess, rhs), tolerance=tolerance, minimal_residual=True)
+        result = solver.solve(problem, rhs, kept.preconditioner(problem, orientations, counts, start=predictor),
+                              x0=_first_guess(guess, rhs), tolerance=tolerance, kind='lubrication',
+                              what='the lubrication problem')
         if predictor:
             kept.served(result.iterations)
     counts['gmres_iterations'] += result.iterations
@@ -251,8 +256,8 @@ def torque_preconditioner(Delta_R, eta, a):
     return spla.LinearOperator((size, size), matvec=apply, dtype=float)
 
 
-def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, counts=None, kept=None,
-                      orientations=None, start=True):
+def torque_from_omega(problem, forces, omega, tolerance=None, torque_cap=None, counts=None, kept=None,
+                      orientations=None, start=True, solver=None):
     """Torques (N, 3) that hold the angular velocities ``omega`` of spheres under ``forces`` (N, 3).
 
     problem : :class:`lubrication.LubricationProblem` at the configuration; omega : see :func:`omega_vectors`;
@@ -260,18 +265,22 @@ def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, c
     to it, keeping their direction: those spheres then turn slower than omega); kept : a :class:`KeptSolves`
     (its preconditioner and its last torque solution as first guess, which this solve replaces) or None (the
     published solve: a preconditioner built here, from zero); orientations (N, 4) with ``kept``; start : the
-    configuration is a step's start (where ``kept`` may build the preconditioner it keeps).
+    configuration is a step's start (where ``kept`` may build the preconditioner it keeps); solver, tolerance : see
+    the module note.
     """
+    solver, tolerance = solver_and_tolerance(solver, tolerance, minimal_residual=kept is not None)
     counts = new_counts() if counts is None else counts
     torque_problem = TorqueFromOmegaProblem(problem, problem.eta, problem.a)
     omega = omega_vectors(omega, problem.num_bodies)
     rhs = torque_problem.rhs(np.asarray(forces, dtype=float).reshape(-1, 3), omega)
     if kept is None:
-        result = solve(torque_problem, rhs, torque_problem.preconditioner(), tolerance=tolerance)
+        result = solver.solve(torque_problem, rhs, torque_problem.preconditioner(), tolerance=tolerance,
+                              kind='lubrication', what='the torques of the prescribed rotation')
         counts['factorisations'] += 1
     else:
-        result = solve(torque_problem, rhs, kept.torque_preconditioner(problem, orientations, counts, start),
-                       x0=_first_guess(kept.torque_guess, rhs), tolerance=tolerance, minimal_residual=True)
+        result = solver.solve(torque_problem, rhs, kept.torque_preconditioner(problem, orientations, counts, start),
+                              x0=_first_guess(kept.torque_guess, rhs), tolerance=tolerance, kind='lubrication',
+                              what='the torques of the prescribed rotation')
         kept.torque_guess = result.velocities.reshape(-1).copy()
     counts['gmres_iterations'] += result.iterations
     torques = result.velocities[:, 3:].copy()
@@ -282,13 +291,13 @@ def torque_from_omega(problem, forces, omega, tolerance=1e-8, torque_cap=None, c
     return torques
 
 
-def _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap, counts, kept,
+def _forces(solver, force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap, counts, kept,
             start=True):
     force_torque = np.array(force_torque_at(locations, orientations), dtype=float).reshape(-1, 6)
     torques = None
     if omega is not None:
         torques = torque_from_omega(problem, force_torque[:, :3], omega, tolerance, torque_cap, counts, kept,
-                                    orientations, start)
+                                    orientations, start, solver=solver)
         force_torque[:, 3:] = torques
     return force_torque, torques
 
@@ -316,7 +325,7 @@ def _noise(settings, problem, kT, dt, rng, tolerance, counts):
     return noise
 
 
-def _step_start(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
+def _step_start(solver, settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
                 matrices, kept):
     """What every step computes first at the start configuration: (counts, locations (N, 3), orientations (N, 4),
     the problem there, force_torque (N, 6), torques (or None), the Brownian increment (6N,))."""
@@ -324,14 +333,14 @@ def _step_start(settings, locations, orientations, force_torque_at, kT, dt, rng,
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     problem = counted_problem(settings, locations, counts, matrices)
-    force_torque, torques = _forces(force_torque_at, problem, locations, orientations, omega, tolerance, torque_cap,
-                                    counts, kept)
+    force_torque, torques = _forces(solver, force_torque_at, problem, locations, orientations, omega, tolerance,
+                                    torque_cap, counts, kept)
     noise = _noise(settings, problem, kT, dt, rng, tolerance, counts)
     return counts, locations, orientations, problem, force_torque, torques, noise
 
 
-def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8, omega=None,
-                     torque_cap=None, matrices=None, rfd=True, kept=None):
+def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=None, omega=None,
+                     torque_cap=None, matrices=None, rfd=True, kept=None, solver=None):
     """One step of the published stochastic trapezoidal scheme (module note): a :data:`StepResult`.
 
     settings : :class:`lubrication.brownian.LubricationSettings`; locations (N, 3), orientations (N, 4);
@@ -340,12 +349,14 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
     the predictor's configuration for the corrector); matrices : the near-field matrices at ``locations``
     if already built; rfd : False leaves out the far-field drift term ``D_M`` (a negative control: the
     equilibrium is then wrong); kept : a :class:`KeptSolves` (the solves keep their preconditioners and start
-    from first guesses, which it updates) or None (the published solves).
+    from first guesses, which it updates) or None (the published solves); solver, tolerance : see the module note.
     """
+    solver, tolerance = solver_and_tolerance(solver, tolerance, minimal_residual=kept is not None)
     counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
-        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices, kept)
+        solver, settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
+        matrices, kept)
     guess = kept.velocity_guess if kept is not None and kT <= 0 else None
-    predictor = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
+    predictor = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
                        orientations, guess, predictor=True)
     mid_locations, mid_orientations = _moved(locations, orientations, predictor, dt)
     wall, jump = _rejection(settings, locations, mid_locations)
@@ -356,9 +367,9 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
         drift = 2.0 * far_field_drift(settings, locations, rng.standard_normal(problem.size), kT).reshape(-1)
         counts['far_field_products'] += 2
     mid_problem = counted_problem(settings, mid_locations, counts)
-    mid_force_torque, mid_torques = _forces(force_torque_at, mid_problem, mid_locations, mid_orientations, omega,
+    mid_force_torque, mid_torques = _forces(solver, force_torque_at, mid_problem, mid_locations, mid_orientations, omega,
                                             tolerance, torque_cap, counts, kept, start=False)
-    corrector = _solve(mid_problem, drift + noise + mid_problem.mobility_product(mid_force_torque.reshape(-1)),
+    corrector = _solve(solver, mid_problem, drift + noise + mid_problem.mobility_product(mid_force_torque.reshape(-1)),
                        tolerance, counts, kept, mid_orientations, predictor)
     if kept is not None:
         kept.velocity_guess = corrector.reshape(-1).copy() if kT <= 0 else None
@@ -372,23 +383,26 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
     return StepResult(new_locations, new_orientations, 0, 0, velocities, torques, counts)
 
 
-def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8,
-                        omega=None, torque_cap=None, matrices=None, kept=None):
+def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=None,
+                        omega=None, torque_cap=None, matrices=None, kept=None, solver=None):
     """One Euler-Maruyama step ``q + dt (M_lub F + U_B + kT div M_lub)`` (RFD drift): a :data:`StepResult`.
 
     kept : a :class:`KeptSolves` or None, as for :func:`trapezoidal_step` (its preconditioner serves the drift's
-    solves too; at kT = 0 the solve starts from the last step's velocities)."""
+    solves too; at kT = 0 the solve starts from the last step's velocities); solver, tolerance : see the module
+    note."""
+    solver, tolerance = solver_and_tolerance(solver, tolerance, minimal_residual=kept is not None)
     counts, locations, orientations, problem, force_torque, torques, noise = _step_start(
-        settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap, matrices, kept)
+        solver, settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
+        matrices, kept)
     guess = kept.velocity_guess if kept is not None and kT <= 0 else None
-    velocities = _solve(problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
+    velocities = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
                         orientations, guess, predictor=True)
     if kept is not None:
         kept.velocity_guess = velocities.reshape(-1).copy() if kT <= 0 else None
     if kT > 0:
         preconditioner = None if kept is None else kept.preconditioner(problem, orientations, counts)
         velocities = velocities + thermal_drift(settings, locations, rng.standard_normal(problem.size), kT,
-                                                tolerance, problem, preconditioner)
+                                                tolerance, problem, preconditioner, solver=solver)
         counts['assemblies'] += 2
     new_locations, new_orientations = _moved(locations, orientations, velocities, dt)
     wall, jump = _rejection(settings, locations, new_locations)
@@ -397,9 +411,11 @@ def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, 
     return StepResult(new_locations, new_orientations, 0, 0, velocities, torques, counts)
 
 
-def rpb_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=1e-8):
+def rpb_step(settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance=None):
     """The baseline without lubrication: ``q + dt (M F + sqrt(2kT/dt) M^1/2 W + kT div M)``, M the far field
-    (Lanczos noise, RFD drift); same rejection rules: a :data:`StepResult`."""
+    (Lanczos noise, RFD drift at the relative ``tolerance``, None: the option table's ``solver_tolerance``); same
+    rejection rules: a :data:`StepResult`."""
+    _, tolerance = solver_and_tolerance(None, tolerance)
     counts = new_counts()
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)

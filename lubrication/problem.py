@@ -5,7 +5,7 @@ above the wall, Rotne-Prager-Yamakawa in free space: the grand product of a ``mo
 :func:`far_field_mobility`), ``Delta_R`` the sparse near-field correction
 (:mod:`lubrication.assembly`).  Velocities ``U = M_lub F`` (and more generally ``U = (I + M Delta_R)^-1
 (X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F``
-(``multi_bodies.solver.body_solver.solve``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
+(the package's one solve, through a ``multi_bodies.solver.solves.Solver``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
 (``s = 6 pi eta a * tolerance``), since ``I + M Delta_R ~ M R_sup`` where ``M^-1 ~ R_MB``.  The published
 code factors ``R_sup + s I`` with CHOLMOD; here SciPy's sparse LU (``splu``), no extra dependency.
 
@@ -18,7 +18,8 @@ import scipy.sparse.linalg as spla
 
 from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
                                 preferred_backend)
-from multi_bodies.solver.body_solver import SolutionParts, solve
+from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.solves import Solver
 from utils import UserInputError
 
 from . import assembly, resistance
@@ -159,20 +160,34 @@ class LubricationProblem:
     def solution(self, x):
         return SolutionParts(None, np.asarray(x, dtype=float).reshape(self.num_bodies, 6), None)
 
-    def preconditioner(self, tolerance=1e-8):
-        """The published preconditioner at this configuration, shift ``6 pi eta a * tolerance``."""
+    def preconditioner(self, tolerance):
+        """The published preconditioner at this configuration, shift ``6 pi eta a * tolerance`` (the solves'
+        relative tolerance)."""
         return LubricationPreconditioner(self.matrices, 6.0 * np.pi * self.eta * self.a * tolerance)
 
 
-def lubricated_velocities(locations, force_torque, a, eta, tolerance=1e-8, x0=None, **options):
+def solver_and_tolerance(solver, tolerance, minimal_residual=False):
+    """(solver, tolerance) of a lubrication function: ``solver`` (a ``multi_bodies.solver.solves.Solver``: a step's,
+    which counts its solves and stops the run at one that does not converge), or when None one that stops at such
+    a solve, with ``minimal_residual``; ``tolerance`` None is the solver's (the option table's ``solver_tolerance``
+    for a new one)."""
+    if solver is None:
+        solver = Solver(tolerance, minimal_residual=minimal_residual)
+    return solver, solver.tolerance if tolerance is None else float(tolerance)
+
+
+def lubricated_velocities(locations, force_torque, a, eta, tolerance=None, x0=None, solver=None, **options):
     """Velocities ``M_lub F`` of spheres at ``locations`` (N, 3) under force_torque (N, 6): a ``SolveResult``.
 
     ``options`` go to :class:`LubricationProblem` (wall, cutoff, periodic_length, firm_delta,
     implementation).  ``result.velocities`` is (N, 6) ``[U W]``; ``result.iterations`` the GMRES count.
+    tolerance : None is the solver's; solver : see :func:`solver_and_tolerance` (a solve that does not converge
+    raises ``utils.SimulationStopped`` unless the solver flags it).
     """
+    solver, tolerance = solver_and_tolerance(solver, tolerance)
     problem = LubricationProblem(locations, a, eta, **options)
-    return solve(problem, problem.rhs(force_torque), problem.preconditioner(tolerance), x0=x0,
-                 tolerance=tolerance)
+    return solver.solve(problem, problem.rhs(force_torque), problem.preconditioner(tolerance), x0=x0,
+                        tolerance=tolerance, kind='lubrication', what='the lubrication problem')
 
 
 def dense_far_field_mobility(problem):

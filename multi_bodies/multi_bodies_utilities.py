@@ -99,7 +99,8 @@ def forces_and_slip(options, system, configuration, force_table=None):
 def run_mobility(options, system, configuration, force_table=None):
     force_torque, slip = forces_and_slip(options, system, configuration, force_table)
     with utils.Timer() as timer:
-        # The same solve as every scheme: body_solver.solve (torques on single blobs and rods projected).
+        # The same solve as every scheme, through the model's Solver (torques on single blobs and rods projected);
+        # one that does not converge is flagged: its velocities are written and the script exits 1 (below).
         if system.articulated is not None:  # joints: doc/articulated.md (time t = 0)
             from multi_bodies.solver.articulated import articulated_problem
             problem, rhs, preconditioner = articulated_problem(system, system.articulated, configuration, 0.0,
@@ -110,8 +111,8 @@ def run_mobility(options, system, configuration, force_table=None):
             rhs = problem.rhs(slip=slip, force_torque=force_torque)
             preconditioner = system.build_preconditioner(configuration)
             r_vectors = problem.r_vectors
-        result = body_solver.solve(problem, rhs, preconditioner, tolerance=options.solver_tolerance,
-                                   minimal_residual=not system.published_solves)
+        result = system.solver(not_converged='flag').solve(problem, rhs, preconditioner,
+                                                            tolerance=options.solver_tolerance)
     print('Time to solve mobility problem = %s' % timer.elapsed)
     print('GMRES iterations = %d, converged = %s, relative residual = %.3e'
           % (result.iterations, result.converged, result.residual))

@@ -15,7 +15,7 @@ from body.body import Body, Configuration, bodies_to_arrays
 from lubrication import brownian, integrators, problem as lubrication_problem
 from multi_bodies.files.input_options import options_with
 from multi_bodies.run.record_checks import _check_history
-from multi_bodies.solver import user_hooks
+from multi_bodies.solver import body_solver, user_hooks
 from multi_bodies.solver.model import Model
 from quaternion_integrator.schemes import make_scheme
 
@@ -120,14 +120,14 @@ def test_closed_gaps_wear_the_kept_preconditioner_and_the_next_step_builds_a_fre
                                  kept=kept)
     assert np.array_equal(kept.built_at[0], closed) and kept.solves == 1
     iterations, least_residual = [], []
-    original = integrators.solve
+    original = body_solver.solve  # the one solve, which every lubrication solve reaches through its Solver
 
     def spy(*args, **kwargs):
         result = original(*args, **kwargs)
         iterations.append(result.iterations)
         least_residual.append(original(*args, **dict(kwargs, minimal_residual=True)).iterations)
         return result
-    monkeypatch.setattr(integrators, 'solve', spy)
+    monkeypatch.setattr(body_solver, 'solve', spy)
     integrators.trapezoidal_step(settings, closed, orientations, weight, 0.05, 1e-4, np.random.default_rng(3), 1e-8)
     # the kept solves take GMRES's least-true-residual iterate, which stops no later than the published one
     assert kept.fewest == least_residual[0] > fewest and least_residual[0] <= iterations[0]

@@ -50,6 +50,7 @@ import utils
 from mobility import choose
 from mobility.interface import Geometry, preferred_backend, registered_backends, unusable_reason
 from multi_bodies.solver import body_solver
+from multi_bodies.solver.solves import Solver
 
 from multi_bodies.advice import advisor_physics
 from multi_bodies.advice.advisor_resolution import ResolutionMeasurements
@@ -248,12 +249,12 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         results = []
 
         def gmres_solve():
-            # The same solve as the scripts and schemes (body_solver.solve), from a zero guess.
+            # The same solve as the scripts and schemes (a solves.Solver, flagging), from a zero guess.
             configuration = scene.arrays.configuration
             problem = body_solver.MobilityProblem(scene.arrays, configuration, vector)
             preconditioner = body_solver.BlockDiagonalPreconditioner(scene.arrays, configuration, blobs)
-            results.append(body_solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque),
-                                             preconditioner, tolerance=tolerance))
+            results.append(Solver(tolerance, not_converged='flag').solve(
+                problem, problem.rhs(slip=slip, force_torque=force_torque), preconditioner))
         # One solve (preconditioner built, GMRES from a zero guess); repeated when short, best time kept.
         gmres_seconds = choose.time_call(gmres_solve, repeats=2)
         result = results[-1]

@@ -103,14 +103,15 @@ class LubricationMeasurements:
             product, solve_seconds, _, _ = tables.COSTS[model]
             return far_seconds * solve_seconds / product, 'modelled: M f x the ratio of the chart'
         from lubrication import LubricationProblem
-        from multi_bodies.solver.body_solver import solve
+        from multi_bodies.solver.solves import Solver
         force = np.zeros((n, 6))
         force[:, 2] = -1.0
         tolerance = scene.options.solver_tolerance
         start = time.perf_counter()
         problem = LubricationProblem(centres, radius, scene.eta, wall=scene.wall, implementation=self.backend,
                                      periodic_length=scene.options.periodic_length)
-        solve(problem, problem.rhs(force), problem.preconditioner(tolerance), tolerance=tolerance)
+        Solver(tolerance, not_converged='flag').solve(problem, problem.rhs(force), problem.preconditioner(tolerance),
+                                                      kind='lubrication')  # a timing: a stop at the limit counts
         return time.perf_counter() - start, 'measured'
 
     def measure_lubrication(self):

@@ -728,16 +728,17 @@ def articulated_problem(model, articulated, configuration, t, force_torque=None,
 
 
 def articulated_velocities(model, articulated, configuration, t, force_torque=None, slip=None, x0=None,
-                           single_blobs=False):
+                           single_blobs=False, solver=None):
     """Velocities of every body with the joints of ``articulated`` at ``configuration`` and time ``t``.
 
-    The problem of :func:`articulated_problem` solved by ``model.solve`` (the package's one solve, at
-    ``solver_tolerance``; raises SimulationStopped when GMRES does not converge), from the normalised first
-    guess ``x0``.  Returns its ``body_solver.SolveResult``: ``velocities`` (Nb, 6), the joint forces (Nc, 3)
+    The problem of :func:`articulated_problem` solved by ``solver`` (a ``solves.Solver``, the one way into the
+    package's one solve; None: ``model.solver()``, at ``solver_tolerance``, which raises SimulationStopped when
+    GMRES does not converge), from the normalised first guess ``x0``.  Returns its ``body_solver.SolveResult``: ``velocities`` (Nb, 6), the joint forces (Nc, 3)
     in ``constraint_force_torque``, ``lambda_blobs`` (None for single blobs), ``iterations``.  Nothing is
     counted here.
     """
     problem, rhs, preconditioner = articulated_problem(model, articulated, configuration, t, force_torque, slip,
                                                        single_blobs)
     what = 'the articulated roller problem' if single_blobs else 'the articulated mobility problem'
-    return model.solve(problem, rhs, preconditioner, x0=x0, what=what)
+    solver = model.solver() if solver is None else solver
+    return solver.solve(problem, rhs, preconditioner, x0=x0, what=what)

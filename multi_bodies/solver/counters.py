@@ -69,3 +69,57 @@ class Counters:
 
 
 COUNTER_NAMES = tuple(field.name for field in fields(Counters))
+
+
+# What one solve of each kind adds to the counters: the fields its GMRES iterations go to, the field that counts
+# the solve itself (or None), and whether its iterations are the progress line's "last iterations".
+SOLVE_KINDS = {
+    'deterministic': (('gmres_iterations',), 'deterministic_solves', True),
+    'stochastic': (('gmres_iterations', 'gmres_stochastic_iterations'), 'stochastic_solves', False),
+    'roller_torques': (('gmres_iterations',), None, True),   # rollers of prescribed spin (multi_bodies.solver.rollers)
+    'concentration': (('laplace_iterations',), None, False),  # the phoretic bodies' solute (doc/phoretic.md)
+    'lubrication': (('gmres_iterations',), None, False),      # the lubrication schemes' solves (lubrication.integrators)
+}
+
+
+class Tally:
+    """The counts one step adds to the run's counters, as its solves and Lanczos calls return them.
+
+    ``add(name=increment, ...)`` (Counters field names), ``solved(kind, iterations)`` (a solve of a kind of
+    :data:`SOLVE_KINDS`), ``after(counters)``: the Counters ``counters`` plus these counts.  ``last_iterations``:
+    the GMRES iterations of the last solve whose kind says so (None: none yet).  Safe to share between the two
+    threads of the products the schemes run side by side.
+    """
+
+    def __init__(self):
+        import threading
+        self._lock = threading.Lock()
+        self._counts = {}
+        self.last_iterations = None
+
+    def add(self, **increments):
+        with self._lock:
+            for name, value in increments.items():
+                if name not in COUNTER_NAMES:
+                    raise ValueError('no counter named %r' % name)
+                self._counts[name] = self._counts.get(name, 0) + int(value)
+
+    def solved(self, kind, iterations):
+        """Count one solve of ``kind`` that took ``iterations`` GMRES iterations."""
+        iteration_fields, solve_field, last = SOLVE_KINDS[kind]
+        increments = dict.fromkeys(iteration_fields, iterations)
+        if solve_field is not None:
+            increments[solve_field] = 1
+        self.add(**increments)
+        if last:
+            self.last_iterations = int(iterations)
+
+    def count(self, name):
+        """What this tally adds to counter ``name``."""
+        with self._lock:
+            return self._counts.get(name, 0)
+
+    def after(self, counters):
+        """``counters`` (Counters) plus these counts: a new Counters."""
+        with self._lock:
+            return counters.plus(**self._counts)

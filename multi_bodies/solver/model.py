@@ -37,13 +37,14 @@ from body.body import Configuration, as_configuration, reference_slip_in_lab_fra
 from body.geometry import Quaternion
 from mobility.interface import (BlobMobility, Geometry, from_implementation_name, implementation_geometry,
                                 make_mobility, published_function, registered_backends)
-from multi_bodies.solver import body_solver, corotated_preconditioner, noise_factor, obstacles, periodic, rollers
+from multi_bodies.solver import body_solver, noise_factor, obstacles, periodic, rollers
 from multi_bodies.solver import user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
+from multi_bodies.solver.solves import Solver
 from stochastic_forcing import lanczos_square_root
-from utils import SimulationStopped, UserInputError
+from utils import UserInputError
 
 # the GMRES preconditioners (option ``preconditioner``; doc/preconditioners.md)
 PRECONDITIONERS = ('auto', 'neighbours', 'block_diagonal')
@@ -463,9 +464,16 @@ class Model:
                 neighbours=built if built is not base else None)
         return built
 
+    def solver(self, not_converged='stop', tally=None):
+        """The :class:`multi_bodies.solver.solves.Solver` of this model's solves (the one way into the one solve):
+        ``solver_tolerance``, ``print_residual``, and under ``preconditioner auto`` and ``neighbours`` the
+        least-residual GMRES iterate and preconditioners turned with the bodies; ``not_converged`` 'stop' (a
+        solve that does not converge raises SimulationStopped) or 'flag'; ``tally``: counts the solves."""
+        return Solver.of_model(self, not_converged=not_converged, tally=tally)
+
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
               what='the mobility problem'):
-        """:func:`body_solver.solve` (the one solve, any problem of its protocol) at ``solver_tolerance``.
+        """``self.solver().solve(...)``: the one solve of any problem of its protocol at ``solver_tolerance``.
 
         rhs (problem.size,); preconditioner as body_solver.solve (None: unpreconditioned); x0: first guess
         of the normalised system (``SolveResult.normalised_solution`` of an earlier solve); tolerance: None
@@ -477,16 +485,8 @@ class Model:
         (``corotated_preconditioner``), and GMRES takes the point of least true residual of its Krylov space
         (``krylov.gmres(minimal_residual=True)``), except under ``published_solves``.
         """
-        tolerance = self.tolerance if tolerance is None else float(tolerance)
-        if not self.published_solves:
-            preconditioner = corotated_preconditioner.following(problem, preconditioner, self.arrays)
-        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
-                                   print_residual=self.print_residual, minimal_residual=not self.published_solves)
-        if not result.converged:
-            raise SimulationStopped('GMRES of %s did not converge to solver_tolerance %g in %d iterations '
-                                    '(relative residual %.3e); try a larger solver_tolerance or check the '
-                                    'configuration' % (what, tolerance, result.iterations, result.residual))
-        return result
+        return self.solver().solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
+                                   what=what)
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
         """``factor * M^{1/2} z`` at the configuration of ``problem``: a ``stochastic_forcing.LanczosResult``.
@@ -539,19 +539,21 @@ class Model:
         symmetric part: ``SpectralMobility.dense_matrix``)."""
         return self.blobs_mobility if self.spectral is None else self.vector_mobility
 
-    def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None):
+    def deterministic_velocities(self, configuration, preconditioner=None, x0=None, solute=None, solver=None):
         """Velocities at ``configuration`` under its forces and slip, by the iterative solve (SPEC 4.2).
 
         preconditioner : one built at ``configuration`` when None (the published solves rebuild it at
         every solve; under ``auto`` and ``neighbours`` the deterministic schemes pass the one they keep);
-        x0 : normalised first guess.
+        x0 : normalised first guess; solver : the :class:`Solver` that solves (and counts) it (None:
+        :meth:`solver`).
         Returns body_solver.SolveResult (``velocities`` (Nb, 6), ``normalised_solution`` for the next guess).
         """
         _, force_torque, slip = self.forces_and_slip(configuration, solute)
         problem = self.mobility_problem(configuration)
         if preconditioner is None:
             preconditioner = self.build_preconditioner(configuration)
-        return self.solve(problem, problem.rhs(slip=slip, force_torque=force_torque), preconditioner, x0=x0)
+        solver = self.solver() if solver is None else solver
+        return solver.solve(problem, problem.rhs(slip=slip, force_torque=force_torque), preconditioner, x0=x0)
 
     def dense_velocities(self, configuration):
         """Velocities (Nb, 6) at ``configuration`` by dense algebra: ``N (F - K^T M^{-1} slip)``."""
@@ -571,9 +573,9 @@ class Model:
         self.roller_mobility.check_coupling(kind)
         return published_function(self.roller_mobility, kind)
 
-    def roller_velocities(self, configuration, torque_guess=None):
+    def roller_velocities(self, configuration, torque_guess=None, solver=None):
         """``rollers.roller_velocities``: RollerVelocities (velocities (N, 3), torque_guess, iterations)."""
-        return rollers.roller_velocities(self, configuration, torque_guess)
+        return rollers.roller_velocities(self, configuration, torque_guess, solver=solver)
 
     def roller_noise(self, r_vectors, z, factor):
         """``rollers.roller_noise``: a LanczosResult with ``noise`` (N, 3)."""

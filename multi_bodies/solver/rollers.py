@@ -122,12 +122,12 @@ class InPlaneMobility(BlobMobility):
         return _projected(lambda v: self.wall_mobility.coupling(kind, r_vectors, v), vector)
 
 
-def roller_velocities(model, configuration, torque_guess=None):
+def roller_velocities(model, configuration, torque_guess=None, solver=None):
     """Linear velocities of single-blob rollers at ``configuration``: :data:`RollerVelocities`.
 
     Forces: one-blob plus blob-blob.  ``free_kinematics``: torque ``8 pi eta a^3 omega_one_roller`` per
     blob; otherwise the torque of :class:`RollerSpinProblem` (GMRES started from ``torque_guess``, the
-    normalised torque of the last solve).  Then ``v = M_UF F + M_UT T``, shape (N, 3): one product where the
+    normalised torque of the last solve, by ``solver``: a ``solves.Solver``, None: the model's).  Then ``v = M_UF F + M_UT T``, shape (N, 3): one product where the
     mobility gives U and W of forces and torques together (``product_in_one_pass``: the spectral product), else
     the two couplings.
     """
@@ -141,8 +141,9 @@ def roller_velocities(model, configuration, torque_guess=None):
         torques = np.tile(8.0 * np.pi * eta * a ** 3 * model.omega_one_roller, model.num_blobs)
     else:
         problem = RollerSpinProblem(model, r_vectors, forces)
-        result = model.solve(problem, problem.rhs(), None, x0=torque_guess, restart=SPIN_GMRES_RESTART,
-                             what='the roller torques')
+        solver = model.solver() if solver is None else solver
+        result = solver.solve(problem, problem.rhs(), None, x0=torque_guess, restart=SPIN_GMRES_RESTART,
+                              kind='roller_torques', what='the roller torques')
         torques, iterations = result.constraint_force_torque.reshape(-1), result.iterations
         if result.normalised_solution is not None:
             torque_guess = result.normalised_solution

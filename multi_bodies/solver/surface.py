@@ -66,10 +66,11 @@ class Surface:
             return None
         return laplace_preconditioner.LaplacePreconditioner(problem, model.arrays.blob_offsets)
 
-    def solve_concentrations(self, model, configuration, x0=None, preconditioner=None):
+    def solve_concentrations(self, model, configuration, x0=None, preconditioner=None, solver=None):
         """(LaplaceProblem, SolveResult) at ``configuration``: the blob concentrations in ``constraint_force_torque``.
 
-        GMRES(200) of the model's ``solver_tolerance`` through ``model.solve``, preconditioned by
+        GMRES(200) of the model's ``solver_tolerance`` through ``solver`` (a ``solves.Solver``; None: the model's,
+        ``model.solver()``), preconditioned by
         :meth:`concentration_preconditioner` (every body alone plus the coarse modes of all bodies, where the
         solves are preconditioned); x0 : normalised first guess (N,) or None (zeros, as published);
         preconditioner : one built elsewhere (kept by a run between solves), or None: built here.
@@ -77,8 +78,9 @@ class Surface:
         problem = self.laplace_problem(model, configuration)
         if preconditioner is None:
             preconditioner = self.concentration_preconditioner(model, configuration, problem)
-        result = model.solve(problem, problem.rhs(), preconditioner, x0=x0, restart=phoretic.LAPLACE_RESTART,
-                             what='the concentration (Laplace) problem')
+        solver = model.solver() if solver is None else solver
+        result = solver.solve(problem, problem.rhs(), preconditioner, x0=x0, restart=phoretic.LAPLACE_RESTART,
+                              kind='concentration', what='the concentration (Laplace) problem')
         return problem, result
 
     def phoretic_slip(self, model, configuration, solved=None):
@@ -108,14 +110,16 @@ class Surface:
             max_cost_ratio=slip_length.AUTO_MAX_COST_RATIO if model.preconditioner == 'auto' else None)
 
 
-def warm_solute(model, configuration, guess, preconditioner=None):
+def warm_solute(model, configuration, guess, preconditioner=None, solver=None):
     """(solved, next guess) of a step: ``solved`` the (problem, SolveResult) of the concentrations at
     ``configuration`` started from the normalised ``guess`` (N,) or None, or None when the model has no phoretic
-    bodies (then the guess is returned unchanged); preconditioner : a kept one, or None (built here)."""
+    bodies (then the guess is returned unchanged); preconditioner : a kept one, or None (built here); solver : the
+    step's ``solves.Solver`` (None: the model's)."""
     surface = model.surface
     if surface is None or surface.phoretic is None:
         return None, guess
-    problem, result = surface.solve_concentrations(model, configuration, x0=guess, preconditioner=preconditioner)
+    problem, result = surface.solve_concentrations(model, configuration, x0=guess, preconditioner=preconditioner,
+                                                   solver=solver)
     return (problem, result), (guess if result.normalised_solution is None else result.normalised_solution)
 
 

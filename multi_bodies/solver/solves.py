@@ -1,0 +1,104 @@
+"""The one way into the package's one solve: settings, counts and what a solve that did not converge means (floor 4).
+
+:func:`multi_bodies.solver.body_solver.solve` is the package's GMRES solve of any problem of the problem protocol
+(doc/adding_a_problem.md).  Nothing of the package calls it but :meth:`Solver.solve` (``tests/test_layout.py``
+checks it): the schemes through their step's context (``quaternion_integrator.scheme_state.StepContext.solve``),
+the model's operations (``Model.solve``, the rollers' spin, the joints, the solute), the lubrication steps, the
+static script, the advisor and the published ``Lub_Solver`` face.  A :class:`Solver` holds
+
+* the settings of the solves of one model: ``solver_tolerance``, whether GMRES stops at the least true residual of
+  its Krylov space and a kept preconditioner is turned with the bodies (``preconditioner auto`` and
+  ``neighbours``; not under ``block_diagonal``, the published solves), whether every residual is printed;
+* a :class:`multi_bodies.solver.counters.Tally` (or None) that counts each solve by its kind (deterministic, noise
+  and random finite differences, roller torques, concentrations, lubrication);
+* what a solve that stops at the iteration limit means: ``'stop'`` raises ``utils.SimulationStopped`` with one
+  line (what was solved, the tolerance, the iterations and the residual reached) - the time-stepping schemes,
+  lubrication included; ``'flag'`` returns the result with ``converged`` False for its caller to say so (the
+  static script writes the velocities and exits 1; the advisor notes it; the published face returns the
+  residual).
+"""
+from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.solver import body_solver, corotated_preconditioner
+from utils import SimulationStopped
+
+NOT_CONVERGED_RULES = ('stop', 'flag')
+# the relative tolerance of a solver made without one: the option table's default of solver_tolerance
+SOLVER_TOLERANCE = OPTION_TABLE['solver_tolerance'].default
+
+
+class Solver:
+    """The settings of a model's solves, their counts and their rule for solves that do not converge.
+
+    Parameters
+    ----------
+    tolerance : float or None
+        Relative tolerance of the solves that name none (the model's ``solver_tolerance``; None: the option
+        table's default).
+    minimal_residual : bool
+        GMRES takes the point of least true residual of each Krylov space (``preconditioner auto`` and
+        ``neighbours``); False: the published iterates.
+    turn_with : body.body.BodyArrays or None
+        A preconditioner built where the bodies were oriented otherwise is applied turned with them
+        (:mod:`multi_bodies.solver.corotated_preconditioner`; None: as built, the published solves).
+    print_residual : bool
+        Print every GMRES residual.
+    not_converged : 'stop' or 'flag' (see the module note).
+    tally : multi_bodies.solver.counters.Tally or None
+        Counts every solve by its ``kind``.
+    """
+
+    def __init__(self, tolerance=None, minimal_residual=False, turn_with=None, print_residual=False, not_converged='stop',
+                 tally=None):
+        if not_converged not in NOT_CONVERGED_RULES:
+            raise ValueError('not_converged %r: one of %s' % (not_converged, ', '.join(NOT_CONVERGED_RULES)))
+        self.tolerance = SOLVER_TOLERANCE if tolerance is None else float(tolerance)
+        self.minimal_residual = bool(minimal_residual)
+        self.turn_with = turn_with
+        self.print_residual = bool(print_residual)
+        self.not_converged = not_converged
+        self.tally = tally
+
+    @classmethod
+    def of_model(cls, model, not_converged='stop', tally=None):
+        """The solver of a ``multi_bodies.solver.model.Model``: its ``solver_tolerance``, its ``print_residual``, and
+        under ``preconditioner auto`` and ``neighbours`` the least-residual iterate and the turned preconditioners."""
+        published = model.published_solves
+        return cls(model.tolerance, minimal_residual=not published, turn_with=None if published else model.arrays,
+                   print_residual=model.print_residual, not_converged=not_converged, tally=tally)
+
+    def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
+              maxiter=body_solver.GMRES_MAXITER, kind='deterministic', what='the mobility problem'):
+        """``body_solver.solve`` of ``problem`` (any problem of the protocol) with these settings: a SolveResult.
+
+        rhs (problem.size,); preconditioner : as body_solver.solve (None: unpreconditioned); x0 : first guess of
+        the normalised system (``SolveResult.normalised_solution`` of an earlier solve) or None; tolerance : None
+        is this solver's; kind : what the tally counts the solve as (``counters.SOLVE_KINDS``); what : the
+        problem's name in the line of a solve that did not converge.  Under ``not_converged`` 'stop' such a
+        solve raises SimulationStopped (its iterations are counted first).
+        """
+        tolerance = self.tolerance if tolerance is None else float(tolerance)
+        if self.turn_with is not None:
+            preconditioner = corotated_preconditioner.following(problem, preconditioner, self.turn_with)
+        result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
+                                   maxiter=maxiter, print_residual=self.print_residual,
+                                   minimal_residual=self.minimal_residual)
+        if self.tally is not None:
+            self.tally.solved(kind, result.iterations)
+        if not result.converged and self.not_converged == 'stop':
+            raise SimulationStopped(not_converged_line(what, tolerance, result))
+        return result
+
+    def replace(self, **changes):
+        """A solver with these settings changed (``tolerance``, ``minimal_residual``, ``turn_with``,
+        ``print_residual``, ``not_converged``, ``tally``)."""
+        settings = dict(tolerance=self.tolerance, minimal_residual=self.minimal_residual, turn_with=self.turn_with,
+                        print_residual=self.print_residual, not_converged=self.not_converged, tally=self.tally)
+        settings.update(changes)
+        return type(self)(**settings)
+
+
+def not_converged_line(what, tolerance, result):
+    """The one line that says a solve of ``what`` stopped at the iteration limit (``result`` a SolveResult)."""
+    return ('GMRES of %s did not converge to solver_tolerance %g in %d iterations (relative residual %.3e); try a '
+            'larger solver_tolerance or check the configuration' % (what, tolerance, result.iterations,
+                                                                   result.residual))
