@@ -44,7 +44,7 @@ from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-expo
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
 from multi_bodies.solver.solves import Solver
 from stochastic_forcing import lanczos_square_root
-from utils import UserInputError
+from utils import UserInputError, warn_user
 
 # the GMRES preconditioners (option ``preconditioner``; doc/preconditioners.md)
 PRECONDITIONERS = ('auto', 'neighbours', 'block_diagonal')
@@ -741,6 +741,9 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
             if spectral.kind in ('triply_periodic', 'doubly_periodic_open') and options.g != 0:
                 log('  note: %s has no mean flow (a net force on the suspension, as gravity g = %g, moves nothing on '
                     'average); doc/periodic.md' % (spectral.kind, options.g))
+        crowded = periodic.overlap_warning(options, bodies, options.blob_radius)
+        if crowded is not None:
+            warn_user(crowded)
     else:
         checked('mobility_vector_prod_implementation', lambda: from_implementation_name(
             product, options.eta, options.blob_radius, options.periodic_length))
