@@ -17,8 +17,9 @@ as the published code does.
   joint torques turn the blobs), forward Euler.
 
 The model carries the joints (``model.articulated``, an ``ArticulatedSet``
-made by ``run_setup.prepare``) and ``model.nonlinear_tolerance``; the
-restoration's residual evaluations are counted in the run state.
+made by ``run_setup.prepare``) and ``model.nonlinear_tolerance``; the solves
+go through the step context's solver and the restoration's residual
+evaluations are counted by it (``StepContext.restore_joints``).
 Velocities have shape (Nb, 6) ``[v, w]``.
 """
 from multi_bodies.solver import articulated as art
@@ -32,68 +33,68 @@ class ArticulatedScheme(Scheme):
     single_blobs = False
     extrapolate_guesses = True  # forward Euler: one solve per step; midpoint: two, dt/2 apart
 
-    def step_event(self, work, t):
+    def step_event(self, context, t):
         """The published ``Constraint.tumbling_event(t)`` of a user's override, at the start of every step."""
-        articulated = work.articulated
+        articulated = context.model.articulated
         if articulated is not None and articulated.step_event is not None:
             articulated.step_event(t)
 
-    def articulated_set(self, work):
-        if work.articulated is None:
+    def articulated_set(self, context):
+        if context.model.articulated is None:
             raise UserInputError("scheme %s needs articulated bodies: add an 'articulated <file.list_vertex> "
                                  "<file.clones> <file.const>' line" % self.name)
-        return work.articulated
+        return context.model.articulated
 
-    def constrained_velocities(self, work, configuration, t):
-        """Velocities (Nb, 6) with the joints at ``configuration`` and time ``t`` (counted, warm started)."""
-        result = art.articulated_velocities(work.model, self.articulated_set(work), configuration, t,
-                                            x0=self.warm_guess(work), single_blobs=self.single_blobs)
-        work.record_solve(result)
-        self.keep_guess(work, result.normalised_solution)
-        return result.velocities
+    def constrained_velocities(self, context, state, configuration, t):
+        """Velocities (Nb, 6) with the joints at ``configuration`` and time ``t`` (counted, warm started):
+        (velocities, state)."""
+        result = art.articulated_velocities(context.model, self.articulated_set(context), configuration, t,
+                                            x0=self.warm_guess(context, state), single_blobs=self.single_blobs,
+                                            solver=context.solver)
+        return result.velocities, self.keep_guess(context, state, result.normalised_solution)
 
-    def half_or_full(self, work, start, velocities, dt, t_end, centres_from):
+    def half_or_full(self, context, start, velocities, dt, t_end, centres_from):
         """``start`` moved with ``velocities`` for ``dt``, joints restored at ``t_end`` around the moved centres."""
-        articulated = work.articulated
+        articulated = context.model.articulated
         centres = articulated.centres(centres_from) + dt * articulated.mean_velocities(velocities)
-        return work.restore_joints(moved(start, velocities, dt), centres, t_end)
+        return context.restore_joints(moved(start, velocities, dt), centres, t_end)
 
-    def finish(self, work, new, velocities, step_index):
-        _check_finite(velocities, step_index, self.name)
-        invalid = work.invalid_bodies(new)
+    def finish(self, context, state, new, velocities):
+        _check_finite(velocities, context.step, self.name)
+        invalid = context.model.invalid_bodies(new)
         if invalid.size:
-            work.count(invalid_configurations=1)
-            raise InvalidConfiguration(step_index, invalid, self.name)
-        return new, velocities
+            context.count(invalid_configurations=1)
+            raise InvalidConfiguration(context.step, invalid, self.name)
+        return new, velocities, state
 
 
 class ArticulatedForwardEuler(ArticulatedScheme):
     """Forward Euler with the joint constraints (one solve per step)."""
     name = 'articulated_deterministic_forward_euler'
 
-    def advance(self, work, configuration, step_index, rng=None):
-        t = step_index * self.dt
-        self.step_event(work, t)
-        U = self.constrained_velocities(work, configuration, t)
-        _check_finite(U, step_index, self.name)
-        new = self.half_or_full(work, configuration, U, self.dt, t + self.dt, configuration)
-        return self.finish(work, new, U, step_index)
+    def advance(self, context, state, configuration):
+        t = context.step * self.dt
+        self.step_event(context, t)
+        U, state = self.constrained_velocities(context, state, configuration, t)
+        _check_finite(U, context.step, self.name)
+        new = self.half_or_full(context, configuration, U, self.dt, t + self.dt, configuration)
+        return self.finish(context, state, new, U)
 
 
 class ArticulatedMidpoint(ArticulatedScheme):
     """Explicit midpoint with the joint constraints (two solves per step)."""
     name = 'articulated_deterministic_midpoint'
 
-    def advance(self, work, configuration, step_index, rng=None):
-        t = step_index * self.dt
-        self.step_event(work, t)
-        U = self.constrained_velocities(work, configuration, t)
-        _check_finite(U, step_index, self.name)
-        middle = self.half_or_full(work, configuration, U, 0.5 * self.dt, t + 0.5 * self.dt, configuration)
-        U_middle = self.constrained_velocities(work, middle, t + 0.5 * self.dt)
-        _check_finite(U_middle, step_index, self.name)
-        new = self.half_or_full(work, configuration, U_middle, self.dt, t + self.dt, configuration)
-        return self.finish(work, new, U_middle, step_index)
+    def advance(self, context, state, configuration):
+        t = context.step * self.dt
+        self.step_event(context, t)
+        U, state = self.constrained_velocities(context, state, configuration, t)
+        _check_finite(U, context.step, self.name)
+        middle = self.half_or_full(context, configuration, U, 0.5 * self.dt, t + 0.5 * self.dt, configuration)
+        U_middle, state = self.constrained_velocities(context, state, middle, t + 0.5 * self.dt)
+        _check_finite(U_middle, context.step, self.name)
+        new = self.half_or_full(context, configuration, U_middle, self.dt, t + self.dt, configuration)
+        return self.finish(context, state, new, U_middle)
 
 
 class ArticulatedForwardEulerRollers(ArticulatedForwardEuler):

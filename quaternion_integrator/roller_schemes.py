@@ -9,65 +9,69 @@ differences of the blob mobility and their noise from Lanczos on it (``Model.rol
 import numpy as np
 
 from quaternion_integrator.stochastic_schemes import StochasticScheme
+
+
 class StochasticRollerScheme(StochasticScheme):
     """Single-blob rollers: only blob positions move; velocities (N, 3)."""
     rollers = True
 
-    def stochastic_velocity(self, work, rng, r_vectors, dt_fraction=1.0, with_drift=True):
+    def stochastic_velocity(self, context, r_vectors, dt_fraction=1.0, with_drift=True):
         """Noise ``sqrt(2kT/(f dt)) M^{1/2} z`` plus (optionally) the RFD drift. Draws z (3N), then W (3N)."""
-        z = rng.standard_normal(3 * work.num_blobs)
-        velocity = work.roller_noise(r_vectors, z, self.noise_factor(dt_fraction))
+        z = context.rng.standard_normal(3 * context.num_blobs)
+        velocity = context.roller_noise(r_vectors, z, self.noise_factor(dt_fraction))
         if with_drift and self.kT > 0 and self.thermal_drift:
-            W = rng.standard_normal(3 * work.num_blobs)
-            velocity = velocity + work.roller_drift(r_vectors, W, self.kT, self.delta)
+            W = context.rng.standard_normal(3 * context.num_blobs)
+            velocity = velocity + context.roller_drift(r_vectors, W, self.kT, self.delta)
         return velocity
 
-    def drift(self, work, rng, r_vectors):
+    def drift(self, context, r_vectors):
         """RFD drift alone (draws W (3N) first)."""
         if self.kT == 0:
             return np.zeros_like(r_vectors)
-        W = rng.standard_normal(3 * work.num_blobs)
+        W = context.rng.standard_normal(3 * context.num_blobs)
         if not self.thermal_drift:
             return np.zeros_like(r_vectors)
-        return work.roller_drift(r_vectors, W, self.kT, self.delta)
+        return context.roller_drift(r_vectors, W, self.kT, self.delta)
 
 
 class StochasticFirstOrderRollers(StochasticRollerScheme):
     """``r += dt (v_det + noise + drift)``.  Draws: z, W (3N each)."""
     name = 'stochastic_first_order_rollers'
 
-    def attempt(self, work, step_index, rng, old):
-        r = work.blob_positions(old)
-        v = self.roller_velocities(work, old) + self.stochastic_velocity(work, rng, r)
-        return self.move(old, v, self.dt), v
+    def attempt(self, context, state, old):
+        r = context.model.blob_positions(old)
+        v, state = self.roller_velocities(context, state, old)
+        v = v + self.stochastic_velocity(context, r)
+        return self.move(old, v, self.dt), v, state
 
 
 class StochasticAdamsBashforthRollers(StochasticRollerScheme):
     """Adams-Bashforth deterministic velocity plus noise and drift (the manual's recommendation for rollers)."""
     name = 'stochastic_adams_bashforth_rollers'
 
-    def attempt(self, work, step_index, rng, old):
-        r = work.blob_positions(old)
-        v_det = self.roller_velocities(work, old)
-        v = self.multistep(work, v_det, self.stochastic_velocity(work, rng, r))
-        return self.move(old, v, self.dt), v
+    def attempt(self, context, state, old):
+        r = context.model.blob_positions(old)
+        v_det, state = self.roller_velocities(context, state, old)
+        v, state = self.multistep(state, v_det, self.stochastic_velocity(context, r))
+        return self.move(old, v, self.dt), v, state
 
 
 class StochasticMidPointRollers(StochasticRollerScheme):
     """Midpoint: noise at r^n and at the midpoint, drift at r^n.  Draws: W (drift), z1, z2 (3N each)."""
     name = 'stochastic_mid_point_rollers'
 
-    def attempt(self, work, step_index, rng, old):
-        r = work.blob_positions(old)
-        d = self.drift(work, rng, r)
-        s1 = self.stochastic_velocity(work, rng, r, dt_fraction=0.5, with_drift=False)
-        v_det = self.roller_velocities(work, old)
+    def attempt(self, context, state, old):
+        r = context.model.blob_positions(old)
+        d = self.drift(context, r)
+        s1 = self.stochastic_velocity(context, r, dt_fraction=0.5, with_drift=False)
+        v_det, state = self.roller_velocities(context, state, old)
         mid = self.move(old, v_det + s1, 0.5 * self.dt)
-        self.check(work, mid)
-        r_mid = work.blob_positions(mid)
-        s2 = self.stochastic_velocity(work, rng, r_mid, dt_fraction=0.5, with_drift=False)
-        v = self.roller_velocities(work, mid) + d + 0.5 * (s1 + s2)
-        return self.move(old, v, self.dt), v
+        self.check(context, state, mid)
+        r_mid = context.model.blob_positions(mid)
+        s2 = self.stochastic_velocity(context, r_mid, dt_fraction=0.5, with_drift=False)
+        v_mid, state = self.roller_velocities(context, state, mid)
+        v = v_mid + d + 0.5 * (s1 + s2)
+        return self.move(old, v, self.dt), v, state
 
 
 class StochasticTrapezoidalRollers(StochasticRollerScheme):
@@ -77,15 +81,16 @@ class StochasticTrapezoidalRollers(StochasticRollerScheme):
     """
     name = 'stochastic_trapezoidal_rollers'
 
-    def attempt(self, work, step_index, rng, old):
-        r = work.blob_positions(old)
-        d = self.drift(work, rng, r)
-        s = self.stochastic_velocity(work, rng, r, with_drift=False)
-        v1 = self.roller_velocities(work, old)
+    def attempt(self, context, state, old):
+        r = context.model.blob_positions(old)
+        d = self.drift(context, r)
+        s = self.stochastic_velocity(context, r, with_drift=False)
+        v1, state = self.roller_velocities(context, state, old)
         predictor = self.move(old, v1 + s, self.dt)
-        self.check(work, predictor)
-        v = 0.5 * (v1 + self.roller_velocities(work, predictor)) + d + s
-        return self.move(old, v, self.dt), v
+        self.check(context, state, predictor)
+        v2, state = self.roller_velocities(context, state, predictor)
+        v = 0.5 * (v1 + v2) + d + s
+        return self.move(old, v, self.dt), v, state
 
 
 ROLLER_SCHEME_CLASSES = (StochasticFirstOrderRollers, StochasticAdamsBashforthRollers, StochasticMidPointRollers,

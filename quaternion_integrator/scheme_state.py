@@ -1,18 +1,23 @@
-"""The run state: a value the time loop passes from step to step, and one step's working copy of it (floor 5).
+"""The run state, a value the time loop passes from step to step, and the context of one step (floor 5).
 
 ``RunState`` holds what changes during a run: the configuration, the index
-of the next step, the counters (``multi_bodies.solver.counters.Counters``)
-and the scheme's history (the warm starts of the solves, the previous
-velocities of the multistep schemes, the step and configuration the
-preconditioner was built at).  It is frozen; a step returns a new one
-(``scheme.step(model, state, rng) -> state``).  Its :meth:`RunState.history`
-is what the restart records save, so a restart continues bit for bit.
+of the next step, the counters (``multi_bodies.solver.counters.Counters``),
+the state of the random generator, and the scheme's history (the warm starts
+of the solves, the previous velocities of the multistep schemes, the step and
+configuration the preconditioner was built at).  It is frozen; a step returns
+a new one (``scheme.step(model, state) -> state``).  Its
+:meth:`RunState.history` and ``rng_state`` are what the restart records
+save, so a restart continues bit for bit.
 
-``StepWork`` is the working copy one step uses: it reads the model's
-physics (attribute look-ups it does not define itself go to the frozen
-model), advances a copy of the history as the step's solves return, adds
-their counts, and at the end makes the next ``RunState``.  It lives for one
-step only.
+``StepContext`` is what one step works with: the frozen model (read as
+``context.model``: nothing is forwarded), the step's index, the generator
+the step draws from, the one solve (:meth:`StepContext.solve`, the only way
+a scheme reaches ``body_solver.solve``) and the counts the step adds.  It
+holds no history: inside a step the history is a ``RunState`` value that
+the counted operations which use it take and return (``velocities, state =
+context.roller_velocities(state, configuration)``), and at the end
+:meth:`StepContext.next_state` makes the next ``RunState`` of it, with the
+counts added and the generator's state.  It lives for one step only.
 """
 from dataclasses import dataclass, replace
 from typing import Any, Optional
@@ -21,7 +26,8 @@ import numpy as np
 
 from body.body import Configuration
 from multi_bodies.solver.body_solver import kept_fewest
-from multi_bodies.solver.counters import Counters
+from multi_bodies.solver.counters import Counters, Tally
+from stochastic_forcing import generators
 
 # The history fields (saved in restart records, SPEC decision 11).
 HISTORY_FIELDS = ('first_guess', 'earlier_guesses', 'roller_torque_guess', 'previous_velocities',
@@ -33,9 +39,6 @@ KEPT_CONCENTRATION_COUNTS = ('concentration_preconditioner_solves', 'concentrati
 # A kept concentration preconditioner is built anew after a solve that took this many GMRES iterations more than the
 # fewest since its build (measured, doc/preconditioners.md: the same iterations as a fresh one, 25 % less time).
 CONCENTRATION_WEAR_ITERATIONS = 1
-# what a StepWork copies from its RunState and back, besides the named fields
-KEPT_STATE = KEPT_PRECONDITIONER_COUNTS + KEPT_CONCENTRATION_COUNTS + ('concentration_preconditioner_configuration',
-                                                                        'concentration_preconditioner')
 
 
 def _copy(array):
@@ -70,6 +73,9 @@ class RunState:
     preconditioner : the preconditioner object built there (a cache: not saved, rebuilt after a restart)
     velocities : the velocities the last step used (not saved)
     last_iterations : GMRES iterations of the last step's last deterministic solve (the progress line)
+    rng_state : the state of the run's random generator before the next step (``rng.bit_generator.state``: a
+        dict; None for a run without one): a step draws from a generator made from it
+        (``stochastic_forcing.generators.from_state``) and the next state holds where it left off
 
     The lubrication schemes keep their solves' preconditioners in the same fields
     (``lubrication.integrators.KeptSolves``: where they were built, their predictor solves and fewest
@@ -96,6 +102,7 @@ class RunState:
     concentration_preconditioner: Any = None
     velocities: Optional[np.ndarray] = None
     last_iterations: int = 0
+    rng_state: Optional[dict] = None
 
     def history(self):
         """What a restart record saves of the scheme (copies): a dict of arrays, ints and None."""
@@ -124,162 +131,165 @@ class RunState:
         return replace(self, **changes)
 
 
-class StepWork:
-    """One step's working copy of a RunState, over the frozen model (see module docstring).
+class StepContext:
+    """What one step of a scheme works with (see the module docstring); frozen after construction.
 
-    Attributes: ``model``, ``step_index``, the history fields of RunState (advanced by the step), the
-    step's count increments.  Any other attribute is the model's (``work.mobility_problem(q)`` is
-    ``model.mobility_problem(q)``).
+    Attributes: ``model`` (the frozen ``multi_bodies.solver.model.Model``), ``step`` (the index of the step),
+    ``rng`` (the generator it draws from, or None), ``tally`` (the counts the step adds,
+    ``multi_bodies.solver.counters.Tally``), ``solver`` (the model's ``multi_bodies.solver.solves.Solver`` with
+    that tally: a solve that does not converge stops the run), ``num_bodies``, ``num_blobs``.
+
+    Its counted operations count what they do in the tally; those that use the history take the step's
+    ``RunState`` and return it with the history advanced, beside what they computed.
     """
 
-    def __init__(self, model, state):
-        self.model = model
-        self.step_index = state.step
-        self.first_guess = state.first_guess
-        self.earlier_guesses = state.earlier_guesses
-        self.roller_torque_guess = state.roller_torque_guess
-        self.previous_velocities = state.previous_velocities
-        self.concentration_guess = state.concentration_guess
-        self.pending_previous = None
-        self.preconditioner_step = state.preconditioner_step
-        self.preconditioner_configuration = state.preconditioner_configuration
-        for name in KEPT_STATE:
-            setattr(self, name, getattr(state, name))
-        self.preconditioner = state.preconditioner
-        self.last_iterations = state.last_iterations
-        self.start_counters = state.counters
-        self.increments = {}
+    def __init__(self, model, step=0, rng=None):
+        set_ = object.__setattr__
+        set_(self, 'model', model)
+        set_(self, 'step', int(step))
+        set_(self, 'rng', rng)
+        set_(self, 'tally', Tally())
+        set_(self, 'solver', model.solver(tally=self.tally))
+        set_(self, 'num_bodies', model.num_bodies)
+        set_(self, 'num_blobs', model.num_blobs)
 
-    def __getattr__(self, name):
-        if name == 'model':  # not yet set (copying): no recursion
-            raise AttributeError(name)
-        return getattr(self.model, name)
+    def __setattr__(self, name, value):
+        raise AttributeError('a StepContext is not changed after it is made (%s); the history is the RunState '
+                             'its operations return' % name)
 
+    # -------------------------------------------------------------- counts
     def count(self, **increments):
         """Add ``increments`` (Counters field name -> int) to the step's counts."""
-        for name, value in increments.items():
-            self.increments[name] = self.increments.get(name, 0) + int(value)
+        self.tally.add(**increments)
 
-    def total(self, name):
-        """The run's count ``name`` (a Counters field) including this step's so far."""
-        return getattr(self.start_counters, name) + self.increments.get(name, 0)
+    def total(self, state, name):
+        """The run's count ``name`` (a Counters field) including this step's so far (``state``: the step's start)."""
+        return getattr(state.counters, name) + self.tally.count(name)
 
-    # -------------------------------------------------------------- the counted operations
+    # -------------------------------------------------------------- the one solve and the noise
     def solve(self, problem, rhs, preconditioner, x0=None, kind='deterministic', tolerance=None,
-              what='the mobility problem'):
-        """``model.solve`` (the one solve), counted as a ``kind`` ('deterministic' or 'stochastic') solve."""
-        result = self.model.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, what=what)
-        self.record_solve(result, kind)
-        return result
-
-    def record_solve(self, result, kind='deterministic'):
-        """Count a SolveResult of ``kind`` (its GMRES iterations and the solve)."""
-        if kind == 'deterministic':
-            self.count(gmres_iterations=result.iterations, deterministic_solves=1)
-            self.last_iterations = result.iterations
-        else:
-            self.count(gmres_iterations=result.iterations, gmres_stochastic_iterations=result.iterations,
-                       stochastic_solves=1)
-
-    def deterministic_velocities(self, configuration, preconditioner=None, x0=None):
-        """``model.deterministic_velocities``, counted."""
-        result = self.model.deterministic_velocities(configuration, preconditioner=preconditioner, x0=x0,
-                                                     solute=self.solute(configuration))
-        self.record_solve(result)
-        return result
-
-    def solute(self, configuration):
-        """Phoretic runs: the concentration solve at ``configuration`` warm started from (and into)
-        ``concentration_guess`` (``multi_bodies.solver.surface``); None for other runs."""
-        from multi_bodies.solver.surface import warm_solute
-        kept = self.kept_concentration_preconditioner(configuration)
-        solved, self.concentration_guess = warm_solute(self.model, configuration, self.concentration_guess,
-                                                       preconditioner=kept)
-        if solved is not None:
-            self.count(laplace_iterations=solved[1].iterations)
-            if kept is not None:
-                self.concentration_served(solved[1].iterations)
-        return solved
-
-    def kept_concentration_preconditioner(self, configuration):
-        """The concentration problem's preconditioner that phoretic runs keep between solves, or None (no
-        phoretic bodies, ``preconditioner block_diagonal``, or solves left unpreconditioned).
-
-        Built at the first solve and after a solve that wore it (``CONCENTRATION_WEAR_ITERATIONS`` more than the
-        fewest since its build); after a restart it is built again where the saved one was built, so the run
-        repeats bit for bit.  It is applied as built (not turned).
-        """
-        surface = self.model.surface
-        if surface is None or surface.phoretic is None or getattr(self.model, 'published_solves', True) \
-                or not surface.preconditions_concentrations(self.model, self.model.num_blobs):
-            return None
-        if self.concentration_preconditioner_configuration is None:
-            self.concentration_preconditioner = surface.concentration_preconditioner(self.model, configuration)
-            self.concentration_preconditioner_configuration = configuration
-            self.concentration_preconditioner_solves, self.concentration_preconditioner_fewest = 0, None
-        elif self.concentration_preconditioner is None:  # a restart: rebuilt where it was built
-            self.concentration_preconditioner = surface.concentration_preconditioner(
-                self.model, self.concentration_preconditioner_configuration)
-        return self.concentration_preconditioner
-
-    def concentration_served(self, iterations):
-        """Count a concentration solve of ``iterations`` GMRES iterations with the kept preconditioner; one that
-        took ``CONCENTRATION_WEAR_ITERATIONS`` more than the fewest since the build ends it."""
-        fewest = kept_fewest(self.concentration_preconditioner_fewest, iterations, CONCENTRATION_WEAR_ITERATIONS)
-        if fewest is None:
-            self.concentration_preconditioner = self.concentration_preconditioner_configuration = None
-            self.concentration_preconditioner_solves = self.concentration_preconditioner_fewest = None
-            return
-        self.concentration_preconditioner_solves += 1
-        self.concentration_preconditioner_fewest = fewest
-
-    def forces_and_slip(self, configuration):
-        """``model.forces_and_slip`` with the warm-started solute (phoretic runs)."""
-        return self.model.forces_and_slip(configuration, self.solute(configuration))
+              restart=None, what='the mobility problem'):
+        """The one solve (``multi_bodies.solver.solves.Solver.solve``) at the model's settings, counted as a solve
+        of ``kind`` (``counters.SOLVE_KINDS``: 'deterministic', 'stochastic', ...); a solve that does not converge
+        stops the run (``utils.SimulationStopped``, one line).  Returns body_solver.SolveResult."""
+        if restart is None:
+            return self.solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, kind=kind, what=what)
+        return self.solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
+                                 kind=kind, what=what)
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
-        """``model.lanczos_noise(...).noise`` (3N,), counted."""
+        """``model.lanczos_noise(...).noise`` (3N,), counted (a call that did not converge is warned about and
+        counted in ``lanczos_not_converged``)."""
         result = self.model.lanczos_noise(problem, z, factor, preconditioner, tolerance=tolerance)
-        self.record_lanczos(result)
+        self._count_lanczos(result)
         return result.noise
-
-    def record_lanczos(self, result):
-        self.count(lanczos_iterations=result.iterations, lanczos_not_converged=0 if result.converged else 1)
-
-    def roller_velocities(self, configuration):
-        """Roller velocities (N, 3) at ``configuration``, the prescribed spin warm started; counted."""
-        result = self.model.roller_velocities(configuration, self.roller_torque_guess)
-        self.roller_torque_guess = result.torque_guess
-        if not self.model.free_kinematics:
-            self.count(gmres_iterations=result.iterations)
-            self.last_iterations = result.iterations
-        return result.velocities
 
     def roller_noise(self, r_vectors, z, factor):
         """``model.roller_noise(...).noise`` (N, 3), counted."""
         result = self.model.roller_noise(r_vectors, z, factor)
-        self.record_lanczos(result)
+        self._count_lanczos(result)
         return result.noise
+
+    def _count_lanczos(self, result):
+        self.count(lanczos_iterations=result.iterations, lanczos_not_converged=0 if result.converged else 1)
+
+    def roller_drift(self, r_vectors, W, kT, delta):
+        """``model.roller_drift``: ``kT div M_UF`` of rollers by a random finite difference, (N, 3)."""
+        return self.model.roller_drift(r_vectors, W, kT, delta)
 
     def restore_joints(self, configuration, centres, t):
         """``articulated.restore`` at the model's ``nonlinear_tolerance``: the Configuration; its evaluations counted."""
-        restored = self.model.articulated.restore(configuration, centres, t, self.model.nonlinear_tolerance,
-                                                  verbose=self.model.print_residual)
+        model = self.model
+        restored = model.articulated.restore(configuration, centres, t, model.nonlinear_tolerance,
+                                             verbose=model.print_residual)
         self.count(nonlinear_iterations=restored.nonlinear_iterations)
         return restored.configuration
 
+    # -------------------------------------------------------------- operations that use the history
+    def deterministic_velocities(self, state, configuration, preconditioner=None, x0=None):
+        """``model.deterministic_velocities`` by this step's solver, with the warm-started solute of phoretic runs:
+        (SolveResult, state)."""
+        solved, state = self.solute(state, configuration)
+        result = self.model.deterministic_velocities(configuration, preconditioner=preconditioner, x0=x0,
+                                                     solute=solved, solver=self.solver)
+        return result, state
+
+    def forces_and_slip(self, state, configuration):
+        """``((r_vectors, force_torque, slip), state)``: ``model.forces_and_slip`` with the warm-started solute."""
+        solved, state = self.solute(state, configuration)
+        return self.model.forces_and_slip(configuration, solved), state
+
+    def roller_velocities(self, state, configuration):
+        """Roller velocities (N, 3) at ``configuration``, the prescribed spin warm started from and into
+        ``state.roller_torque_guess``: (velocities, state)."""
+        result = self.model.roller_velocities(configuration, state.roller_torque_guess, solver=self.solver)
+        return result.velocities, replace(state, roller_torque_guess=result.torque_guess)
+
+    def solute(self, state, configuration):
+        """Phoretic runs: the concentration solve at ``configuration`` warm started from (and into)
+        ``state.concentration_guess`` (``multi_bodies.solver.surface``): (solved, state); solved is None for other
+        runs."""
+        model = self.model
+        if model.surface is None or model.surface.phoretic is None:
+            return None, state
+        from multi_bodies.solver.surface import warm_solute
+        kept, state = self.kept_concentration_preconditioner(state, configuration)
+        solved, guess = warm_solute(model, configuration, state.concentration_guess, preconditioner=kept,
+                                    solver=self.solver)
+        state = replace(state, concentration_guess=guess)
+        if solved is not None and kept is not None:
+            state = concentration_served(state, solved[1].iterations)
+        return solved, state
+
+    def kept_concentration_preconditioner(self, state, configuration):
+        """(the concentration problem's preconditioner that phoretic runs keep between solves, or None, state).
+
+        None without phoretic bodies, under ``preconditioner block_diagonal``, or where the solves are left
+        unpreconditioned.  Built at the first solve and after a solve that wore it (``CONCENTRATION_WEAR_ITERATIONS``
+        more than the fewest since its build); after a restart it is built again where the saved one was built, so
+        the run repeats bit for bit.  It is applied as built (not turned).
+        """
+        model = self.model
+        surface = model.surface
+        if surface is None or surface.phoretic is None or model.published_solves \
+                or not surface.preconditions_concentrations(model, model.num_blobs):
+            return None, state
+        if state.concentration_preconditioner_configuration is None:
+            state = replace(state, concentration_preconditioner=surface.concentration_preconditioner(model,
+                                                                                                   configuration),
+                            concentration_preconditioner_configuration=configuration,
+                            concentration_preconditioner_solves=0, concentration_preconditioner_fewest=None)
+        elif state.concentration_preconditioner is None:  # a restart: rebuilt where it was built
+            state = replace(state, concentration_preconditioner=surface.concentration_preconditioner(
+                model, state.concentration_preconditioner_configuration))
+        return state.concentration_preconditioner, state
+
     # -------------------------------------------------------------- the next state
-    def state(self, start, configuration, step, velocities):
-        """The RunState after this work: ``start`` with the advanced history, the counts added, ``configuration``
-        and ``step``, and ``velocities`` (those the step used, or None)."""
-        return replace(start, configuration=configuration, step=int(step),
-                       counters=start.counters.plus(**self.increments),
-                       first_guess=self.first_guess, earlier_guesses=self.earlier_guesses,
-                       roller_torque_guess=self.roller_torque_guess,
-                       previous_velocities=self.previous_velocities,
-                       concentration_guess=self.concentration_guess,
-                       preconditioner_step=self.preconditioner_step,
-                       preconditioner_configuration=self.preconditioner_configuration,
-                       preconditioner=self.preconditioner, velocities=velocities,
-                       last_iterations=self.last_iterations,
-                       **{name: getattr(self, name) for name in KEPT_STATE})
+    def next_state(self, start, state, configuration, step, velocities):
+        """The RunState after this step: ``state`` (the history the step returned) at ``configuration`` and index
+        ``step``, the counts of ``start`` (the step's start) plus the tally, ``velocities`` (those the step used, or
+        None), the last deterministic solve's iterations and the generator's state where the step left it."""
+        last = self.tally.last_iterations
+        rng_state = start.rng_state
+        bit_generator = getattr(self.rng, 'bit_generator', None)
+        if bit_generator is not None:
+            rng_state = bit_generator.state
+        return replace(state, configuration=configuration, step=int(step), counters=self.tally.after(start.counters),
+                       velocities=velocities, last_iterations=start.last_iterations if last is None else last,
+                       rng_state=rng_state)
+
+
+def concentration_served(state, iterations):
+    """``state`` after a concentration solve of ``iterations`` GMRES iterations with the kept preconditioner; one
+    that took ``CONCENTRATION_WEAR_ITERATIONS`` more than the fewest since the build ends it."""
+    fewest = kept_fewest(state.concentration_preconditioner_fewest, iterations, CONCENTRATION_WEAR_ITERATIONS)
+    if fewest is None:
+        return replace(state, concentration_preconditioner=None, concentration_preconditioner_configuration=None,
+                       concentration_preconditioner_solves=None, concentration_preconditioner_fewest=None)
+    return replace(state, concentration_preconditioner_solves=state.concentration_preconditioner_solves + 1,
+                   concentration_preconditioner_fewest=fewest)
+
+
+def generator_of(state):
+    """The generator a step from ``state`` draws from: made from ``state.rng_state`` (None without one)."""
+    return None if state.rng_state is None else generators.from_state(state.rng_state)

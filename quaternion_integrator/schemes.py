@@ -2,18 +2,21 @@
 
 A scheme object (the rule of a step and its parameters, no state) is made
 once per run by ``make_scheme(name, dt)``; ``scheme.init(model,
-configuration)`` makes the run state and ``scheme.step(model, state, rng)``
+configuration)`` makes the run state and ``scheme.step(model, state)``
 returns the state one step of length ``dt`` later
 (``quaternion_integrator.scheme_state.RunState``).  The *model*
 (``multi_bodies.solver.model.Model``, frozen) is passed in; schemes only use
 its methods, each of which takes the configuration it is about
-(``deterministic_velocities``, ``dense_velocities``, ``roller_velocities``,
-``forces_and_slip``, ``mobility_problem``, ``solve``, ``preprocess``,
-``postprocess``, ``invalid_bodies``, ``blob_positions``), through the
-step's ``StepWork``, and never import the scripts or any global.  The random generator ``rng`` (anything
-with ``standard_normal(n)``: numpy's ``Generator`` or
-``stochastic_forcing.generators.PublishedGenerator``) is unused by the
-deterministic schemes here but is part of the signature.
+(``dense_velocities``, ``mobility_problem``, ``preprocess``,
+``postprocess``, ``invalid_bodies``, ``blob_positions``), as
+``context.model`` of the step's ``StepContext``, whose counted operations
+(``solve``, ``deterministic_velocities``, ``roller_velocities``,
+``forces_and_slip``, ``lanczos_noise``, ...) are the only way to a solve;
+they never import the scripts or any global.  The random generator
+(anything with ``standard_normal(n)``: numpy's ``Generator`` or
+``stochastic_forcing.generators.PublishedGenerator``) is the context's
+``rng``, made from the state's ``rng_state`` or given to ``step``; the
+deterministic schemes here do not draw from it.
 
 Body velocities have shape (Nb, 6) ``[v, w]`` (length/time, radians/time);
 locations (Nb, 3); scalar-first quaternions (Nb, 4), updated by
@@ -25,6 +28,8 @@ the scheme keeps the start-of-step configuration, counts the attempt in
 ``invalid_configurations`` and raises ``InvalidConfiguration`` naming the
 step and the bodies.  NaN velocities raise ``utils.SimulationStopped``.
 """
+from dataclasses import replace
+
 import numpy as np
 
 from quaternion_integrator.scheme_base import (InvalidConfiguration, Scheme, euler_update,  # noqa: F401
@@ -44,16 +49,16 @@ class DeterministicForwardEuler(Scheme):
     extrapolate_guesses = True  # one solve per step (midpoint: two, dt/2 apart)
     keep_preconditioner = True
 
-    def velocities(self, work, configuration):
-        return self.rigid_velocities(work, configuration)
+    def velocities(self, context, state, configuration):
+        return self.rigid_velocities(context, state, configuration)
 
 
 class DeterministicForwardEulerDenseAlgebra(DeterministicForwardEuler):
     """Forward Euler with the dense solve ``U = N (F - K^T M^{-1} slip)`` (cost O(N^3))."""
     name = 'deterministic_forward_euler_dense_algebra'
 
-    def velocities(self, work, configuration):
-        return work.dense_velocities(configuration)
+    def velocities(self, context, state, configuration):
+        return context.model.dense_velocities(configuration), state
 
 
 class AdamsBashforthMixin:
@@ -61,13 +66,13 @@ class AdamsBashforthMixin:
     on acceptance; a state without it starts with an Euler step, as the published code does).
     """
 
-    def combine(self, work, velocities):
-        if work.previous_velocities is None:
+    def combine(self, state, velocities):
+        if state.previous_velocities is None:
             return velocities
-        return 1.5 * velocities - 0.5 * work.previous_velocities
+        return 1.5 * velocities - 0.5 * state.previous_velocities
 
-    def accept(self, work, velocities):
-        work.previous_velocities = np.array(velocities, copy=True)
+    def accept(self, state, velocities):
+        return replace(state, previous_velocities=np.array(velocities, copy=True))
 
 
 class DeterministicAdamsBashforth(AdamsBashforthMixin, DeterministicForwardEuler):
@@ -83,14 +88,14 @@ class DeterministicMidpoint(DeterministicForwardEuler):
     """
     name = 'deterministic_midpoint'
 
-    def velocities(self, work, configuration):
-        U1 = self.rigid_velocities(work, configuration)
+    def velocities(self, context, state, configuration):
+        U1, state = self.rigid_velocities(context, state, configuration)
         mid = self.move(configuration, U1, 0.5 * self.dt)
-        invalid = work.invalid_bodies(mid)
+        invalid = context.model.invalid_bodies(mid)
         if invalid.size:
-            work.count(invalid_configurations=1)
-            raise InvalidConfiguration(work.step_index, invalid, self.name)
-        return self.rigid_velocities(work, mid)
+            context.count(invalid_configurations=1)
+            raise InvalidConfiguration(context.step, invalid, self.name)
+        return self.rigid_velocities(context, state, mid)
 
 
 class DeterministicForwardEulerRollers(Scheme):
@@ -98,8 +103,8 @@ class DeterministicForwardEulerRollers(Scheme):
     name = 'deterministic_forward_euler_rollers'
     rollers = True
 
-    def velocities(self, work, configuration):
-        return self.roller_velocities(work, configuration)
+    def velocities(self, context, state, configuration):
+        return self.roller_velocities(context, state, configuration)
 
 
 class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwardEulerRollers):

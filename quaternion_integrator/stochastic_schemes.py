@@ -15,12 +15,14 @@ produced: by Lanczos on the blob mobility and random finite differences
 ``*_DLA``).
 
 A scheme is made by ``make_scheme(name, dt, options)``;
-``scheme.advance(work, configuration, step_index, rng)`` returns the next
-configuration (``scheme.step`` applies it to the work).  Predictors and
+``scheme.advance(context, state, configuration)`` returns the next
+configuration, the velocities used and the history (``scheme.step`` makes
+the next run state of them).  Predictors and
 midpoints are configurations of their own (``body.body.Configuration``
 values): forces, slip and solves are evaluated at them without touching the
-step's start.  The random numbers come only from ``rng``, through its
-``standard_normal(n)`` (the one draw of every scheme): numpy's
+step's start.  The random numbers come only from the step's
+generator ``context.rng``, through its ``standard_normal(n)`` (the one draw
+of every scheme): numpy's
 ``Generator`` or the published code's legacy ``RandomState``
 (:class:`stochastic_forcing.generators.PublishedGenerator`, which repeats
 a published run's numbers), drawn in a fixed order stated in each scheme,
@@ -38,6 +40,8 @@ message naming the step and the bodies.
 Shapes: body velocities (Nb, 6) ``[v, w]``; locations (Nb, 3); quaternions
 (Nb, 4); blob vectors flat (3N,) or (N, 3); roller velocities (N, 3).
 """
+from dataclasses import replace
+
 import numpy as np
 
 from body.body import Configuration
@@ -61,11 +65,12 @@ class TooManyRejections(SimulationStopped):
 
 
 class _Rejected(Exception):
-    """Internal: the trial configuration of an attempt is invalid; ``bodies`` are the culprits."""
+    """Internal: the trial configuration of an attempt is invalid; ``bodies`` are the culprits, ``state`` the step's
+    history when it was found (the next attempt continues from it: its solves' guesses and preconditioner)."""
 
-    def __init__(self, bodies):
+    def __init__(self, bodies, state):
         super().__init__()
-        self.bodies = bodies
+        self.bodies, self.state = bodies, state
 
 
 class StochasticScheme(Scheme):
@@ -107,45 +112,48 @@ class StochasticScheme(Scheme):
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
 
     # -------------------------------------------------------------- helpers
-    def preconditioner(self, work, step_index, problem):
-        """The block-diagonal preconditioner, rebuilt at ``problem`` every ``update_PC`` steps (kept in the
-        run state with the step and configuration it was built at).  It serves ``solves_at_preconditioner``
+    def preconditioner(self, context, state, problem):
+        """(the block-diagonal preconditioner, state): rebuilt at ``problem`` every ``update_PC`` steps (kept in
+        the run state with the step and configuration it was built at).  It serves ``solves_at_preconditioner``
         solves a step for ``update_PC`` steps, which ``preconditioner auto`` weighs its build against."""
-        rebuild = work.preconditioner_step is None or (
-            step_index % self.update_PC == 0 and work.preconditioner_step != step_index)
+        step_index = context.step
+        rebuild = state.preconditioner_step is None or (
+            step_index % self.update_PC == 0 and state.preconditioner_step != step_index)
         solves = self.solves_at_preconditioner * self.update_PC
         if rebuild:
-            work.preconditioner = work.build_preconditioner(problem.configuration, solves=solves)
-            work.preconditioner_step = step_index
-            work.preconditioner_configuration = problem.configuration
-        elif work.preconditioner is None:  # after a restart: the configuration it was built at
-            work.preconditioner = work.build_preconditioner(work.preconditioner_configuration, solves=solves)
-        return work.preconditioner
+            state = replace(state, preconditioner=context.model.build_preconditioner(problem.configuration,
+                                                                                     solves=solves),
+                            preconditioner_step=step_index, preconditioner_configuration=problem.configuration)
+        elif state.preconditioner is None:  # after a restart: the configuration it was built at
+            state = replace(state, preconditioner=context.model.build_preconditioner(
+                state.preconditioner_configuration, solves=solves))
+        return state.preconditioner, state
 
     @staticmethod
-    def body_lengths(work):
+    def body_lengths(context):
         """The bodies' length scales (Nb,), structure the model holds (``Model.body_lengths``)."""
-        return work.body_lengths
+        return context.model.body_lengths
 
-    def check(self, work, configuration):
-        """Raise _Rejected when ``configuration`` has a blob centre below the wall."""
-        invalid = work.invalid_bodies(configuration)
+    def check(self, context, state, configuration):
+        """Raise _Rejected (with the step's history ``state``) when ``configuration`` has a blob centre below the
+        wall."""
+        invalid = context.model.invalid_bodies(configuration)
         if invalid.size:
-            raise _Rejected(invalid)
+            raise _Rejected(invalid, state)
 
-    def noise_solve(self, work, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
+    def noise_solve(self, context, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
         """A counted noise or RFD solve (no warm start); returns body_solver.SolveResult."""
         if rhs is None:
             rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
-        result = work.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
+        result = context.solve(problem, rhs, preconditioner, kind='stochastic', tolerance=self.noise_tolerance)
         # bodies of prescribed kinematics are not moved by noise or RFD solves
         return result._replace(velocities=problem.without_prescribed_motion(result.velocities))
 
-    def lanczos_noise(self, work, problem, z, factor, preconditioner):
+    def lanczos_noise(self, context, problem, z, factor, preconditioner):
         """``factor M^{1/2} z`` at ``problem`` (Model.lanczos_noise, counted) at the scheme's ``noise_tolerance``."""
-        return work.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
+        return context.lanczos_noise(problem, z, factor, preconditioner, tolerance=self.noise_tolerance)
 
-    def rfd_drift(self, work, configuration, W, preconditioner):
+    def rfd_drift(self, context, configuration, W, preconditioner):
         """``kT/delta [N(q + delta/2 W) - N(q - delta/2 W)] W~`` by two solves (SPEC §5.1, first-order RFD).
 
         W (Nb, 6) ~ N(0, 1); translations are displaced by ``delta * body_length * W_t``
@@ -154,25 +162,26 @@ class StochasticScheme(Scheme):
         ``b - A+ y-``), so the solver tolerance applies to the drift itself.
         Returns (Nb, 6).
         """
-        lengths = self.body_lengths(work)
+        lengths = self.body_lengths(context)
         W = np.asarray(W, dtype=float).reshape(-1, 6)
         if not self.thermal_drift:
             return np.zeros_like(W)
         W_tilde = W.copy()
         W_tilde[:, :3] /= lengths[:, None]
+        model = context.model
 
         def difference(q_plus, q_minus):
-            minus, plus = work.mobility_problem(q_minus), work.mobility_problem(q_plus)
-            y_minus = self.noise_solve(work, minus, preconditioner, noise_force=W_tilde)
+            minus, plus = model.mobility_problem(q_minus), model.mobility_problem(q_plus)
+            y_minus = self.noise_solve(context, minus, preconditioner, noise_force=W_tilde)
             x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
             rhs = minus.rhs(force_torque=W_tilde) - plus.matvec(x_minus)
-            return self.noise_solve(work, plus, preconditioner, rhs=rhs).velocities
+            return self.noise_solve(context, plus, preconditioner, rhs=rhs).velocities
 
         def displace(q, scale, direction):
             return displace_bodies(q, scale, direction, lengths)
         return self.kT * rfd(None, configuration, W, self.delta, displace, difference=difference)
 
-    def slip_rfd(self, work, configuration, problem, W_s, preconditioner, factor, W_R=None, at_configuration=None):
+    def slip_rfd(self, context, configuration, problem, W_s, preconditioner, factor, W_R=None, at_configuration=None):
         """Drift terms of the slip schemes (Sprinkle et al. 2017): extra slip (3N,) and force (Nb, 6).
 
         ``W_R = N K^T M^{-1} W_s`` by one solve (right-hand side ``[-W_s; 0]``); at the configuration moved
@@ -184,12 +193,12 @@ class StochasticScheme(Scheme):
         (:meth:`slip_rfd_products_at`).
         """
         if W_R is None:
-            W_R = self.slip_rfd_solve(work, problem, W_s, preconditioner)
+            W_R = self.slip_rfd_solve(context, problem, W_s, preconditioner)
         if at_configuration is None:
             at_configuration = self.slip_rfd_products_at(problem, W_s)
 
         def products(q):
-            moved = work.mobility_problem(q)
+            moved = context.model.mobility_problem(q)
             return moved.M_dot(W_s), moved.KT_dot(W_s)
         D_M, D_KT = rfd(products, configuration, W_R, self.delta, displace_bodies, centred=False,
                         at_configuration=at_configuration)
@@ -201,12 +210,12 @@ class StochasticScheme(Scheme):
         """``(M W_s (3N,), K^T W_s (Nb, 6))`` at ``problem``: the unmoved end of the slip RFD."""
         return problem.M_dot(W_s), problem.KT_dot(W_s)
 
-    def slip_rfd_solve(self, work, problem, W_s, preconditioner):
+    def slip_rfd_solve(self, context, problem, W_s, preconditioner):
         """``W_R = N K^T M^{-1} W_s`` (Nb, 6) by one noise solve (right-hand side ``[-W_s; 0]``)."""
-        return self.noise_solve(work, problem, preconditioner,
-                                rhs=np.concatenate((-W_s, np.zeros(6 * work.num_bodies)))).velocities
+        return self.noise_solve(context, problem, preconditioner,
+                                rhs=np.concatenate((-W_s, np.zeros(6 * context.num_bodies)))).velocities
 
-    def side_by_side(self, work, problem, first, second):
+    def side_by_side(self, context, problem, first, second):
         """``(first(problem), second(problem))`` for two computations at one configuration that do not
         depend on each other (each a callable of a problem).
 
@@ -215,7 +224,7 @@ class StochasticScheme(Scheme):
         two: the problem's mobility wrapped in ``model.PairedProducts``); otherwise one after the other.
         The same numbers either way, to rounding; ``pair_products = False`` switches the pairing off.
         """
-        paired = work.paired_mobility_product if self.pair_products else None
+        paired = context.model.paired_mobility_product if self.pair_products else None
         if paired is None or not hasattr(problem, 'with_mobility'):
             return first(problem), second(problem)
         from concurrent.futures import ThreadPoolExecutor
@@ -236,92 +245,93 @@ class StochasticScheme(Scheme):
                 pairer.leave()
             return future.result(), result
 
-    def corrector_velocities(self, work, old, velocities, dt, noise_slip, noise_force, preconditioner):
-        """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there.
+    def corrector_velocities(self, context, state, old, velocities, dt, noise_slip, noise_force, preconditioner):
+        """Velocities at ``old`` moved by ``velocities * dt`` (predictor or midpoint), solved there: (velocities
+        (Nb, 6), state).
 
         The solve uses the forces and slip of the moved configuration, the given noise slip (3N,) and
         force (Nb, 6), the preconditioner (None: one built at the moved configuration) and the
         deterministic warm start.  Raises _Rejected when the moved configuration is invalid.
-        Returns velocities (Nb, 6).
         """
         moved = self.move(old, velocities, dt)
-        self.check(work, moved)
-        _, force_torque, slip = work.forces_and_slip(moved)
-        problem = work.mobility_problem(moved)
+        self.check(context, state, moved)
+        (_, force_torque, slip), state = context.forces_and_slip(state, moved)
+        problem = context.model.mobility_problem(moved)
         if preconditioner is None:
-            preconditioner = work.build_preconditioner(moved)
+            preconditioner = context.model.build_preconditioner(moved)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
-        return self.deterministic_solve(work, problem, rhs, preconditioner).velocities
+        result, state = self.deterministic_solve(context, state, problem, rhs, preconditioner)
+        return result.velocities, state
 
     def noise_factor(self, dt_fraction=1.0):
         """``sqrt(2 kT / (dt_fraction dt))``."""
         return np.sqrt(2.0 * self.kT / (dt_fraction * self.dt))
 
     # -------------------------------------------------------------- the step
-    def attempt(self, work, step_index, rng, old):
-        """One try of the step from the Configuration ``old``: (new Configuration, velocities used).
+    def attempt(self, context, state, old):
+        """One try of the step from the Configuration ``old``: (new Configuration, velocities used, state).
 
-        Velocities (Nb, 6) (rollers (N, 3)).  Raises _Rejected when a trial configuration is invalid.
+        Velocities (Nb, 6) (rollers (N, 3)).  Draws from ``context.rng``.  Raises _Rejected when a trial
+        configuration is invalid.
         """
         raise NotImplementedError
 
-    def advance(self, work, configuration, step_index, rng=None):
+    def advance(self, context, state, configuration):
         """One step from ``configuration``, retried with fresh noise while a trial configuration is invalid.
 
-        Returns (the new Configuration, the velocities used); the work's configuration is not changed.
+        Returns (the new Configuration, the velocities used, state).  A rejected attempt's history (its solves'
+        guesses, the preconditioner built) carries on into the next one, except the multistep velocities, which
+        only an accepted step keeps.
         """
-        if rng is None:
+        if context.rng is None:
             raise UserInputError('%s needs a random generator' % self.name)
+        start = state
         rejections = 0
         while True:
-            work.preprocess(configuration)
+            context.model.preprocess(configuration)
             try:
-                new, used = self.attempt(work, step_index, rng, configuration)
+                new, used, state = self.attempt(context, state, configuration)
                 if not np.all(np.isfinite(used)):
                     raise SimulationStopped('step %d of %s: the velocities are not finite (NaN or inf); check the '
                                             'forces (user-defined functions), the time step and the configuration'
-                                            % (step_index, self.name))
-                new = work.postprocess(new)
-                self.check(work, new)
+                                            % (context.step, self.name))
+                new = context.model.postprocess(new)
+                self.check(context, state, new)
             except _Rejected as rejected:
-                work.count(invalid_configurations=1)
+                state = replace(rejected.state, previous_velocities=start.previous_velocities)
+                context.count(invalid_configurations=1)
                 rejections += 1
                 print('Invalid configuration number %d (step %d, bodies %s)'
-                      % (work.total('invalid_configurations'), step_index,
+                      % (context.total(start, 'invalid_configurations'), context.step,
                          ', '.join(str(int(b)) for b in rejected.bodies[:5])))
                 if rejections >= self.max_consecutive_rejections:
-                    raise TooManyRejections(step_index, rejected.bodies, self.name, rejections)
+                    raise TooManyRejections(context.step, rejected.bodies, self.name, rejections)
                 continue
-            self.accept_step(work)
-            return new, used
+            return new, used, state
 
     @staticmethod
-    def accept_step(work):
-        """Called once when a step is accepted (multistep schemes keep their velocities for the next step)."""
-        if work.pending_previous is not None:
-            work.previous_velocities = work.pending_previous
-            work.pending_previous = None
+    def multistep(state, current, noise_part):
+        """(Adams-Bashforth combination, state keeping ``current`` as the next step's previous velocities): first
+        step ``current + noise``, later ``1.5 current - 0.5 previous + noise``."""
+        previous = state.previous_velocities
+        state = replace(state, previous_velocities=np.array(current, copy=True))
+        if previous is None:
+            return current + noise_part, state
+        return 1.5 * current - 0.5 * previous + noise_part, state
 
-    @staticmethod
-    def multistep(work, current, noise_part):
-        """Adams-Bashforth combination: first step ``current + noise``, later ``1.5 current - 0.5 previous + noise``."""
-        work.pending_previous = np.array(current, copy=True)
-        if work.previous_velocities is None:
-            return current + noise_part
-        return 1.5 * current - 0.5 * work.previous_velocities + noise_part
-
-    def deterministic_part(self, work, problem, old, preconditioner, noise_slip=None, noise_force=None,
+    def deterministic_part(self, context, state, problem, old, preconditioner, noise_slip=None, noise_force=None,
                            fresh_noise=False):
-        """The solve at ``old`` of its forces and slip plus the given noise terms: velocities (Nb, 6).
+        """The solve at ``old`` of its forces and slip plus the given noise terms: (velocities (Nb, 6), state).
 
         Warm started from the last deterministic solve, except with ``fresh_noise`` (the right-hand side holds
         this step's Brownian slip, which the last solution knows nothing of): then from zero, see
         :attr:`cold_start_fresh_noise`.
         """
-        _, force_torque, slip = work.forces_and_slip(old)
+        (_, force_torque, slip), state = context.forces_and_slip(state, old)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
         warm = not (fresh_noise and self.cold_start_fresh_noise)
-        return self.deterministic_solve(work, problem, rhs, preconditioner, warm_start=warm).velocities
+        result, state = self.deterministic_solve(context, state, problem, rhs, preconditioner, warm_start=warm)
+        return result.velocities, state
 
 
 # ====================================================================== rigid multiblob, iterative
@@ -332,15 +342,16 @@ class StochasticFirstOrderRFD(StochasticScheme):
     """
     name = 'stochastic_first_order_RFD'
 
-    def attempt(self, work, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * work.num_bodies)
-        z = rng.standard_normal(3 * work.num_blobs)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
-        noise = self.lanczos_noise(work, problem, z, self.noise_factor(), pc)
-        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise, fresh_noise=True)
-        U = U + self.rfd_drift(work, old, W_rfd, pc)
-        return self.move(old, U, self.dt), U
+    def attempt(self, context, state, old):
+        rng = context.rng
+        W_rfd = rng.standard_normal(6 * context.num_bodies)
+        z = rng.standard_normal(3 * context.num_blobs)
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
+        noise = self.lanczos_noise(context, problem, z, self.noise_factor(), pc)
+        U, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=noise, fresh_noise=True)
+        U = U + self.rfd_drift(context, old, W_rfd, pc)
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticAdamsBashforth(StochasticScheme):
@@ -350,18 +361,19 @@ class StochasticAdamsBashforth(StochasticScheme):
     """
     name = 'stochastic_adams_bashforth'
 
-    def attempt(self, work, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * work.num_bodies)
-        z = rng.standard_normal(3 * work.num_blobs)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
-        noise, U_d = self.side_by_side(work, problem,
-                                       lambda shared: self.lanczos_noise(work, shared, z, self.noise_factor(), pc),
-                                       lambda shared: self.deterministic_part(work, shared, old, pc))
-        U_s = self.noise_solve(work, problem, pc, noise_slip=noise).velocities
-        U_s = U_s + self.rfd_drift(work, old, W_rfd, pc)
-        U = self.multistep(work, U_d, U_s)
-        return self.move(old, U, self.dt), U
+    def attempt(self, context, state, old):
+        rng = context.rng
+        W_rfd = rng.standard_normal(6 * context.num_bodies)
+        z = rng.standard_normal(3 * context.num_blobs)
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
+        noise, (U_d, state) = self.side_by_side(
+            context, problem, lambda shared: self.lanczos_noise(context, shared, z, self.noise_factor(), pc),
+            lambda shared: self.deterministic_part(context, state, shared, old, pc))
+        U_s = self.noise_solve(context, problem, pc, noise_slip=noise).velocities
+        U_s = U_s + self.rfd_drift(context, old, W_rfd, pc)
+        U, state = self.multistep(state, U_d, U_s)
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticTractionEM(StochasticScheme):
@@ -371,21 +383,23 @@ class StochasticTractionEM(StochasticScheme):
     """
     name = 'stochastic_traction_EM'
 
-    def traction_terms(self, work, step_index, rng, old):
-        W_rfd = rng.standard_normal(6 * work.num_bodies).reshape(-1, 6)
-        lengths = self.body_lengths(work)
+    def traction_terms(self, context, state, old):
+        """(problem, preconditioner, noise slip, drift slip, drift force, state) of the traction schemes at ``old``."""
+        rng = context.rng
+        W_rfd = rng.standard_normal(6 * context.num_bodies).reshape(-1, 6)
+        lengths = self.body_lengths(context)
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
-        z = rng.standard_normal(3 * work.num_blobs)  # drawn after W_rfd, as before
-        noise, R = self.side_by_side(work, problem,
-                                     lambda shared: self.lanczos_noise(work, shared, z, self.noise_factor(), pc),
-                                     lambda shared: self.noise_solve(work, shared, pc,
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
+        z = rng.standard_normal(3 * context.num_blobs)  # drawn after W_rfd, as before
+        noise, R = self.side_by_side(context, problem,
+                                     lambda shared: self.lanczos_noise(context, shared, z, self.noise_factor(), pc),
+                                     lambda shared: self.noise_solve(context, shared, pc,
                                                                      rhs=shared.rhs(force_torque=W_s)))
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
 
         def products(q):
-            moved = work.mobility_problem(q)
+            moved = context.model.mobility_problem(q)
             return moved.M_dot(lam), moved.KT_dot(lam), moved.K_dot(U_R).reshape(-1)
 
         def displace(q, scale, direction):
@@ -393,14 +407,14 @@ class StochasticTractionEM(StochasticScheme):
         D_M, D_KT, D_K = rfd(products, old, W_rfd, self.delta, displace, centred=False,
                              at_configuration=products_at(problem, lam, U_R))
         if not self.thermal_drift:
-            return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT)
-        return problem, pc, noise, D_M - D_K, -D_KT
+            return problem, pc, noise, np.zeros_like(D_M), np.zeros_like(D_KT), state
+        return problem, pc, noise, D_M - D_K, -D_KT, state
 
-    def attempt(self, work, step_index, rng, old):
-        problem, pc, noise, drift_slip, drift_force = self.traction_terms(work, step_index, rng, old)
-        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise + drift_slip, noise_force=drift_force,
-                                   fresh_noise=True)
-        return self.move(old, U, self.dt), U
+    def attempt(self, context, state, old):
+        problem, pc, noise, drift_slip, drift_force, state = self.traction_terms(context, state, old)
+        U, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=noise + drift_slip,
+                                           noise_force=drift_force, fresh_noise=True)
+        return self.move(old, U, self.dt), U, state
 
 
 def products_at(problem, lam, U_R):
@@ -415,12 +429,13 @@ class StochasticTractionAB(StochasticTractionEM):
     """
     name = 'stochastic_traction_AB'
 
-    def attempt(self, work, step_index, rng, old):
-        problem, pc, noise, drift_slip, drift_force = self.traction_terms(work, step_index, rng, old)
-        U_new = self.deterministic_part(work, problem, old, pc, noise_slip=drift_slip, noise_force=drift_force)
-        U_n = self.noise_solve(work, problem, pc, noise_slip=noise).velocities
-        U = self.multistep(work, U_new, U_n)
-        return self.move(old, U, self.dt), U
+    def attempt(self, context, state, old):
+        problem, pc, noise, drift_slip, drift_force, state = self.traction_terms(context, state, old)
+        U_new, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=drift_slip,
+                                               noise_force=drift_force)
+        U_n = self.noise_solve(context, problem, pc, noise_slip=noise).velocities
+        U, state = self.multistep(state, U_new, U_n)
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticSlipTrapz(StochasticScheme):
@@ -436,25 +451,26 @@ class StochasticSlipTrapz(StochasticScheme):
     reuse_preconditioner = True
     solves_at_preconditioner = 3  # the slip RFD's, the predictor's and (reused) the corrector's
 
-    def attempt(self, work, step_index, rng, old):
-        n3 = 3 * work.num_blobs
+    def attempt(self, context, state, old):
+        rng = context.rng
+        n3 = 3 * context.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
 
         def rfd_solve_and_products(shared):  # W_R and the slip RFD's products at q, beside the Lanczos call
-            return self.slip_rfd_solve(work, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s)
+            return self.slip_rfd_solve(context, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s)
         n1, (W_R, at_q) = self.side_by_side(
-            work, problem, lambda shared: self.lanczos_noise(work, shared, W1, self.noise_factor(), pc),
+            context, problem, lambda shared: self.lanczos_noise(context, shared, W1, self.noise_factor(), pc),
             rfd_solve_and_products)
-        drift_slip, drift_force = self.slip_rfd(work, old, problem, W_s, pc, 2.0 * self.kT / self.delta, W_R=W_R,
-                                                at_configuration=at_q)
-        U1 = self.deterministic_part(work, problem, old, pc, noise_slip=n1, fresh_noise=True)
-        U2 = self.corrector_velocities(work, old, U1, self.dt, n1 + drift_slip, drift_force,
-                                       pc if self.reuse_preconditioner else None)  # at the predictor
+        drift_slip, drift_force = self.slip_rfd(context, old, problem, W_s, pc, 2.0 * self.kT / self.delta,
+                                                W_R=W_R, at_configuration=at_q)
+        U1, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=n1, fresh_noise=True)
+        U2, state = self.corrector_velocities(context, state, old, U1, self.dt, n1 + drift_slip, drift_force,
+                                              pc if self.reuse_preconditioner else None)  # at the predictor
         U = 0.5 * (U1 + U2)
-        return self.move(old, U, self.dt), U
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticSlipMid(StochasticScheme):
@@ -464,25 +480,28 @@ class StochasticSlipMid(StochasticScheme):
     """
     name = 'stochastic_Slip_Mid'
 
-    def attempt(self, work, step_index, rng, old):
-        n3 = 3 * work.num_blobs
+    def attempt(self, context, state, old):
+        rng = context.rng
+        n3 = 3 * context.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
 
         def second_noise_and_rfd(shared):  # beside the first Lanczos call: the second one, W_R and M W_s at q
-            return (self.lanczos_noise(work, shared, W1 + W3, np.sqrt(self.kT / self.dt), pc),
-                    self.slip_rfd_solve(work, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s))
+            return (self.lanczos_noise(context, shared, W1 + W3, np.sqrt(self.kT / self.dt), pc),
+                    self.slip_rfd_solve(context, shared, W_s, pc), self.slip_rfd_products_at(shared, W_s))
         n1, (n_c, W_R, at_q) = self.side_by_side(
-            work, problem, lambda shared: self.lanczos_noise(work, shared, W1, np.sqrt(4.0 * self.kT / self.dt), pc),
+            context, problem,
+            lambda shared: self.lanczos_noise(context, shared, W1, np.sqrt(4.0 * self.kT / self.dt), pc),
             second_noise_and_rfd)
-        U_m = self.deterministic_part(work, problem, old, pc, noise_slip=n1, fresh_noise=True)
-        drift_slip, drift_force = self.slip_rfd(work, old, problem, W_s, pc, self.kT / self.delta, W_R=W_R,
+        U_m, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=n1, fresh_noise=True)
+        drift_slip, drift_force = self.slip_rfd(context, old, problem, W_s, pc, self.kT / self.delta, W_R=W_R,
                                                 at_configuration=at_q)
-        U = self.corrector_velocities(work, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force, pc)  # midpoint
-        return self.move(old, U, self.dt), U
+        U, state = self.corrector_velocities(context, state, old, U_m, 0.5 * self.dt, n_c + drift_slip, drift_force,
+                                             pc)  # at the midpoint
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticEM(StochasticScheme):
@@ -497,16 +516,16 @@ class StochasticEM(StochasticScheme):
     """
     name = 'stochastic_EM'
 
-    def attempt(self, work, step_index, rng, old):
-        W = rng.standard_normal(3 * work.num_blobs)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
-        noise = self.lanczos_noise(work, problem, W, self.noise_factor(), pc)
-        U = self.deterministic_part(work, problem, old, pc, noise_slip=noise, fresh_noise=True)
-        return self.move(old, U, self.dt), U
+    def attempt(self, context, state, old):
+        W = context.rng.standard_normal(3 * context.num_blobs)
+        problem = context.model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
+        noise = self.lanczos_noise(context, problem, W, self.noise_factor(), pc)
+        U, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=noise, fresh_noise=True)
+        return self.move(old, U, self.dt), U, state
 
 
-def rigid_projection(work, configuration, blob_velocities):
+def rigid_projection(model, configuration, blob_velocities):
     """The unconstrained solve: ``(K^T K)^+ K^T v`` at ``configuration``, body velocities (Nb, 6).
 
     blob_velocities v (3N,) or (N, 3).  It is the solve of the saddle-point
@@ -516,8 +535,8 @@ def rigid_projection(work, configuration, blob_velocities):
     block per body, built from six products), so the cost is O(N); the
     pseudo-inverse handles single-blob bodies (no rotational block).
     """
-    arrays = work.arrays
-    nb = work.num_bodies
+    arrays = model.arrays
+    nb = model.num_bodies
     r = arrays.blob_positions(configuration)
     gram = np.empty((nb, 6, 6))
     for k in range(6):
@@ -562,29 +581,30 @@ class StochasticGDCRFD(StochasticScheme):
     """
     name = 'stochastic_GDC_RFD'
 
-    def attempt(self, work, step_index, rng, old):
-        W = rng.standard_normal(3 * work.num_blobs)
-        W_rfd = rng.standard_normal(6 * work.num_bodies).reshape(-1, 6)
-        problem = work.mobility_problem(old)
-        pc = self.preconditioner(work, step_index, problem)
+    def attempt(self, context, state, old):
+        rng, model = context.rng, context.model
+        W = rng.standard_normal(3 * context.num_blobs)
+        W_rfd = rng.standard_normal(6 * context.num_bodies).reshape(-1, 6)
+        problem = model.mobility_problem(old)
+        pc, state = self.preconditioner(context, state, problem)
         factor = self.noise_factor()
-        U_tilde = rigid_projection(work, old, self.lanczos_noise(work, problem, W, factor, pc))
+        U_tilde = rigid_projection(model, old, self.lanczos_noise(context, problem, W, factor, pc))
         divergence = 0.0
         if self.thermal_drift and self.kT > 0:
-            lengths = self.body_lengths(work)
+            lengths = self.body_lengths(context)
             q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
-            noise_rfd = self.lanczos_noise(work, work.mobility_problem(q_rfd), W, factor, pc)
-            U_rfd = rigid_projection(work, q_rfd, noise_rfd)
+            noise_rfd = self.lanczos_noise(context, model.mobility_problem(q_rfd), W, factor, pc)
+            U_rfd = rigid_projection(model, q_rfd, noise_rfd)
             W_tilde = W_rfd.copy()
             W_tilde[:, :3] /= lengths[:, None]
             divergence = float(np.sum((U_rfd - U_tilde) * W_tilde)) / self.delta
         mid = self.move(old, U_tilde, 0.5 * self.dt)
-        self.check(work, mid)
-        problem_mid = work.mobility_problem(mid)
-        noise_mid = self.lanczos_noise(work, problem_mid, W, factor, pc)
-        U = self.deterministic_part(work, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
+        self.check(context, state, mid)
+        problem_mid = model.mobility_problem(mid)
+        noise_mid = self.lanczos_noise(context, problem_mid, W, factor, pc)
+        U, state = self.deterministic_part(context, state, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
         U = U * (1.0 + 0.5 * self.dt * divergence)
-        return self.move(old, U, self.dt), U
+        return self.move(old, U, self.dt), U, state
 
 
 # ====================================================================== rigid multiblob, dense algebra
@@ -593,11 +613,11 @@ class DenseScheme(StochasticScheme):
     dense = True
 
     @staticmethod
-    def dense_velocity(work, configuration, matrices):
-        """``N (F - K^T M^{-1} slip)`` at ``configuration`` with the given dense matrices (built there)."""
+    def dense_velocity(context, state, configuration, matrices):
+        """(``N (F - K^T M^{-1} slip)`` at ``configuration`` with the given dense matrices (built there), state)."""
         M, M_inv, K, N = matrices
-        _, force_torque, slip = work.forces_and_slip(configuration)
-        return (N @ (force_torque.reshape(-1) - K.T @ (M_inv @ slip.reshape(-1)))).reshape(-1, 6)
+        (_, force_torque, slip), state = context.forces_and_slip(state, configuration)
+        return (N @ (force_torque.reshape(-1) - K.T @ (M_inv @ slip.reshape(-1)))).reshape(-1, 6), state
 
 
 class StochasticFirstOrderRFDDense(DenseScheme):
@@ -607,26 +627,27 @@ class StochasticFirstOrderRFDDense(DenseScheme):
     """
     name = 'stochastic_first_order_RFD_dense_algebra'
 
-    def attempt(self, work, step_index, rng, old):
-        nb6 = 6 * work.num_bodies
+    def attempt(self, context, state, old):
+        rng, model = context.rng, context.model
+        nb6 = 6 * context.num_bodies
         W_rfd = rng.standard_normal(nb6)
         z = rng.standard_normal(nb6)
-        matrices = work.dense_matrices(old)
+        matrices = model.dense_matrices(old)
         N = matrices[3]
-        U = self.dense_velocity(work, old, matrices).reshape(-1)
-        U = U + self.noise_factor() * (symmetric_root_matrix(N) @ z)
-        lengths = self.body_lengths(work)
+        U, state = self.dense_velocity(context, state, old, matrices)
+        U = U.reshape(-1) + self.noise_factor() * (symmetric_root_matrix(N) @ z)
+        lengths = self.body_lengths(context)
         W_tilde = W_rfd.reshape(-1, 6).copy()
         W_tilde[:, :3] /= lengths[:, None]
         W_tilde = W_tilde.reshape(-1)
 
         def displace(q, scale, direction):
             return displace_bodies(q, scale, direction, lengths)
-        drift = rfd(lambda q: work.dense_matrices(q)[3] @ W_tilde, old, W_rfd, self.delta, displace,
+        drift = rfd(lambda q: model.dense_matrices(q)[3] @ W_tilde, old, W_rfd, self.delta, displace,
                     centred=False, at_configuration=N @ W_tilde)
         c = self.kT if self.thermal_drift else 0.0
         U = (U + c * drift).reshape(-1, 6)
-        return self.move(old, U, self.dt), U
+        return self.move(old, U, self.dt), U, state
 
 
 def root_and_pseudo_inverse_root(N, rcond=1e-14):
@@ -659,22 +680,24 @@ class Fixman(DenseScheme):
     """
     name = 'Fixman'
 
-    def attempt(self, work, step_index, rng, old):
-        nb6 = 6 * work.num_bodies
+    def attempt(self, context, state, old):
+        rng, model = context.rng, context.model
+        nb6 = 6 * context.num_bodies
         W1 = rng.standard_normal(nb6)
         W2 = rng.standard_normal(nb6)
-        matrices = work.dense_matrices(old)
+        matrices = model.dense_matrices(old)
         N = matrices[3]
         root, inverse_root = root_and_pseudo_inverse_root(N)
-        U_p = self.dense_velocity(work, old, matrices).reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
+        U_p, state = self.dense_velocity(context, state, old, matrices)
+        U_p = U_p.reshape(-1) + np.sqrt(4.0 * self.kT / self.dt) * (root @ W1)
         corrector = np.sqrt(self.kT / self.dt) * (inverse_root @ (W1 + W2))  # pinv(N) N^{1/2} (W1 + W2)
         mid = self.move(old, U_p, 0.5 * self.dt)
-        self.check(work, mid)
-        matrices_mid = work.dense_matrices(mid)
+        self.check(context, state, mid)
+        matrices_mid = model.dense_matrices(mid)
         N_corrector = matrices_mid[3] if self.thermal_drift else N
-        U = self.dense_velocity(work, mid, matrices_mid).reshape(-1) + N_corrector @ corrector
-        U = U.reshape(-1, 6)
-        return self.move(old, U, self.dt), U
+        U, state = self.dense_velocity(context, state, mid, matrices_mid)
+        U = (U.reshape(-1) + N_corrector @ corrector).reshape(-1, 6)
+        return self.move(old, U, self.dt), U, state
 
 
 class StochasticSlipMidDLA(DenseScheme):
@@ -684,32 +707,35 @@ class StochasticSlipMidDLA(DenseScheme):
     """
     name = 'stochastic_Slip_Mid_DLA'
 
-    def attempt(self, work, step_index, rng, old):
-        n3 = 3 * work.num_blobs
+    def attempt(self, context, state, old):
+        rng, model = context.rng, context.model
+        n3 = 3 * context.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        matrices = work.dense_matrices(old)
+        matrices = model.dense_matrices(old)
         M, M_inv, K, N = matrices
-        U_m = self.dense_velocity(work, old, matrices).reshape(-1)
+        U_m, state = self.dense_velocity(context, state, old, matrices)
+        U_m = U_m.reshape(-1)
         W_R = N @ (K.T @ (M_inv @ W_s))
         M_half = symmetric_root_matrix(M)
         U_m = U_m + np.sqrt(4.0 * self.kT / self.dt) * (N @ (K.T @ (M_inv @ (M_half @ W1))))
 
         def products(q):
-            M_q, _, K_q, _ = work.dense_matrices(q, inverse=False)
+            M_q, _, K_q, _ = model.dense_matrices(q, inverse=False)
             return M_q @ W_s, K_q.T @ W_s
         D_M, D_KT = rfd(products, old, W_R.reshape(-1, 6), self.delta, displace_bodies, centred=False,
                         at_configuration=(M @ W_s, K.T @ W_s))
         mid = self.move(old, U_m.reshape(-1, 6), 0.5 * self.dt)
-        self.check(work, mid)
-        matrices_mid = work.dense_matrices(mid)
+        self.check(context, state, mid)
+        matrices_mid = model.dense_matrices(mid)
         _, M_inv_mid, K_mid, N_mid = matrices_mid
         c = self.kT if self.thermal_drift else 0.0
-        U = self.dense_velocity(work, mid, matrices_mid).reshape(-1) + N_mid @ (
+        U, state = self.dense_velocity(context, state, mid, matrices_mid)
+        U = U.reshape(-1) + N_mid @ (
             -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
         U = U.reshape(-1, 6)
-        return self.move(old, U, self.dt), U
+        return self.move(old, U, self.dt), U, state
 
 
 # the roller schemes are in quaternion_integrator/roller_schemes.py

@@ -118,3 +118,23 @@ def make(kind, seed=None):
 def is_legacy_state(state):
     """Whether ``state`` (a ``bit_generator.state`` dict) is the legacy state of a published generator."""
     return isinstance(state, dict) and 'has_gauss' in state
+
+
+def from_state(state):
+    """A new generator continuing ``state`` (a ``bit_generator.state`` dict, as a run state holds it).
+
+    The legacy state of a published generator (``is_legacy_state``: with the cached Gaussian) gives a
+    :class:`PublishedGenerator`; any other gives ``numpy.random.Generator`` on the bit generator the state names
+    (PCG64, MT19937, ...).  Drawing from it gives the numbers the generator whose state it is would have drawn.
+    """
+    if is_legacy_state(state):
+        generator = PublishedGenerator()
+        generator.bit_generator.state = state
+        return generator
+    name = state.get('bit_generator') if isinstance(state, dict) else None
+    bit_generator_class = getattr(np.random, str(name), None)
+    if not (isinstance(bit_generator_class, type) and issubclass(bit_generator_class, np.random.BitGenerator)):
+        raise ValueError('not the state of a numpy bit generator: %r' % (name,))
+    bit_generator = bit_generator_class(0)
+    bit_generator.state = state
+    return np.random.Generator(bit_generator)

@@ -7,20 +7,30 @@ repeats the uninterrupted run bit for bit."""
 import numpy as np
 import pytest
 
-from quaternion_integrator.scheme_state import RunState, StepWork
+from quaternion_integrator.scheme_state import RunState
 from quaternion_integrator.schemes import make_scheme
 from test_neighbour_preconditioner import boomerang_model, grid
 
 
-class _Work:
-    def __init__(self, model, first_guess=None, earlier_guesses=None):
-        self.model, self.first_guess, self.earlier_guesses = model, first_guess, earlier_guesses
+class _Context:
+    """What keep_guess and warm_guess read of a step's context: the model's ``published_solves``."""
+
+    def __init__(self, preconditioner):
+        self.model = _Model(preconditioner)
 
 
 class _Model:
     def __init__(self, preconditioner):
         self.preconditioner = preconditioner
         self.published_solves = preconditioner == 'block_diagonal'
+
+
+def _kept(scheme, context, solutions):
+    """The history (a RunState) after keeping ``solutions`` in turn."""
+    state = RunState(None)
+    for solution in solutions:
+        state = scheme.keep_guess(context, state, solution)
+    return state
 
 
 @pytest.mark.parametrize('scheme_name', ['deterministic_forward_euler', 'deterministic_adams_bashforth',
@@ -31,28 +41,23 @@ def test_extrapolation_reproduces_polynomials_of_its_degree(scheme_name):
     rng = np.random.default_rng(0)
     a, b, c = rng.normal(size=(3, 7))
     scheme = make_scheme(scheme_name, 0.1)
-    work = _Work(_Model('auto'))
-    for k in range(3):
-        scheme.keep_guess(work, a + b * k + c * k * k)
-    np.testing.assert_allclose(scheme.warm_guess(work), a + 3 * b + 9 * c, rtol=0, atol=1e-12)
-    linear = _Work(_Model('auto'))
-    for k in range(2):
-        scheme.keep_guess(linear, a + b * k)
-    np.testing.assert_allclose(scheme.warm_guess(linear), a + 2 * b, rtol=0, atol=1e-12)
-    published = _Work(_Model('block_diagonal'))
-    for k in range(3):
-        scheme.keep_guess(published, a + b * k + c * k * k)
-    assert published.earlier_guesses is None
-    np.testing.assert_array_equal(scheme.warm_guess(published), a + 2 * b + 4 * c)  # the last solution
+    auto = _Context('auto')
+    state = _kept(scheme, auto, [a + b * k + c * k * k for k in range(3)])
+    np.testing.assert_allclose(scheme.warm_guess(auto, state), a + 3 * b + 9 * c, rtol=0, atol=1e-12)
+    linear = _kept(scheme, auto, [a + b * k for k in range(2)])
+    np.testing.assert_allclose(scheme.warm_guess(auto, linear), a + 2 * b, rtol=0, atol=1e-12)
+    published = _Context('block_diagonal')
+    state = _kept(scheme, published, [a + b * k + c * k * k for k in range(3)])
+    assert state.earlier_guesses is None
+    np.testing.assert_array_equal(scheme.warm_guess(published, state), a + 2 * b + 4 * c)  # the last solution
 
 
 def test_stochastic_schemes_keep_the_last_solution():
     scheme = make_scheme('stochastic_Slip_Trapz', 0.1)
-    work = _Work(_Model('auto'))
-    for k in range(3):
-        scheme.keep_guess(work, np.full(4, float(k)))
-    assert work.earlier_guesses is None
-    np.testing.assert_array_equal(scheme.warm_guess(work), np.full(4, 2.0))
+    auto = _Context('auto')
+    state = _kept(scheme, auto, [np.full(4, float(k)) for k in range(3)])
+    assert state.earlier_guesses is None
+    np.testing.assert_array_equal(scheme.warm_guess(auto, state), np.full(4, 2.0))
 
 
 def _run(model, scheme_name, steps, state=None):
@@ -89,7 +94,7 @@ def test_restart_from_the_history_repeats_the_run_bit_for_bit():
     history = half.history()
     assert history['earlier_guesses'].shape == (2, half.first_guess.size)
     restarted = scheme.init(model, half.configuration, half.step, history=history)
-    assert isinstance(restarted, RunState) and isinstance(StepWork(model, restarted).earlier_guesses, np.ndarray)
+    assert isinstance(restarted, RunState) and isinstance(restarted.earlier_guesses, np.ndarray)
     _, rest = _run(model, 'deterministic_adams_bashforth', 3, state=restarted)
     np.testing.assert_array_equal(rest.configuration.locations, whole.configuration.locations)
     np.testing.assert_array_equal(rest.configuration.orientations, whole.configuration.orientations)

@@ -8,6 +8,8 @@ keep their preconditioner (one build for several steps), reach the published tra
 tolerance allows, build a new one when a solve has taken ``KEPT_WEAR_ITERATIONS`` more iterations than the
 fewest, and a restart from the saved history repeats the run bit for bit.
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -131,23 +133,20 @@ def test_a_worn_preconditioner_is_built_anew(monkeypatch):
     """The served counts: the fewest iterations are remembered; a solve with KEPT_WEAR_ITERATIONS more ends the
     preconditioner (the next solve builds one, weighed against the solves it served before the worn one, at
     most KEPT_SOLVES_WEIGHED, averaged with the weight before); fewer more than the fewest does not."""
-    class Work:
-        preconditioner, preconditioner_configuration = object(), object()
-        preconditioner_solves, preconditioner_fewest, preconditioner_lifetime = 0, None, None
-    work = Work()
+    state = RunState(None, preconditioner=object(), preconditioner_configuration=object(), preconditioner_solves=0)
     wear = scheme_base.KEPT_WEAR_ITERATIONS
     for iterations in (6, 4, 4 + wear - 1):
-        scheme_base.Scheme.served(work, iterations)
-    assert (work.preconditioner_solves, work.preconditioner_fewest) == (3, 4)
-    assert work.preconditioner is not None
-    scheme_base.Scheme.served(work, 4 + wear)
-    assert work.preconditioner is None and work.preconditioner_configuration is None
-    assert work.preconditioner_solves is None and work.preconditioner_lifetime == 3
+        state = scheme_base.Scheme.served(state, iterations)
+    assert (state.preconditioner_solves, state.preconditioner_fewest) == (3, 4)
+    assert state.preconditioner is not None
+    state = scheme_base.Scheme.served(state, 4 + wear)
+    assert state.preconditioner is None and state.preconditioner_configuration is None
+    assert state.preconditioner_solves is None and state.preconditioner_lifetime == 3
     # the next one wears after serving one solve: the weight is the mean of 3 and 1, rounded up
-    work.preconditioner, work.preconditioner_configuration, work.preconditioner_solves = object(), object(), 0
+    state = replace(state, preconditioner=object(), preconditioner_configuration=object(), preconditioner_solves=0)
     for iterations in (4, 4 + wear):
-        scheme_base.Scheme.served(work, iterations)
-    assert work.preconditioner is None and work.preconditioner_lifetime == 2
+        state = scheme_base.Scheme.served(state, iterations)
+    assert state.preconditioner is None and state.preconditioner_lifetime == 2
     # the next build is weighed against the solves this one served
     asked = count_builds(monkeypatch)
     model = boomerang_model(grid(4, 4.0), seed=1, preconditioner='auto')

@@ -12,7 +12,7 @@ import scipy.linalg as sla
 
 from multi_bodies.files.input_options import options_with
 from multi_bodies.solver import noise_factor
-from quaternion_integrator.scheme_state import StepWork
+from quaternion_integrator.scheme_state import StepContext
 from quaternion_integrator.schemes import make_scheme
 from multi_bodies.solver.neighbour_preconditioner import neighbour_pairs
 from test_neighbour_preconditioner import boomerang_model
@@ -259,7 +259,7 @@ def test_roller_noise_with_the_factor_has_covariance_m_in_fewer_iterations():
 
 
 def test_sampled_noise_of_a_step_has_covariance_m_and_the_transposed_factor_fails():
-    """The noise a scheme draws (``scheme.lanczos_noise`` over a StepWork, the preconditioner the scheme builds):
+    """The noise a scheme draws (``scheme.lanczos_noise`` over a StepContext, the preconditioner the scheme builds):
     1000 samples on six close boomerangs (90 blobs) at ``noise_solver_tolerance`` 1e-4; probe z-scores below
     4.5 (relative SE sqrt(2/1000)) and the Frobenius statistic below 1.25 (1 for exact noise, see
     test_stochastic); the same Lanczos multiplied by ``L^T`` instead of ``L`` gives a statistic above 1.6."""
@@ -267,15 +267,16 @@ def test_sampled_noise_of_a_step_has_covariance_m_and_the_transposed_factor_fail
     scheme = make_scheme('stochastic_Slip_Trapz', 0.01,
                          options_with(noise_solver_tolerance=1e-4, lanczos_preconditioner='incomplete_cholesky'))
     state = scheme.init(model, model.start_configuration)
-    work = StepWork(model, state)
+    context = StepContext(model, state.step)
     problem = model.mobility_problem(state.configuration)
-    built = scheme.preconditioner(work, 0, problem)
+    built, _ = scheme.preconditioner(context, state, problem)
     assert built.noise_factor.pairs.size
     M = model.dense_matrices(state.configuration, inverse=False)[0]
     probes = probe_directions(M, 7)
     rng = np.random.default_rng(8)
     n = 3 * model.num_blobs
-    ours = np.array([scheme.lanczos_noise(work, problem, rng.standard_normal(n), 1.0, built) for _ in range(1000)])
+    ours = np.array([scheme.lanczos_noise(context, problem, rng.standard_normal(n), 1.0, built)
+                     for _ in range(1000)])
     assert np.max(np.abs(covariance_z_scores(ours, M, probes))) < 4.5
     assert frobenius_statistic(ours, M) < 1.25
     L = dense_blocks(built.noise_factor)

@@ -31,7 +31,7 @@ from multi_bodies import multi_bodies_functions as mbf
 from multi_bodies.files import structure_generators as gen
 from multi_bodies.files.input_options import options_with
 from multi_bodies.solver.model import Model
-from quaternion_integrator.scheme_state import StepWork
+from quaternion_integrator.scheme_state import StepContext
 from quaternion_integrator import stochastic_schemes
 from quaternion_integrator.schemes import make_scheme
 from stochastic_forcing import lanczos_square_root, symmetric_root
@@ -237,7 +237,7 @@ def transposed_factor_samples(problem, pc, rng, count):
 def test_preconditioned_lanczos_covariance_multiblob():
     """With the block Cholesky preconditioner the noise covariance is M; the 2017 transposed factor fails.
 
-    The noise is drawn through the production path: the schemes' ``lanczos_noise`` (a step's StepWork over
+    The noise is drawn through the production path: the schemes' ``lanczos_noise`` (a step's StepContext over
     the model, ``Model.lanczos_noise`` with the preconditioner a scheme builds), so a change of that wiring
     (a dropped or transposed factor L) fails here.  1000 samples on 5 multi-blob bodies (69 blobs): probes
     |z| < 4.5 and Frobenius statistic < 1.25 for ours; the transposed factor gives a statistic above 1.6
@@ -247,13 +247,13 @@ def test_preconditioned_lanczos_covariance_multiblob():
     system = make_system(bodies, types).replace(blob_radius=0.3, eta=ETA)
     scheme = make_scheme('stochastic_first_order_RFD', 0.01, options_with(noise_solver_tolerance=1e-4))
     state = scheme.init(system, system.start_configuration)
-    work = StepWork(system, state)
+    context = StepContext(system, state.step)
     problem = system.mobility_problem(state.configuration)
-    pc = scheme.preconditioner(work, 0, problem)
+    pc, _ = scheme.preconditioner(context, state, problem)
     M = mobility.blob_mobility_matrix('python')(problem.r_vectors, ETA, 0.3)
     probes = probe_directions(M, 7)
     rng = np.random.default_rng(8)
-    ours = np.array([scheme.lanczos_noise(work, problem, rng.standard_normal(3 * problem.num_blobs), 1.0, pc)
+    ours = np.array([scheme.lanczos_noise(context, problem, rng.standard_normal(3 * problem.num_blobs), 1.0, pc)
                      for _ in range(1000)])
     assert np.max(np.abs(covariance_z_scores(ours, M, probes))) < 4.5
     assert frobenius_statistic(ours, M) < 1.25
@@ -271,10 +271,10 @@ def test_lanczos_non_convergence_is_reported():
     system = make_system(bodies, [40], tolerance=1e-12).replace(lanczos_max_iterations=3)
     scheme = make_scheme('stochastic_first_order_RFD', 0.01, Opts())
     start = scheme.init(system, system.start_configuration)
-    work = StepWork(system, start)
+    context = StepContext(system, start.step)
     with pytest.warns(RuntimeWarning, match='Lanczos did not converge'):
-        work.lanczos_noise(system.mobility_problem(start.configuration), np.ones(120), 1.0)
-    state = work.state(start, start.configuration, 1, None)
+        context.lanczos_noise(system.mobility_problem(start.configuration), np.ones(120), 1.0)
+    state = context.next_state(start, start, start.configuration, 1, None)
     assert state.counters.info()['lanczos_not_converged_count'] == 1
     assert state.counters.lanczos_iterations == 3
 
@@ -331,8 +331,8 @@ def test_rigid_body_rfd_drift_of_one_blob():
     old = system.start_configuration
     pc = system.build_preconditioner(old)
     rng = np.random.default_rng(15)
-    work = StepWork(system, scheme.init(system, old))
-    draws = np.array([scheme.rfd_drift(work, old, rng.standard_normal((1, 6)), pc)[0]
+    context = StepContext(system)
+    draws = np.array([scheme.rfd_drift(context, old, rng.standard_normal((1, 6)), pc)[0]
                       for _ in range(1000)])
     mean, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(draws.shape[0])
     exact = np.zeros(6)

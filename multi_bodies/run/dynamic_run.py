@@ -77,10 +77,11 @@ class DynamicRun:
             from multi_bodies.run.concentration_output import is_phoretic, kept_bytes
             if is_phoretic(self.system):
                 self.concentration_keep = kept_bytes(options, self.restart)
-        self.rng = run_output.make_generator(options)
+        self.rng = run_output.make_generator(options)  # its state goes into the run state (RunState.rng_state)
         self.rng_from_restart = False
         model = self.system
-        start = self.scheme.init(model, model.start_configuration, step=options.initial_step)
+        start = self.scheme.init(model, model.start_configuration, step=options.initial_step,
+                                 rng_state=self.rng.bit_generator.state)
         if self.restart is not None and self.restart.get('state') and use_record:
             state = self.restart['state']
             if state.get('rng') is not None:
@@ -95,7 +96,8 @@ class DynamicRun:
                     np.allclose(saved[0], current, rtol=0, atol=1e-12 * (1 + np.max(np.abs(saved[0])))):
                 configuration = Configuration(saved[0], saved[1])
             start = self.scheme.init(model, configuration, step=options.initial_step, history=state.get('scheme'),
-                                     counters=Counters.from_info(state.get('counters')))
+                                     counters=Counters.from_info(state.get('counters')),
+                                     rng_state=self.rng.bit_generator.state)
         elif options.initial_step > 0:
             log('initial_step %d: no restart record in %s%s; the generator starts from seed/random_state and '
                 'multistep schemes restart with one first-order step (as the published code does)'
@@ -110,7 +112,7 @@ class DynamicRun:
         """The restart record's state of RunState ``state`` (configuration, generator, history, counters)."""
         locations, orientations = state.configuration.copy_arrays()
         return {'locations': locations, 'orientations': orientations,
-                'rng': self.rng.bit_generator.state, 'scheme': state.history(),
+                'rng': state.rng_state, 'scheme': state.history(),
                 'counters': self.counters(state)}
 
     def counters(self, state):
@@ -162,13 +164,11 @@ class DynamicRun:
         def advance(step):
             nonlocal state
             assert state.step == step, 'the run state is at step %d, the loop at %d' % (state.step, step)
-            generator_before = self.rng.bit_generator.state  # a signal may abandon the step: back to here
             try:
                 with stop.interrupting():
-                    state = scheme.step(model, state, self.rng)
+                    state = scheme.step(model, state)  # draws from a generator of state.rng_state
             except run_output.StepInterrupted:
-                if state.step == step:  # abandoned: the state is the one before the step, so is the generator
-                    self.rng.bit_generator.state = generator_before
+                if state.step == step:  # abandoned: the state (and its generator's) is the one before the step
                     raise run_output.StepInterrupted(completed=False)
                 raise run_output.StepInterrupted(completed=True)
             except utils.SimulationStopped as err:  # the counts of the stopped step reach .info
