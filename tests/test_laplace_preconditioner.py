@@ -130,13 +130,14 @@ def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve
     it this one from AUTO_MIN_BLOBS blobs on (here 126 blobs: none, then the threshold lowered: this one)."""
     from multi_bodies.solver import surface as surface_module
     from multi_bodies.solver.model import Model
+    from multi_bodies.solver.solves import Solver
     seen = []
-    original = Model.solve
+    original = Solver.solve
 
     def spy(self, problem, rhs, preconditioner, **kwargs):
         seen.append(preconditioner)
         return original(self, problem, rhs, preconditioner, **kwargs)
-    monkeypatch.setattr(Model, 'solve', spy)
+    monkeypatch.setattr(Solver, 'solve', spy)
     problem, offsets = janus_scene(3, 42, 2.6)
 
     class Arrays:
@@ -144,12 +145,12 @@ def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve
 
     class FakeModel:  # what Surface.solve_concentrations reads of a Model
         arrays = Arrays()
-        solve = spy
+        solver = Model.solver
         tolerance, print_residual = 1e-10, False
 
         def __init__(self, preconditioner):
             self.preconditioner = preconditioner
-            self.published_solves = preconditioner == 'block_diagonal'  # read by Model.solve
+            self.published_solves = preconditioner == 'block_diagonal'  # read by Model.solver
     surface = surface_module.Surface()
     monkeypatch.setattr(surface, 'laplace_problem', lambda model, configuration: problem)
     _, published = surface.solve_concentrations(FakeModel('block_diagonal'), None)
