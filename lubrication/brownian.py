@@ -37,6 +37,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.linear_map import FunctionMap, LinearProblem
 from multi_bodies.solver.solves import SOLVER_TOLERANCE
 from stochastic_forcing import lanczos_square_root
 from utils import UserInputError
@@ -151,7 +152,7 @@ class NearFieldRoot:
         return self.Delta_R @ x
 
 
-class TransposedLubricationProblem:
+class TransposedLubricationProblem(LinearProblem):
     """``(I + Delta_R M) V = W`` at one configuration (the drift's first solve): a problem of the one solve.
 
     Built on a :class:`LubricationProblem` (its M and Delta_R); ``preconditioner(tolerance)``:
@@ -161,7 +162,6 @@ class TransposedLubricationProblem:
 
     def __init__(self, problem):
         self.problem, self.size, self.num_bodies = problem, problem.size, problem.num_bodies
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, x):
         x = np.asarray(x, dtype=float).reshape(-1)
@@ -188,7 +188,7 @@ class TransposedLubricationProblem:
             y = forward.R_MB @ forward.factor.solve(rhs)
             y[isolated] = x[isolated]
             return y
-        return spla.LinearOperator((self.size, self.size), matvec=apply, dtype=float)
+        return FunctionMap(self.size, apply)
 
 
 BrownianIncrement = namedtuple('BrownianIncrement', ['velocities', 'noise_rhs', 'lanczos_iterations',

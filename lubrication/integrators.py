@@ -39,6 +39,7 @@ import scipy.sparse.linalg as spla
 
 from body.geometry import rotate_quaternions
 from multi_bodies.solver.body_solver import SolutionParts, kept_fewest
+from multi_bodies.solver.linear_map import FunctionMap, LinearProblem
 from stochastic_forcing import lanczos_square_root
 
 from .brownian import NearFieldRoot, brownian_rhs, far_field_drift, thermal_drift
@@ -188,7 +189,7 @@ def omega_vectors(omega, n):
     return np.broadcast_to(omega_array, (n, 3)).astype(float)
 
 
-class TorqueFromOmegaProblem:
+class TorqueFromOmegaProblem(LinearProblem):
     """Unknowns ``x = [V_i, T_i]`` (N, 6): translational velocities and torques, given forces F and angular
     velocities Omega.  From ``(I + M Delta_R) [V; Omega] = M [F; T]``:
     ``[V; 0] + M Delta_R [V; 0] - M [0; T] = M [F; 0] - [0; Omega] - M Delta_R [0; Omega]``.
@@ -198,7 +199,6 @@ class TorqueFromOmegaProblem:
     def __init__(self, problem, eta, a):
         self.problem, self.size, self.num_bodies = problem, problem.size, problem.num_bodies
         self.eta, self.a = eta, a
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def _split(self, x):
         x = np.asarray(x, dtype=float).reshape(-1, 6)
@@ -234,7 +234,7 @@ class TorqueFromOmegaProblem:
 def torque_preconditioner(Delta_R, eta, a):
     """The preconditioner of :class:`TorqueFromOmegaProblem` from the near field ``Delta_R`` (6N, 6N) of some
     configuration: M replaced by the isolated sphere's mobilities, one sparse LU of ``6 pi eta a I + Delta_R_tt``
-    (as published).  A LinearOperator (6N, 6N)."""
+    (as published).  A ``linear_map.FunctionMap`` (6N, 6N)."""
     size = Delta_R.shape[0]
     trans = (np.arange(size // 6)[:, None] * 6 + np.arange(3)).reshape(-1)
     rot = trans + 3
@@ -253,7 +253,7 @@ def torque_preconditioner(Delta_R, eta, a):
         out[trans] = velocity
         out[rot] = coupling @ velocity - r[rot] / rotational_mobility
         return out
-    return spla.LinearOperator((size, size), matvec=apply, dtype=float)
+    return FunctionMap(size, apply)
 
 
 def torque_from_omega(problem, forces, omega, tolerance=None, torque_cap=None, counts=None, kept=None,

@@ -19,6 +19,7 @@ import scipy.sparse.linalg as spla
 from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
                                 preferred_backend)
 from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.linear_map import LinearMap, LinearProblem
 from multi_bodies.solver.solves import Solver
 from utils import UserInputError
 
@@ -68,7 +69,7 @@ def far_field_product(r_vectors, mobility):
     return apply
 
 
-class LubricationPreconditioner:
+class LubricationPreconditioner(LinearMap):
     """``P^-1 x = (R_sup + s I)^-1 R_MB x`` (the published preconditioner of ``I + M Delta_R``).
 
     matrices : :data:`lubrication.assembly.LubricationMatrices`; shift : ``s`` (force per velocity; the
@@ -85,7 +86,7 @@ class LubricationPreconditioner:
         # R_sup + s I is symmetric: symmetric-mode ordering, pivots on the diagonal
         self.factor = spla.splu(shifted, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
                                 options={'SymmetricMode': True}) if size else None
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = size
 
     def apply(self, x):
         x = np.asarray(x, dtype=float).reshape(-1)
@@ -98,7 +99,7 @@ class LubricationPreconditioner:
         return y
 
 
-class LubricationProblem:
+class LubricationProblem(LinearProblem):
     """``(I + M Delta_R) U = X + M F`` of N spheres at one configuration: a problem of the one solve.
 
     Parameters
@@ -138,7 +139,6 @@ class LubricationProblem:
         self.size = 6 * self.num_bodies
         self.far_field = far_field if far_field is not None else far_field_mobility(eta, a, L, wall, implementation)
         self.mobility_product = far_field_product(locations, self.far_field)
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, x):
         """``(I + M Delta_R) x`` for x (6N,)."""

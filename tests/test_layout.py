@@ -191,3 +191,55 @@ def test_floor_checker_catches_an_upward_import(tmp_path):
     assert floor('multi_bodies.run.dynamic_run') > floor('multi_bodies.solver.planted')
     loop = {'a': {'b'}, 'b': {'a'}, 'c': set()}
     assert sorted(map(sorted, strongly_connected(loop))) == [['a', 'b'], ['c']]
+
+
+# ------------------------------------------------------------------ one way into the solve, one base of operators
+SOLVE_ENTRY = 'multi_bodies.solver.solves'  # Solver.solve: the only caller of body_solver.solve (issue 43)
+
+
+def solve_calls_and_operators(path):
+    """(lines calling the package's one solve ``body_solver.solve`` or importing it by name, lines constructing a
+    SciPy ``LinearOperator``) of one file, read with ``ast``."""
+    tree = ast.parse(path.read_text(), str(path))
+    solve_lines, operator_lines = [], []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or '').endswith('body_solver') and \
+                any(alias.name == 'solve' for alias in node.names):
+            solve_lines.append(node.lineno)
+        elif isinstance(node, ast.Call):
+            function = node.func
+            name = function.attr if isinstance(function, ast.Attribute) else getattr(function, 'id', None)
+            owner = function.value if isinstance(function, ast.Attribute) else None
+            if name == 'solve' and isinstance(owner, ast.Name) and owner.id == 'body_solver':
+                solve_lines.append(node.lineno)
+            if name == 'LinearOperator':
+                operator_lines.append(node.lineno)
+    return solve_lines, operator_lines
+
+
+def test_the_solve_has_one_way_in():
+    """Nothing of the package calls ``body_solver.solve`` but ``solves.Solver.solve`` (which counts by kind and stops
+    or flags a solve that did not converge), and nothing builds a ``LinearOperator`` but the one base of the
+    problems and preconditioners (``multi_bodies.solver.linear_map``); the published faces keep their own."""
+    bypass, operators = [], []
+    for name, path in sorted(package_modules().items()):
+        if name in PUBLISHED_FACES:
+            continue
+        solve_lines, operator_lines = solve_calls_and_operators(path)
+        if name != SOLVE_ENTRY:
+            bypass += ['%s:%d' % (name, line) for line in solve_lines]
+        if name != 'multi_bodies.solver.linear_map':
+            operators += ['%s:%d' % (name, line) for line in operator_lines]
+    assert not bypass, 'calls of body_solver.solve outside %s: %s' % (SOLVE_ENTRY, ', '.join(bypass))
+    assert not operators, 'LinearOperators built outside linear_map: %s' % ', '.join(operators)
+
+
+def test_the_one_way_check_catches_a_bypass(tmp_path):
+    """Negative control: a planted direct solve and a planted hand-built operator are found."""
+    planted = tmp_path / 'planted.py'
+    planted.write_text('import scipy.sparse.linalg as spla\nfrom multi_bodies.solver import body_solver\n'
+                       'from multi_bodies.solver.body_solver import solve\n'
+                       'def f(p, b):\n    op = spla.LinearOperator((2, 2), matvec=abs)\n'
+                       '    return body_solver.solve(p, b, None)\n')
+    solve_lines, operator_lines = solve_calls_and_operators(planted)
+    assert solve_lines == [3, 6] and operator_lines == [5]

@@ -51,12 +51,12 @@ from collections import namedtuple
 import numpy as np
 import scipy.optimize as scop
 import scipy.sparse as scsp
-import scipy.sparse.linalg as spla
 
 from body.body import as_configuration
 from body.geometry import rotation_matrices
 from multi_bodies.solver import articulated_preconditioner
 from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.linear_map import FunctionMap, LinearMap, LinearProblem
 from multi_bodies.files.expressions import parse_expression
 from utils import SimulationStopped, UserInputError, read_text_file
 
@@ -482,7 +482,7 @@ def _skew(v):
 # two joints on one hinge axis give a sixth one of the size of the axes' misalignment (the joints hold to
 # nonlinear_solver_tolerance, not exactly), which would make the solve ill-conditioned.
 RANK_RCOND = 1e-6
-class ArticulatedProblem:
+class ArticulatedProblem(LinearProblem):
     """The mobility problem with joints at one configuration (unknowns ``[lambda (3N), U (6Nb), psi]``).
 
     Reuses the products of a ``body_solver.MobilityProblem`` (``M_dot``, ``K_dot``, ``KT_dot``) and adds the
@@ -528,7 +528,6 @@ class ArticulatedProblem:
             self.offsets.append(self.offsets[-1] + Q.shape[1])
         self.num_multipliers = self.offsets[-1]
         self.size = 3 * self.num_blobs + 6 * self.num_bodies + self.num_multipliers
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def split(self, x):
         n3, n6 = 3 * self.num_blobs, 3 * self.num_blobs + 6 * self.num_bodies
@@ -593,7 +592,7 @@ class ArticulatedProblem:
         return np.matmul(self.projectors, U[:, :, None])[:, :, 0]
 
 
-class ArticulatedPreconditioner:
+class ArticulatedPreconditioner(LinearMap):
     """Block-diagonal body preconditioner plus the exact constraint Schur complement of each articulated body.
 
     For ``[s; f; b]``: ``(lambda0, U0) = P_body [s; f]``; per articulated body
@@ -613,7 +612,7 @@ class ArticulatedPreconditioner:
             for k, body in enumerate(group.body_indices):
                 N[6 * k:6 * k + 6, 6 * k:6 * k + 6] = mobilities[body]
             self.schur.append(np.linalg.pinv(QC @ N @ QC.T, rcond=1e-12, hermitian=True))
-        self.operator = spla.LinearOperator((problem.size, problem.size), matvec=self.apply, dtype=float)
+        self.size = problem.size
 
     def apply(self, x):
         problem = self.problem
@@ -644,7 +643,7 @@ def roller_mobility_product(system, r_vectors):
     return apply
 
 
-class RollerJointProblem:
+class RollerJointProblem(LinearProblem):
     """Single-blob bodies with joints at one configuration and time: the constraint Schur complement.
 
     ``U = M6 (F + C^T phi)`` with ``C U = B`` gives ``C M6 C^T phi = B - C M6 F`` (unknowns phi, size 3Nc);
@@ -664,7 +663,6 @@ class RollerJointProblem:
         self.eta, self.blob_radius = model.eta, model.blob_radius
         self.U_free = self.M6(force_torque)
         self.size = 3 * self.num_constraints
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, phi):
         articulated, a = self.articulated, self.a
@@ -699,7 +697,7 @@ class RollerJointProblem:
             for group, S in zip(articulated.groups, blocks):
                 out[group.constraint_indices] = (S @ r[group.constraint_indices].reshape(-1)).reshape(-1, 3)
             return out.reshape(-1)
-        return spla.LinearOperator((self.size, self.size), matvec=precondition, dtype=float)
+        return FunctionMap(self.size, precondition)
 
 
 def articulated_problem(model, articulated, configuration, t, force_torque=None, slip=None, single_blobs=False):

@@ -22,10 +22,10 @@ preconditioner is used.
 """
 import numpy as np
 import scipy.linalg
-import scipy.sparse.linalg as spla
 
 from body.body import K_matrices
 from multi_bodies.solver.body_solver import MobilityProblem, blob_mobility, radius_of_blobs
+from multi_bodies.solver.linear_map import LinearMap
 
 MAX_GROUP_BLOBS = 600  # a (1,800 + 6k + r)-square LU, about 2e9 flops, per articulated body and build
 # preconditioner auto: the groups are built when their LUs, sum of (3n)^3 / 3 flops, cost at most this many times
@@ -59,7 +59,7 @@ def lu_cost_in_products(group_blobs, num_blobs):
     return float(np.sum((3.0 * np.asarray(group_blobs, dtype=float)) ** 3) / 3.0) / (40.0 * float(num_blobs) ** 2)
 
 
-class GroupPreconditioner:
+class GroupPreconditioner(LinearMap):
     """``P ~ A^{-1}`` of an articulated problem: every articulated body's saddle-point system solved exactly.
 
     problem : articulated.ArticulatedProblem; arrays : body.body.BodyArrays; body_preconditioner : the model's,
@@ -107,7 +107,7 @@ class GroupPreconditioner:
             rows = np.concatenate(((3 * blobs[:, None] + np.arange(3)).reshape(-1),
                                    (n3 + 6 * bodies[:, None] + np.arange(6)).reshape(-1), n6 + np.arange(start, stop)))
             self.groups.append((rows, scipy.linalg.lu_factor(G, check_finite=False)))
-        self.operator = spla.LinearOperator((problem.size, problem.size), matvec=self.apply, dtype=float)
+        self.size = problem.size
 
     def apply(self, x):
         """The preconditioner applied to ``x = [s (3N); f (6Nb); b]`` (the articulated problem's layout)."""

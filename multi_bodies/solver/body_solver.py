@@ -37,7 +37,6 @@ from collections import namedtuple
 
 import numpy as np
 import scipy.linalg.lapack as _lapack
-import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions, saddle_point_product
 from mobility.interface import as_blob_mobility
@@ -45,6 +44,7 @@ from mobility.interface import as_blob_mobility
 from utils import SimulationStopped
 
 from . import krylov
+from .linear_map import LinearMap, LinearProblem
 
 try:  # the per-body block products in C++ (multi_bodies/solver/cpp/preconditioner_module.cpp); NumPy without it
     from . import _preconditioner_cpp
@@ -151,7 +151,7 @@ def mobility_rhs(force_torque, slip):
                            -np.asarray(force_torque, dtype=float).reshape(-1)))
 
 
-class MobilityProblem:
+class MobilityProblem(LinearProblem):
     """The saddle-point problem of all bodies at one configuration (a value: it copies what it is built at).
 
     Parameters
@@ -184,7 +184,6 @@ class MobilityProblem:
         self.num_blobs = self.r_vectors.shape[0]
         self.num_bodies = self.locations.shape[0]
         self.size = 3 * self.num_blobs + 6 * self.num_bodies
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
         self._projectors = None
 
     def with_mobility(self, mobility):
@@ -193,7 +192,6 @@ class MobilityProblem:
         import copy
         twin = copy.copy(self)
         twin.mobility = mobility
-        twin.operator = spla.LinearOperator((self.size, self.size), matvec=twin.matvec, dtype=float)
         return twin
 
     def project_forces(self, force_torque):
@@ -333,7 +331,7 @@ def lower_triangular_inverse(L):
     return np.tril(np.linalg.solve(L, np.broadcast_to(np.eye(L.shape[-1]), L.shape)))
 
 
-class BlockDiagonalPreconditioner:
+class BlockDiagonalPreconditioner(LinearMap):
     """Exact inverse of the saddle-point system of each body alone, at one configuration.
 
     For body k with dense blob mobility ``M_k`` (wall included, no periodic
@@ -415,8 +413,7 @@ class BlockDiagonalPreconditioner:
         if memo is not None and memo_bodies is not None:  # memo['blocks'] holds the last build's bodies only
             memo['blocks'] = kept
         n_blob_unknowns = 3 * body_arrays.num_blobs
-        size = n_blob_unknowns + 6 * body_arrays.num_bodies
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = n_blob_unknowns + 6 * body_arrays.num_bodies
 
     @property
     def locations(self):

@@ -23,10 +23,10 @@ The turned preconditioner changes GMRES iterates only within ``solver_tolerance`
 (``L_dot``, ``L_inv_dot``, ``L_inv_T_dot``) stay those of the build, so the noise is unchanged.
 """
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from body.geometry import rotation_matrices
 from multi_bodies.solver.body_solver import MobilityProblem
+from multi_bodies.solver.linear_map import LinearMap
 
 
 def body_turns(built_at, configuration):
@@ -36,7 +36,7 @@ def body_turns(built_at, configuration):
     return np.matmul(after, np.swapaxes(before, 1, 2))
 
 
-class CorotatedPreconditioner:
+class CorotatedPreconditioner(LinearMap):
     """``D P(q^build) D^T``: the preconditioner ``base`` built at ``q^build``, turned to a problem's orientations.
 
     Parameters
@@ -56,8 +56,7 @@ class CorotatedPreconditioner:
         self.turns = np.ascontiguousarray(turns, dtype=float)
         self.blob_turns = self.turns[np.asarray(blob_body_index)]
         self.num_blob_unknowns = 3 * self.blob_turns.shape[0]
-        size = self.num_blob_unknowns + 6 * self.turns.shape[0]
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = self.num_blob_unknowns + 6 * self.turns.shape[0]
 
     def __getattr__(self, name):
         if name == 'base':  # not yet set (copying): no recursion

@@ -26,7 +26,8 @@ stay).  Shapes: N blobs, B bodies; vectors (N,).
 """
 import numpy as np
 import scipy.linalg
-import scipy.sparse.linalg as spla
+
+from multi_bodies.solver.linear_map import LinearMap
 
 try:
     from multi_bodies.solver import _surface_cpp
@@ -97,7 +98,7 @@ def blocks_and_moments_numpy(x, normals, ws, wd, offsets, modes, wall):
     return np.concatenate(blocks) if blocks else np.zeros(0), moments
 
 
-class LaplacePreconditioner:
+class LaplacePreconditioner(LinearMap):
     """``P ~ A^{-1}`` of a :class:`phoretic.LaplaceProblem` (two-level: coarse modes, then every body alone).
 
     Parameters
@@ -144,7 +145,7 @@ class LaplacePreconditioner:
             E = np.concatenate([Z[offsets[b]:offsets[b + 1], active[b]].T @ AZ[offsets[b]:offsets[b + 1]]
                                 for b in range(num_bodies)])  # Z^T A Z over the active modes
             self.coarse = (Z, active, AZ, body_of_blob, scipy.linalg.lu_factor(E))
-        self.operator = spla.LinearOperator((N, N), matvec=self.apply, dtype=float)
+        self.size = N
 
     def _invert_blocks(self, blocks):
         sizes = np.diff(self.offsets)

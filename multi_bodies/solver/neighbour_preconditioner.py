@@ -34,9 +34,9 @@ The Lanczos noise keeps the base preconditioner's Cholesky factors (SPEC decisio
 preconditioner changes, and GMRES converges to the same solution within ``solver_tolerance``.
 """
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from multi_bodies.solver.body_solver import blob_mobility, blob_radius_argument
+from multi_bodies.solver.linear_map import LinearMap
 
 try:
     from multi_bodies.solver import _preconditioner_cpp
@@ -324,7 +324,7 @@ class _ObstacleCoarseCorrection:
             z[body_rows] += K.T @ correction
 
 
-class NeighbourPreconditioner:
+class NeighbourPreconditioner(LinearMap):
     """The base block-diagonal preconditioner with the couplings of neighbouring bodies (module docstring).
 
     Parameters
@@ -394,8 +394,7 @@ class NeighbourPreconditioner:
         # every body's structure type and index within it; Q: the blob-blob blocks of the base inverse
         body_type, local = body_types(arrays)
         self.has_neighbours = bool(self.pairs.size)
-        size = base.operator.shape[0]
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = base.operator.shape[0]
         self.groups = []  # (first_i (P,), first_j (P,), O (P, 3 n_i, 3 n_j)): pairs of two structure types
         self.pair_groups = []  # (rows of pairs (P,), O): the same blocks, by the pairs they belong to
         self.second_order = []  # (blob rows (k, 3n), body rows (k, 6), blocks (k, 3n, 3n) and (k, 6, 3n))

@@ -25,10 +25,10 @@ of ``background_Laplace``: ``G = (b1, b2, b3)`` and
 ``c_bg`` is harmonic); ``x`` is the lab position.
 """
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from multi_bodies.solver import laplace_kernels
 from multi_bodies.solver.body_solver import SolutionParts
+from multi_bodies.solver.linear_map import LinearProblem
 
 LAPLACE_RESTART = 200  # the published GMRES(200) of the concentration
 
@@ -50,7 +50,7 @@ def background_field(background, x):
     return b0 + x @ G + np.einsum('ij,ij->i', x, Hx), G[None, :] + 2.0 * Hx
 
 
-class LaplaceProblem:
+class LaplaceProblem(LinearProblem):
     """The concentration on the blobs at one configuration: ``A c = b`` of size N (the problem protocol).
 
     Parameters
@@ -73,7 +73,6 @@ class LaplaceProblem:
         self.background = background
         self.wall = bool(wall)
         self.size = self.r_vectors.shape[0]
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def _layers(self, **densities):
         return laplace_kernels.layers(self.r_vectors, self.normals, self.weights, self.wall, **densities)

@@ -16,11 +16,11 @@ vector-product backend in the geometry of ``domain``, one blob radius;
 from collections import namedtuple
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from mobility.interface import BlobMobility
 from multi_bodies.solver import noise_factor
 from multi_bodies.solver.body_solver import SolutionParts, check_finite
+from multi_bodies.solver.linear_map import LinearProblem
 from stochastic_forcing import displace_positions, lanczos_square_root, rfd
 from utils import UserInputError
 
@@ -32,7 +32,7 @@ prescribed-spin solve from (None with ``free_kinematics``) and the GMRES iterati
 SPIN_GMRES_RESTART = 20
 
 
-class RollerSpinProblem:
+class RollerSpinProblem(LinearProblem):
     """Torques (3N,) that make every roller spin at ``omega``: ``M_WT T = omega - M_WF F`` at blob positions r.
 
     Problem protocol of ``body_solver.solve``: ``size`` 3N, ``operator`` ``M_WT``, ``rhs()``,
@@ -46,7 +46,6 @@ class RollerSpinProblem:
         for kind in ('rot_times_force', 'rot_times_torque'):  # refused now (domain in_plane), not in the solve
             self.mobility.check_coupling(kind)
         self.size = forces.size
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def matvec(self, torques):
         return self.mobility.coupling('rot_times_torque', self.r_vectors, torques)

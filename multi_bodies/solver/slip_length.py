@@ -25,12 +25,12 @@ domain, and this package refuses slip-length bodies when the hydrodynamics
 sees a wall (``multi_bodies.solver.surface``).
 """
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from body.body import K_dot, K_matrices
 from multi_bodies.solver import neighbour_preconditioner as neighbours
 from multi_bodies.solver.body_solver import (MobilityProblem, SolutionParts, blob_mobility, one_radius,
                                              radius_of_blobs, spd_inverse)
+from multi_bodies.solver.linear_map import LinearMap, LinearProblem
 
 PAIRS_PER_CHUNK = 1 << 19
 SELF_DISTANCE = 1e-14  # pairs closer than this are skipped (the published self term)
@@ -91,7 +91,7 @@ def double_layer_numpy(x, normals, weights, blob_radius, v):
     return -(3.0 / (4.0 * np.pi)) * out
 
 
-class SlipLengthProblem:
+class SlipLengthProblem(LinearProblem):
     """The slip-length saddle-point problem of all bodies at one configuration (the problem protocol).
 
     Parameters
@@ -112,7 +112,6 @@ class SlipLengthProblem:
         self.xi = self.slip_lengths / (rigid.eta * self.weights)
         self.num_blobs, self.num_bodies = rigid.num_blobs, rigid.num_bodies
         self.size = 6 * self.num_blobs + 6 * self.num_bodies
-        self.operator = spla.LinearOperator((self.size, self.size), matvec=self.matvec, dtype=float)
 
     def D_dot(self, v):
         """``D v`` (N, 3) of blob vectors v (N, 3)."""
@@ -225,7 +224,7 @@ def double_layer_matrix(x, normals, weights, blob_radius):
                                np.asarray(weights, dtype=float).reshape(-1), blob_radius)
 
 
-class SlipLengthPreconditioner:
+class SlipLengthPreconditioner(LinearMap):
     """Block-diagonal preconditioner of :class:`SlipLengthProblem`: each body alone, solved exactly.
 
     mobility : the BlobMobility of the dense blocks (the model's blobs mobility), or a function of the published
@@ -286,8 +285,7 @@ class SlipLengthPreconditioner:
             A_inv_BK = A_inv_B @ K
             S_inv = np.linalg.pinv(np.swapaxes(K, 1, 2) @ A_inv_BK, rcond=1e-14)
             self.blocks.append((A_inv, A_inv_B, A_inv_BK, K, S_inv))
-        size = 6 * body_arrays.num_blobs + 6 * body_arrays.num_bodies
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = 6 * body_arrays.num_blobs + 6 * body_arrays.num_bodies
 
     def apply(self, y):
         y = np.asarray(y, dtype=float).reshape(-1)
@@ -318,7 +316,7 @@ class SlipLengthPreconditioner:
 AUTO_MAX_COST_RATIO = 0.2
 
 
-class SlipLengthNeighbourPreconditioner:
+class SlipLengthNeighbourPreconditioner(LinearMap):
     """:class:`SlipLengthPreconditioner` corrected for the couplings of neighbouring bodies, to first order.
 
     With ``A = A_0 + O`` (``A_0`` every body alone, inverted exactly by the base preconditioner ``P``; ``O`` the
@@ -370,8 +368,7 @@ class SlipLengthNeighbourPreconditioner:
         self.pairs, shifts, _ = neighbours.neighbour_pairs(r_vectors, arrays.blob_body_index, radii,
                                                            configuration.locations, self.gap, periodic_length,
                                                            body_lengths, candidates=candidates)
-        size = base.operator.shape[0]
-        self.operator = spla.LinearOperator((size, size), matvec=self.apply, dtype=float)
+        self.size = base.operator.shape[0]
         self.mobility_groups, self.double_layer_groups = [], []
         normals, weights, a = base.normals, base.weights, float(np.max(radii)) if radii.size else 0.0
         self.eta, self.blob_radius = mobility.eta, a
