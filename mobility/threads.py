@@ -64,15 +64,16 @@ def available_cores():
 
 
 def describe():
-    """One line: the kernel threads, the wait policy and the BLAS threads in force."""
+    """One line: the kernel threads, the wait policy, the BLAS threads in force and the kernels' vector path."""
     try:
         threads = importlib.import_module(__package__ + '._mobility_cpp').max_threads()
     except ImportError:
         threads = 'no C++ extension'
     blas = sorted(set(blas_threads().values()))
-    return '%s (wait policy %s, spin count %s), BLAS threads %s' % (
+    from . import simd
+    return '%s (wait policy %s, spin count %s), BLAS threads %s, kernel path %s' % (
         threads, os.environ.get('OMP_WAIT_POLICY', 'default'), os.environ.get('GOMP_SPINCOUNT', 'default'),
-        '/'.join(str(count) for count in blas) if blas else 'unknown')
+        '/'.join(str(count) for count in blas) if blas else 'unknown', simd.describe())
 
 
 # set-thread-count functions of the BLAS libraries numpy and SciPy ship or link (OpenBLAS with and without
