@@ -722,3 +722,12 @@ def test_blobs_overlapping_within_a_body_are_warned_about(tmp_path, monkeypatch,
                                'input.dat', 'dynamic')
     prepare(options, 'dynamics', log=lambda line: None)
     assert 'smallest blob distance' not in capsys.readouterr().err
+
+
+def test_fluctuating_noise_of_rollers(tmp_path, monkeypatch):
+    """Rollers in a triply periodic box with spectral_noise fluctuating take the exact noise too (no Lanczos)."""
+    write_bodies(tmp_path, {'scheme': 'stochastic_adams_bashforth_rollers', 'periodic_length': '16 16 16',
+                            'spectral_z_bounds': None, 'spectral_noise': 'fluctuating', 'g': 0.0,
+                            'free_kinematics': 'True'}, rollers=True)
+    assert run_script(tmp_path, monkeypatch) == 0
+    assert 'stochastic_iterations_count    = 0' in (tmp_path / 'run.info').read_text()

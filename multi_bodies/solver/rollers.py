@@ -162,8 +162,12 @@ def roller_noise(model, r_vectors, z, factor):
     ``L^{-1} M_UF L^{-T}`` with ``L`` the block IC(0) factor of the blobs that nearly touch
     (``noise_factor.single_blob_factor``): the same covariance, another sample, fewer iterations.
     Returns the ``stochastic_forcing.LanczosResult`` with ``noise`` (N, 3) (its count is the caller's).
+    The spectral product's exact noise (``spectral_noise fluctuating``, triply periodic) replaces Lanczos.
     """
     roller = model.roller_mobility
+    if getattr(roller, 'noise_method', None) == 'fluctuating':
+        result = roller.noise(r_vectors, z, factor=factor)
+        return result._replace(noise=result.noise.reshape(-1, 3))
 
     def plain(v):
         return np.asarray(roller.velocities(r_vectors, v)).reshape(-1)
