@@ -45,7 +45,10 @@ class Solver:
     not_converged : 'stop' or 'flag' (see the module note).
     tally : multi_bodies.solver.counters.Tally or None
         Counts every solve by its ``kind``.
+
+    ``max_iterations`` (class attribute): GMRES's limit on the inner iterations of a solve that names none.
     """
+    max_iterations = body_solver.GMRES_MAXITER
 
     def __init__(self, tolerance=None, minimal_residual=False, turn_with=None, print_residual=False, not_converged='stop',
                  tally=None):
@@ -67,12 +70,13 @@ class Solver:
                    print_residual=model.print_residual, not_converged=not_converged, tally=tally)
 
     def solve(self, problem, rhs, preconditioner, x0=None, tolerance=None, restart=body_solver.GMRES_RESTART,
-              maxiter=body_solver.GMRES_MAXITER, kind='deterministic', what='the mobility problem'):
+              maxiter=None, kind='deterministic', what='the mobility problem'):
         """``body_solver.solve`` of ``problem`` (any problem of the protocol) with these settings: a SolveResult.
 
         rhs (problem.size,); preconditioner : as body_solver.solve (None: unpreconditioned); x0 : first guess of
         the normalised system (``SolveResult.normalised_solution`` of an earlier solve) or None; tolerance : None
-        is this solver's; kind : what the tally counts the solve as (``counters.SOLVE_KINDS``); what : the
+        is this solver's; maxiter : GMRES's iteration limit (None: ``max_iterations``); kind : what the tally
+        counts the solve as (``counters.SOLVE_KINDS``); what : the
         problem's name in the line of a solve that did not converge.  Under ``not_converged`` 'stop' such a
         solve raises SimulationStopped (its iterations are counted first).
         """
@@ -80,7 +84,8 @@ class Solver:
         if self.turn_with is not None:
             preconditioner = corotated_preconditioner.following(problem, preconditioner, self.turn_with)
         result = body_solver.solve(problem, rhs, preconditioner, x0=x0, tolerance=tolerance, restart=restart,
-                                   maxiter=maxiter, print_residual=self.print_residual,
+                                   maxiter=self.max_iterations if maxiter is None else int(maxiter),
+                                   print_residual=self.print_residual,
                                    minimal_residual=self.minimal_residual)
         if self.tally is not None:
             self.tally.solved(kind, result.iterations)
