@@ -20,6 +20,8 @@ its cost per step on this machine:
   (``advisor_lubrication``);
 * ``solver``: one dense solve against one preconditioned GMRES solve;
 * ``backend``: one ``M f`` on every usable backend;
+* ``geometry``: in a box periodic in x and y above the wall, the pseudo-periodic direct sum (first ring of
+  images) against the truly periodic spectral product with each kernel (``advisor_geometry``);
 * ``dt``: the time step: stability, no crossing of the wall or of bodies, and its error measured
   on the scene by step doubling (``recommend_dt``; the bound that binds is named).
 
@@ -55,6 +57,7 @@ from multi_bodies.solver.solves import Solver
 from multi_bodies.advice import advisor_physics
 from multi_bodies.advice.advisor_resolution import ResolutionMeasurements
 from multi_bodies.advice.advisor_lubrication import LubricationMeasurements
+from multi_bodies.advice.advisor_geometry import GeometryMeasurements
 from multi_bodies.advice.advisor_report import (AdvisorReport, _percent, _seconds,  # noqa: F401
                                         apply_recommendation, recommendation_lines)
 from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exported)
@@ -85,7 +88,7 @@ from multi_bodies.advice.advisor_models import (  # noqa: F401  (also re-exporte
 
 
 # ------------------------------------------------------------------ the advisor
-class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
+class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasurements, AdvisorReport):
     """Measures every choice for one scene; see the module docstring.
 
     Parameters: ``scene`` (Scene), ``accuracy`` (target relative error),
@@ -167,7 +170,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, AdvisorReport):
         steps = [('solver', self.measure_solver), ('backend', self.measure_backends),
                  ('resolution', self.measure_resolution), ('wall', self.measure_wall),
                  ('rollers', self.measure_rollers), ('lubrication', self.measure_lubrication),
-                 ('dt', self.measure_dt),
+                 ('geometry', self.measure_geometry), ('dt', self.measure_dt),
                  ('scope', self.keep_to_program), ('check', self.keep_physics), ('dt bounds', self.recommend_dt)]
         for index, (name, step) in enumerate(steps):
             self.log('advise: [%d/%d] %s ...' % (index + 1, len(steps), name))

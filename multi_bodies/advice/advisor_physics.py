@@ -65,6 +65,20 @@ def is_model_key(key):
     return key.startswith('structure:') or key in MODEL_KEYS
 
 
+# Options of the spectral product that the geometry topic recommends (advisor_geometry).
+GEOMETRY_KEYS = ('spectral_kernel', 'spectral_z_bounds')
+
+
+def geometry_change(recommendation, options):
+    """True when the recommendation moves the blob product between the pseudo-periodic direct sums and the
+    spectral product, or changes the spectral kernel or z bounds (the geometry topic): the velocities then change
+    by the current product's periodic error and the difference of the blob models."""
+    vector = 'mobility_vector_prod_implementation'
+    spectral_now = options.mobility_vector_prod_implementation == 'spectral'
+    spectral_new = recommendation.get(vector, options.mobility_vector_prod_implementation) == 'spectral'
+    return spectral_now != spectral_new or any(key in recommendation for key in GEOMETRY_KEYS)
+
+
 def scope(recommendation, options, program):
     """Drop recommended options the program does not use; returns the notes of what was dropped."""
     notes, mcmc_dropped = [], []
@@ -371,13 +385,16 @@ def keep_physics(advisor):
             advisor.notes.append('physics: the recommended model could not be set up (%s)' % err)
         if note:
             advisor.notes.append(note)
-    allowed = advisor.accuracy + (advisor.current_model_error() if model_change else 0.0)
+    geometry = geometry_change(recommendation, advisor.scene.options)
+    allowed = advisor.accuracy + (advisor.current_model_error() if model_change else 0.0) + (
+        advisor.geometry_allowance() if geometry else 0.0)
     holds, message = checker.check(recommendation, allowed)
     advisor.check = dict(getattr(checker, 'last', {}), message=message, holds=holds)
     if holds:
         advisor.notes.append('check: holds: ' + message)
         return
-    dropped = [k for k in recommendation if is_model_key(k) or k == 'scheme']
+    dropped = [k for k in recommendation if is_model_key(k) or k == 'scheme' or k in GEOMETRY_KEYS or (
+        geometry and k == 'mobility_vector_prod_implementation')]
     for key in dropped:
         value = recommendation.pop(key)
         if key.startswith('structure:') and value.split()[0] in advisor.files and os.path.isfile(value.split()[0]):

@@ -41,7 +41,7 @@ class AdvisorReport:
                     '' if structure['nearest_gap'] is None else
                     ', nearest pair at %.4g R' % (structure['nearest_gap'] / sphere['radius']))
                 if sphere else 'not a sphere'))
-        for topic in ('resolution', 'wall', 'rollers', 'lubrication', 'solver', 'backend', 'dt'):
+        for topic in ('resolution', 'wall', 'rollers', 'lubrication', 'solver', 'backend', 'geometry', 'dt'):
             rows = [c for c in self.choices if c.topic == topic]
             if not rows:
                 continue
