@@ -146,3 +146,28 @@ def test_bad_boxes_are_refused():
         ring_sums(np.zeros((1, 3)) + 2, 1.0, 1.0, (10.0, 10.0, 0.0), [0], np.ones((1, 3)))
     with pytest.raises(ValueError, match='n/4'):
         periodic_limit({1: (np.ones((1, 3)), None), 3: (np.ones((1, 3)), None)})
+
+
+def test_the_chart_script_runs_on_a_tiny_scene(tmp_path):
+    """doc/charts/periodic_accuracy_vs_cost.py on 48 rollers: its rows obey the laws the chart shows (more rings
+    of images, a smaller error; a wider force-only kernel, a smaller error) and it writes the PNG and JSON."""
+    import json
+    import os
+    import subprocess
+    import sys
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    png = str(tmp_path / 'chart.png')
+    run = subprocess.run([sys.executable, os.path.join(repo, 'doc', 'charts', 'periodic_accuracy_vs_cost.py'),
+                          '--rollers', '48', '--targets', '6', '--reference-rings', '8', '--png', png],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert os.path.getsize(png) > 0
+    with open(str(tmp_path / 'chart.json')) as f:
+        panels = json.load(f)['panels']
+    for rows in (panel['rows'] for panel in panels.values()):
+        errors = {label: error for label, error, _, _ in rows}
+        assert errors['rings 1'] > errors['rings 2'] > errors['rings 3']
+    translation = {label: error for label, error, _, _ in panels['translation from forces (M_UF, rigid bodies)']
+                   ['rows']}
+    assert translation['spectral w6'] < translation['spectral w5'] < translation['spectral w4']
+    assert '| spectral w6 |' in run.stdout
