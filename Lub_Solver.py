@@ -26,7 +26,7 @@ import numpy as np
 
 from body.geometry import Quaternion
 from lubrication import brownian, integrators
-from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.files.input_options import DEFAULTS
 from multi_bodies.solver.solves import Solver
 
 
@@ -52,10 +52,10 @@ class Lub_Solver:
         self.bodies = bodies
         self.a, self.eta, self.cutoff = float(a), float(eta), float(cutoff)
         self.periodic_length = np.asarray(periodic_length, dtype=float).reshape(3)
-        self.debye_cut = float(OPTION_TABLE['firm_delta'].default if debye_length is None else debye_length)
+        self.debye_cut = float(DEFAULTS.firm_delta if debye_length is None else debye_length)
         self.kT = 0.0
         self.dt = 0.0
-        self.tolerance = OPTION_TABLE['solver_tolerance'].default
+        self.tolerance = DEFAULTS.solver_tolerance
         self.num_rejections_wall = 0
         self.num_rejections_jump = 0
         self.Delta_R = self.R_Sup = self.R_MB = None

@@ -24,11 +24,12 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from body.geometry import minimum_image
+from multi_bodies.files.input_options import DEFAULTS
 from utils import UserInputError
 
 from . import compiled, resistance
 
-DEFAULT_CUTOFF = 4.5  # centre distance in units of a (the published Lub_Cut default)
+DEFAULT_CUTOFF = DEFAULTS.Lub_Cut  # centre distance in units of a (the option table's Lub_Cut)
 
 NeighbourPairs = namedtuple('NeighbourPairs', ['pairs', 'r_over_a', 'r_hat'])
 NeighbourPairs.__doc__ = """Pairs of spheres closer than the cutoff.
@@ -151,7 +152,7 @@ def _numpy_matrices(n, neighbours, locations, a, wall, factors, firm_delta, hand
 
 
 def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
-                        firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+                        firm_delta=resistance.DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """R_sup, R_MB and Delta_R = R_sup - R_MB of spheres at ``locations``: a :data:`LubricationMatrices`.
 
     locations : (N, 3) sphere centres (length units; the wall, if any, is the plane z = 0);
@@ -184,6 +185,6 @@ def resistance_matrices(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_lengt
 
 
 def delta_R(locations, a, eta, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0), wall=True,
-            firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+            firm_delta=resistance.DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """Only Delta_R (6N, 6N) CSR of :func:`resistance_matrices` (same arguments)."""
     return resistance_matrices(locations, a, eta, cutoff, periodic_length, wall, firm_delta, handover).Delta_R

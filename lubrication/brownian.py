@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from multi_bodies.files.input_options import DEFAULTS
 from multi_bodies.solver.body_solver import SolutionParts
 from multi_bodies.solver.linear_map import FunctionMap, LinearProblem
 from multi_bodies.solver.solves import SOLVER_TOLERANCE
@@ -46,7 +47,7 @@ from . import assembly, resistance
 from .problem import LubricationProblem, far_field_mobility, far_field_product, solver_and_tolerance
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
-PUBLISHED_RFD_DELTA = 1e-3
+PUBLISHED_RFD_DELTA = DEFAULTS.rf_delta  # the RFD step of the published lubrication code: rf_delta's default
 
 
 class LubricationSettings(namedtuple('LubricationSettings', [
@@ -87,8 +88,9 @@ class LubricationSettings(namedtuple('LubricationSettings', [
 
 
 def lubrication_settings(a, eta, wall=True, cutoff=assembly.DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0),
-                         firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, handover='published',
-                         near_field_root='lanczos', rfd_delta=PUBLISHED_RFD_DELTA, rfd_scaled_by_a=False):
+                         firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None,
+                         handover=DEFAULTS.lubrication_handover, near_field_root='lanczos',
+                         rfd_delta=PUBLISHED_RFD_DELTA, rfd_scaled_by_a=False):
     """Checked :class:`LubricationSettings` (UserInputError names the bad option)."""
     if near_field_root not in NEAR_FIELD_ROOTS:
         raise UserInputError('lubrication: near_field_root %r is not one of %s' % (near_field_root,

@@ -14,6 +14,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp
 
+from multi_bodies.files.input_options import DEFAULTS
+
 from . import resistance, tables
 
 try:  # by importlib: the extension module is not a file of the package's import graph (tests/test_layout.py)
@@ -64,14 +66,15 @@ def _model(factors, firm_delta, handover):
             windows)
 
 
-def pair_blocks(r, r_hat, factors, firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published', cutoff=4.5):
+def pair_blocks(r, r_hat, factors, firm_delta=resistance.DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover,
+                cutoff=DEFAULTS.Lub_Cut):
     """(R_sup, R_MB) of pairs, (P, 12, 12) each (with the smooth hand-over, the cutoff taper included)."""
     model = _model(factors, firm_delta, handover)
     return _pair_blocks(*model, resistance.CUTOFF_WINDOW, float(cutoff), np.asarray(r, dtype=float).reshape(-1),
                         np.asarray(r_hat, dtype=float).reshape(-1, 3))
 
 
-def wall_blocks(h, factors, firm_delta=resistance.DEFAULT_FIRM_DELTA, handover='published'):
+def wall_blocks(h, factors, firm_delta=resistance.DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """(R_sup, R_MB) wall parts of spheres at heights h (N,): (N, 6, 6) each."""
     return _wall_blocks(*_model(factors, firm_delta, handover), np.asarray(h, dtype=float).reshape(-1))
 

@@ -356,8 +356,8 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
         solver, settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
         matrices, kept)
     guess = kept.velocity_guess if kept is not None and kT <= 0 else None
-    predictor = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
-                       orientations, guess, predictor=True)
+    predictor = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts,
+                       kept, orientations, guess, predictor=True)
     mid_locations, mid_orientations = _moved(locations, orientations, predictor, dt)
     wall, jump = _rejection(settings, locations, mid_locations)
     if settings.wall and np.any(mid_locations[:, 2] <= 0.0):
@@ -367,8 +367,8 @@ def trapezoidal_step(settings, locations, orientations, force_torque_at, kT, dt,
         drift = 2.0 * far_field_drift(settings, locations, rng.standard_normal(problem.size), kT).reshape(-1)
         counts['far_field_products'] += 2
     mid_problem = counted_problem(settings, mid_locations, counts)
-    mid_force_torque, mid_torques = _forces(solver, force_torque_at, mid_problem, mid_locations, mid_orientations, omega,
-                                            tolerance, torque_cap, counts, kept, start=False)
+    mid_force_torque, mid_torques = _forces(solver, force_torque_at, mid_problem, mid_locations, mid_orientations,
+                                            omega, tolerance, torque_cap, counts, kept, start=False)
     corrector = _solve(solver, mid_problem, drift + noise + mid_problem.mobility_product(mid_force_torque.reshape(-1)),
                        tolerance, counts, kept, mid_orientations, predictor)
     if kept is not None:
@@ -395,8 +395,8 @@ def euler_maruyama_step(settings, locations, orientations, force_torque_at, kT, 
         solver, settings, locations, orientations, force_torque_at, kT, dt, rng, tolerance, omega, torque_cap,
         matrices, kept)
     guess = kept.velocity_guess if kept is not None and kT <= 0 else None
-    velocities = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts, kept,
-                        orientations, guess, predictor=True)
+    velocities = _solve(solver, problem, noise + problem.mobility_product(force_torque.reshape(-1)), tolerance, counts,
+                        kept, orientations, guess, predictor=True)
     if kept is not None:
         kept.velocity_guess = velocities.reshape(-1).copy() if kT <= 0 else None
     if kT > 0:

@@ -4,8 +4,8 @@
 above the wall, Rotne-Prager-Yamakawa in free space: the grand product of a ``mobility.interface.BlobMobility``,
 :func:`far_field_mobility`), ``Delta_R`` the sparse near-field correction
 (:mod:`lubrication.assembly`).  Velocities ``U = M_lub F`` (and more generally ``U = (I + M Delta_R)^-1
-(X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F``
-(the package's one solve, through a ``multi_bodies.solver.solves.Solver``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
+(X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F`` (the package's one
+solve, through a ``multi_bodies.solver.solves.Solver``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
 (``s = 6 pi eta a * tolerance``), since ``I + M Delta_R ~ M R_sup`` where ``M^-1 ~ R_MB``.  The published
 code factors ``R_sup + s I`` with CHOLMOD; here SciPy's sparse LU (``splu``), no extra dependency.
 
@@ -18,6 +18,7 @@ import scipy.sparse.linalg as spla
 
 from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
                                 preferred_backend)
+from multi_bodies.files.input_options import DEFAULTS
 from multi_bodies.solver.body_solver import SolutionParts
 from multi_bodies.solver.linear_map import LinearMap, LinearProblem
 from multi_bodies.solver.solves import Solver
@@ -122,8 +123,8 @@ class LubricationProblem(LinearProblem):
     """
 
     def __init__(self, locations, a, eta, wall=True, cutoff=assembly.DEFAULT_CUTOFF, periodic_length=(0.0, 0.0, 0.0),
-                 firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None, handover='published',
-                 far_field=None):
+                 firm_delta=resistance.DEFAULT_FIRM_DELTA, implementation=None, matrices=None,
+                 handover=DEFAULTS.lubrication_handover, far_field=None):
         locations, a, eta, cutoff, L = assembly.check_geometry(locations, a, eta, cutoff, periodic_length)
         if wall and np.any(locations[:, 2] <= 0):
             below = int(np.argmax(locations[:, 2] <= 0))

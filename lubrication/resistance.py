@@ -34,11 +34,12 @@ Hand-over between formulas (``handover``, the input option ``lubrication_handove
 """
 import numpy as np
 
+from multi_bodies.files.input_options import DEFAULTS
 from utils import UserInputError
 
 from . import tables
 
-DEFAULT_FIRM_DELTA = 1e-4
+DEFAULT_FIRM_DELTA = DEFAULTS.firm_delta  # gap clamp in units of a (the option table's firm_delta)
 HANDOVERS = ('published', 'smooth')
 # Windows (lo, hi) of the smooth hand-over, in units of a: chosen where both formulas are defined (the WS
 # table covers r 2.002..2.2, the JO table 2.099..5.001), each a small part of the range of its formulas.
@@ -77,7 +78,7 @@ def smooth_weight(x, window):
     return t * t * (3.0 - 2.0 * t)
 
 
-def cutoff_taper(r, cutoff, handover='published'):
+def cutoff_taper(r, cutoff, handover=DEFAULTS.lubrication_handover):
     """Factor (n,) of the pair terms at distances r (n,) (units of a): 1 (published) or, smooth,
     ``1 - w`` over ``[cutoff - CUTOFF_WINDOW, cutoff]`` (1 below, 0 at the cutoff)."""
     check_handover(handover)
@@ -192,7 +193,7 @@ def pair_blocks(r_hat, self_scalars, pair_scalars, factors):
     return R
 
 
-def pair_resistance_sup(r, r_hat, factors, firm_delta=DEFAULT_FIRM_DELTA, handover='published'):
+def pair_resistance_sup(r, r_hat, factors, firm_delta=DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """Resolved two-sphere resistance R_sup, (n, 12, 12), at distances r (n,) (units of a) along r_hat (n, 3).
 
     Published branches, after the gap clamp: ``r <= 2.006`` near-contact asymptotics
@@ -268,7 +269,7 @@ def wall_blocks(scalars, factors):
     return R
 
 
-def wall_scalars_sup(h, firm_delta=DEFAULT_FIRM_DELTA, handover='published'):
+def wall_scalars_sup(h, firm_delta=DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """Wall-part resistance scalars of a resolved sphere at heights h (n,) (units of a): (n, 5).
 
     Columns ``X^a - 1, Y^a - 1, Y^b, max(X^c - 4/3, 0), max(Y^c - 4/3, 0)`` (normalised).  Away from the
@@ -329,7 +330,7 @@ def wall_scalars_blob_model(h, firm_delta=DEFAULT_FIRM_DELTA):
     return np.stack((Xa - 1.0, Ya - 1.0, Yb, Xc - 4.0 / 3.0, Yc - 4.0 / 3.0), axis=1)
 
 
-def wall_resistance_sup(h, factors, firm_delta=DEFAULT_FIRM_DELTA, handover='published'):
+def wall_resistance_sup(h, factors, firm_delta=DEFAULT_FIRM_DELTA, handover=DEFAULTS.lubrication_handover):
     """Wall part of the resolved sphere's resistance at heights h (n,): (n, 6, 6) (:func:`wall_scalars_sup`)."""
     return wall_blocks(wall_scalars_sup(h, firm_delta, handover), factors)
 

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from many_bodyMCMC.mcmc_energy import quaternion_product_scalars, quaternion_products, quaternions_from_rotations
+from multi_bodies.files.input_options import DEFAULTS  # the keyword defaults are the option table's
 
 ADAPT_INTERVAL = 50  # proposals per adaptation window during the burn-in
 ADAPT_GAIN = 1.5  # log step-size change per unit of acceptance error (the acceptance falls ~0.5 per e-fold)
@@ -47,8 +48,8 @@ class MetropolisSampler:
     target_acceptance : float in (0, 1)
     """
 
-    def __init__(self, energy, locations, orientations, kT, max_translation, max_angle_shift, move='all_bodies',
-                 n_burn_in=0, target_acceptance=0.3):
+    def __init__(self, energy, locations, orientations, kT, max_translation, max_angle_shift, move=DEFAULTS.mcmc_move,
+                 n_burn_in=DEFAULTS.n_burn_in, target_acceptance=DEFAULTS.target_acceptance):
         if move not in MOVES:
             raise ValueError('move must be one of %s' % (MOVES,))
         self.energy, self.kT, self.move = energy, float(kT), move

@@ -3,9 +3,10 @@
 The published reader keeps every ``option value`` line (a repeated option overrides the earlier one, every
 ``structure`` line is kept in order, text after ``#`` is a comment) and gives each option of its table a
 typed attribute with its default.  This face reads the file the same way, types the options of this package's
-table with the table's own conversion (same defaults), keeps the options this package does not know as text
-in ``options`` (the published reader kept them too, and the lubrication drivers read some of them), and adds
-the published lubrication options ``Lub_Cut``, ``firm_delta`` and ``repulsion_strength_firm``.
+table with the table's own conversion (same defaults; the published lubrication drivers' ``Lub_Cut``,
+``firm_delta`` and ``repulsion_strength_firm`` are options of the table), and keeps the options this package does
+not know as text in ``options`` (the published reader kept them too, and the lubrication drivers read some of
+them).
 
 Attributes: every option of the table; ``options`` (dict name -> value text, as written); ``structures``
 (list of lists of words: vertex file, clones file, then any further files of the line); ``structures_ID``
@@ -15,9 +16,6 @@ import os
 
 from multi_bodies.files import input_options
 
-# Options of the published lubrication drivers that this package's table does not type (defaults as the
-# published Lub_Solver and its examples use them: Lub_Cut 4.5 a, the gap clamp 1e-4 a, no firm potential).
-LUBRICATION_OPTIONS = {'Lub_Cut': 4.5, 'firm_delta': 1e-4, 'repulsion_strength_firm': 0.0}
 
 
 class ReadInput:
@@ -55,10 +53,4 @@ class ReadInput:
             if name in self.options:
                 where = '%s, line %d' % (entries, lines[name])
                 value = input_options._convert(option.kind, name, self.options[name], where)
-            setattr(self, name, value)
-        for name, default in LUBRICATION_OPTIONS.items():
-            value = default
-            if name in self.options:
-                where = '%s, line %d' % (entries, lines[name])
-                value = input_options._convert('float', name, self.options[name], where)
             setattr(self, name, value)

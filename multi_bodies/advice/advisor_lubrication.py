@@ -15,6 +15,7 @@ import numpy as np
 
 from multi_bodies.advice import lubrication_tables as tables
 from multi_bodies.advice.lubrication_models import TABLE_MODEL
+from multi_bodies.files.input_options import DEFAULTS
 
 LUBRICATION_SCHEMES = ('lubrication_trapezoidal', 'lubrication_EM', 'lubrication_trapezoidal_rollers')
 LUBRICATION_OPTIONS = ('Lub_Cut', 'firm_delta', 'repulsion_strength_firm')
@@ -41,7 +42,7 @@ def model_kind(scheme):
     return 'rollers' if 'rollers' in scheme else 'multiblob'
 
 
-def scheme_for(model, scheme, kT, free_kinematics=True):
+def scheme_for(model, scheme, kT, free_kinematics=DEFAULTS.free_kinematics):
     """(scheme that runs ``model`` for an input of ``scheme``, or None with the reason it is refused)."""
     kind = model_kind(scheme)
     stochastic = kT > 0
@@ -131,8 +132,7 @@ class LubricationMeasurements:
         current = ('1 blob + lubrication' if kind == 'lubrication' else '1 blob' if blobs_now == 1
                    else 'shell %d' % blobs_now)
         options = self.scene.options
-        kT = float(getattr(options, 'kT', 0.0) or 0.0)
-        free = bool(getattr(options, 'free_kinematics', True))
+        kT, free = float(options.kT), bool(options.free_kinematics)
         candidates = []
         for model in tables.ADVISED_MODELS:
             error, note = tables.model_error(model, pair_gap, wall_gap)
@@ -240,7 +240,7 @@ class LubricationMeasurements:
                 for structure in self.scene.structures:
                     lines.append('%-40s %s %s' % ('structure', vertex, structure['spec'].clones_file))
                 lines.append('%-40s %.12g' % ('blob_radius', radius))
-        g = float(getattr(options, 'g', 0.0) or 0.0)
+        g = float(options.g)
         if g and blobs != blobs_now:
             lines.append('%-40s %.12g   # g is per blob: %d -> %d blobs a sphere; the wall and pair repulsions '
                          'act per blob too: re-tune them for the new model' % ('g', g * blobs_now / blobs, blobs_now,

@@ -211,6 +211,9 @@ OPTION_TABLE = {
     'spectral_z_bounds': _option('floats2', None, SD),
     'spectral_kernel': _option('str', 'w6', SD, Choice(('w6', 'w5', 'w4', 'w6w5', 'w6w4', 'w5w4'))),
     'spectral_noise': _option('str', 'lanczos', ('stochastic',), Choice(('lanczos', 'fluctuating'))),
+    # how a spectral input is read (doc/periodic.md): auto is the published Spectral_Multiblob_Roller form when no
+    # other spectral_* line is given over a wall, the manual's reading otherwise
+    'spectral_reading': _option('str', 'auto', SD, Choice(('auto', 'published', 'package'))),
     # gravity tilt (radians) of the published reader: passed to the hooks as the keyword tilt_angle
     'tilt_angle': _option('float', 0.0, SDM),
     # radius of a multiblob roller that the published Multi_Blob_Two_Rollers program hard-codes (1.0): a hook keyword
@@ -730,3 +733,8 @@ def read_input_file(path, program=None):
     for message in options.warnings:
         warn_user(message)
     return options
+
+
+# The table's defaults as one Options value: a function of the package that takes an option as a keyword reads its
+# default here (``DEFAULTS.solver_tolerance``), never writes it again (tests/test_option_defaults.py checks it).
+DEFAULTS = options_with()

@@ -115,12 +115,15 @@ def smallest_distance(points):
     return float(np.min(dist))
 
 
-def bulk_translational_mobility(reference_blobs, blob_radius, eta=1.0):
+def bulk_translational_mobility(reference_blobs, blob_radius, eta=None):
     """Translational mobility of a rigid blob body far from walls (RPY blobs), ``trace(N_tt)/3``.
 
     The dense free-space mobility of the NumPy backend (``mobility.interface``); the body is tracked at the
-    origin.
+    origin.  eta : None is the option table's ``eta``.
     """
+    if eta is None:
+        from multi_bodies.files.input_options import DEFAULTS
+        eta = DEFAULTS.eta
     from body.body import K_matrices
     from mobility.interface import Geometry, make_mobility
     blobs = np.asarray(reference_blobs, dtype=float)

@@ -40,6 +40,7 @@ import scipy.linalg.lapack as _lapack
 
 from body.body import K_dot, K_matrices, KT_dot, as_configuration, blob_positions, saddle_point_product
 from mobility.interface import as_blob_mobility
+from multi_bodies.files.input_options import DEFAULTS
 
 from utils import SimulationStopped
 
@@ -574,7 +575,7 @@ def kept_fewest(fewest, iterations, margin):
     return None if iterations >= fewest + margin else fewest
 
 
-def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
+def solve(problem, rhs, preconditioner, x0=None, tolerance=None, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
           print_residual=False, minimal_residual=False):
     """Solve ``A x = rhs`` of any problem of the package by preconditioned GMRES: the one solve of the package.
 
@@ -600,13 +601,15 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=1e-8, restart=GMRES_R
         First guess of the *normalised* system ``A y = rhs / |rhs|`` (SPEC 4.2: the published code
         passes the previous normalised solution, ``SolveResult.normalised_solution``); None (or a
         guess of another size) is zeros.
-    tolerance : float, GMRES stops when ``|r| <= tolerance |rhs|``.
+    tolerance : float, GMRES stops when ``|r| <= tolerance |rhs|`` (None: the option table's ``solver_tolerance``).
     minimal_residual : bool, GMRES takes the point of least true residual of its Krylov space and stops at
         the first iteration where it meets the tolerance (:func:`gmres_solve`; False: the published iterates).
 
     Returns :data:`SolveResult` (the solution of ``A x = rhs``, un-normalised, its true residual and its
     iteration count).  Nothing is counted or stored here; the caller decides what a non-converged solve means.
     """
+    if tolerance is None:
+        tolerance = DEFAULTS.solver_tolerance
     rhs = problem.prepare_rhs(np.array(rhs, dtype=float).reshape(-1))
     norm = float(np.linalg.norm(rhs))
     if norm == 0.0:

@@ -78,7 +78,7 @@ SOLVE_KINDS = {
     'stochastic': (('gmres_iterations', 'gmres_stochastic_iterations'), 'stochastic_solves', False),
     'roller_torques': (('gmres_iterations',), None, True),   # rollers of prescribed spin (multi_bodies.solver.rollers)
     'concentration': (('laplace_iterations',), None, False),  # the phoretic bodies' solute (doc/phoretic.md)
-    'lubrication': (('gmres_iterations',), None, False),      # the lubrication schemes' solves (lubrication.integrators)
+    'lubrication': (('gmres_iterations',), None, False),      # the lubrication schemes' solves
 }
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import cupy as cp
 
 from mobility.compiled_laws import pair_laws_source
+from multi_bodies.files.input_options import DEFAULTS  # the keyword defaults below are the option table's
 
 THREADS_PER_BLOCK = 128
 
@@ -57,8 +58,9 @@ def check_usable():
     _kernel()
 
 
-def calc_blob_blob_forces_pycuda(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0,
-                                 debye_length=1.0, blob_radius=1.0, **kwargs):
+def calc_blob_blob_forces_pycuda(r_vectors, periodic_length=(0.0, 0.0, 0.0),
+                                 repulsion_strength=DEFAULTS.repulsion_strength, debye_length=DEFAULTS.debye_length,
+                                 blob_radius=DEFAULTS.blob_radius, **kwargs):
     """Default soft repulsion of all blob pairs on the GPU.
 
     r_vectors : (N, 3) positions; returns the forces, NumPy array (N, 3).

@@ -37,6 +37,7 @@ from body.body import Configuration, as_configuration, reference_slip_in_lab_fra
 from body.geometry import Quaternion
 from mobility.interface import (BlobMobility, Geometry, from_implementation_name, implementation_geometry,
                                 make_mobility, published_function, registered_backends)
+from multi_bodies.files.input_options import DEFAULTS  # Model's keyword defaults are the option table's
 from multi_bodies.solver import body_solver, noise_factor, obstacles, periodic, rollers
 from multi_bodies.solver import user_hooks
 from multi_bodies.solver import physics as mbf
@@ -101,7 +102,8 @@ class Model:
         debye_length, periodic_length, blob_radius, blob_mass.
     eta, blob_radius, solver_tolerance : float
     vector_product_name, blobs_name, blob_blob_name, body_body_name : str
-        Implementation names (``auto`` already resolved).
+        Implementation names (``auto`` already resolved).  Every keyword that is an option of the input file
+        defaults to the option table's default (``DEFAULTS``).
     periodic_length : (3,) floats
     omega_one_roller : (3,) floats, free_kinematics : bool, domain : str
         Roller parameters (SPEC 5.2).
@@ -140,12 +142,17 @@ class Model:
     """
 
     def __init__(self, bodies, body_arrays, hooks, physics, eta, blob_radius, solver_tolerance,
-                 vector_product_name='python', blobs_name='python', blob_blob_name='None', body_body_name='None',
-                 periodic_length=(0.0, 0.0, 0.0), omega_one_roller=(0.0, 0.0, 0.0), free_kinematics=True,
-                 domain='single_wall', print_residual=False, articulated=None, nonlinear_tolerance=1e-8,
-                 check_wall=True, lanczos_max_iterations=1000, vector_mobility=None, blobs_mobility=None,
-                 pycuda_blob_blob_forces=None, surface=None, preconditioner='auto',
-                 lanczos_preconditioner='block_diagonal', spectral=None):
+                 vector_product_name=DEFAULTS.mobility_vector_prod_implementation,
+                 blobs_name=DEFAULTS.mobility_blobs_implementation,
+                 blob_blob_name=DEFAULTS.blob_blob_force_implementation,
+                 body_body_name=DEFAULTS.body_body_force_torque_implementation,
+                 periodic_length=DEFAULTS.periodic_length, omega_one_roller=DEFAULTS.omega_one_roller,
+                 free_kinematics=DEFAULTS.free_kinematics, domain=DEFAULTS.domain, print_residual=False,
+                 articulated=None, nonlinear_tolerance=DEFAULTS.nonlinear_solver_tolerance, check_wall=True,
+                 lanczos_max_iterations=1000,
+                 vector_mobility=None, blobs_mobility=None, pycuda_blob_blob_forces=None, surface=None,
+                 preconditioner=DEFAULTS.preconditioner, lanczos_preconditioner=DEFAULTS.lanczos_preconditioner,
+                 spectral=None):
         arguments = dict(locals())
         del arguments['self']
         set_ = object.__setattr__

@@ -37,13 +37,15 @@ import numpy as np
 
 from mobility.periodic import minimum_image  # noqa: F401  (published name of this module; one source in mobility)
 from body.geometry import Quaternion  # noqa: F401  (star-imported by published override files)
+from multi_bodies.files.input_options import DEFAULTS  # the laws' keyword defaults are the option table's
 from utils import UserInputError
 
 PAIR_CHUNK_ELEMENTS = 262144  # pairs per chunk in the all-pairs sums (bounded memory, cache friendly)
 
 
-def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0,
-                         blob_radius=1.0, blob_mass=1.0, top_wall=None, **kwargs):
+def blob_external_forces(r_vectors, g=DEFAULTS.g, repulsion_strength_wall=DEFAULTS.repulsion_strength_wall,
+                         debye_length_wall=DEFAULTS.debye_length_wall, blob_radius=DEFAULTS.blob_radius, blob_mass=1.0,
+                         top_wall=None, **kwargs):
     """Gravity and soft wall repulsion on every blob, shape (N, 3).
 
     Gravity ``(0, 0, -g blob_mass)``; the wall potential
@@ -64,7 +66,8 @@ def blob_external_forces(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_le
     return forces
 
 
-def blob_external_potential(r_vectors, g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, blob_radius=1.0,
+def blob_external_potential(r_vectors, g=DEFAULTS.g, repulsion_strength_wall=DEFAULTS.repulsion_strength_wall,
+                            debye_length_wall=DEFAULTS.debye_length_wall, blob_radius=DEFAULTS.blob_radius,
                             blob_mass=1.0, top_wall=None, **kwargs):
     """Energy of gravity and of the soft wall of every blob (the potential of ``blob_external_forces``).
 
@@ -91,7 +94,8 @@ def calc_one_blob_forces(r_vectors, *args, **kwargs):
     return blob_external_forces(r_vectors, **kwargs)
 
 
-def blob_blob_force(r, *args, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0, **kwargs):
+def blob_blob_force(r, *args, repulsion_strength=DEFAULTS.repulsion_strength, debye_length=DEFAULTS.debye_length,
+                    blob_radius=DEFAULTS.blob_radius, **kwargs):
     """Soft repulsion of one blob pair, vectorised over pairs.
 
     ``r`` (shape (..., 3)) points from blob i to blob j; returns the force on
@@ -105,7 +109,8 @@ def blob_blob_force(r, *args, repulsion_strength=1.0, debye_length=1.0, blob_rad
     return -magnitude[..., None] * r
 
 
-def blob_blob_potential(r, repulsion_strength=1.0, debye_length=1.0, blob_radius=1.0, **kwargs):
+def blob_blob_potential(r, repulsion_strength=DEFAULTS.repulsion_strength, debye_length=DEFAULTS.debye_length,
+                        blob_radius=DEFAULTS.blob_radius, **kwargs):
     """Energy of the soft repulsion of blob pairs (the potential of ``blob_blob_force``).
 
     r (..., 3) from blob i to blob j -> energies (...): ``eps exp(-(|r| - 2a)/b)``
@@ -145,8 +150,9 @@ def calc_blob_blob_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), pair_force
     return forces
 
 
-def body_body_force_torque(r, quaternion_i=None, quaternion_j=None, *args, repulsion_strength=1.0,
-                           debye_length=1.0, **kwargs):
+def body_body_force_torque(r, quaternion_i=None, quaternion_j=None, *args,
+                           repulsion_strength=DEFAULTS.repulsion_strength, debye_length=DEFAULTS.debye_length,
+                           **kwargs):
     """Yukawa force of one body pair, vectorised over pairs.
 
     ``r`` (shape (..., 3)) points from body i to body j; the orientations
@@ -162,7 +168,8 @@ def body_body_force_torque(r, quaternion_i=None, quaternion_j=None, *args, repul
     return np.stack((-magnitude[..., None] * r, np.zeros_like(r)))
 
 
-def body_body_potential(r, quaternion_i=None, quaternion_j=None, repulsion_strength=1.0, debye_length=1.0, **kwargs):
+def body_body_potential(r, quaternion_i=None, quaternion_j=None, repulsion_strength=DEFAULTS.repulsion_strength,
+                        debye_length=DEFAULTS.debye_length, **kwargs):
     """Yukawa energy ``eps exp(-|r|/b)/|r|`` of body pairs (the potential of ``body_body_force_torque``).
 
     r (..., 3) from body i to body j -> energies (...); the orientations
@@ -256,7 +263,7 @@ default_zero_blobs.published_helper = 'default_zero_blobs'
 active_body_slip.published_helper = 'active_body_slip'
 
 
-def default_blob_blob_cutoff(blob_radius=1.0, debye_length=1.0, **kwargs):
+def default_blob_blob_cutoff(blob_radius=DEFAULTS.blob_radius, debye_length=DEFAULTS.debye_length, **kwargs):
     """``2 a + 30 b``: beyond it the default soft repulsion is below ``exp(-30)`` of its contact value
     (the cutoff of the published ``tree_numba``)."""
     return 2.0 * float(blob_radius) + 30.0 * float(debye_length)
@@ -366,16 +373,17 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
                                  "is not built (%s); run 'pip install -e .' or use python" % (implementation, err))
 
         if implementation == 'tree_numba':
-            def cell_list_cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0,
-                                     debye_length=1.0, blob_radius=1.0, **kw):
+            def cell_list_cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0),
+                                     repulsion_strength=DEFAULTS.repulsion_strength, debye_length=DEFAULTS.debye_length,
+                                     blob_radius=DEFAULTS.blob_radius, **kw):
                 return _forces_cpp.blob_blob_forces_cell_list(
                     np.asarray(r_vectors, dtype=float).reshape(-1, 3), np.asarray(periodic_length, dtype=float).reshape(3),
                     float(repulsion_strength), float(debye_length), float(blob_radius),
                     default_blob_blob_cutoff(blob_radius, debye_length))
             return cell_list_cpp_forces
 
-        def cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=1.0, debye_length=1.0,
-                       blob_radius=1.0, blob_radii=None, **kw):
+        def cpp_forces(r_vectors, periodic_length=(0.0, 0.0, 0.0), repulsion_strength=DEFAULTS.repulsion_strength,
+                       debye_length=DEFAULTS.debye_length, blob_radius=DEFAULTS.blob_radius, blob_radii=None, **kw):
             if blob_radii is not None:
                 return _forces_cpp.blob_blob_forces_radii(np.asarray(r_vectors, dtype=float).reshape(-1, 3),
                                                           np.asarray(periodic_length, dtype=float).reshape(3),

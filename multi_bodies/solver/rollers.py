@@ -172,7 +172,7 @@ def roller_noise(model, r_vectors, z, factor):
     def plain(v):
         return np.asarray(roller.velocities(r_vectors, v)).reshape(-1)
     matvec, L_mult = plain, None
-    if getattr(model, 'lanczos_preconditioner', 'block_diagonal') == 'incomplete_cholesky':
+    if model.lanczos_preconditioner == 'incomplete_cholesky':
         # the blocks of the blobs backend with the rollers' one radius
         lower, _ = noise_factor.single_blob_factor(r_vectors, model.blobs_mobility.replace(
             blob_radius=model.blob_radius))

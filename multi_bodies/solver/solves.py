@@ -17,13 +17,13 @@ static script, the advisor and the published ``Lub_Solver`` face.  A :class:`Sol
   static script writes the velocities and exits 1; the advisor notes it; the published face returns the
   residual).
 """
-from multi_bodies.files.input_options import OPTION_TABLE
+from multi_bodies.files.input_options import DEFAULTS
 from multi_bodies.solver import body_solver, corotated_preconditioner
 from utils import SimulationStopped
 
 NOT_CONVERGED_RULES = ('stop', 'flag')
 # the relative tolerance of a solver made without one: the option table's default of solver_tolerance
-SOLVER_TOLERANCE = OPTION_TABLE['solver_tolerance'].default
+SOLVER_TOLERANCE = DEFAULTS.solver_tolerance
 
 
 class Solver:

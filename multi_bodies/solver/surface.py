@@ -132,7 +132,7 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
     """
     laplace = [s.laplace_file for s in specs]
     lengths = [s.slip_length_file for s in specs]
-    if getattr(options, 'save_concentration', False) and not any(laplace):
+    if options.save_concentration and not any(laplace):
         warn_user('%s: save_concentration is ignored: it writes the solute of phoretic bodies, but no structure line '
                   'has a .Laplace file; remove the option or add the files' % options.where('save_concentration'))
     if not any(laplace) and not any(lengths):
