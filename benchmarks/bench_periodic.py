@@ -89,6 +89,8 @@ def input_text(box, blob_radius, product, scheme='stochastic_Slip_Trapz'):
             line = 'mobility_vector_prod_implementation %s' % product
         elif name == ['scheme']:
             line = 'scheme %s' % scheme
+        elif name == ['spectral_reading'] and product != 'spectral':
+            continue  # an option of the spectral product only
         lines.append(line)
     return '\n'.join(lines) + '\n'
 

@@ -34,7 +34,7 @@ import numpy as np
 import utils
 from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
 from multi_bodies.solver import physics as mbf
-from multi_bodies.solver import published_joints, user_hooks
+from multi_bodies.solver import published_joints, published_spectral, user_hooks
 from multi_bodies.files.input_options import STATIC_SCHEMES, check_options  # noqa: F401 (STATIC_SCHEMES re-exported)
 from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
@@ -44,7 +44,7 @@ from multi_bodies.solver.model import make_model
 from multi_bodies.solver.surface import read_surface
 
 
-def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None):
+def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_record=None, vertex_scale=1.0):
     """Bodies of every ``structure`` line (restart snapshots when ``initial_step > 0``).
 
     Parameters
@@ -60,6 +60,9 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
         With ``save_clones one_file`` and ``initial_step > 0``, the record of
         ``output_name.restart`` at that step: it says where the snapshot
         starts in each ``.config`` file.
+    vertex_scale : float
+        Factor of the blob positions of every ``structure`` and ``obstacle`` vertex file (the particle radius of
+        an input in the published spectral form, ``multi_bodies.solver.published_spectral``; 1 otherwise).
 
     Returns :data:`BodiesRead` (list of Body, list of (ID, number of bodies) per structure type, the
     ``ArticulatedSet`` of the ``articulated`` lines or None).  The bodies of the
@@ -74,6 +77,8 @@ def read_bodies(options, set_slip_by_ID, single_blob_bodies=False, restart_recor
     for spec in all_structure_specs(options):
         clones, (locations, orientations) = saved_or_input_configuration(options, spec, restart_record)
         reference, radii = read_vertex_file(spec.vertex_file, spec.where, return_radii=True)
+        if vertex_scale != 1.0:
+            reference = reference * vertex_scale
         if radii is not None and single_blob_bodies:
             raise utils.UserInputError('%s: %s gives blob radii (fourth column), but the roller schemes use the one '
                                        'blob_radius of the input file; remove the fourth column'
@@ -294,6 +299,25 @@ def load_hooks(options, directory, log=print):
     return hooks
 
 
+def apply_spectral_reading(options, published, bodies, log=print):
+    """Say which reading of a spectral input is used; in the published form, apply the folder's start rules to a new
+    run's ``bodies`` (raised below the particle radius, x and y wrapped into the box; a restart continues its
+    snapshot as saved) and say what they moved."""
+    kind = published_spectral.reading_kind(options)
+    if kind is None:
+        return
+    if published is None:
+        log('spectral_reading package: blob_radius %.10g is the blob radius and the vertex files are read as written '
+            '(the manual\'s reading; doc/periodic.md)' % options.blob_radius)
+        return
+    log(published.log_line())
+    if options.initial_step == 0:
+        raised, wrapped = published_spectral.apply_start_rules(bodies, published, options.periodic_length)
+        log('  the start as the folder\'s script makes it: %d of %d bodies below the particle radius raised to '
+            '%.10g, %d moved by whole periods into the box' % (raised, len(bodies), published_spectral.RAISED_HEIGHT *
+                                                             published.particle_radius, wrapped))
+
+
 def check_start(options, model, types):
     """Refuse a start with a blob centre below the wall (when the wall is seen), naming the structure line."""
     if not model.check_wall:
@@ -390,14 +414,20 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     if script == 'mcmc' and options.articulated:
         raise utils.UserInputError("%s: the Monte Carlo sampler has no joints; remove the 'articulated' line or run "
                                    "it with multi_bodies.py and an articulated scheme" % options.articulated[0].where)
+    published = None
+    if script != 'mcmc':  # the published spectral form (doc/periodic.md): options with the derived blob radius
+        options, published = published_spectral.published_options(options)
     directory = os.getcwd() if directory is None else directory
     hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
     try:
         bodies, types, articulated = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
                                     single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
-                                    restart_record=restart_record)
+                                    restart_record=restart_record,
+                                    vertex_scale=1.0 if published is None else published.vertex_scale)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
+    if script != 'mcmc':
+        apply_spectral_reading(options, published, bodies, log)
     if articulated is not None:
         if getattr(hooks, 'published_constraint_class', None) is not None \
                 or getattr(hooks, 'published_articulated_class', None) is not None:

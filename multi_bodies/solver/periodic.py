@@ -172,7 +172,8 @@ class NearerWallBlocks(BlobMobility):
         return blocks if r.ndim == 3 else blocks[0]
 
 
-SPECTRAL_OPTIONS = ('spectral_geometry', 'spectral_z_bounds', 'spectral_kernel', 'spectral_noise')
+SPECTRAL_OPTIONS = ('spectral_geometry', 'spectral_z_bounds', 'spectral_kernel', 'spectral_noise',
+                    'spectral_reading')
 
 
 def uses_spectral(options):
@@ -302,8 +303,8 @@ def overlap_warning(options, bodies, blob_radius):
     return ('%s: blob_radius %g is larger than the smallest blob distance %g of the bodies of %s: with the spectral '
             'product such overlapping blobs make the mobility nearly singular and GMRES may not converge. The '
             'published Spectral_Multiblob_Roller folder\'s own script scaled its vertex file by blob_radius and used '
-            'half the smallest blob distance as the blob radius; for its scene see '
-            'multi_bodies/examples/spectral_rollers and doc/periodic.md'
+            'half the smallest blob distance as the blob radius, which spectral_reading published does (the default '
+            'without other spectral_* lines; doc/periodic.md)'
             % (options.where('blob_radius'), blob_radius, d, name))
 
 
