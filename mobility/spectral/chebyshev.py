@@ -15,6 +15,10 @@ coefficients of one parity (tridiagonal in each parity) plus the two constants i
 boundary rows are dense.  They are solved by elimination of the two tridiagonal chains (diagonally
 dominant once row 0 is used, no pivoting needed) and a 2 x 2 Schur complement for (c0, d0): O(N) per
 wavenumber.
+
+Array namespace: ``ChebyshevSystem(N, Lz, xp)`` keeps its matrices in ``xp`` (numpy by default, or cupy for
+the GPU product, ``mobility.spectral.array_product``), and its methods work on arrays of that namespace; the
+transforms use scipy's DCT on NumPy arrays and the matrices ``forward`` and ``backward`` otherwise.
 """
 import numpy as np
 
@@ -55,9 +59,13 @@ class ChebyshevSystem:
     S1 x) and R1, L1 (derivative rows of F1 x), each (N+2,); the bands of S1 on its first N columns:
     ``s_diag[j] = S1[j, j]``, ``s_low[j] = S1[j, j-2]``, ``s_up[j] = S1[j, j+2]`` (zero where absent);
     ``forward`` (N, N) and ``backward`` (N, N): node values -> coefficients and back.
+    xp : the array namespace of the matrices and of the arrays the methods take (numpy, or cupy).
     """
 
-    def __init__(self, N, Lz):
+    ARRAYS = ('S1', 'F1', 'R2', 'L2', 'R1', 'L1', 's_diag', 's_low', 's_up', 'backward', 'forward')
+
+    def __init__(self, N, Lz, xp=np):
+        self.xp = xp
         self.N = N
         self.H = Lz / 2.0
         S1, F1 = integration_matrices(N)
@@ -80,17 +88,25 @@ class ChebyshevSystem:
         ends = np.ones(N)
         ends[0] = ends[-1] = 0.5
         self.forward = 2.0 * (ends[:, None] * cosines * ends[None, :]) / (N - 1)
+        self.host = {name: getattr(self, name) for name in self.ARRAYS}   # NumPy copies (small constants)
+        if xp is not np:
+            for name in self.ARRAYS:
+                setattr(self, name, xp.asarray(getattr(self, name)))
 
     # -------------------------------------------------------------- transforms along axis 0
     def to_coefficients(self, values):
-        """Chebyshev coefficients (axis 0) from node values (axis 0), by the DCT-I."""
+        """Chebyshev coefficients (axis 0) from node values (axis 0), by the DCT-I (NumPy) or the matrix."""
+        if self.xp is not np:
+            return self.xp.tensordot(self.forward, values, axes=(1, 0))
         from scipy import fft
         c = fft.dct(values, type=1, axis=0) / (2 * (self.N - 1))
         c[1:-1] *= 2.0
         return c
 
     def to_values(self, coefficients):
-        """Node values (axis 0) from Chebyshev coefficients (axis 0), by the DCT-I."""
+        """Node values (axis 0) from Chebyshev coefficients (axis 0), by the DCT-I (NumPy) or the matrix."""
+        if self.xp is not np:
+            return self.xp.tensordot(self.backward, coefficients, axes=(1, 0))
         from scipy import fft
         c = np.array(coefficients, copy=True)
         c[1:-1] *= 0.5
@@ -99,7 +115,7 @@ class ChebyshevSystem:
     def derivative(self, c):
         """Coefficients of d/dz from coefficients ``c`` (axis 0) by the Chebyshev recurrence."""
         N, H = self.N, self.H
-        d = np.zeros_like(c)
+        d = self.xp.zeros_like(c)
         d[N - 2] = 2 * (N - 1) * c[N - 1] / H
         for j in range(N - 2, 0, -1):
             d[j - 1] = d[j + 1] + 2 * j * c[j] / H
@@ -117,8 +133,8 @@ class ChebyshevSystem:
         diag = 1.0 - q[None, :] * self.s_diag[:, None]
         low = -q[None, :] * self.s_low[:, None]
         upper = -q[None, :] * self.s_up[:, None]
-        pivot = np.empty_like(diag)
-        multiplier = np.zeros_like(diag)
+        pivot = self.xp.empty_like(diag)
+        multiplier = self.xp.zeros_like(diag)
         pivot[:2] = diag[:2]
         for j in range(2, N):
             multiplier[j] = low[j] / pivot[j - 2]
@@ -130,7 +146,7 @@ class ChebyshevSystem:
         """Solve ``(I - K^2 H^2 S1[:, :N]) a = r`` for r (N, nk) with the :meth:`factor` output."""
         pivot, multiplier, upper, _ = factors
         N = r.shape[0]
-        y = np.array(r, dtype=np.result_type(r, pivot), copy=True)
+        y = r.astype(np.result_type(r.dtype, pivot.dtype), copy=True)
         for j in range(2, N):
             y[j] -= multiplier[j] * y[j - 2]
         y[N - 1] /= pivot[N - 1]
@@ -149,23 +165,23 @@ class ChebyshevSystem:
         q = factors[3]
         c_top = (H * H) * K[None, :] * self.R2[:, None] + H * self.R1[:, None]
         c_bottom = (H * H) * K[None, :] * self.L2[:, None] + H * self.L1[:, None]
-        e0 = np.zeros((N, K.size))
+        e0 = self.xp.zeros((N, K.size))
         e0[0] = 1.0
-        e1 = np.zeros((N, K.size))
+        e1 = self.xp.zeros((N, K.size))
         e1[1] = 1.0
         z0 = self.chain_solve(factors, e0)
         z1 = self.chain_solve(factors, e1)
         a_r = self.chain_solve(factors, rhs)
-        g_t0 = q * np.sum(c_top[:N] * z0, axis=0) + c_top[N]
-        g_t1 = q * np.sum(c_top[:N] * z1, axis=0) + c_top[N + 1]
-        g_b0 = q * np.sum(c_bottom[:N] * z0, axis=0) + c_bottom[N]
-        g_b1 = q * np.sum(c_bottom[:N] * z1, axis=0) + c_bottom[N + 1]
-        r_t = top - np.sum(c_top[:N] * a_r, axis=0)
-        r_b = bottom - np.sum(c_bottom[:N] * a_r, axis=0)
+        g_t0 = q * (c_top[:N] * z0).sum(axis=0) + c_top[N]
+        g_t1 = q * (c_top[:N] * z1).sum(axis=0) + c_top[N + 1]
+        g_b0 = q * (c_bottom[:N] * z0).sum(axis=0) + c_bottom[N]
+        g_b1 = q * (c_bottom[:N] * z1).sum(axis=0) + c_bottom[N + 1]
+        r_t = top - (c_top[:N] * a_r).sum(axis=0)
+        r_b = bottom - (c_bottom[:N] * a_r).sum(axis=0)
         det = g_t0 * g_b1 - g_t1 * g_b0
         c0 = (r_t * g_b1 - g_t1 * r_b) / det
         d0 = (g_t0 * r_b - g_b0 * r_t) / det
-        x = np.empty((N + 2, K.size), dtype=a_r.dtype)
+        x = self.xp.empty((N + 2, K.size), dtype=a_r.dtype)
         x[:N] = a_r + q * (c0 * z0 + d0 * z1)
         x[N] = c0
         x[N + 1] = d0
@@ -182,12 +198,13 @@ class ChebyshevSystem:
     def mean_flow(self, rhs, geometry):
         """The k = 0 problem ``u'' = rhs`` with u = 0 at the bottom wall and, above it, u' = 0 at the top
         (DPBW) or u = 0 at the top wall (DPSC); rhs (N, m) coefficients.  Returns the coefficients of u."""
-        N = self.N
+        N, xp = self.N, self.xp
         top = self.R1 if geometry == 'DPBW' else self.R2
         bottom = self.L2
-        a = np.asarray(rhs)
-        matrix = np.array([[top[N], top[N + 1]], [bottom[N], bottom[N + 1]]])
-        right = -np.stack([top[:N] @ a, bottom[:N] @ a])
-        constants = np.linalg.solve(matrix, right.reshape(2, -1)).reshape((2,) + a.shape[1:])
-        x = np.concatenate([a, constants], axis=0)
+        host_top, host_bottom = self.host['R1' if geometry == 'DPBW' else 'R2'], self.host['L2']
+        a = rhs
+        matrix = np.array([[host_top[N], host_top[N + 1]], [host_bottom[N], host_bottom[N + 1]]])
+        right = -xp.stack([top[:N] @ a, bottom[:N] @ a])
+        constants = xp.linalg.solve(xp.asarray(matrix), right.reshape(2, -1)).reshape((2,) + a.shape[1:])
+        x = xp.concatenate([a, constants], axis=0)
         return self.values_of(x)

@@ -5,6 +5,9 @@ Grid index i along an axis of N points has the integer mode ``m = i`` for ``i <=
 the wavenumber is ``2 pi m / L``.  For even N the unpaired mode ``m = N/2`` keeps its raw wavenumber
 ``+pi/h`` in ``k^2``, ``|k|`` and the wall corrections, but its derivative factor ``ik`` is zero (the rule of
 DoublyPeriodicStokes).  The real transforms store x modes 0..Nx//2 only.
+
+The wavenumbers are NumPy arrays (small, made on the host); the wall corrections take an array namespace ``xp``
+(numpy, or cupy for the GPU product) for the per-mode arrays they receive and return.
 """
 import numpy as np
 
@@ -42,30 +45,30 @@ def unpaired(n):
 
 
 # ------------------------------------------------------------------ wall corrections
-def bottom_wall_correction(kx, ky, K, b, z):
+def bottom_wall_correction(kx, ky, K, b, z, xp=np):
     """Homogeneous Stokes velocity in z > 0, decaying upwards, equal to ``b`` (3, m) at z = 0.
 
     kx, ky, K (m,): raw wavenumbers and |k| > 0; z (Nz,) heights above the wall.  Returns (3, Nz, m):
     ``A = kx b_x + ky b_y + i K b_z``, ``u = (-kx A z/K + b_x) e^{-Kz}``, ``v = (-ky A z/K + b_y) e^{-Kz}``,
-    ``w = (-i A z + b_z) e^{-Kz}`` (pressure ``-2 i eta A e^{-Kz}``).
+    ``w = (-i A z + b_z) e^{-Kz}`` (pressure ``-2 i eta A e^{-Kz}``).  ``xp``: the arrays' namespace.
     """
     A = kx * b[0] + ky * b[1] + 1j * K * b[2]
-    zz = z[:, None]
-    decay = np.exp(-K[None, :] * zz)
+    zz = xp.asarray(z)[:, None]
+    decay = xp.exp(-K[None, :] * zz)
     u = (-kx * A * zz / K + b[0]) * decay
     v = (-ky * A * zz / K + b[1]) * decay
     w = (-1j * A * zz + b[2]) * decay
-    return np.stack([u, v, w])
+    return xp.stack([u, v, w])
 
 
-def slit_coefficients(kx, ky, K, b, t, Lz, eta):
+def slit_coefficients(kx, ky, K, b, t, Lz, eta, xp=np):
     """The eight coefficients (8, m) of the homogeneous Stokes solution in 0 < z < Lz equal to ``b`` (3, m) at
     z = 0 and ``t`` (3, m) at z = Lz (pressure ``a1 e^{-Kz} + a2 e^{K(z-Lz)}``; see :func:`slit_correction`)."""
     m = K.size
-    E = np.exp(-K * Lz)
+    E = xp.exp(-K * Lz)
     q = 1.0 / (2.0 * eta)
-    M = np.zeros((m, 8, 8), dtype=complex)
-    rhs = np.zeros((m, 8), dtype=complex)
+    M = xp.zeros((m, 8, 8), dtype=complex)
+    rhs = xp.zeros((m, 8), dtype=complex)
     M[:, 0, 0] = q
     M[:, 0, 1] = E * q
     M[:, 0, 6] = -K
@@ -95,21 +98,21 @@ def slit_coefficients(kx, ky, K, b, t, Lz, eta):
     M[:, 7, 6] = E
     M[:, 7, 7] = 1.0
     rhs[:, 7] = t[2]
-    return np.linalg.solve(M, rhs[..., None])[..., 0].T
+    return xp.linalg.solve(M, rhs[..., None])[..., 0].T
 
 
-def slit_correction(kx, ky, K, b, t, z, Lz, eta):
+def slit_correction(kx, ky, K, b, t, z, Lz, eta, xp=np):
     """Homogeneous Stokes velocity in 0 < z < Lz equal to ``b`` at z = 0 and ``t`` at z = Lz; (3, Nz, m).
 
     ``u = -i a1 kx q z e^{-Kz}/K + i a2 kx q z e^{K(z-Lz)}/K + a3 e^{-Kz} + a4 e^{K(z-Lz)}`` (v alike with ky,
     a5, a6), ``w = a1 q z e^{-Kz} + a2 q z e^{K(z-Lz)} + a7 e^{-Kz} + a8 e^{K(z-Lz)}``, ``q = 1/(2 eta)``.
     """
-    a = slit_coefficients(kx, ky, K, b, t, Lz, eta)
+    a = slit_coefficients(kx, ky, K, b, t, Lz, eta, xp)
     q = 1.0 / (2.0 * eta)
-    zz = z[:, None]
-    down = np.exp(-K[None, :] * zz)
-    up = np.exp(K[None, :] * (zz - Lz))
+    zz = xp.asarray(z)[:, None]
+    down = xp.exp(-K[None, :] * zz)
+    up = xp.exp(K[None, :] * (zz - Lz))
     u = -1j * a[0] * kx * q * zz * down / K + 1j * a[1] * kx * q * zz * up / K + a[2] * down + a[3] * up
     v = -1j * a[0] * ky * q * zz * down / K + 1j * a[1] * ky * q * zz * up / K + a[4] * down + a[5] * up
     w = a[0] * q * zz * down + a[1] * q * zz * up + a[6] * down + a[7] * up
-    return np.stack([u, v, w])
+    return xp.stack([u, v, w])

@@ -3,6 +3,9 @@ bounded) and over wavenumbers (loops run only over the z index).  The compiled p
 (``mobility.spectral.compiled``) computes the same numbers to round-off; tests compare the two.
 
 Grids are real arrays (3, Nz, Ny, Nx) (component, z, y, x), z index 0 at the top of a Chebyshev grid.
+
+The Stokes solves (:func:`solve`) take an array namespace ``xp``: NumPy here (transforms by ``scipy.fft``), or
+CuPy for the GPU product (``mobility.spectral.array_product``: ``cupy.fft``), the same statements either way.
 """
 import numpy as np
 from scipy import fft
@@ -101,51 +104,63 @@ def interpolate_rotations(p, stencil, grid):
 
 
 # ------------------------------------------------------------------ the Stokes solves
-def solve_triply_periodic(p, eta, grid):
+def _transforms(xp):
+    """The FFT module of an array namespace: scipy.fft for NumPy, ``xp.fft`` otherwise (cupy.fft)."""
+    return fft if xp is np else xp.fft
+
+
+def solve_triply_periodic(p, eta, grid, xp=np):
     """Velocity grid (3, Nz, Ny, Nx) from the force density grid on the triply periodic grid."""
-    fhat = fft.rfftn(grid, axes=(1, 2, 3))
-    kz = wavenumbers(p.Nz, p.Lz)[:, None, None]
-    ky = wavenumbers(p.Ny, p.Ly)[None, :, None]
-    kx = wavenumbers(p.Nx, p.Lx)[:p.Nx // 2 + 1][None, None, :]
-    ik = [derivative_factors(p.Nx, p.Lx)[:p.Nx // 2 + 1][None, None, :],
-          derivative_factors(p.Ny, p.Ly)[None, :, None],
-          derivative_factors(p.Nz, p.Lz)[:, None, None]]
+    transforms = _transforms(xp)
+    fhat = transforms.rfftn(grid, axes=(1, 2, 3))
+    kz = xp.asarray(wavenumbers(p.Nz, p.Lz))[:, None, None]
+    ky = xp.asarray(wavenumbers(p.Ny, p.Ly))[None, :, None]
+    kx = xp.asarray(wavenumbers(p.Nx, p.Lx)[:p.Nx // 2 + 1])[None, None, :]
+    ik = [xp.asarray(derivative_factors(p.Nx, p.Lx)[:p.Nx // 2 + 1])[None, None, :],
+          xp.asarray(derivative_factors(p.Ny, p.Ly))[None, :, None],
+          xp.asarray(derivative_factors(p.Nz, p.Lz))[:, None, None]]
     k2 = kx * kx + ky * ky + kz * kz
     k2[0, 0, 0] = 1.0
     # fhat is ordered (x, y, z) components; ik in the same order
     pressure = -(ik[0] * fhat[0] + ik[1] * fhat[1] + ik[2] * fhat[2]) / k2
-    uhat = np.empty_like(fhat)
+    uhat = xp.empty_like(fhat)
     for c in range(3):
         uhat[c] = (fhat[c] - ik[c] * pressure) / (eta * k2)
         uhat[c][0, 0, 0] = 0.0
-    return fft.irfftn(uhat, s=(p.Nz, p.Ny, p.Nx), axes=(1, 2, 3))
+    return transforms.irfftn(uhat, s=(p.Nz, p.Ny, p.Nx), axes=(1, 2, 3))
 
 
-def solve_doubly_periodic(p, eta, grid):
+def solve_doubly_periodic(p, eta, grid, xp=np):
     """Velocity grid (3, Nz, Ny, Nx) from the force density grid in the DP, DPBW and DPSC geometries."""
     N = p.Nz
-    cheb = ChebyshevSystem(N, p.Lz)
+    transforms = _transforms(xp)
+    cheb = ChebyshevSystem(N, p.Lz, xp)
     Nxh = p.Nx // 2 + 1
-    coefficients = fft.rfftn(cheb.to_coefficients(grid.transpose(1, 0, 2, 3)), axes=(2, 3))  # (Nz, 3, Ny, Nxh)
+    coefficients = transforms.rfftn(cheb.to_coefficients(grid.transpose(1, 0, 2, 3)), axes=(2, 3))  # (Nz, 3, Ny, Nxh)
     kx = np.broadcast_to(wavenumbers(p.Nx, p.Lx)[:Nxh][None, :], (p.Ny, Nxh)).ravel()
     ky = np.broadcast_to(wavenumbers(p.Ny, p.Ly)[:, None], (p.Ny, Nxh)).ravel()
     dx = np.broadcast_to(derivative_factors(p.Nx, p.Lx)[:Nxh][None, :], (p.Ny, Nxh)).ravel()
     dy = np.broadcast_to(derivative_factors(p.Ny, p.Ly)[:, None], (p.Ny, Nxh)).ravel()
     K = np.sqrt(kx * kx + ky * ky)
     f = coefficients.reshape(N, 3, -1)
-    u = np.zeros_like(f)
-    live = K > 0                                   # every mode but k = 0
+    u = xp.zeros_like(f)
+    live = np.flatnonzero(K > 0)                   # every mode but k = 0 (indices: the same in every namespace)
+    still = np.flatnonzero(K == 0)
+    partner = _needs_partner(p)[live]
+    kx_partner, ky_partner = (v[live] for v in _partner(p))
+    kx, ky, K, dx, dy = (xp.asarray(v[live]) for v in (kx, ky, K, dx, dy))
+    live, still = xp.asarray(live), xp.asarray(still)
     fx, fy, fz = (f[:, c, live] for c in range(3))
-    Kl, dxl, dyl = K[live], dx[live], dy[live]
+    Kl, dxl, dyl = K, dx, dy
     factors = cheb.factor(Kl)
     # pressure: (D^2 - K^2) p = Dx fx + Dy fy + D fz, p' + K p = 0 (top), p' - K p = 0 (bottom)
-    zero = np.zeros(Kl.size, dtype=complex)
-    xp = cheb.solve(Kl, factors, dxl * fx + dyl * fy + cheb.derivative(fz), zero, zero)
-    pc = cheb.values_of(xp)
+    zero = xp.zeros(Kl.size, dtype=complex)
+    x_pressure = cheb.solve(Kl, factors, dxl * fx + dyl * fy + cheb.derivative(fz), zero, zero)
+    pc = cheb.values_of(x_pressure)
     # p' in the w equation: DoublyPeriodicStokes takes F x_p, UAMMD the Chebyshev recurrence of p
-    dpc = cheb.derivative(pc) if p.rules == 'uammd' else cheb.derivatives_of(xp)
+    dpc = cheb.derivative(pc) if p.rules == 'uammd' else cheb.derivatives_of(x_pressure)
     p_top = pc.sum(axis=0)
-    p_bottom = ((-1.0) ** np.arange(N)) @ pc
+    p_bottom = xp.asarray((-1.0) ** np.arange(N)) @ pc
     # velocity: eta (D^2 - K^2) u = Dx p - fx (v, w alike) with the Robin conditions of the open fluid
     for c, (rhs, top, bottom) in enumerate((
             ((dxl * pc - fx) / eta, -dxl * p_top / (2 * eta * Kl), dxl * p_bottom / (2 * eta * Kl)),
@@ -153,16 +168,15 @@ def solve_doubly_periodic(p, eta, grid):
             ((dpc - fz) / eta, p_top / (2 * eta), p_bottom / (2 * eta)))):
         u[:, c, live] = cheb.values_of(cheb.solve(Kl, factors, rhs, top, bottom))
     if p.geometry != 'DP':                         # k = 0: the mean flow between walls
-        u[:, 0, ~live] = cheb.mean_flow(-f[:, 0, ~live] / eta, p.geometry)
-        u[:, 1, ~live] = cheb.mean_flow(-f[:, 1, ~live] / eta, p.geometry)
+        u[:, 0, still] = cheb.mean_flow(-f[:, 0, still] / eta, p.geometry)
+        u[:, 1, still] = cheb.mean_flow(-f[:, 1, still] / eta, p.geometry)
     values = cheb.to_values(u)                     # (Nz, 3, nk): node values, Fourier in x and y
     if p.geometry != 'DP':
-        kx_partner, ky_partner = _partner(p)
-        values[:, :, live] += _wall_correction(p, eta, cheb, u[:, :, live], kx[live], ky[live], Kl,
-                                               _needs_partner(p)[live], kx_partner[live], ky_partner[live])
+        values[:, :, live] += _wall_correction(p, eta, cheb, u[:, :, live], kx, ky, Kl, partner, kx_partner,
+                                               ky_partner, xp)
     values = values.reshape(N, 3, p.Ny, Nxh)
-    out = fft.irfftn(values, s=(p.Ny, p.Nx), axes=(2, 3))
-    return np.ascontiguousarray(out.transpose(1, 0, 2, 3))
+    out = transforms.irfftn(values, s=(p.Ny, p.Nx), axes=(2, 3))
+    return xp.ascontiguousarray(out.transpose(1, 0, 2, 3))
 
 
 def _needs_partner(p):
@@ -182,8 +196,11 @@ def _partner(p):
     return kxp, kyp
 
 
-def _wall_correction(p, eta, cheb, u, kx, ky, K, needs_partner, kxp, kyp):
+def _wall_correction(p, eta, cheb, u, kx, ky, K, needs_partner, kxp, kyp, xp=np):
     """Node values (Nz, 3, m) of the homogeneous Stokes flow that cancels the DP solution on the walls.
+
+    u (Nz, 3, m), kx, ky, K (m,): arrays of ``xp``; needs_partner (m,) bool and the partners' raw wavenumbers
+    kxp, kyp (m,): NumPy.
 
     The library transforms back with a complex inverse FFT and keeps the real part, so where a mode's
     conjugate partner has its own raw wavenumbers (unpaired modes) the correction is the average of the
@@ -191,24 +208,26 @@ def _wall_correction(p, eta, cheb, u, kx, ky, K, needs_partner, kxp, kyp):
     """
     N = cheb.N
     z = p.z_nodes()
-    alternating = (-1.0) ** np.arange(N)
-    b = -np.einsum('j,jcm->cm', alternating, u)
+    alternating = xp.asarray((-1.0) ** np.arange(N))
+    b = -xp.einsum('j,jcm->cm', alternating, u)
     t = -u.sum(axis=0)
 
     def correction(kx_, ky_, K_, b_, t_):
         if p.geometry == 'DPBW':
-            return bottom_wall_correction(kx_, ky_, K_, b_, z)
-        return slit_correction(kx_, ky_, K_, b_, t_, z, p.Lz, eta)
+            return bottom_wall_correction(kx_, ky_, K_, b_, z, xp)
+        return slit_correction(kx_, ky_, K_, b_, t_, z, p.Lz, eta, xp)
     values = correction(kx, ky, K, b, t)
     if np.any(needs_partner):
-        m = needs_partner
-        partner = correction(kxp[m], kyp[m], K[m], np.conj(b[:, m]), np.conj(t[:, m]))
-        values[:, :, m] = 0.5 * (values[:, :, m] + np.conj(partner))
+        m = xp.asarray(np.flatnonzero(needs_partner))
+        partner = correction(xp.asarray(kxp[needs_partner]), xp.asarray(kyp[needs_partner]), K[m],
+                             xp.conj(b[:, m]), xp.conj(t[:, m]))
+        values[:, :, m] = 0.5 * (values[:, :, m] + xp.conj(partner))
     return values.transpose(1, 0, 2)
 
 
-def solve(p, eta, grid):
-    """Velocity grid from force density grid, (3, Nz, Ny, Nx) each, in the geometry of ``p``."""
+def solve(p, eta, grid, xp=np):
+    """Velocity grid from force density grid, (3, Nz, Ny, Nx) each, in the geometry of ``p``; ``xp`` the grid's
+    array namespace (numpy or cupy)."""
     if p.geometry == 'TP':
-        return solve_triply_periodic(p, eta, grid)
-    return solve_doubly_periodic(p, eta, grid)
+        return solve_triply_periodic(p, eta, grid, xp)
+    return solve_doubly_periodic(p, eta, grid, xp)
