@@ -641,3 +641,19 @@ def _spectral_factory(geometry, eta, blob_radius, **options):
 
 
 register_backend('spectral', _spectral_factory, PERIODIC_GEOMETRIES)
+
+
+def _spectral_gpu_factory(geometry, eta, blob_radius, **options):
+    """The spectral product on an NVIDIA GPU (``mobility.spectral_gpu_mobility``, CuPy), loaded on first use."""
+    import importlib
+    return importlib.import_module('mobility.spectral_gpu_mobility').SpectralGpuMobility(geometry, eta, blob_radius,
+                                                                                         **options)
+
+
+def _spectral_gpu_check():
+    import importlib
+    return importlib.import_module('mobility.spectral_gpu_mobility').unusable_reason()
+
+
+register_backend('spectral_gpu', _spectral_gpu_factory, PERIODIC_GEOMETRIES, rank=PREFERENCE.index('spectral'),
+                 device='gpu', check=_spectral_gpu_check)

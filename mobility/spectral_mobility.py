@@ -58,6 +58,15 @@ def spectral_parameters_for(geometry, blob_radius, kernel='w6', rotation=False, 
                                whole_cells_tolerance=whole_cells_tolerance)
 
 
+def _times_factors(vectors, factors):
+    """Per-blob vectors (N, 3) (or flat) times ``factors`` (N,) (NumPy), in the vectors' own array namespace
+    (NumPy, or CuPy for the GPU backend, whose arrays stay on the device)."""
+    if isinstance(vectors, np.ndarray) or type(vectors).__module__.split('.')[0] != 'cupy':
+        return np.asarray(vectors, dtype=float).reshape(-1, 3) * factors[:, None]
+    import cupy
+    return vectors.reshape(-1, 3) * cupy.asarray(factors)[:, None]
+
+
 class SpectralMobility(BlobMobility):
     """The spectral (force-coupling) blob mobility in a periodic geometry (see the module docstring)."""
     backend = 'spectral'
@@ -83,7 +92,7 @@ class SpectralMobility(BlobMobility):
         self.parameters = parameters
         self.has_rotation = parameters.has_torque
         self.relative_accuracy = RELATIVE_ACCURACY[parameters.geometry]
-        self.stokes = SpectralStokes(parameters, self.eta, path=path, workers=workers)
+        self.stokes = self._product_engine(parameters, path, workers)
         self._positions = None
         if near_wall not in self.NEAR_WALL:
             raise UserInputError('spectral near_wall %r: None or published' % (near_wall,))
@@ -94,6 +103,11 @@ class SpectralMobility(BlobMobility):
                                  'not in %s; use the Lanczos noise there' % geometry.kind)
         self.near_wall = near_wall if parameters.geometry in ('DPBW', 'DPSC') else None
         self.noise_method = noise
+
+    def _product_engine(self, parameters, path, workers):
+        """The object that computes the products (``set_positions``, ``product``, ``timings``): the CPU product
+        here; the GPU backend (``mobility.spectral_gpu_mobility``) gives its array product instead."""
+        return SpectralStokes(parameters, self.eta, path=path, workers=workers)
 
     def _at(self, r_vectors):
         """The product object set at ``r_vectors`` (prepared again only when they differ from the last)."""
@@ -137,13 +151,12 @@ class SpectralMobility(BlobMobility):
             forces = np.zeros(3 * n)
         r, factors = self.near_wall_factors(r_vectors)
         if factors is not None:
-            B = factors[:, None]
-            forces = None if forces is None else np.asarray(forces, dtype=float).reshape(-1, 3) * B
-            torques = None if torques is None else np.asarray(torques, dtype=float).reshape(-1, 3) * B
+            forces = None if forces is None else _times_factors(forces, factors)
+            torques = None if torques is None else _times_factors(torques, factors)
         U, W = self._at(r).product(forces, torques)
         if factors is not None:
-            U = U * factors[:, None]
-            W = None if W is None else W * factors[:, None]
+            U = _times_factors(U, factors)
+            W = None if W is None else _times_factors(W, factors)
         return U.reshape(-1), (None if W is None else W.reshape(-1))
 
     def velocities(self, r_vectors, forces):
