@@ -31,10 +31,27 @@ and a zero first guess at every solve) and with the kept ones (``lubrication.int
 dt 1e-3 and 1e-2, with and without a spin of 12 held by the torques: median seconds per step and the ratio,
 GMRES iterations per solve, sparse LUs per step.
 
+With ``--versus-published``: the published trapezoidal step side by side with this package's, through the same
+driver API (``Lub_Solver(...).Update_Bodies_Trap``), each code in its own process (the published one in its own
+interpreter, ``--published-python``, from a rebuilt published checkout, ``--published-tree``), the steps of the two
+interleaved (which goes first alternates), with one thread each and then with default threads each, CPU seconds
+(all threads of the process) and wall seconds per step, 64 to 4096 spheres by default, and the ratios published /
+package.  The scene and the worker are in ``benchmarks/lubrication_step_worker.py`` (radius 1, so that the
+published pair distance is right).  ``--deterministic`` sets kT = 0 (Heun's method) and also prints how far
+apart the two codes' spheres end (the same physics: within the GMRES tolerance).  Without
+``--published-python`` it prints the published figures measured for issue 46 with their conditions instead::
+
+    python benchmarks/bench_lubrication.py --versus-published --published-python /work/published_venv/bin/python \
+        --published-tree /work/published_tree/RigidMultiblobsWall --sides 8 16 32 64 --versus-steps 3
+
 Scene: radius a = 1.0155 (the published rollers), eta = 1e-3, a square lattice of spacing 2.3 a at height
 1.2 a, jittered by 0.1 a in x and y (seed 1); random forces and torques (seed 2); tolerance 1e-8.
 """
 import argparse
+import json
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -189,6 +206,111 @@ def main_kept(args):
                             seconds / rows['published'][0], its, lu), flush=True)
 
 
+# The published step measured for issue 46 (side by side, each code one process, steps interleaved, one thread each,
+# CPU seconds per trapezoidal step, the lattice scene of this benchmark near the wall, kT > 0): printed with its
+# conditions when the published code cannot be run here.
+ISSUE_46_FIGURES = (
+    'published figures of issue 46 (not measured now): CPU seconds per trapezoidal step, one thread each, each code '
+    'one process, steps interleaved, lattice of spheres near the wall (this benchmark\'s scene), kT > 0',
+    (('spheres', 'published', 'package then', 'ratio'),
+     (64, 0.198, 0.051, 3.9), (256, 1.02, 0.309, 3.3), (1024, 8.35, 3.13, 2.7), (4096, 127.8, 46.1, 2.8)),
+    'kT = 0: ratios 4.9, 4.3, 3.6 at 64, 256, 1024 spheres.  Run with --published-python and --published-tree '
+    'to measure both codes now.')
+
+THREAD_VARIABLES = ('OMP_NUM_THREADS', 'NUMBA_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
+                    'NUMEXPR_NUM_THREADS')
+
+
+def worker_environment(threads):
+    """The environment of a worker: every thread count 1 (``threads == 'one'``) or none set ('default')."""
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    if threads == 'one':
+        env.update({k: '1' for k in THREAD_VARIABLES})
+    return env
+
+
+class Worker:
+    """A ``lubrication_step_worker.py`` process (one code, one lattice) and its line protocol."""
+
+    def __init__(self, python, code, side, threads, args):
+        worker = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'lubrication_step_worker.py')
+        command = [python, worker, '--code', code, '--side', str(side), '--kT', repr(args.versus_kT),
+                   '--dt', repr(args.versus_dt), '--tolerance', repr(args.versus_tolerance)]
+        if code == 'published':
+            command += ['--published-tree', args.published_tree]
+        self.code = code
+        self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                        env=worker_environment(threads), cwd=os.path.dirname(worker))
+        self.ready = self.read()
+
+    def read(self):
+        line = self.process.stdout.readline()
+        if not line:
+            raise RuntimeError('the %s worker stopped (exit %s); run it alone to see why' %
+                               (self.code, self.process.wait()))
+        return json.loads(line)
+
+    def ask(self, command):
+        self.process.stdin.write(command + '\n')
+        self.process.stdin.flush()
+        return self.read()
+
+    def close(self):
+        self.process.stdin.write('quit\n')
+        self.process.stdin.flush()
+        self.process.wait()
+
+
+def versus_rows(side, threads, args):
+    """Both codes' steps at one size and thread setting, interleaved: {code: {'cpu': [...], 'wall': [...],
+    'rejected': n, 'threads': str}}, and the largest distance between the codes' spheres at the end (or None)."""
+    workers = [Worker(args.published_python, 'published', side, threads, args), Worker(sys.executable, 'package',
+                                                                                      side, threads, args)]
+    rows = {w.code: {'cpu': [], 'wall': [], 'rejected': 0, 'threads': w.ready['threads']} for w in workers}
+    for step in range(args.versus_steps):
+        for worker in (workers if step % 2 == 0 else workers[::-1]):
+            answer = worker.ask('step')
+            row = rows[worker.code]
+            row['cpu'].append(answer['cpu'])
+            row['wall'].append(answer['wall'])
+            row['rejected'] += sum(answer['rejected'])
+    apart = None
+    if args.deterministic:
+        ends = [np.array(w.ask('locations')['locations']) for w in workers]
+        apart = float(np.max(np.linalg.norm(ends[0] - ends[1], axis=1)))
+    for worker in workers:
+        worker.close()
+    return rows, apart
+
+
+def main_versus_published(args):
+    """The published step side by side with the package's (see the module note)."""
+    if args.published_python is None or args.published_tree is None:
+        title, table, note = ISSUE_46_FIGURES
+        print(title)
+        print('%8s %10s %13s %6s' % table[0])
+        for row in table[1:]:
+            print('%8d %10.3f %13.3f %6.1f' % row)
+        print(note)
+        return
+    print('trapezoidal steps through Lub_Solver.Update_Bodies_Trap, a = 1, kT = %g, dt = %g, tolerance = %g, '
+          '%d steps each after one warm-up, interleaved; medians; ratio = published / package' % (
+              args.versus_kT, args.versus_dt, args.versus_tolerance, args.versus_steps))
+    print('%6s %8s %11s %11s %7s %11s %11s %7s %9s %s' % (
+        'N', 'threads', 'pub CPU s', 'pkg CPU s', 'ratio', 'pub wall s', 'pkg wall s', 'ratio', 'rejected',
+        'apart' if args.deterministic else ''))
+    for threads in ('one', 'default'):
+        for side in args.sides:
+            rows, apart = versus_rows(side, threads, args)
+            pub, pkg = rows['published'], rows['package']
+            medians = [float(np.median(rows[c][k])) for k in ('cpu', 'wall') for c in ('published', 'package')]
+            print('%6d %8s %11.4f %11.4f %7.2f %11.4f %11.4f %7.2f %4d %4d %s' % (
+                side * side, threads, medians[0], medians[1], medians[0] / medians[1], medians[2], medians[3],
+                medians[2] / medians[3], pub['rejected'], pkg['rejected'],
+                '' if apart is None else '%.1e' % apart), flush=True)
+        print('  threads (%s): published %s; package %s' % (threads, pub['threads'], pkg['threads']))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--sides', type=int, nargs='+', default=[8, 16])
@@ -199,6 +321,15 @@ def main():
     parser.add_argument('--kept', action='store_true',
                         help='trapezoidal steps with the published solves and with the kept ones (KeptSolves)')
     parser.add_argument('--kept-steps', type=int, default=20, help='steps of each run of --kept')
+    parser.add_argument('--versus-published', action='store_true',
+                        help='the published trapezoidal step side by side with the package\'s (see the module note)')
+    parser.add_argument('--published-python', default=None, help='the interpreter of the published code')
+    parser.add_argument('--published-tree', default=None, help='the rebuilt published RigidMultiblobsWall folder')
+    parser.add_argument('--versus-steps', type=int, default=3, help='timed steps of each code per size')
+    parser.add_argument('--deterministic', action='store_true', help='kT = 0 in --versus-published')
+    parser.add_argument('--versus-kT', type=float, default=KT)
+    parser.add_argument('--versus-dt', type=float, default=DT)
+    parser.add_argument('--versus-tolerance', type=float, default=STEP_TOLERANCE)
     parser.add_argument('--assembly', choices=('compiled', 'python', 'both'), default=None,
                         help='the C++ assembly when built (compiled), the NumPy fallback (python), or both one after '
                              'the other (the default of --breakdown)')
@@ -208,6 +339,12 @@ def main():
     compiled.use_compiled(args.assembly != 'python')
     print('assembly:', args.assembly if args.assembly == 'both' else
           'compiled (C++)' if compiled.in_use() else 'NumPy')
+    if args.versus_published:
+        if args.deterministic:
+            args.versus_kT = 0.0
+        if args.sides == [8, 16]:  # the default sizes of the other modes
+            args.sides = [8, 16, 32, 64]
+        return main_versus_published(args)
     if args.breakdown:
         return main_breakdown(args)
     if args.steps:
