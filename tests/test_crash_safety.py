@@ -1038,6 +1038,10 @@ def test_a_process_that_lives_on_after_its_run_is_not_taken_for_a_writer(tmp_pat
     assert run_dynamic(folder)[0] == 0  # in this process, which lives on
     segment = json.loads((folder / 'data' / 'run.run').read_text())['segments'][-1]
     assert segment['pid'] == os.getpid() and segment.get('ended')
-    edit(folder, initial_step=4, n_steps=12)
+    before = (folder / 'data' / 'run.run').read_bytes()
+    edit(folder, dt=-1)
+    assert run_dynamic(folder)[0] == 2  # refused in this same process: run.run is left as it was (found by the
+    assert (folder / 'data' / 'run.run').read_bytes() == before  # fuzzer: it was marked ended a second time)
+    edit(folder, initial_step=4, n_steps=12, dt=0.01)
     status, _, err = run(DYNAMIC, folder)
     assert status == 0, err

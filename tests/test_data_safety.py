@@ -852,6 +852,8 @@ def test_a_joint_of_a_body_with_itself_is_refused(tmp_path):
 @pytest.mark.parametrize('expression, status, words', [
     ('0.1*log(t)', 2, "chain.const, line 3: the expression '0.1*log(t)' is -inf at t = 0.0"),
     ('sqrt(0.025-t)', 1, "chain.const, line 3: the expression 'sqrt(0.025-t)' is nan at t = 0.03"),
+    ('1e308', 2, "chain.const, line 3: the expression '1e308' is 1e+308 at t = 0.0, not a finite number of magnitude "
+                 "at most 1e+150"),  # found by the fuzzer: the joint algebra overflowed (a ValueError traceback)
 ])
 def test_a_non_finite_const_expression_is_named(tmp_path, expression, status, words):
     """A joint vector that is not finite (at the start: refused; later: the run stops) was blamed on the blob

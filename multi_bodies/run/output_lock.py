@@ -315,9 +315,9 @@ def mark_run_ended(output_name):
         document = _read_run_file(path)
         segment = document['segments'][-1]
         me = holder_record()
-        if segment.get('pid') != me['pid'] or segment.get('host') != me['host'] or \
+        if segment.get('ended') or segment.get('pid') != me['pid'] or segment.get('host') != me['host'] or \
                 segment.get('process_start') != me.get('process_start'):
-            return
+            return  # not a segment of this process that is still open (a refused run leaves the file as it was)
         segment['ended'] = time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())
         part = path + '.part'
         with open(part, 'w') as f:

@@ -107,12 +107,13 @@ def compile_expression(text, where):
 
 def non_finite_expression(function, t, error):
     """Raise ``error`` (UserInputError at set-up, SimulationStopped during a run) naming the file, line and
-    expression when ``function`` (of :func:`compile_expression`) is not a finite number at time ``t``."""
+    expression when ``function`` (of :func:`compile_expression`) is not a finite number of magnitude at most
+    ``LARGEST_LINK`` at time ``t`` (as the eight numbers of a joint: a larger one overflows the joint algebra)."""
     value = function(t)
-    if not math.isfinite(value):
-        raise error("%s: the expression '%s' is %r at t = %r, not a finite number (a joint vector or its rate "
-                    "must be finite at every time of the run); fix the expression"
-                    % (function.where, function.text, value, float(t)))
+    if not (math.isfinite(value) and abs(value) <= LARGEST_LINK):
+        raise error("%s: the expression '%s' is %r at t = %r, not a finite number of magnitude at most %g (a joint "
+                    "vector or its rate must be one at every time of the run); fix the expression"
+                    % (function.where, function.text, value, float(t), LARGEST_LINK))
 
 
 Restored = namedtuple('Restored', ['configuration', 'nonlinear_iterations'])
@@ -305,7 +306,7 @@ class ArticulatedSet:
         for c, functions in enumerate(self.expressions):
             if functions is not None:
                 values = [f(t) for f in functions]
-                if not np.all(np.isfinite(values)):
+                if not np.all(np.abs(values) <= LARGEST_LINK):  # also NaN and inf
                     for function in functions:
                         non_finite_expression(function, t, SimulationStopped)
                 links[c], rates[c] = values[:6], values[6:]
