@@ -83,6 +83,7 @@ def test_dense_monolayer_of_rollers_gets_the_spectral_product(tmp_path, monkeypa
     assert chosen is not None and chosen.candidate.startswith('spectral')
     assert result.recommendation['mobility_vector_prod_implementation'] == 'spectral'
     assert result.recommendation.get('spectral_kernel', 'w6') == spectral_kernel_of(chosen)
+    assert result.recommendation['spectral_reading'] == 'package'   # blob_radius read as measured, not published
     assert result.check['holds']
     assert '## geometry' in result.report()
     with open('applied.dat', 'w') as f:
@@ -127,6 +128,23 @@ def test_rigid_monolayer_measured_through_the_compiled_reference(tmp_path, monke
     else:
         assert result.recommendation['mobility_vector_prod_implementation'] == 'spectral'
         assert result.recommendation.get('spectral_kernel', 'w6') == spectral_kernel_of(chosen)
+
+
+def test_a_spectral_input_in_the_published_form_is_not_measured(tmp_path, monkeypatch):
+    """An input naming the spectral product over a wall and no other spectral_* line is read as the published
+    folder reads it (blob_radius the particle radius): the advisor, which reads the scene as the manual does, says
+    so instead of measuring other blobs, and the backend topic's direct sums do not replace the product."""
+    monkeypatch.chdir(tmp_path)
+    name = write_scene(str(tmp_path), 'deterministic_adams_bashforth_rollers', lattice(4, 5.0, 2.0), 20.0)
+    with open(name) as f:
+        text = f.read().replace('mobility_vector_prod_implementation C++', 'mobility_vector_prod_implementation '
+                                                                          'spectral')
+    with open(name, 'w') as f:
+        f.write(text)
+    result = partial_advice(name)
+    rows = geometry_rows(result)
+    assert len(rows) == 1 and rows[0].candidate == 'not measured' and 'spectral_reading package' in rows[0].note
+    assert 'mobility_vector_prod_implementation' not in result.recommendation
 
 
 def test_a_slit_has_no_direct_sum_to_compare(tmp_path, monkeypatch):

@@ -34,8 +34,11 @@ from mobility.image_sums import periodic_limit, relative_error, ring_sums, tiled
 from mobility.interface import Geometry, implementation_geometry, make_mobility
 from mobility.spectral.parameters import refined_parameters
 from mobility.spectral_mobility import SpectralMobility, spectral_parameters_for
+from multi_bodies.files.scheme_table import moves_rollers
 from multi_bodies.solver import body_solver
-from multi_bodies.solver.periodic import PUBLISHED_ZMAX, SpectralDomain, check_grid_periods, spectral_geometry_kind
+from multi_bodies.solver.periodic import (PUBLISHED_ZMAX, SPECTRAL_OPTIONS, SpectralDomain, check_grid_periods,
+                                          spectral_geometry_kind)
+from multi_bodies.solver.published_spectral import reading_kind
 from utils import UserInputError
 
 SPECTRAL = 'spectral'
@@ -70,7 +73,7 @@ class GeometryMeasurements:
                 # the backend and wall topics compare direct sums: they cannot replace a periodic product
                 self.recommendation.pop(vector_option)
             return
-        rollers = 'rollers' in options.scheme
+        rollers = moves_rollers(options.scheme)
         r = scene.r_vectors
         n = scene.num_blobs
         Lx, Ly, _ = options.periodic_length
@@ -114,7 +117,9 @@ class GeometryMeasurements:
         model_difference = None if converged is None else self._geometry_error(converged, targets, limit)
         for kernel in (ROLLER_KERNELS if rollers else FORCE_KERNELS):
             label = spectral_kernel_label(kernel, rollers)
-            lines = {vector_option: SPECTRAL}
+            # the manual's reading of blob_radius, which the advisor measured (an input naming the spectral product
+            # and no other spectral_* line would otherwise be read as the published folder reads it)
+            lines = {vector_option: SPECTRAL, 'spectral_reading': 'package'}
             if kernel != 'w6':
                 lines['spectral_kernel'] = kernel
             if z_line is not None:
@@ -171,14 +176,15 @@ class GeometryMeasurements:
         else:
             chosen = min(meeting, key=lambda row: row[2])
         self.geometry_choice = None if chosen is None else chosen[0]
-        for key in ('spectral_kernel', 'spectral_z_bounds'):
+        for key in ('spectral_kernel', 'spectral_z_bounds', 'spectral_reading'):
             self.recommendation.pop(key, None)
         if chosen is None:
             return
         lines = dict(chosen[4])
         if lines.get(vector_option) == SPECTRAL:
-            if current_spectral:
+            if current_spectral:   # read as the manual says already (else not measured), and its spectral_* lines stay
                 lines.pop(vector_option)
+                lines.pop('spectral_reading')
                 if lines.get('spectral_kernel', 'w6') == options.spectral_kernel:
                     lines.pop('spectral_kernel', None)
                 elif 'spectral_kernel' not in lines:
@@ -190,9 +196,14 @@ class GeometryMeasurements:
                                   'here' % (chosen[0], _percent(chosen[1]), _percent(rows[0][1]),
                                             _seconds(chosen[2])))
         elif current_spectral:
-            self.recommendation[vector_option] = lines[vector_option]
-            self.notes.append('geometry: the pseudo-periodic direct sum meets %s here (%s) and is the cheapest: '
-                              'the spectral product is not needed' % (_percent(self.accuracy), _percent(chosen[1])))
+            # a direct input may not keep the spectral_* lines, which a recommendation cannot remove: said, not set
+            self.recommendation.pop(vector_option, None)
+            given = [name for name in SPECTRAL_OPTIONS if options.is_set(name)]
+            self.notes.append('geometry: the pseudo-periodic direct sum meets %s here (%s) and is the cheapest: the '
+                              'spectral product is not needed; to use it, set mobility_vector_prod_implementation %s '
+                              'and remove the line%s %s' % (_percent(self.accuracy), _percent(chosen[1]),
+                                                            lines[vector_option], 's' if len(given) > 1 else '',
+                                                            ', '.join(given)))
 
     def geometry_allowance(self):
         """How much a recommended change of the periodic product may change the velocities of the check: the
@@ -210,6 +221,10 @@ class GeometryMeasurements:
             return 'a Monte Carlo input has no hydrodynamics'
         Lx, Ly, Lz = options.periodic_length
         spectral = options.mobility_vector_prod_implementation == SPECTRAL
+        if spectral and reading_kind(options) == 'published':
+            return ('the input is read in the published form of a spectral input (blob_radius the particle radius, '
+                    'doc/periodic.md); the advisor reads the scene as the manual does: add spectral_reading package '
+                    'to the input (and the blob radius it means) to measure it')
         if spectral and spectral_geometry_kind(options) != 'doubly_periodic_wall':
             return ('spectral_geometry %s has no direct sum to compare with (the pseudo-periodic sums exist over a '
                     'single wall and in free space): the spectral product is the only product of this geometry'

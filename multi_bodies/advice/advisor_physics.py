@@ -66,7 +66,7 @@ def is_model_key(key):
 
 
 # Options of the spectral product that the geometry topic recommends (advisor_geometry).
-GEOMETRY_KEYS = ('spectral_kernel', 'spectral_z_bounds')
+GEOMETRY_KEYS = ('spectral_kernel', 'spectral_z_bounds', 'spectral_reading')
 
 
 def geometry_change(recommendation, options):
