@@ -25,7 +25,7 @@ Method (Sprinkle et al., Soft Matter 16, 7982, 2020; J. Chem. Phys. 147, 244103,
   per-sphere cap ``|T_i| <= torque_cap`` (then those spheres turn slower).
 
 Every step function takes ``kept``: None for the published solves (each builds its preconditioner, a sparse LU,
-at its configuration and starts from zero), or a :class:`KeptSolves` that keeps the preconditioners between
+at its configuration; the corrector starts from the predictor's velocities, as published, the others from zero), or a :class:`KeptSolves` that keeps the preconditioners between
 solves and steps and gives the solves first guesses (the package's schemes under ``preconditioner auto``); and
 ``solver``: the ``multi_bodies.solver.solves.Solver`` that makes every solve (a scheme's step passes its own, which
 counts the solves and stops the run at one that does not converge; None: one that stops such a solve, with the
@@ -161,15 +161,16 @@ def _first_guess(guess, rhs):
 
 
 def _solve(solver, problem, rhs, tolerance, counts, kept=None, orientations=None, guess=None, predictor=False):
-    """Velocities (N, 6) of ``problem`` for ``rhs`` by ``solver``: with ``kept`` None the published solve (a
-    preconditioner built here, from zero); else the kept preconditioner, the first guess ``guess`` (velocities or
-    None) and the solver's iterate (the least true residual under ``preconditioner auto``); a ``predictor`` solve
-    (at a step's start) may build the kept preconditioner and counts towards its wear."""
+    """Velocities (N, 6) of ``problem`` for ``rhs`` by ``solver``, from the first guess ``guess`` (velocities or
+    None: zeros): with ``kept`` None the published solve (a preconditioner built here; the published corrector
+    starts from the predictor's velocities, the other solves from zero); else the kept preconditioner and the
+    solver's iterate (the least true residual under ``preconditioner auto``); a ``predictor`` solve (at a step's
+    start) may build the kept preconditioner and counts towards its wear."""
     if kept is None:
         preconditioner = problem.preconditioner(tolerance)
         counts['factorisations'] += preconditioner.factor is not None
-        result = solver.solve(problem, rhs, preconditioner, tolerance=tolerance, kind='lubrication',
-                              what='the lubrication problem')
+        result = solver.solve(problem, rhs, preconditioner, x0=_first_guess(guess, rhs), tolerance=tolerance,
+                              kind='lubrication', what='the lubrication problem')
     else:
         result = solver.solve(problem, rhs, kept.preconditioner(problem, orientations, counts, start=predictor),
                               x0=_first_guess(guess, rhs), tolerance=tolerance, kind='lubrication',
