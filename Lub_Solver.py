@@ -18,7 +18,11 @@ and ``num_rejections_jump``.  Random numbers come from ``numpy.random`` (the dri
 Differences from the published class (see ``doc/lubrication.md``): the pair vector is divided by ``a`` in
 every direction (the published code does so only along periodic axes, which makes its pair lubrication
 wrong for ``a != 1``); no CHOLMOD (SciPy's sparse LU), so stochastic runs match the published ones only in
-distribution; ``Update_Bodies`` (Euler-Maruyama) works; nothing is printed.
+distribution; ``Update_Bodies`` (Euler-Maruyama) works; nothing is printed.  The steps keep their preconditioners
+(sparse LUs) from solve to solve and step to step and start their solves from first guesses
+(:class:`lubrication.integrators.KeptSolves`, what the schemes of ``multi_bodies.py`` do under ``preconditioner
+auto``): the same velocities within ``tolerance``, fewer factorisations.  ``published_solves = True`` gives the
+published solves instead (a fresh LU at every solve, the corrector starting from the predictor's velocities).
 
 Floor: a published face on the top floor, never imported by the package itself.
 """
@@ -46,6 +50,7 @@ class Lub_Solver:
     After ``Set_R_Mats()``: ``Delta_R``, ``R_Sup``, ``R_MB`` (scipy.sparse, 6N x 6N, force per velocity,
     layout ``[F1 T1 F2 T2 ...]``).  Counters: ``num_rejections_wall``, ``num_rejections_jump``, and
     ``counts`` (work of the last step: far-field products, GMRES and Lanczos iterations, factorisations).
+    ``published_solves`` (False): True makes the steps' solves as published (see the module note).
     """
 
     def __init__(self, bodies, a, eta, cutoff, periodic_length, debye_length=None):
@@ -62,12 +67,25 @@ class Lub_Solver:
         self.counts = integrators.new_counts()
         self.near_field_root = 'lanczos'
         self.implementation = None
+        self.published_solves = False
+        self._kept = None
 
     # -- configuration ---------------------------------------------------------------------------------------
     def settings(self):
         """The :class:`lubrication.brownian.LubricationSettings` of this solver (read at every call)."""
         return brownian.lubrication_settings(self.a, self.eta, True, self.cutoff, self.periodic_length,
                                              self.debye_cut, self.implementation, 'published', self.near_field_root)
+
+    def kept_solves(self):
+        """The :class:`lubrication.integrators.KeptSolves` of the steps (None with ``published_solves``); a new one
+        when the settings or the tolerance changed since the last step."""
+        if self.published_solves:
+            self._kept = None
+            return None
+        settings = self.settings()
+        if self._kept is None or self._kept.settings != settings or self._kept.tolerance != float(self.tolerance):
+            self._kept = integrators.KeptSolves(settings, self.tolerance)
+        return self._kept
 
     def locations(self):
         """Sphere centres (N, 3)."""
@@ -160,7 +178,7 @@ class Lub_Solver:
         locations, orientations = self.locations(), self.orientations()
         step = integrators.trapezoidal_step(self.settings(), locations, orientations, self._force_torque_at(FT_calc),
                                             self.kT, self.dt, np.random, self.tolerance, Omega, Cut_Torque,
-                                            self._current_matrices())
+                                            self._current_matrices(), kept=self.kept_solves())
         rejected = self._finish(step, locations, orientations)
         if Out_Torque:
             torques = np.zeros((len(self.bodies), 3)) if step.torques is None else step.torques
@@ -172,7 +190,8 @@ class Lub_Solver:
         locations, orientations = self.locations(), self.orientations()
         step = integrators.euler_maruyama_step(self.settings(), locations, orientations,
                                                self._force_torque_at(FT_calc), self.kT, self.dt, np.random,
-                                               self.tolerance, matrices=self._current_matrices())
+                                               self.tolerance, matrices=self._current_matrices(),
+                                               kept=self.kept_solves())
         return self._finish(step, locations, orientations)
 
     def Update_Bodies_no_lub(self, FT_calc):
