@@ -21,6 +21,10 @@ from utils import UserInputError, read_text_file
 # names agree, this floor cannot import theirs).
 OVERRIDE_FILES = ('user_defined_functions.py', 'forces_pycuda_user_defined.py', 'user_defined_potentials.py',
                   'potential_pycuda_user_defined.py')
+# A folder's own copy of the published override module, which a run in the published spectral form reads
+# (multi_bodies.solver.user_hooks.FOLDER_MODULE_COPY); the package's own module beside the scripts is not one.
+FOLDER_MODULE_FILE = 'multi_bodies_functions.py'
+PACKAGE_MODULE_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), FOLDER_MODULE_FILE)
 
 # kind -> True when a restart reads it (its content is in the fingerprint), else why a change cannot alter the
 # continuation.
@@ -30,7 +34,8 @@ FILE_KINDS = {
     'velocity': True,       # prescribed velocities of the bodies of a structure line
     'list_vertex': True,    # vertex files of the bodies of an articulated line
     'const': True,          # joints of an articulated line (and their expressions of t)
-    'override': True,       # user_defined_functions.py and the other override sources of the run directory
+    'override': True,       # user_defined_functions.py and the other override sources of the run directory, and a
+                            # folder's own multi_bodies_functions.py where it is read
     'override data': True,  # the data files an override source declares it reads (``data_files = [...]``)
     'Laplace': True,        # phoretic bodies: normals, reaction and emitting rates, surface mobilities, weights
     'slip_length': True,    # partial-slip surfaces: normals, slip lengths, weights
@@ -124,8 +129,10 @@ def restart_inputs(options, directory):
         found.append(('list_vertex', spec.list_vertex_file))
         found.append(('const', spec.const_file))
         found.extend(('vertex', name) for name in _list_vertex_names(spec.list_vertex_file))
-    for name in OVERRIDE_FILES:
+    for name in OVERRIDE_FILES + (FOLDER_MODULE_FILE,):
         path = os.path.join(directory, name)
+        if name == FOLDER_MODULE_FILE and os.path.isfile(path) and os.path.samefile(path, PACKAGE_MODULE_FILE):
+            continue
         if os.path.isfile(path):
             found.append(('override', name, path))
             found.extend(('override data', data, os.path.join(directory, data))

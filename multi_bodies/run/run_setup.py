@@ -287,11 +287,14 @@ the BodyArrays and the Model."""
 PROGRAM_OF_SCRIPT = {'dynamics': 'dynamic', 'static': 'static', 'mcmc': 'mcmc'}
 
 
-def load_hooks(options, directory, log=print):
-    """The run's hooks from ``directory`` (see ``multi_bodies.solver.user_hooks.load_user_hooks``), logged."""
+def load_hooks(options, directory, log=print, folder_module=None):
+    """The run's hooks from ``directory`` (see ``multi_bodies.solver.user_hooks.load_user_hooks``), logged.
+
+    ``folder_module``: a ``user_hooks.FolderModuleCall`` where a folder's own ``multi_bodies_functions.py`` is read
+    (the published spectral form, ``published_spectral.folder_module_call``), else None."""
     implementation = options.blob_blob_force_implementation
     hooks = user_hooks.load_user_hooks(directory, load_pycuda=implementation in ('pycuda', 'auto'),
-                                physics=mbf.physics_keywords(options))
+                                physics=mbf.physics_keywords(options), folder_module=folder_module)
     if hooks.sources:
         log('user-defined physics from %s' % ', '.join(hooks.sources))
     for note in hooks.notes:
@@ -418,7 +421,11 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     if script != 'mcmc':  # the published spectral form (doc/periodic.md): options with the derived blob radius
         options, published = published_spectral.published_options(options)
     directory = os.getcwd() if directory is None else directory
-    hooks = (load_hooks if hook_loader is None else hook_loader)(options, directory, log)
+    if hook_loader is None:
+        hooks = load_hooks(options, directory, log, folder_module=None if published is None else
+                           published_spectral.folder_module_call(options, script))
+    else:
+        hooks = hook_loader(options, directory, log)
     try:
         bodies, types, articulated = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
                                     single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
@@ -461,6 +468,11 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))
     check_start(options, system, types)
+    if getattr(hooks, 'force_torque_calculator', None) is not None:  # a folder's module: fails here, not at step 1
+        try:
+            system.forces_torques(system.start_configuration)
+        except user_hooks.UserFunctionError as err:
+            raise utils.UserInputError(str(err))
     warning = slow_dense_warning(options, system.blobs_name, body_arrays.blob_offsets)
     if warning:
         log(warning)

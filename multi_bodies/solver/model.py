@@ -358,9 +358,13 @@ class Model:
     def forces_torques(self, configuration, r_vectors=None):
         """Force and torque on every body at ``configuration``, shape (Nb, 6) = ``[F, T]`` (SPEC section 7).
 
-        ``r_vectors`` (N, 3): the blob positions of that configuration when the caller has them.
+        ``r_vectors`` (N, 3): the blob positions of that configuration when the caller has them.  A folder's own
+        ``multi_bodies_functions.py`` (``hooks.force_torque_calculator``, doc/periodic.md) gives them all instead.
         """
         r_vectors = self.blob_positions(configuration) if r_vectors is None else r_vectors
+        folder_calculator = getattr(self.hooks, 'force_torque_calculator', None)
+        if folder_calculator is not None:
+            return folder_calculator(self.bodies_at(configuration), r_vectors).reshape(-1, 6)
         force_torque = self.arrays.KT_dot(configuration, self.blob_forces(r_vectors), r_vectors)
         bodies_law = self.hooks.body_body_of_bodies
         if bodies_law is not None and self.body_body_name != 'python':

@@ -188,3 +188,16 @@ def folder_script_keywords(options):
                 repulsion_strength_wall=options.repulsion_strength_wall, debye_length_wall=options.debye_length_wall,
                 repulsion_strength=options.repulsion_strength, debye_length=options.debye_length,
                 periodic_length=np.array(options.periodic_length, dtype=float))
+
+
+def folder_module_call(options, script):
+    """How the folder's script calls its ``multi_bodies_functions.py`` (``user_hooks.FolderModuleCall``) for a run of
+    ``options`` (:func:`published_options`), or None where a folder module is not read: the static problems, the
+    roller and articulated schemes (the folder's script is a copy of ``multi_bodies.py`` that moves rigid bodies).
+    """
+    from multi_bodies.solver.user_hooks import FolderModuleCall
+    scheme = options.scheme
+    if script != 'dynamics' or 'rollers' in scheme or scheme.startswith('articulated'):
+        return None
+    return FolderModuleCall(folder_script_keywords(options), options.blob_blob_force_implementation,
+                            options.body_body_force_torque_implementation)

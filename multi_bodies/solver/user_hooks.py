@@ -15,6 +15,7 @@ import inspect
 import os
 import sys
 import traceback
+from collections import namedtuple
 from functools import partial
 
 import numpy as np
@@ -189,6 +190,10 @@ class PhysicsHooks:
         self.published_articulated_class = None  # the user's articulated.articulated.Articulated, update_links patched
         self.published_joint_class = None  # with it: the constraint.constraint.Constraint class of the same import
         self.pycuda_file = None
+        # A folder's own multi_bodies_functions.py (read_folder_module): its force_torque_calculator_sort_by_bodies
+        # as (bodies, r_vectors (N, 3)) -> (2 Nb, 3), which replaces the whole force-torque assembly, and its path.
+        self.force_torque_calculator = None
+        self.folder_module = None
         self.overridden = []
         self.sources = []
         self.notes = []
@@ -435,6 +440,29 @@ PUBLISHED_FACES = ('mobility.mobility', 'general_application_utils', 'read_input
                    'multi_bodies_functions', 'articulated.articulated', 'constraint.constraint')
 
 
+def import_failure(path, err, file_words='the user file', content_words='the user-defined functions'):
+    """The UserInputError (one line naming the file and line) for ``err`` raised while importing the Python file
+    ``path``: a syntax error, an import of a published module this package has no face for, a package that is not
+    installed, any other exception.  ``file_words``, ``content_words``: what the file is called in the message."""
+    if isinstance(err, SyntaxError):
+        return UserInputError('%s, line %s: syntax error in %s: %s (%s); fix the file or remove it from the run '
+                              'directory' % (path, err.lineno, content_words, err.msg, (err.text or '').strip()))
+    frames = [f for f in traceback.extract_tb(err.__traceback__)
+              if os.path.abspath(f.filename) == os.path.abspath(path)]
+    line = (', line %d' % frames[-1].lineno) if frames else ''
+    if isinstance(err, ImportError) and getattr(err, 'name', None):
+        missing = err.name.split('.')[0]
+        if missing in PUBLISHED_TREE_MODULES:
+            return UserInputError('%s%s: %s imports %s, a module of the published code\'s own tree (not a package '
+                                  'to install); this package offers the published faces %s and not this one '
+                                  '(doc/overrides.md); remove the import or use the package\'s equivalent'
+                                  % (path, line, file_words, err.name, ', '.join(PUBLISHED_FACES)))
+        return UserInputError('%s%s: %s imports %s, which is not installed; pip install %s or remove the import'
+                              % (path, line, file_words, missing, missing))
+    return UserInputError('%s%s: importing %s raised %s: %s; fix the file or remove it from the run directory'
+                          % (path, line, content_words, type(err).__name__, err))
+
+
 def import_user_file(path):
     """Import the user's override file; returns (hook name -> function, notes for the log).
 
@@ -469,24 +497,8 @@ def import_user_file(path):
     sys.modules[module_name] = module
     try:
         spec.loader.exec_module(module)
-    except SyntaxError as err:
-        raise UserInputError('%s, line %s: syntax error in the user-defined functions: %s (%s); fix the file or '
-                             'remove it from the run directory' % (path, err.lineno, err.msg, (err.text or '').strip()))
     except Exception as err:
-        frames = [f for f in traceback.extract_tb(err.__traceback__)
-                  if os.path.abspath(f.filename) == os.path.abspath(path)]
-        line = (', line %d' % frames[-1].lineno) if frames else ''
-        if isinstance(err, ImportError) and getattr(err, 'name', None):
-            missing = err.name.split('.')[0]
-            if missing in PUBLISHED_TREE_MODULES:
-                raise UserInputError('%s%s: the user file imports %s, a module of the published code\'s own tree '
-                                     '(not a package to install); this package offers the published faces %s and '
-                                     'not this one (doc/overrides.md); remove the import or use the package\'s '
-                                     'equivalent' % (path, line, err.name, ', '.join(PUBLISHED_FACES)))
-            raise UserInputError('%s%s: the user file imports %s, which is not installed; pip install %s or remove '
-                                 'the import' % (path, line, missing, missing))
-        raise UserInputError('%s%s: importing the user-defined functions raised %s: %s; fix the file or remove it '
-                             'from the run directory' % (path, line, type(err).__name__, err))
+        raise import_failure(path, err)
     finally:
         published_constraint = getattr(sys.modules.get('constraint.constraint'), 'Constraint', None)
         published_articulated = getattr(sys.modules.get('articulated.articulated'), 'Articulated', None)
@@ -558,17 +570,28 @@ def override_file(directory, name):
 FOLDER_MODULE_COPY = 'multi_bodies_functions.py'
 
 
+def folder_module_path(directory):
+    """The path of a run directory's own ``multi_bodies_functions.py`` (not this package's), or None.
+
+    Raises UserInputError when something other than a file has that name (a folder, a FIFO, a dangling link)."""
+    path = override_file(directory, FOLDER_MODULE_COPY)
+    if path is None or os.path.samefile(path, PUBLISHED_MODULE_FILE):
+        return None
+    return path
+
+
 def check_folder_module_copy(directory):
-    """Refuse a run directory that holds its own ``multi_bodies_functions.py`` (not this package's).
+    """Refuse a run directory that holds its own ``multi_bodies_functions.py`` (not this package's) where it is not
+    read: anywhere but a dynamic run of rigid bodies whose input is in the published spectral form
+    (:func:`read_folder_module`).
 
     Several published example folders ship a modified copy of the published ``multi_bodies_functions.py`` (and of
     ``multi_bodies.py``, which imports it instead of the defaults and may hard-code keywords, e.g. the ``f = 9.0``
-    of ``Spectral_Multiblob_Roller``).  This package reads the user's functions from ``user_defined_functions.py``
-    only, so such a copy would be ignored: the run stops instead, naming the file, the hooks it defines and what
-    to do.  Raises UserInputError.
+    of ``Spectral_Multiblob_Roller``).  Ignoring such a copy would run other physics than the folder's: the run
+    stops instead, naming the file, the hooks it defines and what to do.  Raises UserInputError.
     """
-    path = os.path.join(directory, FOLDER_MODULE_COPY)
-    if not os.path.isfile(path) or os.path.samefile(path, PUBLISHED_MODULE_FILE):
+    path = folder_module_path(directory)
+    if path is None:
         return
     import ast
     try:
@@ -580,14 +603,162 @@ def check_folder_module_copy(directory):
         defined = []
     raise UserInputError(
         '%s: this folder has its own copy of the published multi_bodies_functions.py (the folder\'s copy of the '
-        'published multi_bodies.py reads it in place of the defaults), which this package does not read; copy the '
-        'functions you need%s into user_defined_functions.py (published style: multi_bodies_functions.<name> = '
-        '<function>; a keyword that the folder\'s multi_bodies.py sets and the input file does not must get its '
-        'value in the function), then rename or remove %s (doc/overrides.md)'
+        'published multi_bodies.py reads it in place of the defaults); this package reads such a copy only in a '
+        'dynamic run of rigid bodies whose input is in the published spectral form (doc/periodic.md), which this is '
+        'not; copy the functions you need%s into user_defined_functions.py (published style: '
+        'multi_bodies_functions.<name> = <function>; a keyword that the folder\'s multi_bodies.py sets and the input '
+        'file does not must get its value in the function), then rename or remove %s (doc/overrides.md)'
         % (path, ' (it defines %s)' % ', '.join(defined) if defined else '', FOLDER_MODULE_COPY))
 
 
-def load_user_hooks(directory='.', load_pycuda=True, physics=None):
+FolderModuleCall = namedtuple('FolderModuleCall', ['keywords', 'blob_blob_implementation',
+                                                   'body_body_implementation'])
+FolderModuleCall.__doc__ = """How a folder's own script calls its ``multi_bodies_functions.py``: the ``keywords`` of its
+``force_torque_calculator_sort_by_bodies`` (name -> value) and the input's ``blob_blob_force_implementation`` and
+``body_body_force_torque_implementation``, which it passes to the module's ``set_blob_blob_forces`` and
+``set_body_body_forces_torques``."""
+
+# The functions of a folder module that its script calls (multi_bodies.solver.published_spectral).
+FOLDER_MODULE_FUNCTIONS = ('force_torque_calculator_sort_by_bodies', 'set_blob_blob_forces',
+                           'set_body_body_forces_torques')
+
+
+def _imp_for_old_modules():
+    """A stand-in for the ``imp`` module (removed in Python 3.12) with the one function published modules use,
+    ``find_module(name)``: raises ImportError when ``name`` cannot be imported.  None where ``imp`` exists."""
+    import importlib.util
+    if importlib.util.find_spec('imp') is not None:
+        return None
+    import types
+    stand_in = types.ModuleType('imp')
+
+    def find_module(name, path=None):
+        if importlib.util.find_spec(name) is None:
+            raise ImportError('No module named %r' % name, name=name)
+        return None, name, ('', '', 5)
+    stand_in.find_module = find_module
+    return stand_in
+
+
+def import_folder_module(path):
+    """Import a folder's ``multi_bodies_functions.py`` at ``path`` as the folder's own script imports it.
+
+    Returns ``(module, user module or None)``: while the file runs it is the module ``multi_bodies_functions``, its
+    folder is the first entry of the import path and the working directory, and the published faces are
+    importable, so its ``import general_application_utils``, ``from quaternion_integrator.quaternion import
+    Quaternion`` and its closing ``import user_defined_functions`` (which rebinds ``multi_bodies_functions.<name>``
+    on this module, published style) work as in the published tree; the user module is the
+    ``user_defined_functions`` it imported, if any.  ``imp`` (Python 3.12 has none) is given a stand-in.
+    Everything is restored afterwards.  Any error is a UserInputError naming the file and line."""
+    import importlib.util
+    import warnings
+    directory = os.path.dirname(os.path.abspath(path))
+    names = ('multi_bodies_functions', 'user_defined_functions', 'imp')
+    saved = {name: sys.modules.get(name) for name in names}
+    spec = importlib.util.spec_from_file_location('multi_bodies_functions', path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules['multi_bodies_functions'] = module
+    sys.modules.pop('user_defined_functions', None)
+    stand_in = _imp_for_old_modules()
+    if stand_in is not None:
+        sys.modules['imp'] = stand_in
+    added_root = FACE_ROOT not in sys.path and importlib.util.find_spec('general_application_utils') is None
+    if added_root:
+        sys.path.append(FACE_ROOT)
+    sys.path.insert(0, directory)
+    cwd = os.getcwd()
+    user_module = None
+    try:
+        os.chdir(directory)  # the module looks for user_defined_functions.py in the working directory
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', DeprecationWarning)  # its import of imp, on Python 3.11
+            spec.loader.exec_module(module)
+        user_module = sys.modules.get('user_defined_functions')
+    except Exception as err:
+        raise import_failure(path, err, file_words='the folder\'s multi_bodies_functions.py',
+                             content_words='the folder\'s multi_bodies_functions.py')
+    finally:
+        os.chdir(cwd)
+        sys.path.remove(directory)
+        if added_root:
+            sys.path.remove(FACE_ROOT)
+        for name, value in saved.items():
+            if value is None:
+                sys.modules.pop(name, None)
+            else:
+                sys.modules[name] = value
+    return module, user_module
+
+
+def read_folder_module(path, call, hooks):
+    """Read a folder's own ``multi_bodies_functions.py`` into ``hooks`` as the folder's published script does.
+
+    ``call``: :class:`FolderModuleCall`.  As that script: ``calc_blob_blob_forces`` and
+    ``calc_body_body_forces_torques`` of the module are set by its ``set_blob_blob_forces`` and
+    ``set_body_body_forces_torques`` from the input's implementations, and its
+    ``force_torque_calculator_sort_by_bodies(bodies, r_vectors, **call.keywords)`` gives the force and torque of
+    every body (``hooks.force_torque_calculator``, checked: shape (2 Nb, 3), finite), in place of this package's
+    assembly of blob, body and pair forces; its ``preprocess`` and ``postprocess`` are the run's.  A
+    ``user_defined_functions.py`` beside it is imported by the module itself, as published (only its
+    ``multi_bodies_functions.<name> = ...`` rebindings act on the module); one that defines hooks of its own, which
+    the published script would not call, is refused.  Raises UserInputError naming the file."""
+    module, user_module = import_folder_module(path)
+    missing = [name for name in FOLDER_MODULE_FUNCTIONS if not callable(getattr(module, name, None))]
+    if missing:
+        raise UserInputError('%s: the folder\'s multi_bodies_functions.py has no %s, which the folder\'s published '
+                             'multi_bodies.py calls; restore the function, or move the functions you need into '
+                             'user_defined_functions.py and remove %s (doc/overrides.md)'
+                             % (path, ', '.join(missing), FOLDER_MODULE_COPY))
+    if user_module is not None:
+        unused = [name for name in mbf.HOOK_NAMES + PUBLISHED_EXTRA_HOOKS + FOLDER_MODULE_FUNCTIONS
+                  if callable(getattr(user_module, name, None)) and getattr(module, name, None)
+                  is not getattr(user_module, name)]
+        if unused:
+            raise UserInputError(
+                '%s defines %s, but beside the folder\'s own %s (which imports it, as the folder\'s published '
+                'multi_bodies.py does) only rebinding on that module acts (multi_bodies_functions.<name> = '
+                '<function>): rebind them, or move the file away' % (getattr(user_module, '__file__', mbf.USER_FILE),
+                                                                      ', '.join(unused), path))
+    for setter, target, implementation in (
+            ('set_blob_blob_forces', 'calc_blob_blob_forces', call.blob_blob_implementation),
+            ('set_body_body_forces_torques', 'calc_body_body_forces_torques', call.body_body_implementation)):
+        try:
+            setattr(module, target, call_user_function(getattr(module, setter), setter, implementation))
+        except UserFunctionError as err:
+            raise UserInputError(str(err))
+    calculator = module.force_torque_calculator_sort_by_bodies
+    keywords = dict(call.keywords)
+
+    def force_torque_calculator(bodies, r_vectors):
+        nb = len(bodies)
+        value = call_user_function(calculator, 'force_torque_calculator_sort_by_bodies', bodies,
+                                   np.asarray(r_vectors, dtype=float).reshape(-1, 3), **keywords)
+        return checked_array(value, [(2 * nb, 3), (nb, 6), (6 * nb,)], calculator,
+                             'force_torque_calculator_sort_by_bodies', 'the force and torque of every body')
+    hooks.force_torque_calculator = force_torque_calculator
+    hooks.folder_module = path
+    hooks.sources.append(path)
+    hooks.notes.append('%s: the folder\'s own module, read as its published multi_bodies.py reads it (doc/periodic.md): '
+                       'force_torque_calculator_sort_by_bodies gives every body\'s force and torque (this package adds '
+                       'no force of its own), with the keywords %s; calc_blob_blob_forces = set_blob_blob_forces(%r), '
+                       'calc_body_body_forces_torques = set_body_body_forces_torques(%r)'
+                       % (path, ', '.join('%s=%s' % (name, _keyword_text(value)) for name, value in keywords.items()),
+                          call.blob_blob_implementation, call.body_body_implementation))
+    found = {name: getattr(module, name) for name in ('preprocess', 'postprocess')
+             if callable(getattr(module, name, None))}
+    hooks.install(found, path)
+    if user_module is not None:
+        hooks.notes.append('%s imported %s itself, as published' % (path, getattr(user_module, '__file__', '')))
+
+
+def _keyword_text(value):
+    """A keyword's value for the log (arrays as their numbers)."""
+    if isinstance(value, np.ndarray):
+        return ' '.join('%g' % v for v in value.ravel())
+    return '%g' % value if isinstance(value, float) else str(value)
+
+
+def load_user_hooks(directory='.', load_pycuda=True, physics=None, folder_module=None):
     """Physics hooks for a run in ``directory``, with the user's overrides (see doc/overrides.md).
 
     Parameters
@@ -602,6 +773,10 @@ def load_user_hooks(directory='.', load_pycuda=True, physics=None):
     physics : dict
         The run's hook keywords; the adapters are probed with them to tell a
         per-blob (per-pair) published function from a vectorised one.
+    folder_module : FolderModuleCall or None
+        Given (an input in the published spectral form, dynamics of rigid bodies), a ``multi_bodies_functions.py``
+        of the run directory is read as its folder's published script reads it (:func:`read_folder_module`) and
+        gives the forces; otherwise such a file is refused (:func:`check_folder_module_copy`).
 
     Conventions of the replaced functions (either is accepted where two are listed):
     ``blob_external_force(r (3,), **kw) -> (3,)`` (per blob, slow) or vectorised;
@@ -613,6 +788,15 @@ def load_user_hooks(directory='.', load_pycuda=True, physics=None):
     ``set_slip_by_ID(body, slip)`` or ``set_slip_by_ID(body)``; ``preprocess(bodies)``;
     ``postprocess(bodies)``.
     """
+    if folder_module is not None:
+        path = folder_module_path(directory)
+        if path is not None:  # the folder's own module gives the forces; it imports user_defined_functions.py itself
+            hooks = PhysicsHooks(physics)
+            read_folder_module(path, folder_module, hooks)
+            pycuda_path = override_file(directory, mbf.USER_PYCUDA_FILE)
+            if pycuda_path is not None:
+                hooks.notes.append('%s is not used: the folder\'s module gives the forces' % pycuda_path)
+            return hooks
     check_folder_module_copy(directory)
     hooks = PhysicsHooks(physics)
     path = override_file(directory, mbf.USER_FILE)
