@@ -1,7 +1,7 @@
 """The forces of the published Spectral_Multiblob_Roller folder, in this package's style (doc/periodic.md).
 
-That folder's own multi_bodies_functions.py, which this package does not read (doc/overrides.md), puts every
-force on the bodies, none on the blobs:
+That folder's own multi_bodies_functions.py (which this package reads only for the folder's own inputs, in the
+published spectral form; doc/periodic.md) puts every force on the bodies, none on the blobs:
 
 * gravity ``-g`` on each body (the input's ``g``);
 * the roller's torque ``8 pi eta R^3 omega`` about y, ``omega = 2 pi f`` with the frequency ``f = 9`` (Hz) that the
@@ -9,7 +9,9 @@ force on the bodies, none on the blobs:
 * the wall's repulsion on the body's centre at height h: ``(eps_w / b_w) exp(-(h - R) / b_w)`` up (``eps_w / b_w``
   below R), with ``repulsion_strength_wall`` and ``debye_length_wall``;
 * between bodies closer than ``3.5 R``, the repulsion ``(eps / b) exp(-(r - 2R) / b)`` along the line of centres
-  (``eps / b`` below 2R), with ``repulsion_strength`` and ``debye_length``; none farther.
+  (``eps / b`` below 2R), with ``repulsion_strength`` and ``debye_length``; none farther;
+* no force on the blobs (``blob_external_forces`` below replaces this package's default gravity and wall
+  repulsion on every blob).
 """
 import numpy as np
 
@@ -43,3 +45,8 @@ def body_body_force_torque(r, repulsion_strength=1.0, debye_length=1.0, **kwargs
 
 
 body_body_force_torque.cutoff = 3.5 * PARTICLE_RADIUS
+
+
+def blob_external_forces(r_vectors, **kwargs):
+    """No force on any blob, shape (N, 3): the folder's force module computes none (its one-blob forces are zero)."""
+    return np.zeros_like(np.asarray(r_vectors, dtype=float).reshape(-1, 3))
