@@ -4,7 +4,8 @@ Method of Sprinkle, van der Wee, Luo, Driscoll and Donev (Soft Matter 16, 7982, 
 equations (not the published code):
 
 * **Increment.** With ``W_far, W_near ~ N(0, I)`` (6N each),
-  ``X = sqrt(2 kT/dt) M^1/2 W_far`` (the package's Lanczos, :func:`stochastic_forcing.lanczos_square_root`)
+  ``X = sqrt(2 kT/dt) M^1/2 W_far`` (the package's Lanczos, :func:`stochastic_forcing.lanczos_square_root`,
+  preconditioned by each sphere's wall self-mobility: :func:`far_field_root`)
   and ``F_B = sqrt(2 kT/dt) Delta_R^1/2 W_near``, the velocities
   ``U_B = (I + M Delta_R)^-1 (X + M F_B)`` have covariance
   ``(2kT/dt) (I + M Delta_R)^-1 (M + M Delta_R M) (I + Delta_R M)^-1 = (2kT/dt) M_lub``.
@@ -202,14 +203,74 @@ noise_rhs : (6N,) ``N = X + M F_B`` (kept by the trapezoidal scheme: its correct
 lanczos_iterations : far-field Lanczos products; gmres_iterations : of the solve."""
 
 
-def brownian_rhs(problem, near_root, W_far, W_near, kT, dt, tolerance):
+def wall_self_mobility_blocks(heights, a, eta, wall=True):
+    """Each sphere's self-mobility (N, 6, 6) above a no-slip wall, ``[[M_tt, M_tr], [M_rt, M_rr]]`` (velocity per
+    force, velocity per torque, angular velocity per torque): the single sphere's terms of the Rotne-Prager-Blake
+    mobility to the orders of Swan and Brady (Phys. Fluids 19, 113306, 2007), with h = max(z, a) / a (heights
+    below a raised to a, as the far field regularises them).  With ``wall`` False, the free-space values
+    ``1/(6 pi eta a)`` and ``1/(8 pi eta a^3)``.  heights : (N,) sphere centres' z (length)."""
+    h = np.maximum(np.asarray(heights, dtype=float).reshape(-1), a) / a
+    blocks = np.zeros((h.size, 6, 6))
+    translation, rotation = 1.0 / (6.0 * np.pi * eta * a), 1.0 / (8.0 * np.pi * eta * a ** 3)
+    if not wall:
+        h = np.full(h.size, np.inf)
+    blocks[:, 0, 0] = blocks[:, 1, 1] = translation * (1.0 - (9.0 / h - 2.0 / h ** 3 + 1.0 / h ** 5) / 16.0)
+    blocks[:, 2, 2] = translation * (1.0 - (9.0 / h - 4.0 / h ** 3 + 1.0 / h ** 5) / 8.0)
+    blocks[:, 3, 3] = blocks[:, 4, 4] = rotation * (1.0 - (5.0 / 16.0) / h ** 3)
+    blocks[:, 5, 5] = rotation * (1.0 - (1.0 / 8.0) / h ** 3)
+    coupling = (3.0 / 32.0) / (6.0 * np.pi * eta * a ** 2) / h ** 4  # angular velocity (x, y) from force (y, x)
+    blocks[:, 3, 1] = blocks[:, 1, 3] = -coupling
+    blocks[:, 4, 0] = blocks[:, 0, 4] = coupling
+    return blocks
+
+
+class BlockRoot:
+    """``L = blockdiag(C_1 .. C_N)`` (6N, 6N) with ``C_i C_i^T`` the i-th sphere's wall self-mobility
+    (:func:`wall_self_mobility_blocks`): the preconditioner of the far-field Lanczos root.  ``apply(x) = L x``,
+    ``apply_inverse(x) = L^-1 x``, ``apply_inverse_transpose(x) = L^-T x`` for x (6N,)."""
+
+    def __init__(self, locations, a, eta, wall=True):
+        blocks = wall_self_mobility_blocks(np.asarray(locations, dtype=float).reshape(-1, 3)[:, 2], a, eta, wall)
+        self.factor = np.linalg.cholesky(blocks)
+        self.inverse = np.linalg.inv(self.factor)
+        self.num_bodies = blocks.shape[0]
+
+    def apply(self, x):
+        return np.einsum('nij,nj->ni', self.factor, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+
+    def apply_inverse(self, x):
+        return np.einsum('nij,nj->ni', self.inverse, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+
+    def apply_inverse_transpose(self, x):
+        return np.einsum('nji,nj->ni', self.inverse, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+
+
+def far_field_root(problem, W, tolerance, factor=1.0, preconditioned=True):
+    """``factor M^1/2 W`` of the far-field M of ``problem`` (a :class:`LubricationProblem`) by Lanczos: a
+    ``stochastic_forcing.LanczosResult``.
+
+    preconditioned : with the wall self-mobility (:class:`BlockRoot` L, ``L L^T`` the block diagonal of M) the
+        iteration runs on ``L^-1 M L^-T`` and the result is ``factor L (L^-1 M L^-T)^1/2 W``: a different root
+        of M, so for Gaussian W the same distribution N(0, factor^2 M), in fewer products where the spheres'
+        self-mobilities differ (heights near the wall, translation against rotation).  False: ``M^1/2 W`` (the
+        published root, the same numbers for the same W).
+    """
+    if not preconditioned or problem.size == 0:
+        return lanczos_square_root(problem.mobility_product, W, tolerance, factor=factor)
+    root = BlockRoot(problem.locations, problem.a, problem.eta, problem.wall)
+    return lanczos_square_root(lambda x: root.apply_inverse(problem.mobility_product(root.apply_inverse_transpose(x))),
+                               W, tolerance, factor=factor, L_mult=root.apply)
+
+
+def brownian_rhs(problem, near_root, W_far, W_near, kT, dt, tolerance, preconditioned=True):
     """``N = sqrt(2kT/dt) (M^1/2 W_far + M Delta_R^1/2 W_near)`` (6N,) and the Lanczos iteration count.
 
     problem : :class:`LubricationProblem`; near_root : :class:`NearFieldRoot` at the same configuration;
-    W_far, W_near : (6N,) standard Gaussians drawn by the caller; kT (energy), dt (time).
+    W_far, W_near : (6N,) standard Gaussians drawn by the caller; kT (energy), dt (time); preconditioned : the
+    far-field root preconditioned by the wall self-mobility (:func:`far_field_root`).
     """
     factor = np.sqrt(2.0 * kT / dt)
-    far = lanczos_square_root(problem.mobility_product, W_far, tolerance, factor=factor)
+    far = far_field_root(problem, W_far, tolerance, factor=factor, preconditioned=preconditioned)
     near_force = factor * near_root.apply(W_near)
     return problem.rhs(force_torque=near_force, velocity=far.noise), far.iterations
 
