@@ -104,4 +104,3 @@ class ArticulatedForwardEulerRollers(ArticulatedForwardEuler):
 
 
 ARTICULATED_SCHEME_CLASSES = (ArticulatedForwardEuler, ArticulatedMidpoint, ArticulatedForwardEulerRollers)
-ARTICULATED_SCHEMES = tuple(cls.name for cls in ARTICULATED_SCHEME_CLASSES)

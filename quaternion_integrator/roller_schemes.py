@@ -12,8 +12,7 @@ from quaternion_integrator.stochastic_schemes import StochasticScheme
 
 
 class StochasticRollerScheme(StochasticScheme):
-    """Single-blob rollers: only blob positions move; velocities (N, 3)."""
-    rollers = True
+    """Single-blob rollers: only blob positions move; velocities (N, 3) (``rollers`` in the registry)."""
 
     def stochastic_velocity(self, context, r_vectors, dt_fraction=1.0, with_drift=True):
         """Noise ``sqrt(2kT/(f dt)) M^{1/2} z`` plus (optionally) the RFD drift. Draws z (3N), then W (3N)."""

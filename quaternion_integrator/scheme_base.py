@@ -26,6 +26,7 @@ import numpy as np
 
 from body.body import Configuration, as_configuration
 from body.geometry import rotate_quaternions as _rotate_quaternions
+from multi_bodies.files.scheme_table import SCHEME_TABLE
 from multi_bodies.solver.body_solver import kept_fewest
 from multi_bodies.solver.counters import Counters
 from quaternion_integrator.scheme_state import RunState, StepContext, generator_of
@@ -109,8 +110,6 @@ class Scheme:
     return the state with it advanced.
     """
     name = None
-    rollers = False
-    dense = False  # dense algebra (O(N^3) per step): the dense memory check of the run applies
     # The deterministic solves of the scheme are equally spaced in time (forward Euler, Adams-Bashforth: dt;
     # midpoint: dt/2), so their first guess may be extrapolated from the last three solutions (first_guess)
     extrapolate_guesses = False
@@ -122,6 +121,25 @@ class Scheme:
         if not dt > 0:
             raise UserInputError('dt must be positive for a dynamic run, got %r' % dt)
         self.dt = float(dt)
+
+    # -------------------------------------------------------------- what the registry says of the scheme
+    @property
+    def entry(self):
+        """The scheme's ``multi_bodies.files.scheme_table.SchemeEntry`` (kind and needs, declared once there)."""
+        return SCHEME_TABLE[self.name]
+
+    @property
+    def rollers(self):
+        """The scheme moves single-blob rollers by their positions alone (velocities (N, 3)): a roller scheme of
+        the registry that is neither a lubrication scheme nor an articulated one (those move spheres and bodies
+        with their orientations)."""
+        entry = self.entry
+        return entry.rollers and not entry.lubrication and not entry.articulated
+
+    @property
+    def dense(self):
+        """Dense algebra (O(N^3) a step): the dense memory check of the run applies."""
+        return self.entry.algebra == 'dense'
 
     # -------------------------------------------------------------- the state
     def init(self, model, configuration, step=0, history=None, counters=None, rng_state=None):

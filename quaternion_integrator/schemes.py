@@ -1,4 +1,7 @@
-"""Time-stepping schemes of the manual, behind one registry keyed by the scheme name.
+"""Time-stepping schemes of the manual, keyed by their names in the scheme registry.
+
+The registry (``multi_bodies.files.scheme_table``: name, kind, what the scheme needs) says which schemes exist
+and what each is; this module holds the class of each (``SCHEMES``) and makes them.
 
 A scheme object (the rule of a step and its parameters, no state) is made
 once per run by ``make_scheme(name, dt)``; ``scheme.init(model,
@@ -32,6 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from multi_bodies.files.scheme_table import scheme_entry, scheme_names
 from quaternion_integrator.scheme_base import (InvalidConfiguration, Scheme, euler_update,  # noqa: F401
                                                rotate_quaternions)
 from quaternion_integrator.stochastic_schemes import RIGID_STOCHASTIC_SCHEME_CLASSES
@@ -101,7 +105,6 @@ class DeterministicMidpoint(DeterministicForwardEuler):
 class DeterministicForwardEulerRollers(Scheme):
     """Single-blob rollers: ``r += v dt`` with v of ``Model.roller_velocities`` (orientation fixed)."""
     name = 'deterministic_forward_euler_rollers'
-    rollers = True
 
     def velocities(self, context, state, configuration):
         return self.roller_velocities(context, state, configuration)
@@ -111,30 +114,28 @@ class DeterministicAdamsBashforthRollers(AdamsBashforthMixin, DeterministicForwa
     name = 'deterministic_adams_bashforth_rollers'
 
 
+# The class of every dynamic scheme, keyed by its name in the scheme registry (multi_bodies.files.scheme_table),
+# which says what each needs; a class without an entry or an entry without a class stops the import.
 SCHEMES = {cls.name: cls for cls in (DeterministicForwardEuler, DeterministicForwardEulerDenseAlgebra,
                                      DeterministicAdamsBashforth, DeterministicMidpoint, DeterministicForwardEulerRollers,
-                                     DeterministicAdamsBashforthRollers)}
-SCHEMES.update({cls.name: cls for cls in ARTICULATED_SCHEME_CLASSES})  # joints: doc/articulated.md
+                                     DeterministicAdamsBashforthRollers)
+           + ARTICULATED_SCHEME_CLASSES  # joints: doc/articulated.md
+           + RIGID_STOCHASTIC_SCHEME_CLASSES + ROLLER_SCHEME_CLASSES
+           + LUBRICATION_SCHEME_CLASSES}  # lubrication: doc/lubrication.md
+_unregistered = set(SCHEMES) ^ set(scheme_names(dynamic=True))
+if _unregistered:
+    raise ImportError('scheme classes and the scheme registry (multi_bodies/files/scheme_table.py) disagree on %s'
+                      % ', '.join(sorted(_unregistered)))
+
 
 def _all_schemes():
-    schemes = dict(SCHEMES)
-    schemes.update({cls.name: cls for cls in RIGID_STOCHASTIC_SCHEME_CLASSES + ROLLER_SCHEME_CLASSES
-                    + LUBRICATION_SCHEME_CLASSES})  # lubrication: doc/lubrication.md
-    return schemes
+    """Name -> class of every dynamic scheme (a copy of :data:`SCHEMES`)."""
+    return dict(SCHEMES)
 
 
-STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
-                      'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
-                      'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
-                      'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
-                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
-                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM',
-                      'lubrication_trapezoidal_rollers')
-
-
+STOCHASTIC_SCHEMES = scheme_names(kind='stochastic')
 # Schemes that solve the mixed problem of bodies of prescribed kinematics (obstacles, velocity files).
-SCHEMES_WITH_OBSTACLES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
-                          'deterministic_adams_bashforth', 'stochastic_Slip_Trapz', 'stochastic_Slip_Mid')
+SCHEMES_WITH_OBSTACLES = scheme_names(obstacles=True, dynamic=True)
 
 
 def check_fixed_bodies_supported(name, options):
@@ -144,7 +145,7 @@ def check_fixed_bodies_supported(name, options):
     specs = list(options.structures) + list(options.obstacles)
     fixed = [spec for spec in specs if getattr(spec, 'obstacle', False)
              or getattr(spec, 'velocity_file', None) is not None]
-    if not fixed or name not in _all_schemes():
+    if not fixed or name not in SCHEMES:
         return
     where = options.where
     raise UserInputError(
@@ -161,10 +162,10 @@ def make_scheme(name, dt, options=None):
     ``rf_delta`` and ``update_PC``.  Raises UserInputError for an unknown
     name (the message lists the known ones).
     """
-    schemes = _all_schemes()
+    entry = scheme_entry(name)
+    if entry is None or entry.kind == 'static':
+        raise UserInputError("unknown scheme '%s'; known schemes: %s" % (name, ', '.join(SCHEMES)))
     check_fixed_bodies_supported(name, options)
-    if name in SCHEMES:
-        return SCHEMES[name](dt)
-    if name in schemes:
-        return schemes[name](dt, options)
-    raise UserInputError("unknown scheme '%s'; known schemes: %s" % (name, ', '.join(schemes)))
+    if entry.kind == 'stochastic':
+        return SCHEMES[name](dt, options)
+    return SCHEMES[name](dt)

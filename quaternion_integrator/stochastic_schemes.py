@@ -46,6 +46,7 @@ import numpy as np
 
 from body.body import Configuration
 from multi_bodies.files.input_options import check_value, options_with
+from multi_bodies.solver.body_solver import DenseMobilityProblem
 from quaternion_integrator.scheme_base import Scheme, displace_bodies
 from stochastic_forcing import rfd, symmetric_root_matrix
 from utils import SimulationStopped, UserInputError
@@ -80,7 +81,6 @@ class StochasticScheme(Scheme):
     random finite differences), ``update_PC`` (rebuild the preconditioner
     every ``update_PC`` steps, SPEC §4.3).
     """
-    dense = False
     pair_products = True  # share passes over the blob pairs between independent products (C++ backend)
     # GMRES solves a step makes with the step's preconditioner (at least two in every scheme here: the noise or
     # RFD solves and the deterministic one); ``preconditioner auto`` weighs the neighbour correction's build
@@ -112,6 +112,15 @@ class StochasticScheme(Scheme):
         self.max_consecutive_rejections = MAX_CONSECUTIVE_REJECTIONS
 
     # -------------------------------------------------------------- helpers
+    def problem_at(self, context, configuration):
+        """The mobility problem at ``configuration`` that the step's solves, products and noise use
+        (``Model.mobility_problem``; a dense twin's: :class:`DenseTwin`)."""
+        return context.model.mobility_problem(configuration)
+
+    def preconditioner_at(self, context, configuration):
+        """A preconditioner built at ``configuration`` for one solve (``Model.build_preconditioner``)."""
+        return context.model.build_preconditioner(configuration)
+
     def preconditioner(self, context, state, problem):
         """(the block-diagonal preconditioner, state): rebuilt at ``problem`` every ``update_PC`` steps (kept in
         the run state with the step and configuration it was built at).  It serves ``solves_at_preconditioner``
@@ -168,10 +177,9 @@ class StochasticScheme(Scheme):
             return np.zeros_like(W)
         W_tilde = W.copy()
         W_tilde[:, :3] /= lengths[:, None]
-        model = context.model
 
         def difference(q_plus, q_minus):
-            minus, plus = model.mobility_problem(q_minus), model.mobility_problem(q_plus)
+            minus, plus = self.problem_at(context, q_minus), self.problem_at(context, q_plus)
             y_minus = self.noise_solve(context, minus, preconditioner, noise_force=W_tilde)
             x_minus = np.concatenate((y_minus.lambda_blobs.reshape(-1), y_minus.velocities.reshape(-1)))
             rhs = minus.rhs(force_torque=W_tilde) - plus.matvec(x_minus)
@@ -198,7 +206,7 @@ class StochasticScheme(Scheme):
             at_configuration = self.slip_rfd_products_at(problem, W_s)
 
         def products(q):
-            moved = context.model.mobility_problem(q)
+            moved = self.problem_at(context, q)
             return moved.M_dot(W_s), moved.KT_dot(W_s)
         D_M, D_KT = rfd(products, configuration, W_R, self.delta, displace_bodies, centred=False,
                         at_configuration=at_configuration)
@@ -256,9 +264,9 @@ class StochasticScheme(Scheme):
         moved = self.move(old, velocities, dt)
         self.check(context, state, moved)
         (_, force_torque, slip), state = context.forces_and_slip(state, moved)
-        problem = context.model.mobility_problem(moved)
+        problem = self.problem_at(context, moved)
         if preconditioner is None:
-            preconditioner = context.model.build_preconditioner(moved)
+            preconditioner = self.preconditioner_at(context, moved)
         rhs = problem.rhs(slip=slip, force_torque=force_torque, noise_slip=noise_slip, noise_force=noise_force)
         result, state = self.deterministic_solve(context, state, problem, rhs, preconditioner)
         return result.velocities, state
@@ -346,7 +354,7 @@ class StochasticFirstOrderRFD(StochasticScheme):
         rng = context.rng
         W_rfd = rng.standard_normal(6 * context.num_bodies)
         z = rng.standard_normal(3 * context.num_blobs)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
         noise = self.lanczos_noise(context, problem, z, self.noise_factor(), pc)
         U, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=noise, fresh_noise=True)
@@ -365,7 +373,7 @@ class StochasticAdamsBashforth(StochasticScheme):
         rng = context.rng
         W_rfd = rng.standard_normal(6 * context.num_bodies)
         z = rng.standard_normal(3 * context.num_blobs)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
         noise, (U_d, state) = self.side_by_side(
             context, problem, lambda shared: self.lanczos_noise(context, shared, z, self.noise_factor(), pc),
@@ -389,7 +397,7 @@ class StochasticTractionEM(StochasticScheme):
         W_rfd = rng.standard_normal(6 * context.num_bodies).reshape(-1, 6)
         lengths = self.body_lengths(context)
         W_s = np.concatenate((W_rfd[:, :3] * (self.kT / lengths[:, None]), W_rfd[:, 3:] * self.kT), axis=1)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
         z = rng.standard_normal(3 * context.num_blobs)  # drawn after W_rfd, as before
         noise, R = self.side_by_side(context, problem,
@@ -399,7 +407,7 @@ class StochasticTractionEM(StochasticScheme):
         lam, U_R = R.lambda_blobs.reshape(-1), R.velocities
 
         def products(q):
-            moved = context.model.mobility_problem(q)
+            moved = self.problem_at(context, q)
             return moved.M_dot(lam), moved.KT_dot(lam), moved.K_dot(U_R).reshape(-1)
 
         def displace(q, scale, direction):
@@ -456,7 +464,7 @@ class StochasticSlipTrapz(StochasticScheme):
         n3 = 3 * context.num_blobs
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
 
         def rfd_solve_and_products(shared):  # W_R and the slip RFD's products at q, beside the Lanczos call
@@ -486,7 +494,7 @@ class StochasticSlipMid(StochasticScheme):
         W1 = rng.standard_normal(n3)
         W_s = rng.standard_normal(n3)
         W3 = rng.standard_normal(n3)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
 
         def second_noise_and_rfd(shared):  # beside the first Lanczos call: the second one, W_R and M W_s at q
@@ -518,7 +526,7 @@ class StochasticEM(StochasticScheme):
 
     def attempt(self, context, state, old):
         W = context.rng.standard_normal(3 * context.num_blobs)
-        problem = context.model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
         noise = self.lanczos_noise(context, problem, W, self.noise_factor(), pc)
         U, state = self.deterministic_part(context, state, problem, old, pc, noise_slip=noise, fresh_noise=True)
@@ -585,7 +593,7 @@ class StochasticGDCRFD(StochasticScheme):
         rng, model = context.rng, context.model
         W = rng.standard_normal(3 * context.num_blobs)
         W_rfd = rng.standard_normal(6 * context.num_bodies).reshape(-1, 6)
-        problem = model.mobility_problem(old)
+        problem = self.problem_at(context, old)
         pc, state = self.preconditioner(context, state, problem)
         factor = self.noise_factor()
         U_tilde = rigid_projection(model, old, self.lanczos_noise(context, problem, W, factor, pc))
@@ -593,14 +601,14 @@ class StochasticGDCRFD(StochasticScheme):
         if self.thermal_drift and self.kT > 0:
             lengths = self.body_lengths(context)
             q_rfd = displace_bodies(old, self.delta, W_rfd, lengths)
-            noise_rfd = self.lanczos_noise(context, model.mobility_problem(q_rfd), W, factor, pc)
+            noise_rfd = self.lanczos_noise(context, self.problem_at(context, q_rfd), W, factor, pc)
             U_rfd = rigid_projection(model, q_rfd, noise_rfd)
             W_tilde = W_rfd.copy()
             W_tilde[:, :3] /= lengths[:, None]
             divergence = float(np.sum((U_rfd - U_tilde) * W_tilde)) / self.delta
         mid = self.move(old, U_tilde, 0.5 * self.dt)
         self.check(context, state, mid)
-        problem_mid = model.mobility_problem(mid)
+        problem_mid = self.problem_at(context, mid)
         noise_mid = self.lanczos_noise(context, problem_mid, W, factor, pc)
         U, state = self.deterministic_part(context, state, problem_mid, mid, pc, noise_slip=noise_mid, fresh_noise=True)
         U = U * (1.0 + 0.5 * self.dt * divergence)
@@ -700,42 +708,47 @@ class Fixman(DenseScheme):
         return self.move(old, U, self.dt), U, state
 
 
-class StochasticSlipMidDLA(DenseScheme):
-    """Dense-algebra version of the midpoint slip scheme (same slip sign as the other dense schemes, SPEC decision 1).
+class DenseTwin:
+    """Mixin: an iterative scheme's own step with dense products and exact solves (its dense twin).
+
+    The step of the iterative scheme builds its problems with :meth:`problem_at` and reaches the mobility only
+    through the operations overridden here: the problem is a ``body_solver.DenseMobilityProblem`` (the blob matrix
+    ``M`` and ``K`` built at the configuration), the noise ``factor M^{1/2} z`` is the symmetric root's (not
+    Lanczos), the solves are exact (``N (F - K^T M^{-1} s)``, no GMRES: nothing is counted), and no preconditioner
+    is built.  The draws and the formulas are the iterative scheme's, so the two agree to the solver tolerance.
+    """
+    pair_products = False
+
+    def problem_at(self, context, configuration):
+        model = context.model
+        M, _, K, _ = model.dense_matrices(configuration, inverse=False)
+        return DenseMobilityProblem(model.arrays, configuration, model.vector_mobility, M, K)
+
+    def preconditioner(self, context, state, problem):
+        return None, state
+
+    def preconditioner_at(self, context, configuration):
+        return None
+
+    def lanczos_noise(self, context, problem, z, factor, preconditioner):
+        return factor * (problem.root() @ np.asarray(z, dtype=float).reshape(-1))
+
+    def noise_solve(self, context, problem, preconditioner, noise_slip=None, noise_force=None, rhs=None):
+        if rhs is None:
+            rhs = problem.rhs(noise_slip=noise_slip, noise_force=noise_force)
+        return problem.exact_solution(rhs)
+
+    def deterministic_solve(self, context, state, problem, rhs, preconditioner, warm_start=True):
+        return problem.exact_solution(rhs), state
+
+
+class StochasticSlipMidDLA(DenseTwin, StochasticSlipMid):
+    """Dense-algebra version of the midpoint slip scheme: :class:`StochasticSlipMid`'s step with dense products
+    (:class:`DenseTwin`); the slip enters with the same sign as in the other dense schemes (SPEC decision 1).
 
     Draws: W1, W_s, W3 (3N each); W_c = W1 + W3.
     """
     name = 'stochastic_Slip_Mid_DLA'
-
-    def attempt(self, context, state, old):
-        rng, model = context.rng, context.model
-        n3 = 3 * context.num_blobs
-        W1 = rng.standard_normal(n3)
-        W_s = rng.standard_normal(n3)
-        W3 = rng.standard_normal(n3)
-        matrices = model.dense_matrices(old)
-        M, M_inv, K, N = matrices
-        U_m, state = self.dense_velocity(context, state, old, matrices)
-        U_m = U_m.reshape(-1)
-        W_R = N @ (K.T @ (M_inv @ W_s))
-        M_half = symmetric_root_matrix(M)
-        U_m = U_m + np.sqrt(4.0 * self.kT / self.dt) * (N @ (K.T @ (M_inv @ (M_half @ W1))))
-
-        def products(q):
-            M_q, _, K_q, _ = model.dense_matrices(q, inverse=False)
-            return M_q @ W_s, K_q.T @ W_s
-        D_M, D_KT = rfd(products, old, W_R.reshape(-1, 6), self.delta, displace_bodies, centred=False,
-                        at_configuration=(M @ W_s, K.T @ W_s))
-        mid = self.move(old, U_m.reshape(-1, 6), 0.5 * self.dt)
-        self.check(context, state, mid)
-        matrices_mid = model.dense_matrices(mid)
-        _, M_inv_mid, K_mid, N_mid = matrices_mid
-        c = self.kT if self.thermal_drift else 0.0
-        U, state = self.dense_velocity(context, state, mid, matrices_mid)
-        U = U.reshape(-1) + N_mid @ (
-            -c * D_KT + K_mid.T @ (M_inv_mid @ (np.sqrt(self.kT / self.dt) * (M_half @ (W1 + W3)) + c * D_M)))
-        U = U.reshape(-1, 6)
-        return self.move(old, U, self.dt), U, state
 
 
 # the roller schemes are in quaternion_integrator/roller_schemes.py

@@ -51,6 +51,7 @@ import utils
 
 from mobility import choose
 from mobility.interface import Geometry, preferred_backend, registered_backends, unusable_reason
+from multi_bodies.files.scheme_table import moves_rollers, scheme_entry
 from multi_bodies.solver import body_solver
 from multi_bodies.solver.solves import Solver
 
@@ -272,7 +273,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
                        (result.iterations, GMRES_WARNING_ITERATIONS, tolerance))
             self.notes.append(warning)
             note += ' (above %d: warning)' % GMRES_WARNING_ITERATIONS
-        if 'rollers' in scene.options.scheme:
+        if moves_rollers(scene.options.scheme):
             note += ' (of the multiblob problem; rollers need none)'
             seconds = self.product_time(scene.r_vectors, wall)[0]
             self.add('solver', None, 'rollers: one M f per step%s' % (
@@ -280,7 +281,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
                 scene.num_blobs, None, seconds, True, 'free_kinematics %s' % scene.options.free_kinematics)
         self.add('solver', None, 'preconditioned GMRES', scene.num_blobs, tolerance, gmres_seconds,
                  result.converged and result.iterations <= GMRES_WARNING_ITERATIONS, note)
-        if 'rollers' in scene.options.scheme:
+        if moves_rollers(scene.options.scheme):
             return
         # Dense: measured on the scene when small, modelled as (N / n)^3 from a measured smaller dense solve.
         n = scene.num_blobs
@@ -362,7 +363,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
                  self.cost_per_step(free_seconds), meets,
                  'M f %s; %.2fx faster than with the wall' % (how_free, wall_seconds / max(free_seconds, 1e-12)))
         if meets:
-            if 'rollers' in scene.options.scheme:
+            if moves_rollers(scene.options.scheme):
                 self.recommendation['domain'] = 'no_wall'
             else:
                 for option in ('mobility_vector_prod_implementation', 'mobility_blobs_implementation'):
@@ -391,7 +392,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
             roller_cost, multiblob_cost = roller.cost_s, current.cost_s
         radii = {round(s['sphere']['radius'], 9) for s in spheres}
         dynamic = scene.options.scheme not in STATIC_SCHEMES
-        if 'rollers' in scene.options.scheme:
+        if moves_rollers(scene.options.scheme):
             self.rollers_scene(spheres, roller_error if known else None)
             return
         self.add('rollers', None, 'multiblob (current)', scene.num_blobs, multiblob_error if known else None,
@@ -400,7 +401,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
         applicable = dynamic and len(radii) == 1
         self.add('rollers', None, 'single-blob rollers', scene.arrays.num_bodies, roller_error if known else None,
                  roller_cost, meets, '' if applicable else 'rollers need a dynamic scheme and spheres of one radius')
-        if meets and applicable and 'rollers' not in scene.options.scheme:
+        if meets and applicable and not moves_rollers(scene.options.scheme):
             roller_scheme = ROLLER_SCHEMES.get(scene.options.scheme)
             if roller_scheme is None:
                 return
@@ -561,8 +562,8 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
                           'Adams-Bashforth crossing the wall at dt mu k = 4.5 and inaccurate at 2.2, forward Euler '
                           'bounded but off by 0.4 at 4.5' % (dt, ', '.join(safe) or 'none'))
         # Roller schemes move single blobs only; the rigid schemes are for the other runs.
-        rollers = 'rollers' in options.scheme
-        applicable = {name: row for name, row in STOCHASTIC_SCHEME_TABLE.items() if ('rollers' in name) == rollers
+        rollers = moves_rollers(options.scheme)
+        applicable = {name: row for name, row in STOCHASTIC_SCHEME_TABLE.items() if moves_rollers(name) == rollers
                       and not (name == 'stochastic_EM' and self.scene.wall)}  # no drift: wrong above a wall
         # The table's dt are in units of the relaxation time tau = 1/(mu k) of the stiffest mode (its scene:
         # blobs in a stiff trap near the wall); here tau = 1/rate of the estimates above.
@@ -603,12 +604,13 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
             lengths.append(options.debye_length_wall)
         if options.blob_blob_force_implementation != 'None' and options.repulsion_strength != 0:
             lengths.append(options.debye_length)
-        base = scheme.replace('_rollers', '').replace('_dense_algebra', '')
+        entry = scheme_entry(scheme)
+        base = entry.rollers_of or entry.dense_of or scheme  # the rigid iterative scheme it stands in for
         if base not in SCHEME_TABLE:  # stochastic: the explicit deterministic part (Adams-Bashforth or Euler)
             base = 'deterministic_adams_bashforth' if 'adams_bashforth' in base else 'deterministic_forward_euler'
         rate = self.dt_summary['rate']
         stability = SCHEME_TABLE[base]['stability'] / rate if base in SCHEME_TABLE and rate > 0 else np.inf
-        stochastic = not scheme.startswith('deterministic')
+        stochastic = entry.kind == 'stochastic'
         bounds = advisor_physics.dt_bounds(stability, speed, wall_gap, pair_gap)
         mu = self.dt_summary.get('mu', 0.0)
         if stochastic and options.kT > 0 and mu > 0 and np.isfinite(wall_gap):
@@ -624,7 +626,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
         hard = min(value for _, value, _ in bounds)
         if np.isfinite(hard) and speed > 0:
             measured_scheme = scheme if not stochastic else (
-                'deterministic_adams_bashforth_rollers' if 'rollers' in scheme else 'deterministic_forward_euler')
+                'deterministic_adams_bashforth_rollers' if moves_rollers(scheme) else 'deterministic_forward_euler')
             measured = advisor_physics.measured_dt(checker.options_for_dt(self.recommendation), measured_scheme,
                                                    hard, self.accuracy, steps=2 if self.quick else 4)
             self.dt_measurement = measured
@@ -639,7 +641,7 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
             self.add('dt', None, 'bound %s: dt <= %.4g' % (bound, value), None, None, None, options.dt <= value,
                      reason + ('; BINDS' if bound == name else ''))
         self.dt_bound = dict(dt=float(limit), binds=name, bounds={b: float(v) for b, v, _ in bounds}, speed=speed)
-        if scheme.startswith('lubrication_'):
+        if entry.lubrication:
             self.notes.append('dt: the bounds above are those of the far-field model (one blob per sphere without '
                               'lubrication, which moves the spheres faster near contact); no dt is recommended for '
                               'a lubrication scheme (the input dt = %g is kept)' % options.dt)

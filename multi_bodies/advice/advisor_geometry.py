@@ -34,6 +34,7 @@ from mobility.image_sums import periodic_limit, relative_error, ring_sums, tiled
 from mobility.interface import Geometry, implementation_geometry, make_mobility
 from mobility.spectral.parameters import refined_parameters
 from mobility.spectral_mobility import SpectralMobility, spectral_parameters_for
+from multi_bodies.files.scheme_table import moves_rollers
 from multi_bodies.solver import body_solver
 from multi_bodies.solver.periodic import (PUBLISHED_ZMAX, SPECTRAL_OPTIONS, SpectralDomain, check_grid_periods,
                                           spectral_geometry_kind)
@@ -72,7 +73,7 @@ class GeometryMeasurements:
                 # the backend and wall topics compare direct sums: they cannot replace a periodic product
                 self.recommendation.pop(vector_option)
             return
-        rollers = 'rollers' in options.scheme
+        rollers = moves_rollers(options.scheme)
         r = scene.r_vectors
         n = scene.num_blobs
         Lx, Ly, _ = options.periodic_length

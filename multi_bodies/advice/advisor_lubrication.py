@@ -16,8 +16,9 @@ import numpy as np
 from multi_bodies.advice import lubrication_tables as tables
 from multi_bodies.advice.lubrication_models import TABLE_MODEL
 from multi_bodies.files.input_options import DEFAULTS
+from multi_bodies.files.scheme_table import moves_rollers, scheme_names
 
-LUBRICATION_SCHEMES = ('lubrication_trapezoidal', 'lubrication_EM', 'lubrication_trapezoidal_rollers')
+LUBRICATION_SCHEMES = scheme_names(lubrication=True)  # the scheme registry's
 LUBRICATION_OPTIONS = ('Lub_Cut', 'firm_delta', 'repulsion_strength_firm')
 MEASURE_SPHERES = 2000       # above this many spheres the lubricated solve is modelled, not measured
 MEASURE_FROM = 64            # below this many spheres every cost is modelled from the chart (overheads)
@@ -39,7 +40,7 @@ def model_kind(scheme):
     """'lubrication', 'rollers' or 'multiblob': what the input's scheme runs."""
     if scheme in LUBRICATION_SCHEMES:
         return 'lubrication'
-    return 'rollers' if 'rollers' in scheme else 'multiblob'
+    return 'rollers' if moves_rollers(scheme) else 'multiblob'
 
 
 def scheme_for(model, scheme, kT, free_kinematics=DEFAULTS.free_kinematics):
@@ -193,7 +194,7 @@ class LubricationMeasurements:
         """Drop the resolution and rollers topics' model lines (``reason`` says why, in the note)."""
         from multi_bodies.advice.advisor_physics import is_model_key
         dropped = [key for key in self.recommendation if is_model_key(key) or (
-            key == 'scheme' and ('rollers' in self.recommendation[key]) != ('rollers' in self.scene.options.scheme))]
+            key == 'scheme' and moves_rollers(self.recommendation[key]) != moves_rollers(self.scene.options.scheme))]
         for key in dropped:
             self.recommendation.pop(key)
         if dropped:

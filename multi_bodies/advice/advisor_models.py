@@ -23,6 +23,7 @@ from multi_bodies.solver.body_solver import body_mobility_from_resistance
 from multi_bodies.solver import user_hooks
 from multi_bodies.advice import sphere_tables
 from multi_bodies.files.input_options import read_input_file
+from multi_bodies.files.scheme_table import dense_variants, moves_rollers, roller_variants, scheme_names
 from multi_bodies.run.run_setup import read_bodies
 from multi_bodies.files.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
 
@@ -32,13 +33,10 @@ GMRES_WARNING_ITERATIONS = 100
 NO_WALL = '_no_wall'
 DENSE_BLOB_LIMIT = 3000           # blobs above which one dense solve is modelled, not measured
 MEASURE_BUDGET_S = 1.0            # a single timing predicted to take longer is modelled instead
-ROLLER_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_rollers',
-                  'deterministic_adams_bashforth': 'deterministic_adams_bashforth_rollers',
-                  'stochastic_adams_bashforth': 'stochastic_adams_bashforth_rollers',
-                  'stochastic_first_order_RFD': 'stochastic_first_order_rollers'}
-DENSE_SCHEMES = {'deterministic_forward_euler': 'deterministic_forward_euler_dense_algebra',
-                 'stochastic_first_order_RFD': 'stochastic_first_order_RFD_dense_algebra'}
-STATIC_SCHEMES = ('mobility', 'resistance', 'body_mobility')
+# The roller and dense counterparts of a scheme and the static schemes: the scheme registry's
+ROLLER_SCHEMES = roller_variants()
+DENSE_SCHEMES = dense_variants()
+STATIC_SCHEMES = scheme_names(kind='static')
 
 # Scheme cost/accuracy tables shipped with the package, by scheme name: a dict with 'order',
 # 'solves_per_step', 'stability' (dt * mu * k limit) and 'source'.  The deterministic rows are the
@@ -322,7 +320,7 @@ class Scene:
         self.options = read_input_file(input_file, 'mcmc' if self.program == 'mcmc' else None)
         self.hooks = user_hooks.load_user_hooks(os.getcwd(), load_pycuda=False)
         self.bodies, self.types, _ = read_bodies(self.options, self.hooks.set_slip_by_ID,
-                                              single_blob_bodies='rollers' in self.options.scheme)
+                                              single_blob_bodies=moves_rollers(self.options.scheme))
         self.arrays = bodies_to_arrays(self.bodies, [count for _, count in self.types])
         slips = [np.zeros((b.Nblobs, 3)) if b.slip_reference is None else b.slip_reference for b in self.bodies]
         self.arrays.reference_slip = np.concatenate(slips).reshape(-1, 3)
@@ -357,7 +355,7 @@ class Scene:
     @property
     def wall(self):
         names = (self.options.mobility_vector_prod_implementation, self.options.mobility_blobs_implementation)
-        if 'rollers' in self.options.scheme:
+        if moves_rollers(self.options.scheme):
             return self.options.domain != 'no_wall'
         return not all(name.endswith(NO_WALL) for name in names)
 

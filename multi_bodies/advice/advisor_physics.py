@@ -34,6 +34,7 @@ import numpy as np
 
 import utils
 from multi_bodies.files.input_options import OPTION_TABLE, STATIC_SCHEMES, is_used, parse_input_text
+from multi_bodies.files.scheme_table import moves_rollers, scheme_has, scheme_names
 from multi_bodies.solver.physics import ONE_BLOB_NAMES
 
 # The per-blob parameters of the default laws, rescaled when the blob count of a body changes.
@@ -43,7 +44,7 @@ PER_BLOB_HOOKS = ONE_BLOB_NAMES + ('blob_blob_force',)
 # Recommendation keys that change the model of the bodies (dropped together when the check fails).
 MODEL_KEYS = ('blob_radius', 'free_kinematics', 'omega_one_roller') + PER_BLOB_PARAMETERS
 # Static problems that use dense blocks only (no blob vector product).
-DENSE_BLOCK_SCHEMES = ('body_mobility', 'resistance')
+DENSE_BLOCK_SCHEMES = scheme_names(kind='static', algebra='dense')  # the scheme registry's
 # Blobs (with the larger of the user's and the recommended model) beyond which the check and the time-step
 # measurement run on the bodies nearest the lowest body instead of the whole scene.
 CHECK_BLOB_LIMIT = 3000
@@ -92,10 +93,10 @@ def scope(recommendation, options, program):
             del recommendation[key]
             notes.append('scope: %s dropped: scheme %s builds dense blocks and does not use the blob vector product'
                          % (name, scheme))
-        elif name == 'mobility_blobs_implementation' and ('rollers' in scheme or scheme.startswith('lubrication_')):
+        elif name == 'mobility_blobs_implementation' and (moves_rollers(scheme) or scheme_has(scheme, 'lubrication')):
             del recommendation[key]
             notes.append('scope: %s dropped: the %s schemes use the blob vector product only'
-                         % (name, 'lubrication' if scheme.startswith('lubrication_') else 'roller'))
+                         % (name, 'lubrication' if scheme_has(scheme, 'lubrication') else 'roller'))
         elif name in OPTION_TABLE and name != 'scheme' and OPTION_TABLE[name].used_by \
                 and not is_used(name, program, scheme):
             del recommendation[key]
@@ -145,7 +146,7 @@ def force_parts(system):
 def velocities(system, scheme):
     """Body velocities of one mobility problem: (Nb, 6), or (N, 3) linear velocities of rollers."""
     configuration = system.start_configuration
-    if 'rollers' in scheme:
+    if moves_rollers(scheme):
         return system.roller_velocities(configuration).velocities
     return system.deterministic_velocities(configuration).velocities
 
@@ -266,7 +267,7 @@ class PhysicsCheck:
         two is stepped: the user's, unless the recommended scheme needs the recommended bodies (rollers).
         """
         scheme = recommendation.get('scheme', self.options.scheme)
-        if ('rollers' in scheme) == ('rollers' in self.options.scheme):
+        if moves_rollers(scheme) == moves_rollers(self.options.scheme):
             if scheme == self.options.scheme:
                 return self.options
             return self.recommended_options({'scheme': scheme})
@@ -364,8 +365,8 @@ def keep_physics(advisor):
     if advisor.program == 'mcmc':
         return
     model_change = any(is_model_key(k) for k in recommendation) or (
-        'scheme' in recommendation and ('rollers' in recommendation['scheme']) != ('rollers' in
-                                                                                    advisor.scene.options.scheme))
+        'scheme' in recommendation and moves_rollers(recommendation['scheme']) != moves_rollers(
+            advisor.scene.options.scheme))
     if not recommendation:
         return
     try:
@@ -414,7 +415,7 @@ def keep_physics(advisor):
 def blob_speeds(system, body_velocities, scheme):
     """Speed of every blob (N,) from body velocities (Nb, 6) (rigid motion) or roller velocities (N, 3)."""
     v = np.asarray(body_velocities)
-    if 'rollers' in scheme:
+    if moves_rollers(scheme):
         return np.linalg.norm(v.reshape(-1, 3), axis=1)
     blob_v = system.arrays.K_dot(system.start_configuration, v.reshape(-1, 6))
     return np.linalg.norm(np.asarray(blob_v).reshape(-1, 3), axis=1)

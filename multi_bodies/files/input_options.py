@@ -20,6 +20,7 @@ import math
 import os
 from collections import namedtuple
 
+from multi_bodies.files.scheme_table import moves_rollers, scheme_entry, scheme_names
 from utils import UserInputError, read_text_file, warn_user
 
 
@@ -34,22 +35,12 @@ from utils import UserInputError, read_text_file, warn_user
 # (many_bodyMCMC/many_body_MCMC.py), 'lubrication' (the lubrication schemes only).  An empty ``used_by``: read for
 # compatibility, no effect.
 PROGRAMS = ('dynamic', 'static', 'mcmc')
-STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
-# Names of the dynamic schemes (quaternion_integrator.schemes holds the classes; tests/test_input.py checks
-# that both lists agree).
-DETERMINISTIC_SCHEMES = ('deterministic_forward_euler', 'deterministic_forward_euler_dense_algebra',
-                         'deterministic_adams_bashforth', 'deterministic_forward_euler_rollers',
-                         'deterministic_adams_bashforth_rollers', 'deterministic_midpoint')
-STOCHASTIC_SCHEMES = ('stochastic_first_order_RFD', 'stochastic_adams_bashforth',
-                      'stochastic_first_order_RFD_dense_algebra', 'stochastic_traction_EM', 'Fixman',
-                      'stochastic_Slip_Trapz', 'stochastic_traction_AB', 'stochastic_Slip_Mid',
-                      'stochastic_Slip_Mid_DLA', 'stochastic_first_order_rollers', 'stochastic_adams_bashforth_rollers',
-                      'stochastic_mid_point_rollers', 'stochastic_trapezoidal_rollers', 'stochastic_EM',
-                      'stochastic_GDC_RFD', 'lubrication_trapezoidal', 'lubrication_EM',
-                      'lubrication_trapezoidal_rollers')
-# Articulated bodies (doc/articulated.md; quaternion_integrator.articulated_schemes holds the classes).
-ARTICULATED_SCHEMES = ('articulated_deterministic_forward_euler', 'articulated_deterministic_midpoint',
-                       'articulated_deterministic_forward_euler_rollers')
+# The schemes' names, kinds and needs are the scheme registry's (multi_bodies.files.scheme_table); these are its
+# lists (quaternion_integrator.schemes holds the classes and refuses one the registry does not know).
+STATIC_SCHEMES = scheme_names(kind='static')
+DETERMINISTIC_SCHEMES = scheme_names(kind='deterministic', articulated=False)
+STOCHASTIC_SCHEMES = scheme_names(kind='stochastic')
+ARTICULATED_SCHEMES = scheme_names(articulated=True)
 DYNAMIC_SCHEMES = DETERMINISTIC_SCHEMES + STOCHASTIC_SCHEMES + ARTICULATED_SCHEMES
 MCMC_MOVES = ('all_bodies', 'one_body')                        # many_bodyMCMC.sampler.MOVES
 MCMC_ENERGY_IMPLEMENTATIONS = ('auto', 'python', 'C++', 'pycuda')  # many_bodyMCMC.mcmc_energy.IMPLEMENTATIONS
@@ -567,13 +558,12 @@ def usage_tags(program, scheme):
     if program is None:
         program = 'static' if scheme in STATIC_SCHEMES else 'dynamic'
     tags = {program}
-    if program == 'dynamic':
-        if not scheme.startswith('deterministic') and scheme not in ARTICULATED_SCHEMES:
-            tags.add('stochastic')
-        if 'rollers' in scheme:
-            tags.add('rollers')
-        if scheme.startswith('lubrication'):
-            tags.add('lubrication')
+    entry = scheme_entry(scheme)
+    if program == 'dynamic' and entry is not None:
+        for tag, needed in (('stochastic', entry.kind == 'stochastic'), ('rollers', entry.rollers),
+                            ('lubrication', entry.lubrication)):
+            if needed:
+                tags.add(tag)
     return tags
 
 
@@ -713,14 +703,14 @@ def check_periodic_box(options):
         return  # the spectral product's geometry is checked with its options (multi_bodies.solver.periodic)
     implementations = (options.mobility_vector_prod_implementation, options.mobility_blobs_implementation)
     wall = any(not name.endswith('_no_wall') for name in implementations)
-    if 'rollers' in options.scheme and options.domain != 'no_wall':
+    if moves_rollers(options.scheme) and options.domain != 'no_wall':
         wall = True
     if wall:
         raise UserInputError(
             "%s: periodic_length along z is %g, but the simulation has a wall at z = 0; set the third value to 0, "
             "or choose free space (mobility implementations ending in _no_wall%s)"
             % (options.where('periodic_length'), options.periodic_length[2],
-               ', domain no_wall' if 'rollers' in options.scheme else ''))
+               ', domain no_wall' if moves_rollers(options.scheme) else ''))
 
 
 def read_input_file(path, program=None):

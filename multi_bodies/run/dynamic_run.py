@@ -51,8 +51,7 @@ class DynamicRun:
         setup = prepare(options, 'dynamics', print_residual=print_residual, log=log, restart_record=self.restart)
         self.hooks, self.bodies, self.types, self.system = setup.hooks, setup.bodies, setup.types, setup.system
         arrays = setup.body_arrays
-        dense = self.scheme.dense or 'dense' in options.scheme  # Fixman, *_DLA, *_dense_algebra
-        if dense or options.save_blobs_mobility or options.save_body_mobility:
+        if self.scheme.dense or options.save_blobs_mobility or options.save_body_mobility:
             run_output.refuse_if_too_big(
                 run_output.dense_memory(arrays.num_blobs, arrays.num_bodies),
                 'the dense mobility of %d blobs (%s%s)' % (arrays.num_blobs, options.scheme,

@@ -24,6 +24,7 @@ import numpy as np
 from utils import UserInputError, warn_user
 from multi_bodies.files.input_options import OPTION_TABLE
 from multi_bodies.files.run_inputs import file_digest, restart_inputs
+from multi_bodies.files.scheme_table import moves_rollers
 from multi_bodies.files.snapshots import clones_name, config_name
 
 from multi_bodies.run.record_checks import (configuration_problem, generator_problem, missing_fields,
@@ -386,7 +387,7 @@ def check_restart(options, record, types, fingerprint, report=warn_user, program
                             '(the file was edited or replaced)' % (k, ', '.join(bad), path))
             use_record = False
         unfit = (missing_fields(record, types, program)
-                 or run_problem(record, types, num_blobs, rollers='rollers' in (getattr(options, 'scheme', '') or ''))
+                 or run_problem(record, types, num_blobs, rollers=moves_rollers(getattr(options, 'scheme', None)))
                  or generator_problem(options, (record.get('state') or {}).get('rng'))
                  or (configuration_problem(record, *configuration) if configuration is not None and not bad
                      else None))

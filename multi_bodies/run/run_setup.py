@@ -36,6 +36,7 @@ from body.body import Body, bodies_to_arrays, reference_slip_in_lab_frame
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver import published_joints, published_spectral, user_hooks
 from multi_bodies.files.input_options import STATIC_SCHEMES, check_options  # noqa: F401 (STATIC_SCHEMES re-exported)
+from multi_bodies.files.scheme_table import moves_rollers, scheme_has
 from multi_bodies.run import run_output
 from multi_bodies.run.run_output import RESTART_SUFFIX, write_bodies_info  # noqa: F401
 from multi_bodies.files.snapshots import clones_name, config_name, read_clones_file, read_config_snapshot
@@ -181,7 +182,7 @@ def read_articulated_bodies(options, set_slip_by_ID, bodies, types, single_blob_
     from multi_bodies.solver import articulated as art
     specs = options.articulated
     if not specs:  # an articulated scheme moves plain bodies with no joint, as the published code does
-        return art.ArticulatedSet() if options.scheme.startswith('articulated_') else None
+        return art.ArticulatedSet() if scheme_has(options.scheme, 'articulated') else None
     articulated = art.ArticulatedSet()
     for spec in specs:
         names = art.read_list_vertex_file(spec.list_vertex_file, spec.where)
@@ -428,7 +429,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         hooks = hook_loader(options, directory, log)
     try:
         bodies, types, articulated = read_bodies(options, hooks.set_slip_by_ID if set_slip_by_ID is None else set_slip_by_ID,
-                                    single_blob_bodies=script == 'dynamics' and 'rollers' in options.scheme,
+                                    single_blob_bodies=script == 'dynamics' and moves_rollers(options.scheme),
                                     restart_record=restart_record,
                                     vertex_scale=1.0 if published is None else published.vertex_scale)
     except user_hooks.UserFunctionError as err:

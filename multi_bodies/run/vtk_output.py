@@ -44,6 +44,7 @@ import numpy as np
 
 import utils
 from body.body import Configuration, K_dot, bodies_to_arrays
+from multi_bodies.files.scheme_table import scheme_names
 from multi_bodies.solver import user_hooks
 from multi_bodies.run.run_setup import read_bodies
 from multi_bodies.run import run_output
@@ -391,7 +392,7 @@ class AlsoWriteVtk:
 
 
 # ------------------------------------------------------------------ a saved run, read back (clones_to_vtk, render)
-STATIC_SCHEMES = ('body_mobility', 'mobility', 'resistance')
+STATIC_SCHEMES = scheme_names(kind='static')  # the scheme registry's
 
 
 def load_run(options):

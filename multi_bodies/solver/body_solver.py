@@ -649,6 +649,53 @@ def dense_matrices(body_arrays, configuration, mobility, eta=None, blob_radius=N
     return M, M_inv, K, body_mobility_from_resistance(K.T @ M_inv @ K)
 
 
+class DenseMobilityProblem(MobilityProblem):
+    """The rigid problem at one configuration over its dense matrices: the products are matrix products and the
+    solution is exact (no GMRES); the dense twins of the iterative schemes take their step with it
+    (``quaternion_integrator.stochastic_schemes.DenseTwin``).
+
+    M : (3N, 3N) the blob mobility and K : (3N, 6Nb) the kinematics at ``configuration`` (``dense_matrices`` with
+    ``inverse=False``); ``mobility``: the model's vector mobility (the problem's ``eta``, radii and box).
+    ``M^{-1}`` and ``N = pinv(K^T M^{-1} K)`` are made at the first :meth:`exact_solution`, the symmetric root
+    ``M^{1/2}`` at the first :meth:`root`.
+    """
+
+    def __init__(self, body_arrays, configuration, mobility, M, K):
+        super().__init__(body_arrays, configuration, mobility)
+        self.M, self.K = M, K
+        self._inverse = self._root = None
+
+    def M_dot(self, blob_forces):
+        return self.M @ np.asarray(blob_forces, dtype=float).reshape(-1)
+
+    def K_dot(self, body_velocities):
+        return (self.K @ np.asarray(body_velocities, dtype=float).reshape(-1)).reshape(-1, 3)
+
+    def KT_dot(self, blob_forces):
+        return (self.K.T @ np.asarray(blob_forces, dtype=float).reshape(-1)).reshape(-1, 6)
+
+    def root(self):
+        """``M^{1/2}`` (3N, 3N), the symmetric root (``stochastic_forcing.symmetric_root_matrix``)."""
+        if self._root is None:
+            from stochastic_forcing import symmetric_root_matrix
+            self._root = symmetric_root_matrix(self.M)
+        return self._root
+
+    def exact_solution(self, rhs):
+        """The exact solution of ``A [lambda; U] = rhs = [s; -F]``: ``U = N (F - K^T M^{-1} s)``,
+        ``lambda = M^{-1} (s + K U)``; a SolveResult of 0 iterations."""
+        if self._inverse is None:
+            M_inv = spd_inverse(self.M)
+            self._inverse = M_inv, body_mobility_from_resistance(self.K.T @ M_inv @ self.K)
+        M_inv, N = self._inverse
+        rhs = np.asarray(rhs, dtype=float).reshape(-1)
+        n3 = 3 * self.num_blobs
+        slip, force_torque = rhs[:n3], -rhs[n3:]
+        velocities = N @ (force_torque - self.K.T @ (M_inv @ slip))
+        lambda_blobs = M_inv @ (slip + self.K @ velocities)
+        return SolveResult(lambda_blobs.reshape(-1, 3), velocities.reshape(-1, 6), 0, True, 0.0, None, None)
+
+
 def spd_inverse(matrix):
     """Inverse of a symmetric positive definite matrix (n, n) from its Cholesky factor (LAPACK potrf/potri).
 

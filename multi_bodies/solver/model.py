@@ -38,6 +38,7 @@ from body.geometry import Quaternion
 from mobility.interface import (BlobMobility, Geometry, from_implementation_name, implementation_geometry,
                                 make_mobility, published_function, registered_backends)
 from multi_bodies.files.input_options import DEFAULTS  # Model's keyword defaults are the option table's
+from multi_bodies.files.scheme_table import moves_rollers
 from multi_bodies.solver import body_solver, noise_factor, obstacles, periodic, rollers
 from multi_bodies.solver import user_hooks
 from multi_bodies.solver import physics as mbf
@@ -690,7 +691,7 @@ def wall_is_seen(options, vector_product_name, blobs_name, script='dynamics'):
 
     script : 'dynamics' or 'static' (body_mobility and resistance use the dense blocks only).
     """
-    if 'rollers' in options.scheme:
+    if moves_rollers(options.scheme):
         return options.domain != 'no_wall'
     names = [blobs_name]
     if script == 'dynamics' or options.scheme == 'mobility':
@@ -740,7 +741,7 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
     spectral = None
     check_wall = wall_is_seen(options, product, blobs, script)
     if product == periodic.SPECTRAL:  # doc/periodic.md
-        spectral = periodic.spectral_domain(options, rollers=script == 'dynamics' and 'rollers' in options.scheme)
+        spectral = periodic.spectral_domain(options, rollers=script == 'dynamics' and moves_rollers(options.scheme))
         check_wall = spectral.checks_heights
         checked('mobility_blobs_implementation', lambda: spectral.block_mobility(blobs, options.eta,
                                                                                  options.blob_radius))

@@ -29,6 +29,7 @@ import numpy as np
 from mobility.interface import (Geometry, PERIODIC_GEOMETRIES, BlobMobility, implementation_geometry,
                                 make_mobility)
 from mobility.spectral_mobility import SpectralMobility, spectral_parameters_for
+from multi_bodies.files.scheme_table import scheme_has
 from utils import SimulationStopped, UserInputError
 
 SPECTRAL = 'spectral'
@@ -221,7 +222,7 @@ def spectral_domain(options, rollers=False, blob_radius=None):
         raise UserInputError('%s: .Laplace and .slip_length bodies solve their surface problems with the wall\'s '
                              'direct kernels; the spectral product does not serve them (use a direct '
                              'mobility_vector_prod_implementation)' % surface[0])
-    if scheme.startswith('lubrication'):
+    if scheme_has(scheme, 'lubrication'):
         raise UserInputError('%s: the lubrication schemes take their far field from the wall tables, not from the '
                              'spectral product; use a direct mobility_vector_prod_implementation'
                              % where('mobility_vector_prod_implementation'))

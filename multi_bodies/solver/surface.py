@@ -23,12 +23,12 @@ Which runs are refused, and why:
 """
 import numpy as np
 
+from multi_bodies.files.scheme_table import moves_rollers, scheme_names
 from multi_bodies.files.surface_files import read_laplace_file, read_slip_length_file
 from multi_bodies.solver import laplace_preconditioner, phoretic, slip_length
 from utils import UserInputError, warn_user
 
-SLIP_LENGTH_SCHEMES = ('deterministic_forward_euler', 'deterministic_adams_bashforth', 'deterministic_midpoint',
-                       'mobility')
+SLIP_LENGTH_SCHEMES = scheme_names(slip_length=True)  # the scheme registry's
 
 
 class Surface:
@@ -140,7 +140,7 @@ def read_surface(options, specs, types, vertex_blobs, laplace_wall, hydrodynamic
     if options.articulated:
         raise UserInputError('%s: .Laplace and .slip_length files are not read on articulated bodies; remove the '
                              "'articulated' line or the surface files" % options.articulated[0].where)
-    if 'rollers' in options.scheme:
+    if moves_rollers(options.scheme):
         raise UserInputError('%s: scheme %s moves single-blob rollers, which have no surface; remove the .Laplace and '
                              '.slip_length files or use a rigid-body scheme'
                              % (options.where('scheme'), options.scheme))
