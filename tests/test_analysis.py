@@ -75,6 +75,23 @@ def test_ideal_gas_pair_correlation_is_one_in_a_periodic_plane_and_a_wrong_box_i
     assert np.sum(((wrong['g'] - 1) / se) ** 2) > chi_square_bound(25)
 
 
+def test_pair_correlation_of_a_known_finite_configuration_is_exact():
+    """Three points in a periodic plane, at separations 1, 2 and sqrt(5) (one frame): each of the bins holding one of
+    them has g = 1 / (M P_k) exactly, with M = N (N - 1) / 2 = 3 the pairs and P_k = pi (r2^2 - r1^2) / L^2 the
+    ideal fraction of the bin (the normalisation N^2 / 2 would give two thirds of it); every other bin is 0."""
+    L = 20.0
+    points = np.array([[[5.0, 5.0, 0.0], [6.0, 5.0, 0.0], [5.0, 7.0, 0.0]]])
+    edges = np.linspace(0.0, 3.0, 11)  # bins of 0.3: 1, 2 and sqrt(5) fall inside bins 3, 6 and 7
+    result = pair_correlation(points, (L, L, 0), 3.0, 10, 2, blocks=1)
+    expected = np.zeros(10)
+    for distance in (1.0, 2.0, np.sqrt(5.0)):
+        k = int(distance // 0.3)
+        assert edges[k] < distance < edges[k + 1]
+        expected[k] = 1.0 / (3.0 * np.pi * (edges[k + 1] ** 2 - edges[k] ** 2) / L ** 2)
+    np.testing.assert_allclose(result['g'], expected, rtol=1e-12, atol=0)
+    assert result['particles'] == 3 and result['frames'] == 1
+
+
 def test_ideal_gas_pair_correlation_in_3d_above_a_wall_uses_the_sampled_slab():
     """x, y periodic, z open (uniform in [0, 4]): g = 1 once the slab's height density is used.
 

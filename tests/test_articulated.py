@@ -247,6 +247,36 @@ def test_locked_chain_far_from_the_wall_sediments_as_one_body(tmp_path, monkeypa
     assert np.max(np.abs(displacement - displacement[1])) < 1e-9 * np.linalg.norm(displacement[1])
 
 
+def test_the_velocities_follow_a_moving_joint_to_second_order(tmp_path, monkeypatch):
+    """Two octahedra joined at a point that moves in body p's frame, ``l_p(t) = (1.25 + 0.5 sin 2t, 0, 0)`` (the
+    .const line's expressions), under gravity.  The velocity solve at t = 0 must make the joint residual
+    ``g = q_p + R_p l_p(t) - q_q - R_q l_q`` stationary along the motion, so moving the bodies with the solved
+    velocities for h (no restoration) leaves ``|g(h)| = O(h^2)``: halving h divides it by 4.  With the wrong sign of
+    the moving link's term (``B = +(R_p dl_p/dt - R_q dl_q/dt)``) the residual would be ``2 h |dl_p/dt| = 2 h``,
+    first order; asserted below 1 % of ``h |dl_p/dt|`` (measured 4e-5 of it at h = 1e-3, ratio 4.0)."""
+    from quaternion_integrator.scheme_base import moved
+    np.savetxt(tmp_path / 'shell.vertex', OCTAHEDRON, header='6', comments='')
+    (tmp_path / 'pair.list_vertex').write_text('shell.vertex\nshell.vertex\n')
+    moving = '1.25+0.5*sin(2*t) 0 0 -1.25 0 0 cos(2*t) 0 0 0 0 0'
+    (tmp_path / 'pair.const').write_text('2\n1\n0 1  1.25 0 0  -1.25 0 0  %s\n' % moving)
+    (tmp_path / 'pair.clones').write_text('2\n0 0 3 1 0 0 0\n2.5 0 3 1 0 0 0\n')
+    text = '\n'.join(['scheme articulated_deterministic_forward_euler', 'output_name run', 'eta 1.0',
+                      'blob_radius 0.25', 'g 1.0', 'repulsion_strength_wall 0', 'solver_tolerance 1e-12',
+                      'mobility_blobs_implementation python', 'mobility_vector_prod_implementation python',
+                      'blob_blob_force_implementation None', 'dt 0.01', 'n_steps 1',
+                      'articulated pair.list_vertex pair.clones pair.const'])
+    _, setup = setup_system(tmp_path, text, monkeypatch, script='dynamics')
+    system = setup.system
+    joints, start = system.articulated, system.start_configuration
+    assert np.max(np.abs(joints.violation(start, 0.0))) < 1e-14  # the joint holds at t = 0
+    U = art.articulated_velocities(system, joints, start, 0.0).velocities
+    assert np.linalg.norm(U[:, 3:]) > 1e-3  # the bodies turn: R_p l_p moves too
+    residual = {h: np.max(np.abs(joints.violation(moved(start, U, h), h))) for h in (1e-3, 5e-4)}
+    link_rate = 1.0  # |dl_p/dt| at t = 0
+    assert residual[1e-3] < 0.01 * 1e-3 * link_rate, residual
+    assert residual[1e-3] / residual[5e-4] > 3.0, residual  # second order in h
+
+
 def joint_residuals_from_file(frames, const_path):
     """|q_p + R_p l_p - q_q - R_q l_q| (frames, joints) of saved frames (F, Nb, 7), from the .const file's links.
 

@@ -91,6 +91,13 @@ def double_layer_numpy(x, normals, weights, blob_radius, v):
     return -(3.0 / (4.0 * np.pi)) * out
 
 
+def navier_coefficients(slip_lengths, eta, weights):
+    """``xi_i = l_i / (eta w_i)`` (N,) of slip lengths ``l`` (N,) [L], the viscosity ``eta`` and the quadrature
+    weights ``w`` (N,) [L]^2: the Navier condition of blob i is ``u_i = -xi_i P_i lambda_i`` (``lambda_i / w_i`` the
+    traction).  The one place the slip-length term is written: the problem and its preconditioners take it here."""
+    return np.asarray(slip_lengths, dtype=float).reshape(-1) / (eta * np.asarray(weights, dtype=float).reshape(-1))
+
+
 class SlipLengthProblem(LinearProblem):
     """The slip-length saddle-point problem of all bodies at one configuration (the problem protocol).
 
@@ -109,7 +116,7 @@ class SlipLengthProblem(LinearProblem):
         self.normals = np.asarray(normals, dtype=float).reshape(-1, 3)
         self.weights = np.asarray(weights, dtype=float).reshape(-1)
         self.slip_lengths = np.asarray(slip_lengths, dtype=float).reshape(-1)
-        self.xi = self.slip_lengths / (rigid.eta * self.weights)
+        self.xi = navier_coefficients(self.slip_lengths, rigid.eta, self.weights)
         self.num_blobs, self.num_bodies = rigid.num_blobs, rigid.num_bodies
         self.size = 6 * self.num_blobs + 6 * self.num_bodies
 
@@ -256,7 +263,7 @@ class SlipLengthPreconditioner(LinearMap):
         from multi_bodies.solver.phoretic import lab_normals
         normals = lab_normals(body_arrays, configuration, np.asarray(normals, dtype=float).reshape(-1, 3))
         weights = np.asarray(weights, dtype=float).reshape(-1)
-        self.xi = np.asarray(slip_lengths, dtype=float).reshape(-1) / (eta * weights)
+        self.xi = navier_coefficients(slip_lengths, eta, weights)
         self.normals, self.weights, self.configuration = normals, weights, configuration
         self.blocks = []
         for (bodies, blobs), n_blobs in zip(body_arrays.type_slices, body_arrays.type_blobs):
