@@ -163,8 +163,7 @@ def count_products(model):
             def counted_apply(x):
                 counter.preconditioner += 1
                 return apply(x)
-            pc.apply = counted_apply
-            pc.operator = type(pc.operator)(pc.operator.shape, matvec=counted_apply, dtype=float)
+            pc.apply = counted_apply  # its operator (linear_map.LinearMap) applies it
             return pc
     arguments = dict(model.arguments, vector_mobility=CountedMobility(model.vector_mobility, counter))
     return CountedModel(**arguments), counter

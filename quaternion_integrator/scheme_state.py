@@ -178,9 +178,10 @@ class StepContext:
                                  kind=kind, what=what)
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
-        """``model.lanczos_noise(...).noise`` (3N,), counted (a call that did not converge is warned about and
-        counted in ``lanczos_not_converged``)."""
-        result = self.model.lanczos_noise(problem, z, factor, preconditioner, tolerance=tolerance)
+        """The noise ``factor M^{1/2} z`` (3N,) of the step's solver (``Solver.noise``: Lanczos, or exact where the
+        product can), counted (a call that did not converge is warned about and counted in
+        ``lanczos_not_converged``)."""
+        result = self.solver.noise(problem, z, factor, preconditioner, tolerance=tolerance)
         self._count_lanczos(result)
         return result.noise
 

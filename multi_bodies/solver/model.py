@@ -44,8 +44,7 @@ from multi_bodies.solver import user_hooks
 from multi_bodies.solver import physics as mbf
 from multi_bodies.solver.body_solver import check_finite  # noqa: F401  (re-exported: its callers' name)
 from multi_bodies.solver.neighbour_preconditioner import AUTO_MAX_COST_RATIO, NeighbourPreconditioner
-from multi_bodies.solver.solves import Solver
-from stochastic_forcing import lanczos_square_root
+from multi_bodies.solver.solves import LANCZOS_MAX_ITERATIONS, Solver, warn_if_not_converged
 from utils import UserInputError, warn_user
 
 # the GMRES preconditioners (option ``preconditioner``; doc/preconditioners.md)
@@ -150,7 +149,7 @@ class Model:
                  periodic_length=DEFAULTS.periodic_length, omega_one_roller=DEFAULTS.omega_one_roller,
                  free_kinematics=DEFAULTS.free_kinematics, domain=DEFAULTS.domain, print_residual=False,
                  articulated=None, nonlinear_tolerance=DEFAULTS.nonlinear_solver_tolerance, check_wall=True,
-                 lanczos_max_iterations=1000,
+                 lanczos_max_iterations=LANCZOS_MAX_ITERATIONS,
                  vector_mobility=None, blobs_mobility=None, pycuda_blob_blob_forces=None, surface=None,
                  preconditioner=DEFAULTS.preconditioner, lanczos_preconditioner=DEFAULTS.lanczos_preconditioner,
                  spectral=None):
@@ -501,40 +500,14 @@ class Model:
                                    what=what)
 
     def lanczos_noise(self, problem, z, factor, preconditioner=None, tolerance=None):
-        """``factor * M^{1/2} z`` at the configuration of ``problem``: a ``stochastic_forcing.LanczosResult``.
-
-        ``noise`` (3N,), ``iterations``, ``converged`` (nothing is counted here).  With a preconditioner the
-        Lanczos iteration runs on ``L^{-1} M L^{-T}`` and the result is multiplied by ``L`` (covariance
-        ``M``; SPEC decision 1).  A call that does not converge is warned about.
-        tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``.
-        """
-        tolerance = self.tolerance if tolerance is None else float(tolerance)
-        mobility = getattr(problem, 'mobility', None)
-        if getattr(mobility, 'noise_method', None) == 'fluctuating':  # exact: no Krylov space, no preconditioner
-            return mobility.noise(problem.r_vectors, z, factor=factor)
-        if preconditioner is None:
-            matvec, L_mult = problem.M_dot, None
-        else:
-            # the factor L: the block-diagonal Cholesky factors, or the incomplete Cholesky factor of
-            # lanczos_preconditioner incomplete_cholesky (any invertible L gives the covariance M)
-            factor_of = getattr(preconditioner, 'noise_factor', None) or preconditioner
-
-            def matvec(v):
-                return factor_of.L_inv_dot(problem.M_dot(factor_of.L_inv_T_dot(v)))
-            L_mult = factor_of.L_dot
-        result = lanczos_square_root(matvec, z, tolerance, max_iterations=self.lanczos_max_iterations,
-                                     factor=factor, L_mult=L_mult, print_residual=self.print_residual)
-        self.warn_if_not_converged(result, tolerance)
-        return result
+        """``self.solver().noise(...)``: ``factor * M^{1/2} z`` at the configuration of ``problem``, a
+        ``stochastic_forcing.LanczosResult`` (``multi_bodies.solver.solves.Solver.noise``; nothing is counted here).
+        tolerance : relative change at which Lanczos stops; None is ``solver_tolerance``."""
+        return self.solver().noise(problem, z, factor, preconditioner, tolerance=tolerance)
 
     def warn_if_not_converged(self, result, tolerance=None):
-        """Warn (RuntimeWarning) when a Lanczos result did not converge."""
-        if not result.converged:
-            import warnings
-            warnings.warn('Lanczos did not converge to solver_tolerance %g in %d iterations (last relative change '
-                          '%.3e); the noise is approximate (counted in .info as lanczos_not_converged_count)'
-                          % (self.tolerance if tolerance is None else tolerance, result.iterations,
-                             result.relative_change), RuntimeWarning)
+        """Warn (RuntimeWarning) when a Lanczos result did not converge (``solves.warn_if_not_converged``)."""
+        warn_if_not_converged(result, self.tolerance if tolerance is None else tolerance)
 
     def dense_matrices(self, configuration, inverse=True):
         """Dense algebra at ``configuration``: (M (3N, 3N), M^{-1} or None, K (3N, 6Nb), N (6Nb, 6Nb) or None).
