@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multi_bodies.files.scheme_table import moves_rollers, scheme_has
 from multi_bodies.files.structure_files import read_vertex_file
 from multi_bodies.solver.periodic import SPECTRAL, SPECTRAL_OPTIONS
 from utils import UserInputError
@@ -197,7 +198,7 @@ def folder_module_call(options, script):
     """
     from multi_bodies.solver.user_hooks import FolderModuleCall
     scheme = options.scheme
-    if script != 'dynamics' or 'rollers' in scheme or scheme.startswith('articulated'):
+    if script != 'dynamics' or moves_rollers(scheme) or scheme_has(scheme, 'articulated'):
         return None
     return FolderModuleCall(folder_script_keywords(options), options.blob_blob_force_implementation,
                             options.body_body_force_torque_implementation)
