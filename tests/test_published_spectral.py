@@ -222,6 +222,43 @@ def test_what_the_published_form_cannot_read_is_one_line(tmp_path, change, fragm
     assert 'spectral_reading package' in message
 
 
+def test_the_package_example_is_the_published_form_of_its_scene(tmp_path):
+    """multi_bodies/examples/spectral_rollers writes the published scene the manual's way (the shell scaled by the
+    particle radius, half the smallest blob distance as blob_radius, spectral_reading package).  Its shell unscaled
+    and blob_radius 1.0155 with no spectral_* line, read in the published form, is the same model: the same blob
+    radius as the example's line, the same blobs and start, the same velocities."""
+    import shutil
+    from multi_bodies.files.structure_files import read_vertex_file, write_vertex_file
+    example = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'multi_bodies', 'examples',
+                           'spectral_rollers')
+    package = tmp_path / 'package'
+    shutil.copytree(example, package)
+    text = (package / 'inputfile_spectral_rollers.dat').read_text()
+    (package / 'input.dat').write_text(text)
+    published = tmp_path / 'published'
+    shutil.copytree(example, published)
+    write_vertex_file(published / 'shell.vertex', read_vertex_file(str(package / 'shell_N_12_Rh_1_0155.vertex'))
+                      / PARTICLE_RADIUS)
+    lines = []
+    for line in text.splitlines():
+        name = line.split('#', 1)[0].split()[:1]
+        if name == ['spectral_reading']:
+            continue
+        if name == ['blob_radius']:
+            example_radius = float(line.split()[1])
+            line = 'blob_radius %r' % PARTICLE_RADIUS
+        lines.append(line.replace('shell_N_12_Rh_1_0155.vertex', 'shell.vertex'))
+    (published / 'input.dat').write_text('\n'.join(lines) + '\n')
+    models = [prepared(folder)[1].system for folder in (package, published)]
+    assert models[1].blob_radius == pytest.approx(example_radius, rel=1e-12)
+    assert models[0].blob_radius == example_radius
+    assert np.allclose(models[1].arrays.reference_blobs, models[0].arrays.reference_blobs, rtol=0, atol=1e-12)
+    assert np.array_equal(models[1].start_configuration.locations, models[0].start_configuration.locations)
+    velocities = [np.asarray(m.replace(solver_tolerance=1e-10).deterministic_velocities(m.start_configuration)
+                             .velocities) for m in models]
+    assert np.allclose(velocities[1], velocities[0], rtol=1e-7, atol=1e-9 * np.max(np.abs(velocities[0])))
+
+
 # ------------------------------------------------------------------------------------------ the folder module
 def test_the_folder_module_gives_the_forces_and_the_rollers_roll(tmp_path):
     """Two rollers far apart above the wall: the folder module's forces (gravity, the torque 2 pi f 8 pi eta R^3
