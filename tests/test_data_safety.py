@@ -1230,3 +1230,16 @@ def test_a_nul_byte_in_a_file_name_of_the_input_is_one_line(tmp_path):
     status, out, err = run_dynamic(folder)
     assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
     assert 'holds a NUL byte' in err, err
+
+
+@pytest.mark.parametrize('offset', [2 ** 70, 2 ** 40, 10 ** 6])
+def test_a_forged_config_offset_beyond_the_file_is_one_line(tmp_path, offset):
+    """Found by the 30-minute fuzz run (issue 48): a record's config_offsets of 2**70 made the .config reader's
+    seek raise ValueError (a traceback); an offset outside the file is now the reader's one-line refusal."""
+    folder = driven_scene(tmp_path / 'run', n_steps=12, save_clones='one_file')
+    assert run_dynamic(folder)[0] == 0
+    forge_record(str(folder / 'data' / 'run'), 6, _set('config_offsets', 'a', offset))
+    (folder / 'input.dat').write_text(set_options_text(folder, initial_step=6))
+    status, out, err = run_dynamic(folder)
+    assert status == 2 and 'Traceback' not in out + err and len(err.strip().splitlines()) == 1, err
+    assert 'run.a.config' in err, err

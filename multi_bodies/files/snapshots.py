@@ -137,8 +137,10 @@ def read_config_snapshot(path, offset):
     number is NaN or infinite."""
     with open(path, 'rb') as f:
         size = os.fstat(f.fileno()).st_size
-        f.seek(offset)
         try:
+            if not 0 <= int(offset) < size:  # (a forged record's 2**70 cannot even be seeked to)
+                raise ValueError('byte %d is not inside the file' % offset)
+            f.seek(int(offset))
             count = int(f.readline().split()[0])
             if count < 0 or count * SHORTEST_BODY_LINE > size - offset:
                 raise ValueError('the count line announces more bodies than the file holds')
