@@ -555,7 +555,7 @@ def changed_value(name, option, value):
                'structure_names': 'a', 'plot_velocity_field': '0 1 2 0 1 2 1 2 2', 'periodic_length': '40 40 0',
                'omega_one_roller': '1 0 0', 'cells': '2 2', 'green_particles': '0 1', 'tracer_radius': '0.5',
                'noise_solver_tolerance': '1e-6', 'scheme': 'stochastic_Slip_Mid', 'kT': '0.5',
-               'background_Laplace': '1'}
+               'background_Laplace': '1', 'spectral_z_bounds': '0 10'}
     if name in special:
         return special[name]
     if isinstance(option.rule, Choice):
