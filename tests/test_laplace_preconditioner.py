@@ -147,6 +147,7 @@ def test_the_published_preconditioner_keeps_the_published_unpreconditioned_solve
         arrays = Arrays()
         solver = Model.solver
         tolerance, print_residual = 1e-10, False
+        lanczos_max_iterations = 1000  # read by Solver.of_model; the concentration solve draws no noise
 
         def __init__(self, preconditioner):
             self.preconditioner = preconditioner
