@@ -98,6 +98,13 @@ extensions = [
         cxx_std=17,
     ),
     Pybind11Extension(
+        'lubrication._block_ldlt_cpp',
+        ['lubrication/cpp/block_ldlt_module.cpp'],
+        # the sparse block LDL^T of the lubrication preconditioners (lubrication/sparse_factor.py); serial
+        extra_compile_args=[arg for arg in compile_args if arg != '-fopenmp'],
+        cxx_std=17,
+    ),
+    Pybind11Extension(
         'body._rigid_cpp',
         ['body/cpp/rigid_module.cpp'],
         extra_compile_args=compile_args,
