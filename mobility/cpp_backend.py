@@ -18,8 +18,10 @@ def _L(periodic_length):
 
 def _make_product(kind, wall):
     def product(r_vectors, vector, eta, a, periodic_length=(0, 0, 0), precision='double'):
-        radius = blob_radii(a, r_vectors, kind)
-        if radius.ndim:  # different radii: the source-target formulas, each pair once
+        # one radius (a Python or NumPy number: the usual case) goes straight to the kernel; arrays of radii are
+        # checked and collapsed by blob_radii
+        radius = a if isinstance(a, (float, np.floating)) else blob_radii(a, r_vectors, kind)
+        if np.ndim(radius):  # different radii: the source-target formulas, each pair once
             return _ext.radii_product(r_vectors, np.ravel(vector), radius, float(eta), _L(periodic_length), wall)
         return _ext.product(kind, r_vectors, np.ravel(vector), float(eta), float(radius), _L(periodic_length), wall,
                             precision)

@@ -335,3 +335,18 @@ def _rpy_apply(c_iso, c_rr, rx, ry, rz, fx, fy, fz):
     """``(c_iso I + c_rr r r^T) f`` per pair (no sum)."""
     rf = c_rr * (rx * fx + ry * fy + rz * fz)
     return c_iso * fx + rf * rx, c_iso * fy + rf * ry, c_iso * fz + rf * rz
+
+
+def wall_regularisation(z, radius, xp=np):
+    """Raised heights and damping factors of blobs near the wall.
+
+    ``z`` (...,) heights, ``radius`` (scalar or (...,)) blob radii, same length
+    unit; ``xp`` the array module (numpy or cupy).  Returns ``(z_eff, damping)``
+    of the shape of ``z``: ``z_eff = max(z, radius)``, ``damping = 1`` for
+    ``z >= radius``, else ``z / radius`` (0 for a point blob, radius 0).
+    """
+    z = xp.asarray(z, dtype=xp.float64)
+    radius = xp.asarray(radius, dtype=xp.float64)
+    safe_radius = xp.where(radius > 0, radius, 1.0)
+    damping = xp.where(z >= radius, 1.0, xp.where(radius > 0, z / safe_radius, 0.0))
+    return xp.maximum(z, radius), damping

@@ -14,8 +14,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from body.geometry import wrap_axis
+
 from . import pair_formulas as pf
-from .periodic import wall_regularisation, wrap_axis
+from .pair_formulas import wall_regularisation
 from .product_names import product_functions, source_target_functions
 
 PAIRS_PER_CHUNK = 1 << 17

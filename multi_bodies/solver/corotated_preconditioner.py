@@ -46,8 +46,8 @@ class CorotatedPreconditioner(LinearMap):
     turns : (Nb, 3, 3) rotations ``D_k`` (:func:`body_turns`).
     blob_body_index : (N,) int, the body of every blob.
 
-    ``operator`` is the turned application; every other attribute (the Lanczos factors, ``configuration``, the
-    body mobilities) is the base's.
+    ``operator`` is the turned application; ``configuration``, ``noise_factor`` and the Lanczos factors
+    ``L_dot``, ``L_inv_dot``, ``L_inv_T_dot`` are the base's (the build's, not turned).
     """
 
     def __init__(self, base, turns, blob_body_index):
@@ -58,10 +58,25 @@ class CorotatedPreconditioner(LinearMap):
         self.num_blob_unknowns = 3 * self.blob_turns.shape[0]
         self.size = self.num_blob_unknowns + 6 * self.turns.shape[0]
 
-    def __getattr__(self, name):
-        if name == 'base':  # not yet set (copying): no recursion
-            raise AttributeError(name)
-        return getattr(self.base, name)
+    # Named, not forwarded: where the base was built and the factors of its noise (the Lanczos factor is the
+    # base's: D L D^T is not what Lanczos needs; the solves apply the base's factor to the turned problem only
+    # through ``operator``).
+    @property
+    def configuration(self):
+        return self.base.configuration
+
+    @property
+    def noise_factor(self):
+        return getattr(self.base, 'noise_factor', None) or self.base
+
+    def L_dot(self, vector):
+        return self.base.L_dot(vector)
+
+    def L_inv_dot(self, vector):
+        return self.base.L_inv_dot(vector)
+
+    def L_inv_T_dot(self, vector):
+        return self.base.L_inv_T_dot(vector)
 
     def _turn(self, x, inverse):
         """``D x`` (``inverse``: ``D^T x``) of ``x = [blob vectors (3N); body vectors (6 Nb)]``."""

@@ -323,13 +323,13 @@ class Model:
 
     def preprocess(self, configuration):
         """The user's ``preprocess(bodies)`` at ``configuration``, on read-only views (nothing with the default)."""
-        if not self.hooks.is_default('preprocess'):
+        if 'preprocess' in self.hooks.overridden:
             self.hooks.preprocess(self.bodies_at(configuration))
 
     def postprocess(self, configuration):
         """The configuration after the user's ``postprocess(bodies)`` on writable copies of the bodies at
         ``configuration`` (``configuration`` itself with the default)."""
-        if self.hooks.is_default('postprocess'):
+        if 'postprocess' not in self.hooks.overridden:
             return configuration
         bodies = self.bodies_at(configuration, writable=True)
         self.hooks.postprocess(bodies)
@@ -370,9 +370,9 @@ class Model:
         if bodies_law is not None and self.body_body_name != 'python':
             bodies_law = None
         views = None
-        if not self.hooks.is_default('bodies_external_force_torque') or bodies_law is not None:
+        if 'bodies_external_force_torque' in self.hooks.overridden or bodies_law is not None:
             views = self.bodies_at(configuration)
-        if not self.hooks.is_default('bodies_external_force_torque'):
+        if 'bodies_external_force_torque' in self.hooks.overridden:
             extra = self.hooks.bodies_external_force_torque(views, r_vectors, **self.physics)
             force_torque = force_torque + np.asarray(extra, dtype=float).reshape(-1, 6)
         if bodies_law is not None:  # published style: takes the bodies

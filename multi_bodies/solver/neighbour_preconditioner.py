@@ -462,11 +462,30 @@ class NeighbourPreconditioner(LinearMap):
             self.second_order.append((blob_rows, body_rows, np.matmul(Q_type[coupled], G_type[coupled]),
                                       np.matmul(V_type[coupled], G_type[coupled])))
 
-    def __getattr__(self, name):
-        # everything else (Cholesky factors for Lanczos, body mobilities, configuration...) is the base's
-        if name == 'base':
-            raise AttributeError(name)
-        return getattr(self.base, name)
+    # What it shares with its base, named (no attribute forwarding): where it was built and the base's
+    # block-diagonal Cholesky factors, which Lanczos uses unless a noise factor of its own is given
+    # (``lanczos_preconditioner incomplete_cholesky`` sets ``noise_factor``).
+    noise_factor = None
+
+    @property
+    def configuration(self):
+        return self.base.configuration
+
+    @property
+    def cholesky_factors(self):
+        return self.base.cholesky_factors
+
+    def L_dot(self, vector):
+        return self.base.L_dot(vector)
+
+    def L_inv_dot(self, vector):
+        return self.base.L_inv_dot(vector)
+
+    def L_inv_T_dot(self, vector):
+        return self.base.L_inv_T_dot(vector)
+
+    def _blockwise(self, vector, factors, transpose=False, lower=False):
+        return self.base._blockwise(vector, factors, transpose=transpose, lower=lower)
 
     def neighbour_product(self, blob_forces):
         """``O_near lambda``: blob velocities (3N,) of blob forces (3N,) through the neighbour blocks only."""
