@@ -418,11 +418,6 @@ class SlipLengthNeighbourPreconditioner(LinearMap):
             self.double_layer_groups.append((n3 + first_j[use], first_i[use], double_layer_blocks(
                 r_vectors[blobs_j], r_vectors[blobs_i], normals[blobs_i], weights[blobs_i], a)))
 
-    def __getattr__(self, name):
-        if name == 'base':
-            raise AttributeError(name)
-        return getattr(self.base, name)
-
     def near_field_product(self, lam, v):
         """``(O_near x)`` in the first rows (3N,): ``sum_j M_ij lambda_j - D_ij v_j`` over the neighbour pairs.
 
