@@ -243,3 +243,34 @@ def test_the_one_way_check_catches_a_bypass(tmp_path):
                        '    return body_solver.solve(p, b, None)\n')
     solve_lines, operator_lines = solve_calls_and_operators(planted)
     assert solve_lines == [3, 6] and operator_lines == [5]
+
+
+STEP_PACKAGES = ('body', 'mobility', 'multi_bodies.solver', 'quaternion_integrator', 'stochastic_forcing')
+
+
+def attribute_forwarders(path):
+    """Lines of the classes of one file that define ``__getattr__`` (attribute forwarding), read with ``ast``."""
+    tree = ast.parse(path.read_text(), str(path))
+    return [item.lineno for node in ast.walk(tree) if isinstance(node, ast.ClassDef)
+            for item in node.body if isinstance(item, ast.FunctionDef) and item.name == '__getattr__']
+
+
+def test_no_attribute_forwarding_on_the_step_path():
+    """No class of the packages a step runs through (the files ``benchmarks/trace_step.py`` finds a Slip_Trapz step
+    entering) forwards unknown attributes with ``__getattr__``: what a wrapper shares with what it wraps is named
+    (issue 43: the old step context forwarded everything to the model)."""
+    found = []
+    for name, path in sorted(package_modules().items()):
+        if name in PUBLISHED_FACES or not any(name == p or name.startswith(p + '.') for p in STEP_PACKAGES):
+            continue
+        found += ['%s:%d' % (name, line) for line in attribute_forwarders(path)]
+    assert not found, 'classes forwarding attributes with __getattr__: %s' % ', '.join(found)
+
+
+def test_the_forwarding_check_catches_a_forwarder(tmp_path):
+    """Negative control: a planted forwarding wrapper is found (and a module-level __getattr__ is not a class's)."""
+    planted = tmp_path / 'planted.py'
+    planted.write_text('def __getattr__(name):\n    raise AttributeError(name)\n\n'
+                       'class Wrapper:\n    def __init__(self, base):\n        self.base = base\n\n'
+                       '    def __getattr__(self, name):\n        return getattr(self.base, name)\n')
+    assert attribute_forwarders(planted) == [8]
