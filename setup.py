@@ -52,86 +52,44 @@ HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobi
            'mobility/cpp/fast_exp.h', 'mobility/cpp/blob_arrays.h', 'mobility/cpp/dense_matrices.h',
            'mobility/cpp/blob_pair_formulas.inc', 'mobility/cpp/simd_dispatch.h', 'mobility/cpp/simd_targets.h',
            'mobility/cpp/simd_vector.inc', 'mobility/cpp/mobility_kernels.inc']
+
+
+def extension(name, sources, include_dirs=(), depends=(), openmp=True, contract=True, extra_args=()):
+    """One pybind11 extension with the package's flags.  Each gets its own copies of the flag lists (pybind11
+    appends its own flags to the lists it is given; shared lists collected every extension's additions).
+    openmp : False builds it serial; contract : False builds it without fused multiply-adds."""
+    args = [arg for arg in compile_args if openmp or arg != '-fopenmp']
+    if not contract:
+        args = [arg for arg in args if not arg.startswith('-ffp-contract')] + ['-ffp-contract=off']
+    return Pybind11Extension(name, list(sources), include_dirs=list(include_dirs), depends=list(depends),
+                             extra_compile_args=args + list(extra_args),
+                             extra_link_args=list(link_args) if openmp else [], cxx_std=17)
+
+
+SOLVER_KERNELS = ['mobility/cpp', 'multi_bodies/solver/cpp']
 extensions = [
-    Pybind11Extension(
-        'mobility._mobility_cpp',
-        ['mobility/cpp/mobility_module.cpp', 'mobility/cpp/dense_matrices.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=HEADERS,
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'multi_bodies.solver._forces_cpp',
-        ['multi_bodies/solver/cpp/forces_module.cpp'],
-        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
-        depends=HEADERS + ['multi_bodies/solver/cpp/forces_kernels.inc'],
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'multi_bodies.solver._preconditioner_cpp',
-        ['multi_bodies/solver/cpp/preconditioner_module.cpp'],
-        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
-        depends=HEADERS + ['multi_bodies/solver/cpp/near_field_kernels.inc'],
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'multi_bodies.solver._surface_cpp',
-        ['multi_bodies/solver/cpp/surface_module.cpp'],
-        include_dirs=['mobility/cpp', 'multi_bodies/solver/cpp'],
-        depends=HEADERS + ['multi_bodies/solver/cpp/surface_kernels.inc'],
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'lubrication._lubrication_cpp',
-        ['lubrication/cpp/lubrication_module.cpp'],
-        # serial (no OpenMP: it did not pay); no fused multiply-adds, so the blocks equal the NumPy fallback's
-        extra_compile_args=[arg for arg in compile_args if arg != '-fopenmp' and not arg.startswith('-ffp-contract')]
-        + ['-ffp-contract=off'],
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'lubrication._block_ldlt_cpp',
-        ['lubrication/cpp/block_ldlt_module.cpp'],
-        # the sparse block LDL^T of the lubrication preconditioners (lubrication/sparse_factor.py); serial
-        extra_compile_args=[arg for arg in compile_args if arg != '-fopenmp'],
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'body._rigid_cpp',
-        ['body/cpp/rigid_module.cpp'],
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'many_bodyMCMC._energy_cpp',
-        ['many_bodyMCMC/cpp/energy_module.cpp'],
-        include_dirs=['mobility/cpp', 'many_bodyMCMC/cpp'],
-        depends=HEADERS + ['many_bodyMCMC/cpp/energy_kernels.inc'],
-        extra_compile_args=compile_args,
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
-    Pybind11Extension(
-        'mobility._spectral_cpp',
-        ['mobility/cpp/spectral_module.cpp'],
-        include_dirs=['mobility/cpp'],
-        depends=['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h',
-                 'mobility/cpp/spectral_spread.inc', 'mobility/cpp/spectral_solve.inc',
-                 'mobility/cpp/spectral_kernels.inc'] + HEADERS,
-        # complex products and quotients inline (finite values only; no NaN recovery calls) where accepted
-        extra_compile_args=compile_args + (['-fcx-limited-range'] if compiler_accepts(['-fcx-limited-range']) else []),
-        extra_link_args=link_args,
-        cxx_std=17,
-    ),
+    extension('mobility._mobility_cpp', ['mobility/cpp/mobility_module.cpp', 'mobility/cpp/dense_matrices.cpp'],
+              ['mobility/cpp'], HEADERS),
+    extension('multi_bodies.solver._forces_cpp', ['multi_bodies/solver/cpp/forces_module.cpp'], SOLVER_KERNELS,
+              HEADERS + ['multi_bodies/solver/cpp/forces_kernels.inc']),
+    extension('multi_bodies.solver._preconditioner_cpp', ['multi_bodies/solver/cpp/preconditioner_module.cpp'],
+              SOLVER_KERNELS, HEADERS + ['multi_bodies/solver/cpp/near_field_kernels.inc']),
+    extension('multi_bodies.solver._surface_cpp', ['multi_bodies/solver/cpp/surface_module.cpp'], SOLVER_KERNELS,
+              HEADERS + ['multi_bodies/solver/cpp/surface_kernels.inc']),
+    # serial (OpenMP did not pay); no fused multiply-adds, so the blocks equal the NumPy fallback's
+    extension('lubrication._lubrication_cpp', ['lubrication/cpp/lubrication_module.cpp'], openmp=False,
+              contract=False),
+    # the sparse block LDL^T of the lubrication preconditioners (lubrication/sparse_factor.py); serial
+    extension('lubrication._block_ldlt_cpp', ['lubrication/cpp/block_ldlt_module.cpp'], openmp=False),
+    extension('body._rigid_cpp', ['body/cpp/rigid_module.cpp']),
+    extension('many_bodyMCMC._energy_cpp', ['many_bodyMCMC/cpp/energy_module.cpp'], ['mobility/cpp',
+              'many_bodyMCMC/cpp'], HEADERS + ['many_bodyMCMC/cpp/energy_kernels.inc']),
+    # complex products and quotients inline (finite values only; no NaN recovery calls) where accepted
+    extension('mobility._spectral_cpp', ['mobility/cpp/spectral_module.cpp'], ['mobility/cpp'],
+              ['mobility/cpp/openmp_threads.h', 'mobility/cpp/spectral_spread.h', 'mobility/cpp/spectral_solve.h',
+               'mobility/cpp/spectral_spread.inc', 'mobility/cpp/spectral_solve.inc',
+               'mobility/cpp/spectral_kernels.inc'] + HEADERS,
+              extra_args=['-fcx-limited-range'] if compiler_accepts(['-fcx-limited-range']) else []),
 ]
 
 class parallel_build_ext(build_ext):
