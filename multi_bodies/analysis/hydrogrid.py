@@ -45,6 +45,7 @@ import numpy as np
 from multi_bodies.analysis import tables
 from multi_bodies.analysis.structure_factor import StructureFactor, half_space, structure_factor_memory
 from multi_bodies.analysis.time_correlations import TimeCorrelations
+from multi_bodies.run.writers import Writer
 from utils import UserInputError, refuse_if_too_big
 
 NAMELIST_NAME = 'hydroGridOptions.nml'
@@ -245,20 +246,20 @@ def write_hydrogrid_tables(output_name, structure, correlations, step=None):
     return written
 
 
-class AlsoSampleStructureFactors:
-    """Wraps the snapshot writer of a dynamic run: each save also samples the HydroGrid analyses.
+class StructureFactorWriter(Writer):
+    """The HydroGrid analyses of a dynamic run (``call_HydroGrid True``), sampled at its saves; a writer of
+    ``multi_bodies.run.writers``.
 
-    ``save(step, locations, orientations, ...)`` calls the writer's ``save`` and,
-    when ``step`` is a multiple of ``sample_HydroGrid``, adds the body locations
-    (Nb, 3) to S(k) (and F(k, t)); the tables are rewritten at most every 30 s
-    and at the last save, and with ``save_HydroGrid`` s > 0 a copy named with
-    the step is written every s steps and the averages restart.  Samples are
-    taken when the run saves (every ``n_save`` steps): the sampling interval is
-    ``lcm(n_save, sample_HydroGrid)`` steps (said in the log when it differs).
+    At a save of ``step`` a multiple of ``sample_HydroGrid``, the body locations (Nb, 3) are added to S(k) (and
+    F(k, t)); the tables are rewritten at most every 30 s and at the last save, and with ``save_HydroGrid``
+    s > 0 a copy named with the step is written every s steps and the averages restart.  Samples are taken when
+    the run saves (every ``n_save`` steps): the sampling interval is ``lcm(n_save, sample_HydroGrid)`` steps
+    (said in the log when it differs).
     """
+    suffixes = ('hydrogrid.sk.dat', 'hydrogrid.sk_radial.dat', 'hydrogrid.fkt.dat')
 
-    def __init__(self, snapshot_writer, options, log=print, plan=None):
-        self.snapshot_writer, self.options, self.log = snapshot_writer, options, log
+    def __init__(self, options, log=print, plan=None):
+        self.options, self.log = options, log
         self.plan = HydroGridPlan(options, log=log) if plan is None else plan  # a run makes it with its checks
         interval = options.n_save * self.plan.sample_every // math.gcd(options.n_save, self.plan.sample_every)
         if interval != self.plan.sample_every:
@@ -270,30 +271,25 @@ class AlsoSampleStructureFactors:
         self.block_length = max(1, -(-expected // 10))  # ten blocks (the last may be shorter)
         self.samples, self.last_write = 0, time.monotonic()
 
-    def save(self, step, locations, orientations, *args, **kwargs):
-        """The snapshot writer's ``save`` (same arguments), then the HydroGrid sample of ``step``."""
-        result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
-        if step % self.interval == 0:
-            positions = np.asarray(getattr(locations, 'locations', locations), dtype=float)[None, :, :]  # (1, Nb, 3)
-            frame, block = np.array([self.samples]), np.array([self.samples // self.block_length])
-            self.structure.add(positions, frame, block)
+    def write(self, frame):
+        """The HydroGrid sample of ``frame.step`` (a save)."""
+        step = frame.step
+        if step % self.interval != 0:
+            return
+        positions = np.asarray(frame.locations, dtype=float)[None, :, :]  # (1, Nb, 3)
+        sample, block = np.array([self.samples]), np.array([self.samples // self.block_length])
+        self.structure.add(positions, sample, block)
+        if self.correlations is not None:
+            self.correlations.add(positions, sample, block)
+        self.samples += 1
+        last = step + self.options.n_save > self.options.n_steps
+        if last or time.monotonic() - self.last_write > 30.0:
+            write_hydrogrid_tables(self.options.output_name, self.structure, self.correlations)
+            self.last_write = time.monotonic()
+        if self.plan.save_every > 0 and step % self.plan.save_every == 0 and step > self.options.initial_step:
+            write_hydrogrid_tables(self.options.output_name, self.structure, self.correlations, step=step)
+            self.structure.reset()
+            self.samples = 0
             if self.correlations is not None:
-                self.correlations.add(positions, frame, block)
-            self.samples += 1
-            last = step + self.options.n_save > self.options.n_steps
-            if last or time.monotonic() - self.last_write > 30.0:
-                write_hydrogrid_tables(self.options.output_name, self.structure, self.correlations)
-                self.last_write = time.monotonic()
-            if self.plan.save_every > 0 and step % self.plan.save_every == 0 and step > self.options.initial_step:
-                write_hydrogrid_tables(self.options.output_name, self.structure, self.correlations, step=step)
-                self.structure.reset()
-                self.samples = 0
-                if self.correlations is not None:
-                    self.correlations = self.plan.accumulators(self.options, self.interval * self.options.dt)[1]
-                    self.correlations.start_source()
-        return result
-
-    def __getattr__(self, name):
-        if name in ('snapshot_writer', 'options', 'log', 'plan', 'structure', 'correlations'):
-            raise AttributeError(name)
-        return getattr(self.snapshot_writer, name)
+                self.correlations = self.plan.accumulators(self.options, self.interval * self.options.dt)[1]
+                self.correlations.start_source()

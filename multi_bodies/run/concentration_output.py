@@ -17,6 +17,7 @@ solve from zero (so they do not depend on the run's warm starts).
 import numpy as np
 
 from body.body import Configuration
+from multi_bodies.run.writers import OnSave, Writer
 
 
 def surface_point_data(model, configuration):
@@ -52,75 +53,72 @@ def read_concentration_file(path):
 SIDE_FILE = 'concentration'  # the key of this file's bytes in a restart record's ``side_files``
 
 
-class AlsoWriteConcentration:
-    """Wraps the snapshot writer of a running script: each ``save(step, locations, orientations, ...)`` also
-    appends the block of that configuration to ``output_name.concentration`` and passes the block's bytes
-    ``[start, end]`` to the snapshot writer, which keeps them in the step's restart record.
+class ConcentrationWriter(Writer):
+    """``output_name.concentration`` (``save_concentration True``): at every save, the block of that
+    configuration is appended and its bytes ``[start, end]`` go into the step's restart record
+    (``frame.side_files``; a writer of ``multi_bodies.run.writers`` that feeds the record).
 
     A new run starts the file empty (the earlier run's was set aside before).  A restart from step k keeps the
     blocks before step k (``keep`` bytes, :func:`kept_bytes` of the record of k, checked before the run starts)
-    and, at its first save, moves the rest (the abandoned
-    continuation's blocks, and block k, which the restart writes again) to ``output_name.set_aside/``, so the
-    file holds one block per saved step, as the uninterrupted run's.  Runs without phoretic bodies write nothing
-    (the option is ignored, with a warning).
+    and, at its first save, moves the rest (the abandoned continuation's blocks, and block k, which the restart
+    writes again) to ``output_name.set_aside/`` (``RunInfo.set_aside_tail``), so the file holds one block per
+    saved step, as the uninterrupted run's.  At the step a signal stopped the run at (off the grid) no block is
+    written and the record gets ``[end, end]``.  Runs without phoretic bodies write nothing (the option is
+    ignored, with a warning).
     """
+    trigger = OnSave(stops=True)
+    feeds_record = True
+    suffixes = (SIDE_FILE,)
 
-    def __init__(self, snapshot_writer, options, model, keep=None, log=print):
-        self.snapshot_writer, self.model, self.log = snapshot_writer, model, log
+    def __init__(self, options, model, keep=None, log=print):
+        self.model, self.log = model, log
         self.output_name = options.output_name
         self.path = options.output_name + '.concentration'
         self.phoretic = is_phoretic(model)
         self.keep = keep  # bytes of the file a restart keeps (:func:`kept_bytes`; None: nothing to cut)
         self._begun = False
-        if options.initial_step == 0 and self.phoretic:
+        self.run = None
+        self._start = None
+
+    def open(self, run):
+        self.run = run
+        if not run.restart and self.phoretic:
             open(self.path, 'w').close()
             self._begun = True
 
     def _begin(self):
         """A restart's first save: cut the file where the record of the restart step says (the tail set aside)."""
         self._begun = True
-        from multi_bodies.run import run_output
-        import os
-        if self.keep is None or not os.path.isfile(self.path) or os.path.getsize(self.path) <= self.keep:
-            return
-        folder = run_output.aside_folder(self.output_name, 'after_step_concentration')
-        run_output._save_tail(self.path, self.keep, folder)
-        self.log('restart: the blocks of %s after byte %d (the continuation that is replaced) moved to %s'
-                 % (self.path, self.keep, folder))
+        folder = self.run.set_aside_tail(self.path, self.keep, 'after_step_concentration')
+        if folder is not None:
+            self.log('restart: the blocks of %s after byte %d (the continuation that is replaced) moved to %s'
+                     % (self.path, self.keep, folder))
 
     def _size(self):
         import os
         return os.path.getsize(self.path) if os.path.isfile(self.path) else 0
 
-    def offsets_at_stop(self):
-        """The record's ``side_files`` entry of a step saved off the grid (no block): [end, end]."""
+    def write(self, frame):
         if not self.phoretic:
-            return None
+            return
         if not self._begun:
             self._begin()
-        size = self._size()
-        return {SIDE_FILE: [size, size]}
-
-    def save(self, step, locations, orientations, *args, **kwargs):
-        if kwargs.get('stop') or not self.phoretic:
-            return self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
-        from multi_bodies.run import run_output
-        if not self._begun:
-            self._begin()
-        block = concentration_block(self.model, Configuration(locations, orientations)).encode()
         start = self._size()
+        if frame.kind == 'stop':  # off the grid: no block, the record says where the blocks end
+            self._start = None
+            frame.side_files[SIDE_FILE] = [start, start]
+            return
+        from multi_bodies.run import run_output
+        block = concentration_block(self.model, Configuration(frame.locations, frame.orientations)).encode()
         run_output._append_or_take_back(self.path, block)
-        try:
-            return self.snapshot_writer.save(step, locations, orientations, *args,
-                                             side_offsets={SIDE_FILE: [start, start + len(block)]}, **kwargs)
-        except BaseException:
-            _cut_quietly(self.path, start)  # the step is not saved: neither is its block
-            raise
+        self._start = start
+        frame.side_files[SIDE_FILE] = [start, start + len(block)]
 
-    def __getattr__(self, name):
-        if name in ('snapshot_writer', 'model', 'log', 'path', 'phoretic', 'keep', 'output_name', '_begun'):
-            raise AttributeError(name)
-        return getattr(self.snapshot_writer, name)
+    def take_back(self, frame):
+        """The step is not saved: neither is its block."""
+        if self._start is not None:
+            _cut_quietly(self.path, self._start)
+            self._start = None
 
 
 def is_phoretic(model):

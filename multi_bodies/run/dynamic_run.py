@@ -3,19 +3,19 @@
 ``run_dynamics(options)`` is what the dynamic script, the ensemble runner
 and the tests call.  It wires the rooms together as the scripts do (set-up,
 the scheme registry of ``quaternion_integrator``, the writers of
-``run_output``), so it sits on the scripts' floor and only scripts and the
-ensemble runner import it.  It sets the run up, writes every output through
-``multi_bodies.run.run_output`` and returns the exit status (0 done, 1 stopped
-by the simulation, 130/143 stopped by SIGINT/SIGTERM).  User mistakes raise
-``utils.UserInputError`` before the first byte is written.
+``multi_bodies.run.writers``), so it sits on the scripts' floor and only scripts and the
+ensemble runner import it.  It sets the run up, runs the loop of
+``multi_bodies.run.run_loop`` (Monte Carlo's too), writes every output through
+the writers of ``multi_bodies.run.writers`` (the caller's own after the run's)
+and returns the exit status (0 done, 1 stopped by the simulation, 130/143
+stopped by SIGINT/SIGTERM).  User mistakes raise ``utils.UserInputError``
+before the first byte is written.
 
 Exact restarts (SPEC decision 11): every save appends a record to
 ``output_name.restart`` with the generator state, the scheme history and the
 counters; ``initial_step k`` picks the record of step k up, so the restarted
 run continues bit for bit the trajectory of an uninterrupted one.
 """
-import time
-
 import numpy as np
 
 import utils
@@ -24,7 +24,9 @@ from multi_bodies.files.input_options import check_options
 from multi_bodies.solver.counters import Counters
 from multi_bodies.run import run_output
 from multi_bodies.run.output_lock import output_lock
-from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies, write_run_start
+from multi_bodies.run.run_loop import log_error, run_loop
+from multi_bodies.run.run_setup import prepare, start_output, write_articulated_copies
+from multi_bodies.run.writers import CallbackWriter, InfoWriter, RecordWriter, RunInfo, WriterSet
 from quaternion_integrator.schemes import make_scheme
 
 class DynamicRun:
@@ -34,8 +36,9 @@ class DynamicRun:
     restart (the record of ``initial_step`` or None).
     """
 
-    def __init__(self, options, print_residual=False, log=print, lock=None):
+    def __init__(self, options, print_residual=False, log=print, lock=None, writers=()):
         self.options, self.log, self.lock = options, log, lock
+        self.user_writers = list(writers)  # the caller's own writers (multi_bodies.run.writers), after the run's
         check_options(options, 'dynamic')  # the table's rules (dt > 0, n_save >= 1, ...) before the scheme is made
         try:
             self.scheme = make_scheme(options.scheme, options.dt, options)
@@ -102,6 +105,7 @@ class DynamicRun:
                 'multistep schemes restart with one first-order step (as the published code does)'
                 % (options.initial_step, options.output_name, run_output.RESTART_SUFFIX))
         self.start_state = start  # the run state before the first step (RunState, a value)
+        self.writers = self.make_writers()
         run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state(start))),
                                         self.log)
         start_output(options)
@@ -124,130 +128,59 @@ class DynamicRun:
     def write_info(self, state, extra_lines=()):
         run_output.write_info(self.options.output_name + '.info', self.counters(state), extra_lines)
 
+    # -------------------------------------------------------------- the run loop's program (run_loop)
+    progress_name = property(lambda self: self.options.scheme)
+    noun, info_name, interruptible, save_first = 'run', '.info', True, True
+    model = property(lambda self: self.system)
+
+    def arrays(self, state):
+        return state.configuration.locations, state.configuration.orientations
+
+    def invalid(self, state):
+        return state.counters.invalid_configurations
+
+    def iterations(self, state):
+        return state.last_iterations
+
+    def save_note(self, state):
+        return ''
+
     def run(self):
-        """The time loop; returns the exit status."""
-        options, model, scheme = self.options, self.system, self.scheme
-        state = self.start_state
-        restart = options.initial_step > 0
-        try:
-            writer, concentration = self.start_files(restart)
-        except OSError as err:  # a full disk or a file-size limit before the first save: one line, the file named
-            self.log_error('error: run stopped before its first step: %s'
-                           % run_output.write_error_line(err, 'the first files of the run', options.initial_step,
-                                                         None, again=options.initial_step))
-            return 1
-        first, last = options.initial_step, options.n_steps
-        progress = run_output.Progress(options.scheme, first, last)
-        status, stopped_line = 0, None
-        start = time.perf_counter()
+        """The time loop (``multi_bodies.run.run_loop``); returns the exit status."""
+        return run_loop(self, self.start_state)
 
-        def save(index):
-            writer.save(index, state.configuration.locations, state.configuration.orientations,
-                        self.restart_state(state))
-            if options.save_blobs_mobility or options.save_body_mobility:
-                self.save_mobilities(index, state.configuration)
-            self.write_info(state)
-            progress.at_save(index, state.counters.invalid_configurations)
-
-        def save_stop(index):  # a signal stopped the run off the n_save grid: keep the last step completed
-            self.writer.save(index, state.configuration.locations, state.configuration.orientations,
-                             self.restart_state(state), stop=True,
-                             side_offsets=concentration.offsets_at_stop() if concentration is not None else None)
-            self.write_info(state)
-            self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
-                     '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
-                                                         options.output_name, run_output.RESTART_SUFFIX, index))
-
-        loop = run_output.TimeLoop(first, last, options.n_save)
-
-        def advance(step):
-            nonlocal state
-            assert state.step == step, 'the run state is at step %d, the loop at %d' % (state.step, step)
-            try:
-                with stop.interrupting():
-                    state = scheme.step(model, state)  # draws from a generator of state.rng_state
-            except run_output.StepInterrupted:
-                if state.step == step:  # abandoned: the state (and its generator's) is the one before the step
-                    raise run_output.StepInterrupted(completed=False)
-                raise run_output.StepInterrupted(completed=True)
-            except utils.SimulationStopped as err:  # the counts of the stopped step reach .info
-                if err.state is not None:
-                    state = err.state
-                raise
-            progress.after_step(step, state.last_iterations, state.counters.invalid_configurations)
-
-        with run_output.StopRequest() as stop:
-            try:
-                loop.run(save, advance, stop, save_stop)
-                if loop.stopped and loop.complete:  # the signal came as the last step ended: nothing is lost
-                    self.log('%s came after the last step: the run is complete' % stop.signal_name)
-                elif loop.stopped:
-                    stopped_line = stop.stopped_line(loop.step, loop.saved)
-                    status = stop.exit_status
-                if last <= first:
-                    self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
-            except (utils.SimulationStopped, np.linalg.LinAlgError) as err:
-                if isinstance(err, np.linalg.LinAlgError):  # a singular blob mobility: blobs of a body merged
-                    err = utils.SimulationStopped('step %d of %s: the linear algebra failed (%s); the blobs of a '
-                                                  'body are too close to each other for their distance to the '
-                                                  'origin (check the positions and forces)'
-                                                  % (loop.step, options.scheme, err))
-                progress.close()
-                self.log_error('error: run stopped: %s. Snapshots up to the last saved step are complete; .info '
-                               'and .time are written.' % str(err).rstrip('.'))
-                stopped_line = 'run stopped at step %d: %s' % (loop.step, str(err).rstrip('.'))
-                status = 1
-            except OSError as err:  # a full disk or a file-size limit: one line, what was appended taken back
-                progress.close()
-                line = run_output.write_error_line(err, 'the outputs', loop.step, loop.saved)
-                self.log_error('error: run stopped: %s' % line)
-                stopped_line = 'run stopped at step %d: %s' % (loop.step, line)
-                status = 1
-            except KeyboardInterrupt:
-                stopped_line = 'run interrupted at step %d' % loop.step
-                status = 130
-            finally:
-                progress.close()
-                if not run_output.finish_run(options.output_name, start, first, loop.step, restart,
-                                             lambda *lines: self.write_info(state, *lines),
-                                             stopped_line) and status == 0:
-                    status = 1
-        if stopped_line and status != 1:
-            if loop.stop_saved is not None:
-                self.log_error('%s; the last step completed, %d, is saved (%s%s/): restart with initial_step %d'
-                               % (stopped_line, loop.stop_saved, options.output_name, run_output.STOP_SUFFIX,
-                                  loop.stop_saved))
-            elif loop.stopped:
-                self.log_error('%s; outputs are complete up to step %d, which is saved; restart with initial_step %d'
-                               % (stopped_line, loop.step, loop.step))
-            else:
-                self.log_error('%s; outputs are complete up to step %d; restart with initial_step %d'
-                               % (stopped_line, loop.last_saved, loop.last_saved))
-        return status
-
-    def start_files(self, restart):
-        """The files a run writes before its time loop, and its writer: (writer, the ``.concentration`` writer or
-        None).  Raises OSError when a file cannot be written."""
+    def make_writers(self):
+        """The run's writers (``multi_bodies.run.writers``), in the order a save writes them: the
+        ``.concentration`` block (it feeds the record), the snapshots and restart record, the VTK files, the
+        HydroGrid samples, the dense mobilities, ``.info``, then the user's writers."""
         options, model = self.options, self.system
-        write_run_start(options, self.types, model.num_blobs, self.rng, restart=restart, log=self.log)
-        write_articulated_copies(options)
-        writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
-                                           options.where('save_clones'), restart=restart,
-                                           restart_from=(self.restart, self.restart_end),
-                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
-        self.writer = writer
-        if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
-            from multi_bodies.run.vtk_output import AlsoWriteVtk
-            writer = AlsoWriteVtk(writer, options, self.types, model)
-        concentration = None
+        snapshots = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
+                                              options.where('save_clones'), restart=options.initial_step > 0,
+                                              restart_from=(self.restart, self.restart_end),
+                                              fingerprint=self.fingerprint, log=self.log)
+        self.writer = snapshots
+        writers = []
         if options.save_concentration:  # phoretic runs: output_name.concentration (doc/phoretic.md)
-            from multi_bodies.run.concentration_output import AlsoWriteConcentration
-            writer = concentration = AlsoWriteConcentration(writer, options, model, keep=self.concentration_keep,
-                                                            log=self.log)
+            from multi_bodies.run.concentration_output import ConcentrationWriter
+            writers.append(ConcentrationWriter(options, model, keep=self.concentration_keep, log=self.log))
+        if options.save_vtk:  # blob and body .vtp files and .pvd collections (doc/visualisation.md)
+            from multi_bodies.run.vtk_output import VtkWriter
+            writers.append(VtkWriter(options, self.types, model))
         if options.call_HydroGrid:  # the published HydroGrid options, computed by the package (doc/analysis.md)
-            from multi_bodies.analysis.hydrogrid import AlsoSampleStructureFactors
-            writer = AlsoSampleStructureFactors(writer, options, log=self.log, plan=self.hydrogrid_plan)
-        return writer, concentration
+            from multi_bodies.analysis.hydrogrid import StructureFactorWriter
+            writers.append(StructureFactorWriter(options, log=self.log, plan=self.hydrogrid_plan))
+        if options.save_blobs_mobility or options.save_body_mobility:
+            writers.append(CallbackWriter(lambda frame: self.save_mobilities(frame.step, frame.state.configuration)))
+        writers.append(InfoWriter(self.write_info))
+        return WriterSet(RecordWriter(snapshots, self.restart_state), writers + list(self.user_writers),
+                         lock=self.lock)
+
+    def start_files(self):
+        """The files a run writes before its time loop, and every writer's ``open``.  Raises OSError when a file
+        cannot be written."""
+        self.writers.start(RunInfo(self.options, self.system, self.types, 'dynamics', log=self.log),
+                           self.system.num_blobs, self.rng)
+        write_articulated_copies(self.options)
 
     def save_mobilities(self, step, configuration):
         """``save_blobs_mobility`` / ``save_body_mobility``: dense mobilities at the saved step's ``configuration``
@@ -265,14 +198,14 @@ class DynamicRun:
             run_output.save_table(stem % 'body_mobility', N)
 
     def log_error(self, text):
-        import sys
-        print(text, file=sys.stderr, flush=True)
+        log_error(text)
 
 
-def run_dynamics(options, print_residual=False, log=print):
+def run_dynamics(options, print_residual=False, log=print, writers=()):
     """Set up and run the dynamics of validated ``options``; returns the exit status.
 
+    ``writers``: the caller's own writers (``multi_bodies.run.writers.Writer``), written after the run's.
     ``output_name.lock`` is held from before the restart record is read until the run ends (one writer per
     output name, ``multi_bodies.run.output_lock``), and checked before every save."""
     with output_lock(options, log) as lock:
-        return DynamicRun(options, print_residual=print_residual, log=log, lock=lock).run()
+        return DynamicRun(options, print_residual=print_residual, log=log, lock=lock, writers=writers).run()

@@ -514,21 +514,24 @@ def copied_input_names(options):
     return tuple(os.path.basename(path) for path in paths)
 
 
-def set_aside_earlier_run(options, types, log=print):
+def set_aside_earlier_run(options, types, log=print, extra_suffixes=()):
     """A new run (``initial_step 0``): move every file of an earlier run with the same ``output_name`` to
-    ``output_name.set_aside/`` before anything is written (``run_output.set_aside_earlier_run``)."""
+    ``output_name.set_aside/`` before anything is written (``run_output.set_aside_earlier_run``);
+    ``extra_suffixes``: the names after ``output_name.`` of further files (those of the run's writers)."""
     return run_output.set_aside_earlier_run(options.output_name, [name for name, _ in types],
-                                            copied_input_names(options), log=log, keep=[options.input_file])
+                                            copied_input_names(options) + tuple(extra_suffixes), log=log,
+                                            keep=[options.input_file])
 
 
-def write_run_start(options, types, num_blobs, rng=None, restart=False, log=print):
+def write_run_start(options, types, num_blobs, rng=None, restart=False, log=print, extra_suffixes=()):
     """The first files of a run: ``.inputfile`` (appended to on a restart), ``.random_state`` (of ``rng``, new
     runs only) and ``.bodies_info`` (``types``: (ID, count) per structure; ``num_blobs``: int).
 
     A new run first sets the files of an earlier run with the same ``output_name`` aside (nothing of it is
-    overwritten or mixed with the new one)."""
+    overwritten or mixed with the new one), the files named by ``extra_suffixes`` (after ``output_name.``: the
+    run's writers' own) too."""
     if not restart:
-        set_aside_earlier_run(options, types, log)
+        set_aside_earlier_run(options, types, log, extra_suffixes)
     run_output.copy_input_file(options.input_file, options.output_name, restart=restart)
     if rng is not None and not restart:
         run_output.save_random_state(options.output_name + '.random_state', rng)

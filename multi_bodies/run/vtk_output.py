@@ -48,6 +48,7 @@ from multi_bodies.files.scheme_table import scheme_names
 from multi_bodies.solver import user_hooks
 from multi_bodies.run.run_setup import read_bodies
 from multi_bodies.run import run_output
+from multi_bodies.run.writers import Writer
 from multi_bodies.files import snapshots as snapshot_files
 from multi_bodies.files.structure_files import read_body_table
 from body.geometry import rotation_matrices
@@ -342,37 +343,46 @@ class VtkSeries:
             collection.close()
 
 
-class AlsoWriteVtk:
-    """Wraps the snapshot writer of a running script: each ``save(step)`` also writes the VTK files.
+class VtkWriter(Writer):
+    """The VTK files of every save (``save_vtk True``, doc/visualisation.md): blob and body ``.vtp`` files and
+    their ``.pvd`` collections, and the joints of articulated bodies; a writer of ``multi_bodies.run.writers``.
 
-    ``snapshot_writer``: any object with ``save(step, locations (Nb, 3),
-    orientations (Nb, 4), ...)``, the configuration saved; ``system``: the
-    run's model (its ``arrays``, a ``BodyArrays``, and its joints);
-    ``types``: list of (structure ID, bodies).
+    ``options``: the run's Options; ``types``: list of (structure ID, bodies); ``system``: the run's model (its
+    ``arrays``, a ``BodyArrays``, and its joints).  The files are opened by ``open`` (a restart keeps the
+    collections' entries of the steps before its first).
     """
+    suffixes = ('blobs.pvd', 'bodies.pvd', 'joints.pvd')
 
-    def __init__(self, snapshot_writer, options, types, system):
-        self.snapshot_writer, self.system = snapshot_writer, system
+    def __init__(self, options, types, system):
+        self.options, self.types, self.system = options, list(types), system
+        self.series, self.joint_collection = None, None
+        self.joints = system.articulated
+
+    def open(self, run):
+        options, types = self.options, self.types
         self.series = VtkSeries(options.output_name, [name for name, _ in types], [count for _, count in types],
                                 options.dt, options.periodic_length, wrap_periodic=False,
                                 first_step=options.initial_step)
         # articulated bodies: the joints too, output_name.joints.<step>.vtp (doc/articulated.md)
-        self.joints = system.articulated
         if self.joints is not None:
             self.output_name, self.dt = options.output_name, options.dt
             self.joint_collection = PvdCollection(collection_name(options.output_name, 'joints'),
                                                   options.initial_step if options.initial_step > 0 else None)
 
-    def save(self, step, locations, orientations, *args, **kwargs):
-        """The snapshot writer's ``save`` (same arguments), then the VTK files of ``step`` at that configuration."""
-        result = self.snapshot_writer.save(step, locations, orientations, *args, **kwargs)
-        configuration = Configuration(locations, orientations)
+    def write(self, frame):
+        """The VTK files of ``frame.step`` at the frame's configuration."""
+        configuration = Configuration(frame.locations, frame.orientations)
         from multi_bodies.run.concentration_output import surface_point_data  # phoretic runs: c and slip
         slip, extra = surface_point_data(self.system, configuration)
-        self.series.write(step, self.system.arrays, configuration, blob_slip=slip, blob_arrays=extra)
+        self.series.write(frame.step, self.system.arrays, configuration, blob_slip=slip, blob_arrays=extra)
         if self.joints is not None:
-            self.write_joints(step, configuration)
-        return result
+            self.write_joints(frame.step, configuration)
+
+    def close(self):
+        if self.series is not None:
+            self.series.close()
+        if self.joint_collection is not None:
+            self.joint_collection.close()
 
     def write_joints(self, step, configuration):
         """``output_name.joints.<step>.vtp``: each joint at ``q_p + R_p l_p`` with its residual and bodies."""
@@ -384,11 +394,6 @@ class AlsoWriteVtk:
         write_vtp(path, points, [('residual', residual), ('body_p', self.joints.bodies[:, 0].astype(np.int64)),
                                  ('body_q', self.joints.bodies[:, 1].astype(np.int64))])
         self.joint_collection.add(time, path)
-
-    def __getattr__(self, name):
-        if name in ('snapshot_writer', 'system', 'series', 'joints', 'joint_collection', 'output_name', 'dt'):
-            raise AttributeError(name)
-        return getattr(self.snapshot_writer, name)
 
 
 # ------------------------------------------------------------------ a saved run, read back (clones_to_vtk, render)
