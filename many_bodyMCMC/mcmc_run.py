@@ -1,7 +1,10 @@
 """One Monte Carlo run from validated options: the library function behind ``many_body_MCMC.py``.
 
 ``run_mcmc(options)`` sets the run up (bodies, potentials, energy backend,
-generator), writes every output through ``multi_bodies.run.run_output`` and
+generator), runs the chain on the dynamic run's loop (``multi_bodies.run.run_loop``:
+the step is ``sampler.MetropolisChain.step``, state in, state out, the generator's
+state in the ``ChainState``), writes every output through the writers of
+``multi_bodies.run.writers`` (the caller's own after the chain's) and
 returns the exit status (0 done; 130 or 143 when SIGINT or SIGTERM stopped it after
 the step in progress, with every file complete).  Outputs, prefixed by
 ``output_name``: ``.inputfile``, ``.random_state``, ``.bodies_info``,
@@ -12,18 +15,19 @@ continues the uninterrupted chain exactly.
 """
 import os
 import sys
-import time
 
 import numpy as np
 
 import utils
 from many_bodyMCMC import mcmc_energy
-from many_bodyMCMC.sampler import MetropolisSampler
+from many_bodyMCMC.sampler import MetropolisChain, MetropolisSampler
 from multi_bodies.solver import physics as multi_bodies_functions
 from multi_bodies.run import run_output
 from multi_bodies.run.output_lock import output_lock
 from multi_bodies.files.input_options import check_options, unused_options
-from multi_bodies.run.run_setup import prepare, start_output, write_run_start
+from multi_bodies.run.run_loop import run_loop
+from multi_bodies.run.run_setup import prepare, start_output
+from multi_bodies.run.writers import InfoWriter, RecordWriter, RunInfo, WriterSet
 
 INFO_SUFFIX = '.MCMC_info'
 
@@ -49,7 +53,7 @@ class MCMCRun:
     Attributes: options, hooks, bodies, types, energy, sampler, rng, restart.
     """
 
-    def __init__(self, options, directory=None, log=print, lock=None):
+    def __init__(self, options, directory=None, log=print, lock=None, writers=()):
         self.options, self.log, self.lock = options, log, lock
         check_options(options, 'mcmc')  # the table's rules (kT > 0, n_save >= 1, ...) before any file is read
         unused = unused_options(options, 'mcmc')
@@ -112,6 +116,10 @@ class MCMCRun:
                                     self.sampler.max_translation, self.sampler.max_angle_shift))
         run_output.warn_if_large_output(options, self.types, len(run_output.state_to_bytes(self.restart_state())),
                                         log)
+        self.model = self.energy
+        self.scheme = MetropolisChain(self.sampler)  # the step of the run loop
+        self.start_state = self.scheme.init(options.initial_step, self.rng.bit_generator.state)  # a value
+        self.writers = self.make_writers(writers)
         start_output(options)
 
     def check_periodic_bodies(self, bodies):
@@ -142,98 +150,70 @@ class MCMCRun:
                                    'the clones files)' % (self.options.input_file, self.sampler.current_energy,
                                                           ', '.join(self.hooks.sources) or 'the input'))
 
-    def restart_state(self):
-        return {'rng': self.rng.bit_generator.state, 'sampler': self.sampler.get_state()}
+    def restart_state(self, state=None):
+        """The restart record's state of the chain state ``state`` (the chain as it is now by default)."""
+        if state is None:
+            return {'rng': self.rng.bit_generator.state, 'sampler': self.sampler.get_state()}
+        return {'rng': state.rng_state, 'sampler': state.sampler_record()}
 
-    def write_info(self, extra_lines=()):
+    def write_info(self, state=None, extra_lines=()):
+        """``.MCMC_info`` of the chain state ``state`` (the chain as it is now by default)."""
+        if state is not None:
+            self.sampler.load(state)
         text = '\n'.join(self.sampler.info_lines() + list(extra_lines)) + '\n'
         run_output.atomic_write(self.options.output_name + INFO_SUFFIX, text)
 
-    def run(self):
-        """The Monte Carlo loop; returns the exit status."""
-        options, sampler = self.options, self.sampler
-        restart = options.initial_step > 0
-        try:
-            write_run_start(options, self.types, self.energy.arrays.num_blobs, self.rng, restart=restart,
-                            log=self.log)
-        except OSError as err:  # a full disk or a file-size limit before the first save: one line, the file named
-            print('error: run stopped before its first step: %s'
-                  % run_output.write_error_line(err, 'the first files of the run', options.initial_step, None,
-                                                again=options.initial_step), file=sys.stderr, flush=True)
-            return 1
-        writer = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
-                                           options.where('save_clones'), restart=restart,
-                                           restart_from=(self.restart, self.restart_end),
-                                           fingerprint=self.fingerprint, log=self.log, lock=self.lock)
-        first, last = options.initial_step, options.n_steps
-        name = 'MCMC_' + options.mcmc_move
-        progress = run_output.Progress(name, first, last)
-        status, stopped_line = 0, None
-        start = time.perf_counter()
+    # -------------------------------------------------------------- the run loop's program (run_loop)
+    noun, info_name, interruptible = 'chain', INFO_SUFFIX, False
 
-        def save(index):
-            writer.save(index, sampler.locations, sampler.orientations, self.restart_state())
-            self.write_info()
-            progress.at_save(index, sampler.invalid, extra=', acceptance ratio = %.4g' % sampler.acceptance_ratio())
+    @property
+    def progress_name(self):
+        return 'MCMC_' + self.options.mcmc_move
 
-        def save_stop(index):  # a signal stopped the run: keep the step just finished, beside the series
-            writer.save(index, sampler.locations, sampler.orientations, self.restart_state(), stop=True)
-            self.write_info()
-            self.log('stopped by a signal: the snapshot of step %d is in %s%s and its restart record in %s%s '
-                     '(restart with initial_step %d)' % (index, options.output_name, run_output.STOP_SUFFIX,
-                                                         options.output_name, run_output.RESTART_SUFFIX, index))
-
+    @property
+    def save_first(self):
         # a restart does not write its first snapshot again (the run before wrote it), unless that step was
         # saved beside the series when a signal stopped the run
-        from_stop = bool((self.restart or {}).get('stop'))
-        loop = run_output.TimeLoop(first, last, options.n_save, save_first=not restart or from_stop)
+        return self.options.initial_step == 0 or bool((self.restart or {}).get('stop'))
 
-        def advance(step):
-            sampler.step(step, self.rng)
-            progress.after_step(step, 0, sampler.invalid)
+    def arrays(self, state):
+        return state.locations, state.orientations
 
-        stop = run_output.StopRequest()
-        try:
-            with stop:
-                loop.run(save, advance, stop, save_stop)
-            if loop.stopped and loop.complete:  # the signal came as the last step ended: nothing is lost
-                self.log('%s came after the last step: the chain is complete' % stop.signal_name)
-            elif loop.stopped:
-                stopped_line = stop.stopped_line(loop.step)
-                status = stop.exit_status
-            if last <= first:
-                self.log('nothing to do: initial_step %d >= n_steps %d' % (first, last))
-        except OSError as err:  # a full disk or a file-size limit: one line, what was appended taken back
-            line = run_output.write_error_line(err, 'the outputs', loop.step, loop.saved)
-            print('error: run stopped: %s' % line, file=sys.stderr, flush=True)
-            stopped_line, status = 'run stopped at step %d: %s' % (loop.step, line), 1
-        except KeyboardInterrupt:
-            stopped_line = 'run interrupted at step %d' % loop.step
-            status = 130
-        finally:
-            progress.close()
-            if not run_output.finish_run(options.output_name, start, first, loop.step, restart, self.write_info,
-                                         stopped_line) and status == 0:
-                status = 1
-        if stopped_line and status != 1:
-            if loop.stop_saved is not None:
-                print('%s; the step reached is saved too (%s%s/): restart with initial_step %d'
-                      % (stopped_line, options.output_name, run_output.STOP_SUFFIX, loop.stop_saved),
-                      file=sys.stderr, flush=True)
-            elif loop.stopped:
-                print('%s; outputs are complete up to step %d, which is saved; restart with initial_step %d'
-                      % (stopped_line, loop.step, loop.step), file=sys.stderr, flush=True)
-            else:
-                print('%s; outputs are complete up to the last saved step; restart with initial_step set to that '
-                      'step' % stopped_line, file=sys.stderr, flush=True)
-        return status
+    def invalid(self, state):
+        return state.invalid
+
+    def iterations(self, state):
+        return 0
+
+    def save_note(self, state):
+        return ', acceptance ratio = %.4g' % state.acceptance_ratio()
+
+    def make_writers(self, writers=()):
+        """The chain's writers (``multi_bodies.run.writers``): the snapshots and restart record, ``.MCMC_info``,
+        then the user's ``writers``."""
+        options = self.options
+        snapshots = run_output.SnapshotWriter(options.output_name, options.save_clones, self.types,
+                                              options.where('save_clones'), restart=options.initial_step > 0,
+                                              restart_from=(self.restart, self.restart_end),
+                                              fingerprint=self.fingerprint, log=self.log)
+        return WriterSet(RecordWriter(snapshots, self.restart_state),
+                         [InfoWriter(self.write_info)] + list(writers), lock=self.lock)
+
+    def start_files(self):
+        self.writers.start(RunInfo(self.options, self.energy, self.types, 'mcmc', log=self.log, dt=0.0),
+                           self.energy.arrays.num_blobs, self.rng)
+
+    def run(self):
+        """The Monte Carlo loop (``multi_bodies.run.run_loop``, as the dynamic run's); returns the exit status."""
+        return run_loop(self, self.start_state)
 
 
-def run_mcmc(options, directory=None, log=print):
+def run_mcmc(options, directory=None, log=print, writers=()):
     """Set up and run the Monte Carlo chain of validated ``options``; returns the exit status.
 
+    ``writers``: the caller's own writers (``multi_bodies.run.writers.Writer``), written after the chain's.
     ``output_name.lock`` is held from before the restart record is read until the chain ends."""
     with output_lock(options, log) as lock:
-        return MCMCRun(options, directory=directory, log=log, lock=lock).run()
+        return MCMCRun(options, directory=directory, log=log, lock=lock, writers=writers).run()
 
 

@@ -23,11 +23,14 @@ so the chain that follows samples exp(-U/kT) exactly.
 Quaternions are not renormalised (as in the dynamic code).
 """
 import math
+from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from many_bodyMCMC.mcmc_energy import quaternion_product_scalars, quaternion_products, quaternions_from_rotations
 from multi_bodies.files.input_options import DEFAULTS  # the keyword defaults are the option table's
+from stochastic_forcing import generators
 
 ADAPT_INTERVAL = 50  # proposals per adaptation window during the burn-in
 ADAPT_GAIN = 1.5  # log step-size change per unit of acceptance error (the acceptance falls ~0.5 per e-fold)
@@ -93,6 +96,9 @@ class MetropolisSampler:
         uniforms = rng.random(nb).tolist()
         accepted = invalid = 0
         offsets = self.energy.offsets
+        # the sweep changes copies: the arrays it started from (a ChainState's) stay as they were
+        self.locations, self.orientations = self.locations.copy(), self.orientations.copy()
+        self.r_vectors = self.r_vectors.copy()
         new_locations = self.locations + translations
         rotations = rotations.tolist()
         for k in range(nb):
@@ -161,3 +167,84 @@ class MetropolisSampler:
         (self.proposals, self.accepted, self.invalid, self.proposals_after_burn_in, self.accepted_after_burn_in,
          self.window_proposals, self.window_accepted) = state['counters']
         self.refresh()
+
+    # -------------------------------------------------------------------------------- the chain as values
+    def chain_state(self, step, rng_state):
+        """The chain now as a :class:`ChainState` at step index ``step`` with the generator state ``rng_state``."""
+        return ChainState(step=int(step), locations=self.locations, orientations=self.orientations,
+                          r_vectors=self.r_vectors, energy=self.current_energy,
+                          max_translation=self.max_translation, max_angle_shift=self.max_angle_shift,
+                          counters=(self.proposals, self.accepted, self.invalid, self.proposals_after_burn_in,
+                                    self.accepted_after_burn_in, self.window_proposals, self.window_accepted),
+                          rng_state=rng_state)
+
+    def load(self, state):
+        """Take the chain of the :class:`ChainState` ``state`` (its arrays, energy, sizes and counters; nothing is
+        recomputed)."""
+        self.locations, self.orientations, self.r_vectors = state.locations, state.orientations, state.r_vectors
+        self.current_energy = state.energy
+        self.max_translation, self.max_angle_shift = state.max_translation, state.max_angle_shift
+        (self.proposals, self.accepted, self.invalid, self.proposals_after_burn_in, self.accepted_after_burn_in,
+         self.window_proposals, self.window_accepted) = state.counters
+
+
+@dataclass(frozen=True)
+class ChainState:
+    """The run state of a Monte Carlo chain (a value: a step makes a new one, the arrays are not changed).
+
+    step : int, the index of the next step; locations (Nb, 3), orientations (Nb, 4) scalar-first quaternions,
+    r_vectors (N, 3) the blob positions; energy : float, the energy of the configuration (kT units of the
+    potentials); max_translation, max_angle_shift : the proposal sizes; counters : the seven counts of
+    :meth:`MetropolisSampler.get_state` (proposals, accepted, invalid, proposals and accepted after the burn-in,
+    the adaptation window's proposals and accepted); rng_state : the generator's ``bit_generator.state`` before
+    the next step.
+    """
+    step: int
+    locations: np.ndarray
+    orientations: np.ndarray
+    r_vectors: np.ndarray
+    energy: float
+    max_translation: float
+    max_angle_shift: float
+    counters: tuple
+    rng_state: Optional[dict] = None
+
+    @property
+    def invalid(self):
+        return self.counters[2]
+
+    def acceptance_ratio(self):
+        proposals, accepted = self.counters[0], self.counters[1]
+        return accepted / proposals if proposals else 0.0
+
+    def sampler_record(self):
+        """The restart record's ``sampler`` entry (``MetropolisSampler.get_state``'s form, copies)."""
+        return {'locations': self.locations.copy(), 'orientations': self.orientations.copy(),
+                'max_translation': self.max_translation, 'max_angle_shift': self.max_angle_shift,
+                'counters': tuple(self.counters)}
+
+
+class MetropolisChain:
+    """Monte Carlo as a scheme of the run loop: ``step(model, state) -> state`` with the generator's state in
+    the run state (``ChainState.rng_state``), as the dynamic schemes' ``RunState``.
+
+    ``sampler``: the :class:`MetropolisSampler` whose ``step`` advances the chain (its rules: moves, acceptance,
+    burn-in adaptation); ``model``: the energy (unused: the sampler holds it).
+    """
+
+    def __init__(self, sampler):
+        self.sampler = sampler
+
+    def init(self, step, rng_state):
+        """The chain's state at step index ``step`` (the sampler as it is now) with the generator state
+        ``rng_state``."""
+        return self.sampler.chain_state(step, rng_state)
+
+    def step(self, model, state):
+        """The state after Monte Carlo step ``state.step`` (one move of all bodies or one sweep): draws from a
+        generator made from ``state.rng_state``; ``state`` is left unchanged."""
+        sampler = self.sampler
+        sampler.load(state)
+        rng = generators.from_state(state.rng_state)
+        sampler.step(state.step, rng)
+        return sampler.chain_state(state.step + 1, rng.bit_generator.state)

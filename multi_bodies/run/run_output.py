@@ -601,8 +601,8 @@ class StopRequest:
 
     Inside :meth:`interrupting` (the dynamic run wraps each step in it) the first signal raises
     :class:`StepInterrupted` at once, so a slow step (a large solve) is abandoned within moments and the run keeps
-    the last completed step; elsewhere (a save being written, the Monte Carlo steps, which change their sampler
-    in place) the signal is only noted and the loop stops after the save or step in progress.
+    the last completed step; elsewhere (a save being written, a Monte Carlo step, which is short and is let
+    finish) the signal is only noted and the loop stops after the save or step in progress.
     A second signal raises KeyboardInterrupt at once.  Handlers are only
     installed in the main thread (Dask workers run tasks in other threads).
     """
