@@ -128,8 +128,12 @@ def _last_error_line(log_path):
     return errors[-1] if errors else (lines[-1] if lines else '')
 
 
-def run_replica(spec):
+def run_replica(spec, make_writers=None):
     """Run one replica in this process; the Dask task.  Returns a result dict.
+
+    ``make_writers``: None, or a callable ``make_writers(options) -> list`` of the caller's own writers
+    (``multi_bodies.run.writers.Writer``) for this replica's run (each replica needs its own: a writer is opened
+    and closed by one run); they write beside the replica's outputs as in any dynamic run.
 
     ``spec``: one entry of :func:`replica_specs`.  The run reads
     ``spec['input_file']`` with the working directory set to
@@ -165,7 +169,8 @@ def run_replica(spec):
             if resume:
                 options = options.replace(initial_step=resume)
             result['resumed_from'] = resume
-            exit_status = run_dynamics(options, log=print)
+            exit_status = run_dynamics(options, log=print,
+                                       writers=make_writers(options) if make_writers is not None else ())
         except UserInputError as err:
             print('error: %s' % err, flush=True)
             result.update(status='failed', exit_status=2, message=str(err))
