@@ -24,6 +24,7 @@ Velocities have shape (Nb, 6) ``[v, w]``.
 """
 from multi_bodies.solver import articulated as art
 from quaternion_integrator.scheme_base import InvalidConfiguration, Scheme, _check_finite, moved
+from stochastic_forcing import generators
 from utils import UserInputError
 
 
@@ -34,10 +35,14 @@ class ArticulatedScheme(Scheme):
     extrapolate_guesses = True  # forward Euler: one solve per step; midpoint: two, dt/2 apart
 
     def step_event(self, context, t):
-        """The published ``Constraint.tumbling_event(t)`` of a user's override, at the start of every step."""
+        """The published ``Constraint.tumbling_event(t)`` of a user's override, at the start of every step.
+
+        Its draws from numpy's global stream come from the run's generator when that is the published one
+        (``random_generator published``), as the published code seeds the global stream with ``seed``."""
         articulated = context.model.articulated
         if articulated is not None and articulated.step_event is not None:
-            articulated.step_event(t)
+            with generators.drawn_by_numpy_global(context.rng):
+                articulated.step_event(t)
 
     def articulated_set(self, context):
         if context.model.articulated is None:

@@ -19,6 +19,7 @@ the published generator, the legacy state dict of numpy
 (``RandomState.get_state(legacy=False)``: the MT19937 keys and position plus
 ``has_gauss`` and ``gauss``), so a restart repeats the uninterrupted run.
 """
+import contextlib
 import weakref
 
 import numpy as np
@@ -106,6 +107,29 @@ class PublishedGenerator:
 
     def integers(self, low, high=None, size=None):
         return self._legacy.randint(low, high, size)
+
+
+@contextlib.contextmanager
+def drawn_by_numpy_global(rng):
+    """Within the block, numpy's global legacy stream (``np.random.rand``, ``np.random.seed``...) is ``rng``.
+
+    A user's override written for the published code draws from numpy's global stream (the published
+    ``bacteria_run_and_tumble`` starts its tumbles with ``np.random.rand(1)``), which the published code seeds
+    with ``seed`` and shares with its Brownian noise.  For a :class:`PublishedGenerator` the global stream takes
+    ``rng``'s state on entry and ``rng`` continues where the block's draws left it on exit (the global stream
+    gets its own state back), so a published run's draws repeat in the same order.  For any other generator
+    (or None) nothing is shared: the block draws from the global stream as it is.
+    """
+    if not isinstance(rng, PublishedGenerator):
+        yield
+        return
+    own = np.random.get_state()
+    np.random.set_state(rng.get_state())
+    try:
+        yield
+    finally:
+        rng._legacy.set_state(np.random.get_state())
+        np.random.set_state(own)
 
 
 def make(kind, seed=None):

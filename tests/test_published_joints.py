@@ -299,3 +299,82 @@ def test_prescribed_joint_rates_are_read_from_links_deriv_updated(tmp_path, refe
     solve_links, _ = joints.links(s)
     assert position_links[1, 0] == pytest.approx(L01 * np.sin(alpha), abs=1e-14)
     assert solve_links[1, 0] == pytest.approx(L01 * np.sin(alpha) ** 2, abs=1e-14)
+
+
+# ------------------------------------------------------------------- the published random stream of the tumbles
+def test_numpy_global_stream_is_the_published_generator_inside_the_block():
+    """Inside ``drawn_by_numpy_global(rng)`` numpy's global stream draws ``rng``'s numbers (the published code seeds
+    the global stream with ``seed``) and ``rng`` continues after them; the global stream gets its state back.  With
+    numpy's Generator (``random_generator default``) nothing is shared (control)."""
+    from stochastic_forcing.generators import PublishedGenerator, drawn_by_numpy_global
+    legacy = np.random.RandomState(7)
+    expected = legacy.rand(3)
+    np.random.seed(11)
+    global_first = np.random.RandomState(11).rand()
+    rng = PublishedGenerator(7)
+    with drawn_by_numpy_global(rng):
+        drawn = np.random.rand(3)
+    assert np.array_equal(drawn, expected)
+    assert rng.random() == legacy.rand()  # the run's generator continues after the block's draws
+    assert np.random.rand() == global_first  # the global stream was left where it was
+    other = np.random.default_rng(7)
+    np.random.seed(11)
+    with drawn_by_numpy_global(other):
+        assert np.random.rand() == global_first
+
+
+def test_tumbles_start_at_the_draws_of_the_run_generator(tmp_path, reference_dir, monkeypatch):
+    """``random_generator published`` and ``seed 3``: the override's ``np.random.rand(1)`` in ``tumbling_event``
+    draws numpy's legacy stream seeded 3, as the published code (which seeds the global stream) draws it, so the
+    tumble starts at the first step whose draw is below 1 - exp(-dt / tau) = 1/2, and the run's generator ends after
+    exactly those draws.  Control: numpy's Generator (the default) leaves the draws to the global stream (seeded
+    here with 12345), whose first tumble is elsewhere."""
+    from quaternion_integrator.articulated_schemes import ArticulatedScheme
+    from quaternion_integrator.scheme_state import StepContext
+    from stochastic_forcing.generators import PublishedGenerator
+    dt, period = 0.0025, TUMBLE_PERIOD
+    tau = float(dt / np.log(2.0))
+    folder = tumble_scene(tmp_path, reference_dir, tau, 1)
+    monkeypatch.chdir(folder)
+
+    def first_tumble(draws):
+        return next(k for k, u in enumerate(draws) if u < 1 - np.exp(-dt / tau))
+
+    expected = {3: first_tumble(np.random.RandomState(3).rand(50)), 12345: first_tumble(np.random.RandomState(12345).rand(50))}
+    assert expected[3] != expected[12345]  # the control can tell the streams apart
+    for rng, seed in ((PublishedGenerator(3), 3), (np.random.default_rng(3), 12345)):
+        model = prepare(read_input_file('inputfile.dat', 'dynamic'), 'dynamics', log=lambda *a: None).system
+        joints = model.articulated
+        np.random.seed(12345)
+        started = None
+        for k in range(expected[seed] + 3):
+            ArticulatedScheme.step_event(None, StepContext(model, k, rng), k * dt)
+            _, rates = joints.links(k * dt)
+            if started is None and np.any(rates[1] != 0):
+                started = k
+        assert started == expected[seed], (seed, started, expected)
+        if seed == 3:  # one draw a step until the tumble, none during it
+            check = np.random.RandomState(3)
+            check.rand(expected[3] + 1)
+            assert rng.random() == check.rand()
+
+
+def test_articulated_preconditioner_over_the_neighbour_preconditioner(tmp_path, reference_dir, monkeypatch):
+    """Under ``preconditioner auto``, an articulated body too large for the exact group solve gets the published
+    Schur complement over the model's body preconditioner, which is then the neighbour preconditioner (it crashed
+    when that stopped forwarding the block-diagonal attributes: the published bacteria_run_and_tumble folder,
+    570 blobs, takes this path).  The step equals the one under ``block_diagonal`` to the solver tolerance."""
+    from multi_bodies.solver import articulated_preconditioner
+    monkeypatch.setattr(articulated_preconditioner, 'AUTO_MAX_PRODUCTS', -1.0)  # refuse the group solve
+    frames = {}
+    for choice in ('auto', 'block_diagonal'):
+        folder = tumble_scene(tmp_path / choice, reference_dir, 1e6, 1)
+        monkeypatch.chdir(folder)
+        with open('inputfile.dat', 'a') as f:
+            f.write('preconditioner %s\n' % choice)
+        options = read_input_file('inputfile.dat', 'dynamic')
+        assert run_dynamics(options, log=lambda *a: None) == 0
+        frames[choice] = snapshots.read_config_frames('run_constant_torque.bacteria_constant_torque.config')
+    moved = np.abs(frames['auto'][-1, :, :3] - frames['auto'][0, :, :3]).max()
+    assert moved > 1e-4
+    assert np.abs(frames['auto'] - frames['block_diagonal']).max() < 1e-6 * max(moved, 1.0)

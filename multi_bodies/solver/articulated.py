@@ -605,7 +605,10 @@ class ArticulatedPreconditioner(LinearMap):
     def __init__(self, problem, body_preconditioner):
         self.problem, self.body = problem, body_preconditioner
         mobilities = np.zeros((problem.num_bodies, 6, 6))
-        for (bodies, _), N in zip(body_preconditioner.body_arrays.type_slices, body_preconditioner.body_mobilities):
+        block_diagonal = body_preconditioner  # the neighbour and corotated preconditioners hold theirs as .base
+        while not hasattr(block_diagonal, 'body_mobilities') and hasattr(block_diagonal, 'base'):
+            block_diagonal = block_diagonal.base
+        for (bodies, _), N in zip(block_diagonal.body_arrays.type_slices, block_diagonal.body_mobilities):
             mobilities[bodies] = N
         self.schur = []
         for group, (_, QC) in zip(problem.articulated.groups, problem.reduced):
