@@ -234,17 +234,29 @@ class MetropolisChain:
 
     def __init__(self, sampler):
         self.sampler = sampler
+        self._live = None  # (the rng_state dict this chain's last step returned, the generator that is there)
 
     def init(self, step, rng_state):
         """The chain's state at step index ``step`` (the sampler as it is now) with the generator state
         ``rng_state``."""
         return self.sampler.chain_state(step, rng_state)
 
+    def generator(self, state):
+        """The generator a step from ``state`` draws from: made from ``state.rng_state``, or, when ``state`` is the
+        one this chain's last step returned, the generator that step left there (the same numbers, without
+        making a generator at every step of a long chain)."""
+        if self._live is not None and self._live[0] is state.rng_state:
+            return self._live[1]
+        return generators.from_state(state.rng_state)
+
     def step(self, model, state):
         """The state after Monte Carlo step ``state.step`` (one move of all bodies or one sweep): draws from a
-        generator made from ``state.rng_state``; ``state`` is left unchanged."""
+        generator at ``state.rng_state``; ``state`` is left unchanged."""
         sampler = self.sampler
         sampler.load(state)
-        rng = generators.from_state(state.rng_state)
+        rng = self.generator(state)
+        self._live = None  # while it draws, the generator is at no state's rng_state
         sampler.step(state.step, rng)
-        return sampler.chain_state(state.step + 1, rng.bit_generator.state)
+        rng_state = rng.bit_generator.state
+        self._live = (rng_state, rng)
+        return sampler.chain_state(state.step + 1, rng_state)

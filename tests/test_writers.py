@@ -241,6 +241,10 @@ def test_the_monte_carlo_step_is_a_scheme_step(tmp_path, monkeypatch, move):
     again = chain.scheme.step(chain.model, state)
     assert one.step == again.step == 1 and np.array_equal(one.locations, again.locations)
     assert one.counters == again.counters and one.rng_state == again.rng_state
+    two = chain.scheme.step(chain.model, again)  # continues the generator the last step left
+    two_again = chain.scheme.step(chain.model, again)  # from the same state again: the same numbers
+    assert np.array_equal(two.locations, two_again.locations) and two.rng_state == two_again.rng_state
+    assert two.rng_state != again.rng_state and two.counters[0] > again.counters[0]  # a step was made
 
     assert chain.run() == 0  # the run starts from the state made when it was set up, whatever was stepped since
     saved, _ = read_clones_file(str(folder / 'data' / 'run.a.00000012.clones'))
