@@ -9,8 +9,9 @@ problem's, :func:`lubrication.integrators.torque_preconditioner`).  Both are sym
   (``lubrication/cpp/block_ldlt_module.cpp``): minimum-degree ordering on the graph of blocks, left-looking
   numeric factorisation without pivoting, dense B x B kernels (George and Liu, *Computer Solution of Large Sparse
   Positive Definite Systems*, 1981; Davis, *Direct Methods for Sparse Linear Systems*, SIAM 2006).  It factors only
-  L, and its symbolic part (ordering, structure) is reused by :meth:`SymmetricFactor.refactor` and by
-  ``factorise(..., previous=...)`` when the scalar pattern is unchanged;
+  L, and its symbolic part (ordering, structure) is reused when the scalar pattern is unchanged: from the last
+  factorisation of the same block size (kept here), or from the factor given to
+  :meth:`SymmetricFactor.refactor` or ``factorise(..., previous=...)``;
 * ``'superlu'``: SciPy's SuperLU in symmetric mode (``permc_spec='MMD_AT_PLUS_A'``, ``diag_pivot_thresh=0``): the
   fallback when the extension is not built, and the method of the package before the extension.
 
@@ -32,6 +33,10 @@ except ImportError:  # pragma: no cover - the extension was not built: SuperLU i
 
 METHODS = ('block_ldlt', 'superlu')
 _DEFAULT = ['block_ldlt' if _block_ldlt is not None else 'superlu']
+# The last block LDL^T of each block size, whose symbolic part (ordering and structure: a function of the scalar
+# pattern alone) the next factorisation reuses when its pattern is the same (the usual case from solve to solve and
+# step to step).  A cache, not state: a factorisation with and without it is the same to the bit.
+_LAST_BY_BLOCK = {}
 
 
 class FactorisationError(ValueError):
@@ -55,6 +60,12 @@ def _checked(method):
         raise ValueError('the block LDL^T extension lubrication._block_ldlt_cpp is not built (python3 setup.py '
                          'build_ext --inplace)')
     return method
+
+
+def forget_orderings():
+    """Drop the kept symbolic parts (the next block LDL^T of each block size orders its pattern anew: benchmarks
+    and tests)."""
+    _LAST_BY_BLOCK.clear()
 
 
 def use_method(method):
@@ -107,11 +118,14 @@ class SymmetricFactor:
             return self
         kept = previous if previous is not None else self
         kept = kept._factor if isinstance(kept, SymmetricFactor) and kept.method == 'block_ldlt' else None
+        if kept is None:
+            kept = _LAST_BY_BLOCK.get(self.block)
         try:
             self._factor = _block_ldlt.factorise(A.indptr.astype(np.int64), A.indices.astype(np.int64), A.data, n,
                                                  self.block, self.shift, kept)
         except _block_ldlt.PivotError as error:
             raise FactorisationError(str(error)) from None
+        _LAST_BY_BLOCK[self.block] = self._factor
         self.positive_definite = bool(self._factor.positive_definite)
         return self
 

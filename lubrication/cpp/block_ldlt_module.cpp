@@ -19,8 +19,10 @@
 //      scales its off-diagonal blocks.  A zero (or non-finite) pivot stops it (ValueError); a negative one is
 //      allowed (the matrix is then indefinite: positive_definite is False).
 //   3. Solves: permute, forward with L, divide by D, backward with L^T, permute back.
-// The symbolic part (ordering, structure, where each input entry goes) is kept and reused by
-// refactor() when the scalar sparsity pattern of the input is the same (the usual case from step to step).
+// The symbolic part (ordering, structure, where each input entry goes) is reused when the scalar pattern of the
+// next input is the same (the `previous` factor of factorise()); the ordering and structure alone when only its
+// block graph is the same (the usual case from step to step: the neighbour pairs stay while exact zeros come and
+// go in the scalar pattern).
 // Only the lower triangle (in the permuted order) of the input is read: the input must be symmetric.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -52,19 +54,51 @@ struct Symbolic {
   std::vector<long> rowptr, rowcol, rowpos;  // for each row k: the columns j < k holding it and its position
   std::vector<long> target;        // for each input entry: its offset in L's storage (diagonal blocks first), -1
   std::vector<std::int64_t> indptr, indices;  // the input's scalar pattern (to reuse this symbolic part)
+  std::vector<long> graph_ptr, graph_idx;     // the block graph ordered (to reuse the ordering on another pattern)
 };
 
-// Minimum degree on the block graph adj (sorted lists without self loops): (perm, structures by original node).
+// The block graph of a CSR pattern of B x B blocks, symmetrised (a block present in either triangle), without
+// self loops: CSR lists (ptr (nb + 1), idx), each ascending.
+void block_graph(long n, int B, const std::int64_t *indptr, const std::int64_t *indices, std::vector<long> &ptr,
+                 std::vector<long> &idx) {
+  const long nb = n / B;
+  std::vector<std::vector<long>> adj(nb);
+  std::vector<long> mark(nb, -1);  // mark[J] == I: J is already in the list of I
+  for (long I = 0; I < nb; ++I)
+    for (long r = I * B; r < (I + 1) * B; ++r)
+      for (std::int64_t e = indptr[r]; e < indptr[r + 1]; ++e) {
+        const long J = static_cast<long>(indices[e]) / B;
+        if (J != I && mark[J] != I) mark[J] = I, adj[I].push_back(J);
+      }
+  std::vector<std::size_t> own(nb);  // the blocks of row I's own pattern are adj[I][0 .. own[I])
+  for (long I = 0; I < nb; ++I) own[I] = adj[I].size();
+  for (long I = 0; I < nb; ++I)  // (I, J) stored: J gets I (a repeat where its own pattern holds it: dropped below)
+    for (std::size_t q = 0; q < own[I]; ++q) adj[adj[I][q]].push_back(I);
+  std::fill(mark.begin(), mark.end(), -1);
+  ptr.assign(nb + 1, 0);
+  idx.clear();
+  for (long I = 0; I < nb; ++I) {
+    for (long J : adj[I])
+      if (mark[J] != I) mark[J] = I, idx.push_back(J);
+    std::sort(idx.begin() + ptr[I], idx.end());
+    ptr[I + 1] = static_cast<long>(idx.size());
+  }
+}
+
+// Minimum degree on the block graph adj (lists without self loops): (perm, structures by original node).
+// Eliminating v joins its remaining neighbours (its front) into a clique: each neighbour u gains the front's other
+// nodes it does not hold yet (found with a mark per node) and loses v.  The lists stay unsorted; the degrees, and
+// so the ordering, do not depend on their order.
 void minimum_degree(std::vector<std::vector<long>> adj, std::vector<long> &perm,
                     std::vector<std::vector<long>> &structure) {
   const long nb = static_cast<long>(adj.size());
   std::vector<char> eliminated(nb, 0);
+  std::vector<long> mark(nb, -1);  // mark[w] == u: w is in adj[u] (for the neighbour u being updated)
   using Entry = std::pair<long, long>;  // (degree, node): the lowest degree, then the lowest node, first
   std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> queue;
   for (long v = 0; v < nb; ++v) queue.push({static_cast<long>(adj[v].size()), v});
   perm.clear();
   structure.assign(nb, {});
-  std::vector<long> merged;
   while (!queue.empty()) {
     const auto [degree, v] = queue.top();
     queue.pop();
@@ -75,40 +109,30 @@ void minimum_degree(std::vector<std::vector<long>> adj, std::vector<long> &perm,
     for (long u : front) {
       // adj[u] <- (adj[u] union front) minus {u, v}
       std::vector<long> &list = adj[u];
-      merged.clear();
-      merged.reserve(list.size() + front.size());
-      auto a = list.begin(), b = front.begin();
-      while (a != list.end() || b != front.end()) {
-        long next;
-        if (b == front.end() || (a != list.end() && *a < *b)) next = *a++;
-        else if (a == list.end() || *b < *a) next = *b++;
-        else next = *a++, ++b;
-        if (next != u && next != v) merged.push_back(next);
+      for (std::size_t i = 0; i < list.size();) {  // drop v, mark the others
+        if (list[i] == v) {
+          list[i] = list.back();
+          list.pop_back();
+        } else {
+          mark[list[i++]] = u;
+        }
       }
-      list.swap(merged);
+      for (long w : front)
+        if (w != u && mark[w] != u) list.push_back(w);
       queue.push({static_cast<long>(list.size()), u});
     }
+    // marks hold node ids: a later update of u re-marks its whole list, so no reset is needed
     structure[v].swap(front);
   }
 }
 
-std::shared_ptr<Symbolic> analyse(long n, int B, const std::int64_t *indptr, const std::int64_t *indices) {
-  auto s = std::make_shared<Symbolic>();
-  const long nb = n / B;
+// The ordering and the block structure of L from the block graph (graph_ptr, graph_idx), written into s.
+void order(Symbolic *s, long nb, std::vector<long> graph_ptr, std::vector<long> graph_idx) {
   s->nb = nb;
-  s->indptr.assign(indptr, indptr + n + 1);
-  s->indices.assign(indices, indices + indptr[n]);
-  // block graph (symmetrised: a block present in either triangle)
   std::vector<std::vector<long>> adj(nb);
-  for (long r = 0; r < n; ++r)
-    for (std::int64_t e = indptr[r]; e < indptr[r + 1]; ++e) {
-      const long I = r / B, J = static_cast<long>(indices[e]) / B;
-      if (I != J) adj[I].push_back(J), adj[J].push_back(I);
-    }
-  for (auto &list : adj) {
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
-  }
+  for (long I = 0; I < nb; ++I) adj[I].assign(graph_idx.begin() + graph_ptr[I], graph_idx.begin() + graph_ptr[I + 1]);
+  s->graph_ptr.swap(graph_ptr);
+  s->graph_idx.swap(graph_idx);
   std::vector<std::vector<long>> structure;
   minimum_degree(std::move(adj), s->perm, structure);
   s->iperm.assign(nb, 0);
@@ -134,11 +158,20 @@ std::shared_ptr<Symbolic> analyse(long n, int B, const std::int64_t *indptr, con
       const long q = next[s->rowidx[p]]++;
       s->rowcol[q] = j, s->rowpos[q] = p;
     }
-  // where each input entry goes: the diagonal block of column k at k * B * B, the off-diagonal block at
-  // position p at (nb + p) * B * B; entries above the diagonal (in the permuted order) are not read
+}
+
+// Where each input entry of the scalar pattern (indptr, indices) goes in L's storage, for the ordering of s: the
+// diagonal block of column k at k * B * B, the off-diagonal block at position p at (nb + p) * B * B; entries above
+// the diagonal (in the permuted order) are not read.
+void map_entries(Symbolic *s, long n, int B, const std::int64_t *indptr, const std::int64_t *indices) {
+  const long nb = s->nb;
+  s->indptr.assign(indptr, indptr + n + 1);
+  s->indices.assign(indices, indices + indptr[n]);
   s->target.assign(indptr[n], -1);
+  std::vector<long> position(nb, -1);  // position[j]: where block (k, j) of L is, for the block row k at hand
   for (long I = 0; I < nb; ++I) {
     const long k = s->iperm[I];  // rows of block I are rows of L's block row k; the column is J's
+    for (long q = s->rowptr[k]; q < s->rowptr[k + 1]; ++q) position[s->rowcol[q]] = s->rowpos[q];
     for (int a = 0; a < B; ++a) {
       const long r = I * B + a;
       for (std::int64_t e = indptr[r]; e < indptr[r + 1]; ++e) {
@@ -148,13 +181,28 @@ std::shared_ptr<Symbolic> analyse(long n, int B, const std::int64_t *indptr, con
           if (b <= a) s->target[e] = (k * B + a) * B + b;
           continue;
         }
-        // block (k, j) of L: column j, find row k among its rows
-        const long *begin = &s->rowidx[s->colptr[j]], *end = &s->rowidx[s->colptr[j + 1]];
-        const long p = std::lower_bound(begin, end, k) - &s->rowidx[0];
-        s->target[e] = ((nb + p) * B + a) * B + b;
+        // block (k, j) of L (in the structure of column j: I and J are neighbours and J is eliminated first)
+        s->target[e] = ((nb + position[j]) * B + a) * B + b;
       }
     }
+    for (long q = s->rowptr[k]; q < s->rowptr[k + 1]; ++q) position[s->rowcol[q]] = -1;
   }
+}
+
+// The symbolic part for the pattern (indptr, indices) of n x n with B x B blocks: the ordering of `previous`
+// (a symbolic part of any block size, or null) when its block graph is this pattern's, else a new one.
+std::shared_ptr<Symbolic> analyse(long n, int B, const std::int64_t *indptr, const std::int64_t *indices,
+                                  const Symbolic *previous) {
+  std::vector<long> graph_ptr, graph_idx;
+  block_graph(n, B, indptr, indices, graph_ptr, graph_idx);
+  std::shared_ptr<Symbolic> s;
+  if (previous != nullptr && previous->graph_ptr == graph_ptr && previous->graph_idx == graph_idx) {
+    s = std::make_shared<Symbolic>(*previous);  // its ordering and structure (the copy is O(blocks of L))
+  } else {
+    s = std::make_shared<Symbolic>();
+    order(s.get(), n / B, std::move(graph_ptr), std::move(graph_idx));
+  }
+  map_entries(s.get(), n, B, indptr, indices);
   return s;
 }
 
@@ -174,13 +222,14 @@ py::array_t<T> copied(const std::vector<T> &values) {
 
 template <int B>
 struct Kernels {
-  // target -= X Y^T (B x B row-major each)
-  static inline void subtract_product_transposed(double *target, const double *X, const double *Y) {
+  // target -= X Y (B x B row-major each); the innermost loop runs along rows of Y and target (contiguous, no
+  // reduction), so the compiler vectorises it
+  static inline void subtract_product(double *__restrict target, const double *__restrict X,
+                                      const double *__restrict Y) {
     for (int a = 0; a < B; ++a)
-      for (int b = 0; b < B; ++b) {
-        double sum = 0.0;
-        for (int m = 0; m < B; ++m) sum += X[a * B + m] * Y[b * B + m];
-        target[a * B + b] -= sum;
+      for (int m = 0; m < B; ++m) {
+        const double x = X[a * B + m];
+        for (int b = 0; b < B; ++b) target[a * B + b] -= x * Y[m * B + b];
       }
   }
 };
@@ -278,11 +327,11 @@ class BlockLDLT {
       for (long q = s_->rowptr[k]; q < s_->rowptr[k + 1]; ++q) {
         const long j = s_->rowcol[q], p = s_->rowpos[q];
         const double *Lkj = off + p * BB, *dj = d + j * BS;
-        for (int a = 0; a < BS; ++a)
-          for (int m = 0; m < BS; ++m) T[a * BS + m] = Lkj[a * BS + m] * dj[m];
-        Kernels<BS>::subtract_product_transposed(Dk, Lkj, T);
+        for (int a = 0; a < BS; ++a)  // T = D_j L_kj^T
+          for (int m = 0; m < BS; ++m) T[m * BS + a] = Lkj[a * BS + m] * dj[m];
+        Kernels<BS>::subtract_product(Dk, Lkj, T);
         for (long r = p + 1; r < colptr[j + 1]; ++r)
-          Kernels<BS>::subtract_product_transposed(off + slot[rowidx[r]], off + r * BB, T);
+          Kernels<BS>::subtract_product(off + slot[rowidx[r]], off + r * BB, T);
       }
       // the diagonal block: scalar LDL^T without pivoting (lower triangle read; unit L stored below the diagonal)
       double *dk = d + k * BS;
@@ -403,7 +452,7 @@ std::unique_ptr<BlockLDLT> factorise(const IndexArray &indptr, const IndexArray 
     if (previous != nullptr && previous->block_size() == block && same_pattern(*previous->symbolic(), n, ip, ix))
       symbolic = previous->symbolic();
     else
-      symbolic = analyse(n, block, ip, ix);
+      symbolic = analyse(n, block, ip, ix, previous != nullptr ? previous->symbolic().get() : nullptr);
   }
   auto factor = std::make_unique<BlockLDLT>(n, block, symbolic);
   {
