@@ -24,24 +24,24 @@ Method (Sprinkle et al., Soft Matter 16, 7982, 2020; J. Chem. Phys. 147, 244103,
   prescribed angular velocity (the mixed problem for T and the translational velocities), with an optional
   per-sphere cap ``|T_i| <= torque_cap`` (then those spheres turn slower).
 
-Every step function takes ``kept``: None for the published solves (each builds its preconditioner, a sparse LU,
-at its configuration; the corrector starts from the predictor's velocities, as published, the others from zero), or a :class:`KeptSolves` that keeps the preconditioners between
-solves and steps and gives the solves first guesses (the package's schemes under ``preconditioner auto``); and
-``solver``: the ``multi_bodies.solver.solves.Solver`` that makes every solve (a scheme's step passes its own, which
-counts the solves and stops the run at one that does not converge; None: one that stops such a solve, with the
-least-residual iterate where ``kept`` is given), and ``tolerance`` (None: the solver's).
+Every step function takes ``kept``: None for the published solves (each builds its preconditioner, a sparse
+factorisation, at its configuration; the corrector starts from the predictor's velocities, as published, the others
+from zero), or a :class:`KeptSolves` that keeps the preconditioners between solves and steps and gives the solves
+first guesses (the package's schemes under ``preconditioner auto``); and ``solver``: the
+``multi_bodies.solver.solves.Solver`` that makes every solve (a scheme's step passes its own, which counts the solves
+and stops the run at one that does not converge; None: one that stops such a solve, with the least-residual iterate
+where ``kept`` is given), and ``tolerance`` (None: the solver's).
 """
 from collections import namedtuple
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from body.geometry import rotate_quaternions
 from multi_bodies.solver.body_solver import SolutionParts, kept_fewest
 from multi_bodies.solver.linear_map import FunctionMap, LinearProblem
 from stochastic_forcing import lanczos_square_root
 
+from . import sparse_factor
 from .brownian import NearFieldRoot, brownian_rhs, far_field_drift, thermal_drift
 from .problem import LubricationPreconditioner, far_field_product, solver_and_tolerance
 
@@ -54,7 +54,7 @@ rejected_wall, rejected_jump : 0 or 1 (a sphere below z = 0; a sphere moving mor
 velocities : (N, 6) the velocities used for the step ``[U W]`` (of the rejected step when rejected).
 torques : (N, 3) torques from ``torque_from_omega`` (mean of the stages), or None without omega.
 counts : dict of work done: ``far_field_products``, ``gmres_iterations``, ``lanczos_iterations``,
-    ``factorisations`` (sparse LU), ``assemblies`` (of Delta_R)."""
+    ``factorisations`` (sparse LDL^T or LU: :mod:`lubrication.sparse_factor`), ``assemblies`` (of Delta_R)."""
 
 
 def new_counts():
@@ -195,7 +195,8 @@ class TorqueFromOmegaProblem(LinearProblem):
     velocities Omega.  From ``(I + M Delta_R) [V; Omega] = M [F; T]``:
     ``[V; 0] + M Delta_R [V; 0] - M [0; T] = M [F; 0] - [0; Omega] - M Delta_R [0; Omega]``.
     Preconditioner: M replaced by the isolated sphere's ``1/(6 pi eta a)``, ``1/(8 pi eta a^3)``, which
-    gives ``V = 6 pi eta a (6 pi eta a I + Delta_R_tt)^-1 r_t`` (one sparse LU, as published) and then T."""
+    gives ``V = 6 pi eta a (6 pi eta a I + Delta_R_tt)^-1 r_t`` (one sparse factorisation, as published) and then
+    T."""
 
     def __init__(self, problem, eta, a):
         self.problem, self.size, self.num_bodies = problem, problem.size, problem.num_bodies
@@ -234,17 +235,16 @@ class TorqueFromOmegaProblem(LinearProblem):
 
 def torque_preconditioner(Delta_R, eta, a):
     """The preconditioner of :class:`TorqueFromOmegaProblem` from the near field ``Delta_R`` (6N, 6N) of some
-    configuration: M replaced by the isolated sphere's mobilities, one sparse LU of ``6 pi eta a I + Delta_R_tt``
-    (as published).  A ``linear_map.FunctionMap`` (6N, 6N)."""
+    configuration: M replaced by the isolated sphere's mobilities, one sparse factorisation of
+    ``6 pi eta a I + Delta_R_tt`` (as published; :func:`lubrication.sparse_factor.factorise`, 3 x 3 blocks).
+    A ``linear_map.FunctionMap`` (6N, 6N)."""
     size = Delta_R.shape[0]
     trans = (np.arange(size // 6)[:, None] * 6 + np.arange(3)).reshape(-1)
     rot = trans + 3
     friction = 6.0 * np.pi * eta * a
     rotational_mobility = 1.0 / (8.0 * np.pi * eta * a ** 3)
     Delta_R = Delta_R.tocsr()
-    block = Delta_R[trans][:, trans] + friction * sp.identity(trans.size, format='csr')
-    factor = spla.splu(block.tocsc(), permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                       options={'SymmetricMode': True})
+    factor = sparse_factor.factorise(Delta_R[trans][:, trans], friction, block=3)
     coupling = Delta_R[rot][:, trans]
 
     def apply(r):

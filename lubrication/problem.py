@@ -7,14 +7,13 @@ above the wall, Rotne-Prager-Yamakawa in free space: the grand product of a ``mo
 (X + M F)``) come from the published formulation: GMRES on ``(I + M Delta_R) U = X + M F`` (the package's one
 solve, through a ``multi_bodies.solver.solves.Solver``), preconditioned by ``P^-1 = (R_sup + s I)^-1 R_MB``
 (``s = 6 pi eta a * tolerance``), since ``I + M Delta_R ~ M R_sup`` where ``M^-1 ~ R_MB``.  The published
-code factors ``R_sup + s I`` with CHOLMOD; here SciPy's sparse LU (``splu``), no extra dependency.
+code factors ``R_sup + s I`` with CHOLMOD; here the package's sparse block LDL^T where built, else SciPy's sparse
+LU (:mod:`lubrication.sparse_factor`), no extra dependency.
 
 Vector layout ``[F1 T1 F2 T2 ...]`` (forces, torques) and ``[U1 W1 U2 W2 ...]`` (velocities, angular
 velocities); the problem's ``solution`` gives velocities (N, 6) rows ``[U W]``.
 """
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
                                 preferred_backend)
@@ -24,7 +23,7 @@ from multi_bodies.solver.linear_map import LinearMap, LinearProblem
 from multi_bodies.solver.solves import Solver
 from utils import UserInputError
 
-from . import assembly, resistance
+from . import assembly, resistance, sparse_factor
 
 
 def far_field_implementation(implementation, wall):
@@ -76,17 +75,15 @@ class LubricationPreconditioner(LinearMap):
     matrices : :data:`lubrication.assembly.LubricationMatrices`; shift : ``s`` (force per velocity; the
     published ``6 pi eta a * tolerance``).  Isolated spheres (no neighbour, far from the wall) are left
     alone (identity), as published.  ``operator`` is a LinearOperator (6N, 6N); ``factor_time`` counts
-    nothing: the factorisation is made once here (``scipy.sparse.linalg.splu``).
+    nothing: the factorisation is made once here (:func:`lubrication.sparse_factor.factorise`, 6 x 6 blocks).
     """
 
     def __init__(self, matrices, shift):
         size = matrices.R_sup.shape[0]
         self.R_MB = matrices.R_MB
         self.isolated_rows = np.repeat(np.asarray(matrices.isolated, dtype=bool), 6)
-        shifted = (matrices.R_sup + float(shift) * sp.identity(size, format='csr')).tocsc()
-        # R_sup + s I is symmetric: symmetric-mode ordering, pivots on the diagonal
-        self.factor = spla.splu(shifted, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                                options={'SymmetricMode': True}) if size else None
+        # R_sup + s I is symmetric positive definite: LDL^T without pivoting (SuperLU where not built)
+        self.factor = sparse_factor.factorise(matrices.R_sup, float(shift), block=6) if size else None
         self.size = size
 
     def apply(self, x):

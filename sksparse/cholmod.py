@@ -2,16 +2,20 @@
 ``sksparse/__init__.py``; the package never imports it).
 
 ``cholesky(A, beta=0)`` factors ``A + beta I`` as ``P (A + beta I) P^T = L L^T`` with a fill-reducing permutation
-``P`` (SuperLU's symmetric minimum-degree ordering of ``A^T + A`` without pivoting, so the LU factors are
-``L_u D L_u^T`` and ``L = L_u D^(1/2)``).  The :class:`Factor` answers the calls of scikit-sparse's factor that the
-published codes use: ``factor(b)`` and ``solve_A(b)`` solve ``(A + beta I) x = b`` for b of shape (n,) or (n, k);
-``L()`` (n, n) sparse lower triangular, ``P()`` (n,) the permutation as an index array (``A[P][:, P] = L L^T``),
-``apply_P``, ``apply_Pt``, ``logdet()``; ``cholesky_inplace(A, beta)`` refactors.  A matrix that is not positive
-definite raises :class:`CholmodNotPositiveDefiniteError`.
+``P``: the package's sparse LDL^T ``L_u D L_u^T`` without pivoting (:mod:`lubrication.sparse_factor`, minimum-degree
+ordering; scalar blocks) where its extension is built, else SuperLU's symmetric minimum-degree ordering of
+``A^T + A`` without pivoting (the LU factors are then ``L_u D L_u^T``); ``L = L_u D^(1/2)``.  The :class:`Factor`
+answers the calls of scikit-sparse's factor that the published codes use: ``factor(b)`` and ``solve_A(b)`` solve
+``(A + beta I) x = b`` for b of shape (n,) or (n, k); ``L()`` (n, n) sparse lower triangular, ``P()`` (n,) the
+permutation as an index array (``A[P][:, P] = L L^T``), ``apply_P``, ``apply_Pt``, ``logdet()``;
+``cholesky_inplace(A, beta)`` refactors.  A matrix that is not positive definite raises
+:class:`CholmodNotPositiveDefiniteError`.
 """
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from lubrication import sparse_factor
 
 
 class CholmodError(Exception):
@@ -37,6 +41,8 @@ class Factor:
             A = (A + beta * sp.identity(A.shape[0], format='csc')).tocsc()
         if A.nnz and abs(A - A.T).max() > 1e-12 * abs(A).max():
             raise CholmodError('cholesky needs a symmetric matrix')
+        if sparse_factor.available():
+            return self._block_ldlt(A)
         lu = spla.splu(A, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0, options={'SymmetricMode': True})
         if not np.array_equal(lu.perm_r, lu.perm_c):  # a pivot left the diagonal: not positive definite
             raise CholmodNotPositiveDefiniteError('the matrix is not positive definite (pivoting was needed)')
@@ -44,9 +50,24 @@ class Factor:
         if np.any(~(pivots > 0)):
             raise CholmodNotPositiveDefiniteError('the matrix is not positive definite (pivot %d is %g)'
                                                   % (int(np.argmax(~(pivots > 0))), pivots[~(pivots > 0)][0]))
-        self._lu, self._n = lu, A.shape[0]
+        self._solve, self._n = lu.solve, A.shape[0]
         self._P = np.argsort(lu.perm_c)
         self._L = (lu.L @ sp.diags(np.sqrt(pivots))).tocsc()
+        self._logdet = float(np.sum(np.log(pivots)))
+        return self
+
+    def _block_ldlt(self, A):
+        """The factorisation of the symmetric ``A`` (already shifted) by :func:`lubrication.sparse_factor.factorise`."""
+        try:
+            factor = sparse_factor.factorise(A, block=1, method='block_ldlt')
+        except sparse_factor.FactorisationError as error:
+            raise CholmodNotPositiveDefiniteError('the matrix is not positive definite (%s)' % error) from None
+        perm, unit_lower, pivots = factor.factors()
+        if not factor.positive_definite:
+            raise CholmodNotPositiveDefiniteError('the matrix is not positive definite (pivot %g)' % pivots.min())
+        self._solve, self._n = factor.solve, A.shape[0]
+        self._P = np.asarray(perm, dtype=np.int64)
+        self._L = (unit_lower @ sp.diags(np.sqrt(pivots))).tocsc()
         self._logdet = float(np.sum(np.log(pivots)))
         return self
 
@@ -56,7 +77,7 @@ class Factor:
     def solve_A(self, b):
         """``x`` with ``(A + beta I) x = b``; b of shape (n,) or (n, k), dense or sparse (then a dense answer)."""
         b = b.toarray() if sp.issparse(b) else np.asarray(b, dtype=float)
-        return self._lu.solve(b)
+        return self._solve(b)
 
     def L(self):
         """The lower triangular factor, sparse (n, n): ``A[P][:, P] = L L^T``."""

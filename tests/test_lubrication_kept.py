@@ -2,7 +2,7 @@
 
 Laws: every solve solves the same linear system to ``solver_tolerance`` whatever its preconditioner and first
 guess, so the runs under ``preconditioner auto`` (kept) follow the published solves (``block_diagonal``) within
-what the tolerance allows, with fewer sparse LU factorisations (the control: a looser tolerance moves the run
+what the tolerance allows, with fewer sparse factorisations (the control: a looser tolerance moves the run
 off by more than that bound, so the comparison can fail); a configuration whose gaps have closed wears the kept
 preconditioner and the next step builds a fresh one, whose solve takes the published iterations; a restart
 from the saved history repeats the run bit for bit (the control: the history without the kept preconditioner's
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from body.body import Body, Configuration, bodies_to_arrays
-from lubrication import brownian, integrators, problem as lubrication_problem
+from lubrication import brownian, integrators, sparse_factor
 from multi_bodies.files.input_options import options_with
 from multi_bodies.run.record_checks import _check_history
 from multi_bodies.solver import body_solver, user_hooks
@@ -51,14 +51,14 @@ def run(model, steps, scheme_name='lubrication_trapezoidal', state=None, seed=4,
 
 
 def count_factorisations(monkeypatch):
-    """Every sparse LU of a lubrication or torque preconditioner from now on (a list that fills)."""
+    """Every sparse factorisation of a lubrication or torque preconditioner from now on (a list that fills)."""
     made = []
-    original = lubrication_problem.spla.splu
+    original = sparse_factor.factorise
 
     def spy(*args, **kwargs):
         made.append(1)
         return original(*args, **kwargs)
-    monkeypatch.setattr(lubrication_problem.spla, 'splu', spy)
+    monkeypatch.setattr(sparse_factor, 'factorise', spy)
     return made
 
 
