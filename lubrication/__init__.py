@@ -12,6 +12,8 @@ Modules (floor of ``multi_bodies.solver``):
 * :mod:`lubrication.resistance` - pair (12 x 12) and wall (6 x 6) resistance blocks, vectorised;
 * :mod:`lubrication.assembly` - neighbour search and the sparse R_sup, R_MB, Delta_R (6N x 6N);
 * :mod:`lubrication.problem` - ``(I + M Delta_R) U = X + M F`` as a problem of ``body_solver.solve``;
+* :mod:`lubrication.sparse_factor` - the preconditioners' sparse factorisations (the compiled block LDL^T,
+  SuperLU where it is not built);
 * :mod:`lubrication.brownian` - increments with covariance (2kT/dt) M_lub, the near-field root, the drift;
 * :mod:`lubrication.integrators` - trapezoidal, Euler-Maruyama and RPB steps, ``torque_from_omega``, and
   ``KeptSolves`` (preconditioners kept between solves and steps, first guesses).
