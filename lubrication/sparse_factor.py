@@ -83,7 +83,8 @@ class SymmetricFactor:
     block : 6 (one block row per sphere: forces and torques) or 3 (translations), 1 or 2 also accepted;
     method : ``'block_ldlt'``, ``'superlu'`` or None (:func:`default_method`); previous : a SymmetricFactor whose
     symbolic part is reused when its block size and scalar pattern equal this one's (block LDL^T only).
-    ``solve(b)`` for b (n,) or (n, k); ``positive_definite``; ``size``; ``method``.
+    ``solve(b)`` for b (n,) or (n, k); ``positive_definite``; ``size``; ``method``; ``ordering_reused`` (the block
+    LDL^T took its ordering from an earlier factorisation).
     """
 
     def __init__(self, A, shift=0.0, block=6, method=None, previous=None):
@@ -113,6 +114,7 @@ class SymmetricFactor:
             if not np.all(np.isfinite(pivots)) or np.any(pivots == 0):
                 raise FactorisationError('zero or non-finite pivot: the matrix is singular or not symmetric '
                                          'positive definite')
+            self.ordering_reused = False
             self.positive_definite = bool(np.all(pivots > 0)) and (not n or np.array_equal(self._lu.perm_r,
                                                                                               self._lu.perm_c))
             return self
@@ -125,8 +127,9 @@ class SymmetricFactor:
                                                  self.block, self.shift, kept)
         except _block_ldlt.PivotError as error:
             raise FactorisationError(str(error)) from None
-        _LAST_BY_BLOCK[self.block] = self._factor
+        _LAST_BY_BLOCK[self.block] = self._factor.ordering_only()  # no values: a kept ordering costs O(blocks of L)
         self.positive_definite = bool(self._factor.positive_definite)
+        self.ordering_reused = bool(self._factor.ordering_reused)
         return self
 
     def solve(self, b):

@@ -124,6 +124,9 @@ def test_the_ordering_is_reused_on_another_scalar_pattern_of_the_same_blocks(blo
     reused = sparse_factor.factorise(B, 0.3, block=block, method='block_ldlt', previous=first)
     sparse_factor.forget_orderings()
     fresh = sparse_factor.factorise(B, 0.3, block=block, method='block_ldlt')
+    assert reused.ordering_reused and not fresh.ordering_reused
+    kept = sparse_factor.factorise(A, 0.3, block=block, method='block_ldlt')  # the kept ordering of `fresh`
+    assert kept.ordering_reused and np.array_equal(kept.solve(b), first.solve(b))
     assert np.array_equal(reused.factors()[0], fresh.factors()[0])
     assert np.array_equal(reused.solve(b), fresh.solve(b))
     assert relative(reused.solve(b), np.linalg.solve(B.toarray() + 0.3 * np.eye(B.shape[0]), b)) < 1e-12
@@ -135,6 +138,7 @@ def test_the_ordering_is_reused_on_another_scalar_pattern_of_the_same_blocks(blo
     C = C.tocsr()
     C.eliminate_zeros()
     other = sparse_factor.factorise(C, 0.3, block=block, method='block_ldlt', previous=first)
+    assert not other.ordering_reused
     assert relative(other.solve(b), np.linalg.solve(C.toarray() + 0.3 * np.eye(C.shape[0]), b)) < 1e-12
 
 
@@ -243,6 +247,28 @@ def test_lubrication_matrices_solve_as_superlu_solves_them(name, matrices, shift
     x = rng.standard_normal(size)
     for new, old in zip(by_ldlt, by_superlu):
         assert relative(new.apply(x), old.apply(x)) < 1e-10
+
+
+@needs_extension
+def test_a_moved_configuration_reuses_the_ordering():
+    """A lattice moved by up to 1e-4 a keeps its neighbour pairs while exact zeros of R_sup come and go: the
+    preconditioner at the moved configuration takes the ordering of the last one (no new ordering), its products
+    equal those of a preconditioner ordered anew bit for bit; the torque problem's likewise."""
+    locations = lattice_near_wall(6, spacing=2.3, height=1.2, jitter=0.1, seed=3)
+    moved = locations + 1e-4 * np.random.default_rng(4).uniform(-1, 1, locations.shape)
+    before, after = (assembly.resistance_matrices(where, 1.0, 1.0) for where in (locations, moved))
+    assert np.array_equal(before.neighbours.pairs, after.neighbours.pairs)
+    assert not np.array_equal(before.R_sup.indices, after.R_sup.indices) or before.R_sup.nnz != after.R_sup.nnz
+    x = np.random.default_rng(5).standard_normal(before.R_sup.shape[0])
+    lubrication_problem.LubricationPreconditioner(before, 1e-6)
+    kept = lubrication_problem.LubricationPreconditioner(after, 1e-6)
+    torques_kept = integrators.torque_preconditioner(after.Delta_R, 1.0, 1.0)
+    sparse_factor.forget_orderings()
+    anew = lubrication_problem.LubricationPreconditioner(after, 1e-6)
+    torques_anew = integrators.torque_preconditioner(after.Delta_R, 1.0, 1.0)
+    assert kept.factor.ordering_reused and not anew.factor.ordering_reused
+    assert np.array_equal(kept.apply(x), anew.apply(x))
+    assert np.array_equal(torques_kept.apply(x), torques_anew.apply(x))
 
 
 def test_superlu_solves_the_same_matrices():

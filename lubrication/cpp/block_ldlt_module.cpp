@@ -190,14 +190,16 @@ void map_entries(Symbolic *s, long n, int B, const std::int64_t *indptr, const s
 }
 
 // The symbolic part for the pattern (indptr, indices) of n x n with B x B blocks: the ordering of `previous`
-// (a symbolic part of any block size, or null) when its block graph is this pattern's, else a new one.
+// (a symbolic part of any block size, or null) when its block graph is this pattern's (then *reused is set), else a
+// new one.
 std::shared_ptr<Symbolic> analyse(long n, int B, const std::int64_t *indptr, const std::int64_t *indices,
-                                  const Symbolic *previous) {
+                                  const Symbolic *previous, bool *reused) {
   std::vector<long> graph_ptr, graph_idx;
   block_graph(n, B, indptr, indices, graph_ptr, graph_idx);
   std::shared_ptr<Symbolic> s;
   if (previous != nullptr && previous->graph_ptr == graph_ptr && previous->graph_idx == graph_idx) {
     s = std::make_shared<Symbolic>(*previous);  // its ordering and structure (the copy is O(blocks of L))
+    *reused = true;
   } else {
     s = std::make_shared<Symbolic>();
     order(s.get(), n / B, std::move(graph_ptr), std::move(graph_idx));
@@ -260,6 +262,7 @@ class BlockLDLT {
   }
 
   py::array_t<double> solve(const Array &b) const {
+    if (static_cast<long>(d_.size()) != n_) throw std::invalid_argument("this factor holds an ordering only");
     if (b.ndim() < 1 || b.ndim() > 2 || b.shape(0) != n_)
       throw std::invalid_argument("right-hand side must be (n,) or (n, k) with n = " + std::to_string(n_));
     const long columns = b.ndim() == 2 ? b.shape(1) : 1;
@@ -281,6 +284,7 @@ class BlockLDLT {
   // (perm (n,), CSR triple of the unit lower triangular L (n x n, permuted order), d (n,)):
   // A[perm[k], perm[l]] = (L D L^T)[k, l]
   py::tuple factors() const {
+    if (static_cast<long>(d_.size()) != n_) throw std::invalid_argument("this factor holds an ordering only");
     const long nb = s_->nb, BB = static_cast<long>(B_) * B_;
     py::array_t<std::int64_t> perm(n_);
     for (long k = 0; k < nb; ++k)
@@ -306,10 +310,14 @@ class BlockLDLT {
   }
 
   bool positive_definite() const { return positive_; }
+  bool ordering_reused() const { return ordering_reused_; }
+  void set_ordering_reused(bool reused) { ordering_reused_ = reused; }
   long nonzero_blocks() const { return s_->nb + s_->colptr[s_->nb]; }
   long size() const { return n_; }
   int block_size() const { return B_; }
   std::shared_ptr<Symbolic> symbolic() const { return s_; }
+  // a factor holding this one's symbolic part only (to offer its ordering to a later factorisation)
+  std::unique_ptr<BlockLDLT> ordering_only() const { return std::make_unique<BlockLDLT>(n_, B_, s_); }
 
  private:
   template <int BS>
@@ -423,6 +431,7 @@ class BlockLDLT {
   std::shared_ptr<Symbolic> s_;
   std::vector<double> values_, d_;
   bool positive_ = false;
+  bool ordering_reused_ = false;  // the ordering came from `previous` (same pattern or same block graph)
 };
 
 // Factor the symmetric CSR matrix (indptr, indices, data) of size n, made of B x B blocks, plus shift I;
@@ -447,14 +456,16 @@ std::unique_ptr<BlockLDLT> factorise(const IndexArray &indptr, const IndexArray 
       throw std::domain_error("non-finite entry (" + std::to_string(e) + "-th stored value): nothing to factor");
   }
   std::shared_ptr<Symbolic> symbolic;
+  bool reused = false;
   {
     py::gil_scoped_release release;
     if (previous != nullptr && previous->block_size() == block && same_pattern(*previous->symbolic(), n, ip, ix))
-      symbolic = previous->symbolic();
+      symbolic = previous->symbolic(), reused = true;
     else
-      symbolic = analyse(n, block, ip, ix, previous != nullptr ? previous->symbolic().get() : nullptr);
+      symbolic = analyse(n, block, ip, ix, previous != nullptr ? previous->symbolic().get() : nullptr, &reused);
   }
   auto factor = std::make_unique<BlockLDLT>(n, block, symbolic);
+  factor->set_ordering_reused(reused);
   {
     py::gil_scoped_release release;
     factor->factor(data.data(), shift);
@@ -470,7 +481,10 @@ PYBIND11_MODULE(_block_ldlt_cpp, module) {
   py::class_<BlockLDLT>(module, "BlockLDLT")
       .def("solve", &BlockLDLT::solve, "x with A x = b for b (n,) or (n, k)", py::arg("b"))
       .def("factors", &BlockLDLT::factors, "(perm (n,), L as a CSR triple, d (n,)): A[perm][:, perm] = L D L^T")
+      .def("ordering_only", &BlockLDLT::ordering_only,
+           "a factor with this one's ordering and structure and no values (factorise's `previous`)")
       .def_property_readonly("positive_definite", &BlockLDLT::positive_definite)
+      .def_property_readonly("ordering_reused", &BlockLDLT::ordering_reused)
       .def_property_readonly("nonzero_blocks", &BlockLDLT::nonzero_blocks)
       .def_property_readonly("size", &BlockLDLT::size)
       .def_property_readonly("block_size", &BlockLDLT::block_size);
