@@ -476,3 +476,24 @@ def test_missing_import_in_a_user_file_names_the_package(tmp_path):
     with pytest.raises(UserInputError, match='the user file imports not_a_package_here_xyz, which is not '
                                              'installed; pip install not_a_package_here_xyz or remove the import'):
         load_user_hooks(str(tmp_path))
+
+
+def test_rotated_vector_jacobian_is_the_derivative_of_the_rotation():
+    """d(R(theta) a)/d theta of the joint restoration against central differences of R(theta) a, which are exact
+    for its entries (quadratic in theta) up to round-off; at unit and at general quaternions (the least-squares
+    iterates are not normalised).  Control: the same differences of another link differ."""
+    from multi_bodies.solver.articulated import quaternion_rotation, rotated_vector_jacobian
+    rng = np.random.default_rng(4)
+    theta = rng.normal(size=(5, 4))
+    theta[:2] /= np.linalg.norm(theta[:2], axis=1)[:, None]
+    a = rng.normal(size=(5, 3))
+    h = 1e-3
+    numeric = np.empty((5, 3, 4))
+    for j in range(4):
+        step = np.zeros(4)
+        step[j] = h
+        numeric[:, :, j] = (np.einsum('kij,kj->ki', quaternion_rotation(theta + step), a)
+                            - np.einsum('kij,kj->ki', quaternion_rotation(theta - step), a)) / (2 * h)
+    J = rotated_vector_jacobian(theta, a)
+    assert np.abs(J - numeric).max() < 1e-9 * np.abs(numeric).max()
+    assert np.abs(rotated_vector_jacobian(theta, a[::-1]) - numeric).max() > 0.1

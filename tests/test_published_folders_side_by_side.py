@@ -14,7 +14,7 @@ configurations are compared.
   bodies stay close.  They are not equal: the published joint restoration (a bounded least-squares problem with
   a continuum of minimisers, stopped after 14 evaluations) moves its result by 1e-5 to 2e-4 for a relative
   change of 1e-15 of its input, so two codes whose velocities agree to the solver tolerance part by about 1e-5
-  after one step.  Measured over 12 steps: bodies 4.1e-3 apart at most, step lengths 1.0e-4 apart at most
+  after one step.  Measured over 12 steps: bodies 5.6e-3 apart at most, step lengths 1.2e-4 apart at most
   (steps of 0.09 running, up to 0.44 tumbling).
 * ``Rollers_Small_Example`` (20 steps; the folder's ``16_lines.clones`` is not in the published repository and
   must be made with its ``clones_gen.m``): the 1,008 rollers stay within 1e-8 of the published ones (1.4e-10
@@ -142,8 +142,8 @@ def test_bacteria_run_and_tumble_moves_like_the_published_run(tmp_path):
     tumbling = {side: s > 1.1 * running for side, s in steps.items()}
     assert np.array_equal(tumbling['published'], tumbling['package']), steps
     assert tumbling['published'].any() and not tumbling['published'].all()  # a tumble, and running steps
-    assert np.abs(steps['published'] - steps['package']).max() < 1e-3, steps  # 1.0e-4 measured
-    assert np.abs(frames['published'][:, :, :3] - frames['package'][:, :, :3]).max() < 1e-2  # 4.1e-3 measured
+    assert np.abs(steps['published'] - steps['package']).max() < 1e-3, steps  # 1.2e-4 measured
+    assert np.abs(frames['published'][:, :, :3] - frames['package'][:, :, :3]).max() < 2e-2  # 5.6e-3 measured
 
 
 @pytest.mark.slow

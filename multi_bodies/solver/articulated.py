@@ -218,15 +218,25 @@ def quaternion_rotation(theta):
 
 
 def rotated_vector_jacobian(theta, a):
-    """d(R(theta) a)/d theta, shape (n, 3, 4), for quaternions theta (n, 4) and vectors a (n, 3)."""
-    s, p = theta[:, 0], theta[:, 1:]
+    """d(R(theta) a)/d theta, shape (n, 3, 4), for quaternions theta (n, 4) (scalar first) and vectors a (n, 3).
+
+    Each entry is evaluated term by term in the published code's order: the joint restoration's least-squares
+    path depends on the Jacobian's last bit (see ``_nonlinear_correction``)."""
+    t0, t1, t2, t3 = theta[:, 0], theta[:, 1], theta[:, 2], theta[:, 3]
+    l0, l1, l2 = a[:, 0], a[:, 1], a[:, 2]
     J = np.empty((theta.shape[0], 3, 4))
-    J[:, :, 0] = 4 * s[:, None] * a + 2 * _cross(p, a)
-    pa = np.sum(p * a, axis=1)
-    eye = np.eye(3)
-    for j in range(3):
-        J[:, :, 1 + j] = 2 * (eye[j][None, :] * pa[:, None] + p * a[:, j:j + 1] + s[:, None] * _cross(
-            np.broadcast_to(eye[j], a.shape), a))
+    J[:, 0, 0] = 2 * l2 * t2 - 2 * l1 * t3 + 4 * l0 * t0
+    J[:, 1, 0] = -2 * l2 * t1 + 2 * l0 * t3 + 4 * l1 * t0
+    J[:, 2, 0] = 2 * l1 * t1 - 2 * l0 * t2 + 4 * l2 * t0
+    J[:, 0, 1] = 4 * l0 * t1 + 2 * l1 * t2 + 2 * l2 * t3
+    J[:, 1, 1] = 2 * l0 * t2 - 2 * l2 * t0
+    J[:, 2, 1] = 2 * l0 * t3 + 2 * l1 * t0
+    J[:, 0, 2] = 2 * l1 * t1 + 2 * l2 * t0
+    J[:, 1, 2] = 2 * l0 * t1 + 4 * l1 * t2 + 2 * l2 * t3
+    J[:, 2, 2] = 2 * l1 * t3 - 2 * l0 * t0
+    J[:, 0, 3] = 2 * l2 * t1 - 2 * l1 * t0
+    J[:, 1, 3] = 2 * l2 * t2 + 2 * l0 * t0
+    J[:, 2, 3] = 2 * l0 * t1 + 2 * l1 * t2 + 4 * l2 * t3
     return J
 
 
