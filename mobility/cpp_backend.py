@@ -42,6 +42,23 @@ def trans_times_force_two(r_vectors, v1, v2, eta, a, wall=True):
     return _ext.product_two(r_vectors, np.ravel(v1), np.ravel(v2), float(eta), float(a), bool(wall))
 
 
+def has_grand_product():
+    """True when the built extension has the one-pass grand product (rebuild with setup.py build_ext otherwise)."""
+    return hasattr(_ext, 'grand_product')
+
+
+def grand_product(r_vectors, forces, torques, eta, a, periodic_length=(0, 0, 0), wall=True):
+    """``(U, W)`` (3N,) each: the grand mobility times ``[forces; torques]`` in one pass over the pairs.
+
+    ``U = M_UF F + M_UT T``, ``W = M_WF F + M_WT T`` of blobs of one radius ``a`` (a number), above the wall
+    (``wall``: Rotne-Prager-Blake with the Swan-Brady rotation couplings) or in free space (RPY), with the
+    periodic images of ``periodic_length`` as the other products take them.  The same numbers as the four
+    coupling products summed, to rounding.
+    """
+    return _ext.grand_product(r_vectors, np.ravel(forces), np.ravel(torques), float(eta), float(a),
+                              _L(periodic_length), bool(wall))
+
+
 def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):
     return _ext.source_target(source_r, target_r, np.ravel(force), np.ravel(radius_source),
                               np.ravel(radius_target), float(eta), _L(periodic_length), wall)

@@ -321,7 +321,8 @@ class DirectMobility(BlobMobility):
 
     Every product is the backend's function of ``mobility.backends`` called with this object's viscosity,
     radius and box (the same numbers as the published function forms).  ``paired_velocities`` is one pass
-    over the pairs for the C++ wall and free-space products of one radius without periodic images;
+    over the pairs for the C++ wall and free-space products of one radius without periodic images, and so is
+    ``product`` with any periodic box (all four couplings: ``grand_product_in_one_pass``);
     ``cross_blocks`` and ``near_field_domain`` are the C++ backend's (wall and free space).
     """
 
@@ -348,6 +349,16 @@ class DirectMobility(BlobMobility):
             if getattr(module, 'has_product_two', lambda: False)():  # an extension built before it: no pairing
                 self._pair = module.trans_times_force_two
         self.pairs_in_one_pass = self._pair is not None
+        # the grand product in one pass over the pairs: C++, wall or free space, one radius (any periodic box).
+        # product_in_one_pass stays False: the rollers, which need U only, take fewer instructions from the two
+        # couplings trans_times_force + trans_times_torque than from the one-pass U and W (doc/performance.md)
+        self._grand = None
+        if (backend == 'C++' and self.domain != 'free_surface' and precision == 'double'
+                and np.ndim(self.blob_radius) == 0):
+            module = _direct.load_backend('C++')
+            if getattr(module, 'has_grand_product', lambda: False)():  # an extension built before it: four products
+                self._grand = module.grand_product
+        self.grand_product_in_one_pass = self._grand is not None
 
     def replace(self, eta=None, blob_radius=None, periodic_length=None):
         twin = super().replace(eta, blob_radius, periodic_length)
@@ -364,6 +375,18 @@ class DirectMobility(BlobMobility):
         if kind not in self._couplings:
             self._couplings[kind] = _direct.blob_product(self.name, kind)
         return self._couplings[kind](r_vectors, vector, self.eta, self.blob_radius, self.periodic_length)
+
+    def product(self, r_vectors, forces=None, torques=None):
+        """``(U, W)`` of forces and torques; one pass over the pairs for all four couplings where
+        ``grand_product_in_one_pass`` (the C++ wall and free-space products of one radius), else the four
+        couplings summed."""
+        if self._grand is None or (forces is None and torques is None):
+            return super().product(r_vectors, forces, torques)
+        n = np.size(r_vectors) // 3
+        forces = np.zeros(3 * n) if forces is None else forces
+        torques = np.zeros(3 * n) if torques is None else torques
+        return self._grand(r_vectors, forces, torques, self.eta, self.blob_radius, self.periodic_length,
+                           self.domain == 'single_wall')
 
     def paired_velocities(self, r_vectors, forces_1, forces_2):
         if self._pair is None:

@@ -121,6 +121,36 @@ py::tuple product_two(const Array &r, const Array &v1, const Array &v2, double e
   return py::make_tuple(flat_result(ux, uy, uz, b.damping, factor), flat_result(wx, wy, wz, c.damping, factor));
 }
 
+// (U, W) = M [F; T] (3N,) each, blobs of radius a, in one pass over the pairs (grand_product_symmetric): U in
+// units of 1/(8 pi eta a) and W of 1/(8 pi eta a^2) after the torques are divided by a.
+py::tuple grand_product(const Array &r, const Array &forces, const Array &torques, double eta, double a,
+                        const Array &periodic_length, bool wall) {
+  if (!(a > 0.0) || !(eta > 0.0)) throw std::invalid_argument("blob radius and viscosity must be positive");
+  const std::size_t n = count_rows(r, "r_vectors");
+  const Blobs f = make_blobs(r, &forces, std::vector<double>(n, a), a, wall, "r_vectors");
+  Blobs g = make_blobs(r, &torques, std::vector<double>(n, a), a, wall, "r_vectors");
+  for (std::size_t i = 0; i < n; ++i) g.vx[i] /= a, g.vy[i] /= a, g.vz[i] /= a;
+  const std::vector<double> L = periodic_lengths(periodic_length, a, wall);
+  const bool periodic = L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0;
+  std::vector<double> out;
+  {
+    py::gil_scoped_release release;
+    if (wall && periodic)
+      RMB_SIMD_DISPATCH(grand_product_symmetric<true, true>(f, g, L, out));
+    else if (wall)
+      RMB_SIMD_DISPATCH(grand_product_symmetric<true, false>(f, g, L, out));
+    else if (periodic)
+      RMB_SIMD_DISPATCH(grand_product_symmetric<false, true>(f, g, L, out));
+    else
+      RMB_SIMD_DISPATCH(grand_product_symmetric<false, false>(f, g, L, out));
+  }
+  std::vector<double> ux(out.begin(), out.begin() + n), uy(out.begin() + n, out.begin() + 2 * n),
+      uz(out.begin() + 2 * n, out.begin() + 3 * n), wx(out.begin() + 3 * n, out.begin() + 4 * n),
+      wy(out.begin() + 4 * n, out.begin() + 5 * n), wz(out.begin() + 5 * n, out.end());
+  const double factor = 1.0 / (8.0 * M_PI * eta * a);
+  return py::make_tuple(flat_result(ux, uy, uz, f.damping, factor), flat_result(wx, wy, wz, f.damping, factor / a));
+}
+
 Array product(const std::string &kind, const Array &r, const Array &vector, double eta, double a,
               const Array &periodic_length, bool wall, const std::string &precision) {
   return wall ? blob_product<true>(kind, r, vector, eta, a, periodic_length, precision)
@@ -269,6 +299,10 @@ PYBIND11_MODULE(_mobility_cpp, m) {
   m.def("product_two", &product_two, py::arg("r_vectors"), py::arg("v1"), py::arg("v2"), py::arg("eta"),
         py::arg("a"), py::arg("wall"),
         "trans_times_force of two vectors (3N,) each in one pass over the pairs (no periodic images): (M v1, M v2).");
+  m.def("grand_product", &grand_product, py::arg("r_vectors"), py::arg("forces"), py::arg("torques"), py::arg("eta"),
+        py::arg("a"), py::arg("periodic_length"), py::arg("wall"),
+        "(U, W) = grand mobility times [forces; torques] (3N,) each, blobs of one radius a, wall or free space, "
+        "periodic images as product takes them: all four couplings in one pass over the pairs.");
   register_dense_matrices(m);
   m.def("max_threads", &rmb::max_threads, "Number of OpenMP threads the kernels use.");
 }
