@@ -53,10 +53,11 @@ CHILD = textwrap.dedent('''
 def scenes():
     """{name: (r (N, 3), F (3N,), T (3N,), periodic_length (3,), wall)}: blob counts that are not multiples of
     the vector widths, blobs close to the wall (z = 1.05 a) and below their radius (z = 0.5 a), overlapping
-    blobs and a coincident pair, in free space and above the wall, with and without periodic images."""
+    blobs and a coincident pair, in free space and above the wall, with and without periodic images; 700 blobs
+    run the threaded loop (per-thread sums, OMP_NUM_THREADS=2 in the child)."""
     rng = np.random.default_rng(46)
     out = {}
-    for n in (1, 2, 7, 19, 44, 97):
+    for n in (1, 2, 7, 19, 44, 97, 700):  # 700: enough pairs for the threaded loop (per-thread sums)
         r = np.column_stack([rng.uniform(0, 5, n), rng.uniform(0, 5, n), rng.uniform(0.4, 3, n)])
         if n >= 7:
             r[1] = r[0] + [0.2, 0.1, 0.05]  # overlapping
