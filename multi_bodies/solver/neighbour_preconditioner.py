@@ -462,8 +462,8 @@ class NeighbourPreconditioner(LinearMap):
             self.second_order.append((blob_rows, body_rows, np.matmul(Q_type[coupled], G_type[coupled]),
                                       np.matmul(V_type[coupled], G_type[coupled])))
 
-    # What it shares with its base, named (no attribute forwarding): where it was built and the base's
-    # block-diagonal Cholesky factors, which Lanczos uses unless a noise factor of its own is given
+    # What it shares with its base, named (no attribute forwarding): where it was built, its bodies, and the
+    # base's block-diagonal Cholesky factors, which Lanczos uses unless a noise factor of its own is given
     # (``lanczos_preconditioner incomplete_cholesky`` sets ``noise_factor``).
     noise_factor = None
 
@@ -472,8 +472,16 @@ class NeighbourPreconditioner(LinearMap):
         return self.base.configuration
 
     @property
+    def body_arrays(self):
+        return self.base.body_arrays
+
+    @property
     def cholesky_factors(self):
         return self.base.cholesky_factors
+
+    @property
+    def inverse_cholesky_factors(self):
+        return self.base.inverse_cholesky_factors
 
     def L_dot(self, vector):
         return self.base.L_dot(vector)
