@@ -34,6 +34,17 @@ from multi_bodies.files.input_options import DEFAULTS
 from multi_bodies.solver.solves import Solver
 
 
+
+def in_periodic_box(locations, periodic_length):
+    """The published ``put_r_vecs_in_periodic_box``: (N, 3) positions moved by whole periods along each periodic
+    axis into [0, L] (a coordinate below 0 by whole periods up to [0, L); one above L down to (0, L]); a copy."""
+    r = np.array(locations, dtype=float).reshape(-1, 3)
+    for axis, L in enumerate(np.asarray(periodic_length, dtype=float).reshape(3)):
+        if L > 0:
+            x = r[:, axis]
+            x += L * np.where(x < 0, np.ceil(-x / L), np.where(x > L, -np.ceil((x - L) / L), 0.0))
+    return r
+
 class Lub_Solver:
     """Lubrication-corrected hydrodynamics of spheres of radius ``a`` above a wall (the published driver API).
 
@@ -152,8 +163,8 @@ class Lub_Solver:
     def _force_torque_at(self, FT_calc):
         def force_torque_at(locations, orientations):
             self._place(locations, orientations)
-            r_vectors = np.concatenate([b.get_r_vectors() for b in self.bodies]) if len(self.bodies) else \
-                np.zeros((0, 3))
+            # as published: FT_calc gets the sphere centres put in the periodic box (put_r_vecs_in_periodic_box)
+            r_vectors = in_periodic_box(self.locations(), self.periodic_length)
             return np.asarray(FT_calc(self.bodies, r_vectors), dtype=float).reshape(-1, 6)
         return force_torque_at
 

@@ -238,3 +238,28 @@ def test_quaternion_square_root_of_the_published_class():
     root = q.square_root()
     np.testing.assert_allclose((root * root).entries, q.entries, atol=1e-14)
     np.testing.assert_allclose(root.entries, Quaternion.from_rotation([0.15, -0.6, 1.25]).entries, atol=1e-14)
+
+
+def test_forces_see_the_centres_in_the_periodic_box_as_published():
+    """``Update_Bodies_Trap`` gives FT_calc the sphere centres put in the periodic box, as the published
+    ``put_r_vecs_in_periodic_box`` loop does (written out here): whole periods added below 0, taken off above L,
+    a coordinate on a box face kept; the non-periodic axis untouched."""
+    import numpy as np
+    from Lub_Solver import in_periodic_box
+
+    def published_loop(r_vecs_np, L):
+        r_vecs = np.copy(r_vecs_np)
+        for r_vec in r_vecs:
+            for i in range(3):
+                if L[i] > 0:
+                    while r_vec[i] < 0:
+                        r_vec[i] += L[i]
+                    while r_vec[i] > L[i]:
+                        r_vec[i] -= L[i]
+        return r_vecs
+    L = np.array([3.0, 4.5, 0.0])
+    r = np.random.default_rng(0).uniform(-20.0, 20.0, (500, 3))
+    r[:6, 0] = [0.0, 3.0, 6.0, -3.0, -6.0, 7.5]
+    np.testing.assert_array_equal(in_periodic_box(r, L), published_loop(r, L))
+    assert in_periodic_box(r, L)[1, 0] == 3.0 and in_periodic_box(r, L)[2, 0] == 3.0  # faces kept as published
+    np.testing.assert_array_equal(in_periodic_box(r, np.zeros(3)), r)
