@@ -9,7 +9,7 @@ new long, ...), so a drift in the machine's speed touches both alike.  Printed p
 checkout, and the ratio new / old with the spread of the per-round ratios.
 
 Scenes (the scenes of ``benchmarks/bench_dynamics.py``): ``--bodies`` boomerangs of 15 blobs (blob radius
-0.25) on a square grid of spacing 4 at z = 2.5 with random orientations (seed 1), gravity and the default soft
+0.25; the package's boomerang, arms of 2.1) on a square grid of spacing 4 at z = 2.5 with random orientations (seed 1), gravity and the default soft
 repulsions, ``solver_tolerance 1e-8``, kT = 1, the C++ backends; schemes ``deterministic_adams_bashforth``
 and ``stochastic_Slip_Trapz``.
 
@@ -33,11 +33,11 @@ THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'
 
 
 def boomerang_blobs():
-    """(15, 3) blob positions of the published boomerang (two arms of 7 blobs, spacing 0.525, at right angles)."""
-    arm = 0.525 * np.arange(1, 8)
-    blobs = [[0.0, 0.0, 0.0]] + [[x, 0.0, 0.0] for x in arm] + [[0.0, y, 0.0] for y in arm]
-    blobs = np.array(blobs)
-    return blobs - blobs.mean(axis=0)
+    """(15, 3) blob positions of the benchmark boomerang (``multi_bodies.files.structure_generators.boomerang``,
+    the scenes of bench_dynamics.py and trace_step.py), made once by the new checkout and read by both."""
+    sys.path.insert(0, REPO)
+    from multi_bodies.files.structure_generators import boomerang
+    return np.asarray(boomerang(), dtype=float)
 
 
 def write_scene(folder, bodies, scheme, steps):
