@@ -198,8 +198,8 @@ def draw(results, path):
             ax.annotate(label.replace('spectral ', ''), (seconds, max(err, 1e-7)), textcoords='offset points',
                         xytext=(5, 3), fontsize=8)
         ax.axhline(result['notes']['model_difference'], color='grey', ls=':', lw=1)
-        ax.text(ax.get_xlim()[0], result['notes']['model_difference'], ' blob models differ', fontsize=7,
-                va='bottom', color='grey')
+        ax.text(ax.get_xlim()[1], result['notes']['model_difference'], 'blob models differ ', fontsize=7,
+                va='bottom', ha='right', color='grey')  # at the right end: the ring-1 point sits near the left
         ax.set_xlabel('seconds per product (this machine)')
         ax.set_ylabel('relative error against the periodic limit')
         ax.set_title(title, fontsize=10)
