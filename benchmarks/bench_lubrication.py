@@ -136,9 +136,12 @@ def breakdown_rows(side, repeats):
     def builtin(*names):  # own time of compiled functions whose name holds one of names
         return sum(value[2] for key, value in stats.items() if key[0] == '~' and any(n in key[2] for n in names))
     seconds = {'assembly': sum(value[3] for key, value in stats.items() if key[2] == 'resistance_matrices'),
-               'sparse LU': builtin('gstrf'),
-               'far field': builtin('_mobility_cpp.product'),
-               'sparse products, solves': builtin('csr_matvec', 'bsr_matvec', "'solve' of 'SuperLU'")}
+               # the factorisations: the block LDL^T (factor, refactor, ordering) or SuperLU's gstrf where not built
+               'sparse LU': builtin('gstrf', '_block_ldlt_cpp.factorise', '_block_ldlt_cpp.ordering_only'),
+               # the far field: the one-pass grand product, or the coupling products where it is not built
+               'far field': builtin('_mobility_cpp.product', '_mobility_cpp.grand_product'),
+               'sparse products, solves': builtin('csr_matvec', 'bsr_matvec', "'solve' of 'SuperLU'",
+                                                  '_block_ldlt_cpp.solve')}
     seconds['rest (Python)'] = total - sum(seconds.values())
     return locations.shape[0], t_step, {part: value / repeats for part, value in seconds.items()}
 
@@ -147,8 +150,9 @@ def main_breakdown(args):
     """For each side and each assembly path (one after the other): the assembly alone (median of 10 or more
     calls, unprofiled), the median step, and the step's parts under cProfile (seconds per step)."""
     paths = ('python', 'compiled') if args.assembly == 'both' else (args.assembly,)
-    print('%6s %9s %12s %9s %10s %10s %10s %12s %14s' % ('N', 'assembly', 'assembly ms', 'step s', 'assembly',
+    print('%6s %9s %12s %9s %10s %10s %10s %12s %14s' % ('N', 'assembly', 'assembly ms', 'step ms', 'assembly',
                                                          'sparse LU', 'far field', 'sparse/solves', 'rest (Python)'))
+    print('(the parts: milliseconds per step under cProfile, which slows the Python parts)')
     for side in args.sides:
         locations = lattice(side)
         for path in paths:
@@ -159,9 +163,9 @@ def main_breakdown(args):
             t_assembly, _ = median_time(lambda: assembly.resistance_matrices(locations, RADIUS, ETA),
                                         max(10, args.repeats))
             n, t_step, parts = breakdown_rows(side, args.repeats)
-            print('%6d %9s %12.2f %9.3f %10.3f %10.3f %10.3f %12.3f %14.3f' % (
-                n, path, 1e3 * t_assembly, t_step, parts['assembly'], parts['sparse LU'], parts['far field'],
-                parts['sparse products, solves'], parts['rest (Python)']))
+            print('%6d %9s %12.2f %9.2f %10.2f %10.2f %10.2f %12.2f %14.2f' % (
+                n, path, 1e3 * t_assembly, 1e3 * t_step, 1e3 * parts['assembly'], 1e3 * parts['sparse LU'],
+                1e3 * parts['far field'], 1e3 * parts['sparse products, solves'], 1e3 * parts['rest (Python)']))
 
 
 def kept_rows(side, tolerance, dt, omega, steps):
