@@ -26,7 +26,7 @@ import numpy as np
 
 from body.geometry import rotation_matrices
 from multi_bodies.solver.body_solver import MobilityProblem
-from multi_bodies.solver.linear_map import LinearMap
+from multi_bodies.solver.linear_map import WrapsPreconditioner
 
 
 def body_turns(built_at, configuration):
@@ -36,7 +36,7 @@ def body_turns(built_at, configuration):
     return np.matmul(after, np.swapaxes(before, 1, 2))
 
 
-class CorotatedPreconditioner(LinearMap):
+class CorotatedPreconditioner(WrapsPreconditioner):
     """``D P(q^build) D^T``: the preconditioner ``base`` built at ``q^build``, turned to a problem's orientations.
 
     Parameters
@@ -58,25 +58,11 @@ class CorotatedPreconditioner(LinearMap):
         self.num_blob_unknowns = 3 * self.blob_turns.shape[0]
         self.size = self.num_blob_unknowns + 6 * self.turns.shape[0]
 
-    # Named, not forwarded: where the base was built and the factors of its noise (the Lanczos factor is the
-    # base's: D L D^T is not what Lanczos needs; the solves apply the base's factor to the turned problem only
-    # through ``operator``).
-    @property
-    def configuration(self):
-        return self.base.configuration
-
+    # The factor of its noise is the base's (D L D^T is not what Lanczos needs; the solves apply the base's factor
+    # to the turned problem only through ``operator``).
     @property
     def noise_factor(self):
         return getattr(self.base, 'noise_factor', None) or self.base
-
-    def L_dot(self, vector):
-        return self.base.L_dot(vector)
-
-    def L_inv_dot(self, vector):
-        return self.base.L_inv_dot(vector)
-
-    def L_inv_T_dot(self, vector):
-        return self.base.L_inv_T_dot(vector)
 
     def _turn(self, x, inverse):
         """``D x`` (``inverse``: ``D^T x``) of ``x = [blob vectors (3N); body vectors (6 Nb)]``."""

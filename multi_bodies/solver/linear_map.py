@@ -49,3 +49,22 @@ class FunctionMap(LinearMap):
 
     def apply(self, x):
         return self.function(x)
+
+
+class WrapsPreconditioner(LinearMap):
+    """A preconditioner built on another (``self.base``, the block-diagonal one) that shares what the solves and
+    the noise read of it, named rather than forwarded: where it was built (``configuration``) and the Lanczos
+    factors ``L_dot``, ``L_inv_dot``, ``L_inv_T_dot`` (the base's block-diagonal Cholesky factors)."""
+
+    @property
+    def configuration(self):
+        return self.base.configuration
+
+    def L_dot(self, vector):
+        return self.base.L_dot(vector)
+
+    def L_inv_dot(self, vector):
+        return self.base.L_inv_dot(vector)
+
+    def L_inv_T_dot(self, vector):
+        return self.base.L_inv_T_dot(vector)

@@ -36,7 +36,7 @@ preconditioner changes, and GMRES converges to the same solution within ``solver
 import numpy as np
 
 from multi_bodies.solver.body_solver import blob_mobility, blob_radius_argument
-from multi_bodies.solver.linear_map import LinearMap
+from multi_bodies.solver.linear_map import WrapsPreconditioner
 
 try:
     from multi_bodies.solver import _preconditioner_cpp
@@ -324,7 +324,7 @@ class _ObstacleCoarseCorrection:
             z[body_rows] += K.T @ correction
 
 
-class NeighbourPreconditioner(LinearMap):
+class NeighbourPreconditioner(WrapsPreconditioner):
     """The base block-diagonal preconditioner with the couplings of neighbouring bodies (module docstring).
 
     Parameters
@@ -468,10 +468,6 @@ class NeighbourPreconditioner(LinearMap):
     noise_factor = None
 
     @property
-    def configuration(self):
-        return self.base.configuration
-
-    @property
     def body_arrays(self):
         return self.base.body_arrays
 
@@ -482,15 +478,6 @@ class NeighbourPreconditioner(LinearMap):
     @property
     def inverse_cholesky_factors(self):
         return self.base.inverse_cholesky_factors
-
-    def L_dot(self, vector):
-        return self.base.L_dot(vector)
-
-    def L_inv_dot(self, vector):
-        return self.base.L_inv_dot(vector)
-
-    def L_inv_T_dot(self, vector):
-        return self.base.L_inv_T_dot(vector)
 
     def _blockwise(self, vector, factors, transpose=False, lower=False):
         return self.base._blockwise(vector, factors, transpose=transpose, lower=lower)
