@@ -35,7 +35,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from multi_bodies.ensembles import ensemble_runner as runner  # noqa: E402
 from multi_bodies.files.snapshots import read_config_frames  # noqa: E402
-from multi_bodies.run import run_output  # noqa: E402
+from multi_bodies.run import run_loop, run_output  # noqa: E402
 from run_scenes import REPO_ROOT, child_environment, set_options  # noqa: E402
 
 DYNAMIC = str(REPO_ROOT / 'multi_bodies' / 'multi_bodies.py')
@@ -980,7 +980,7 @@ def test_the_time_loop_keeps_the_step_a_signal_stops_at(first, last, n_save, sig
         if step == signal_after:
             stop.signal_number = signal.SIGTERM
 
-    loop = run_output.TimeLoop(first, last, n_save)
+    loop = run_loop.TimeLoop(first, last, n_save)
     loop.run(grid.append, advance, stop, beside.append)
     assert grid == saved and beside == ([stop_saved] if stop_saved else []) and loop.complete == complete
     assert loop.stopped
@@ -991,8 +991,8 @@ def test_an_interrupted_step_is_kept_as_the_step_before_it():
 
     def advance(step):
         if step == 6:
-            raise run_output.StepInterrupted(completed=False)
-    loop = run_output.TimeLoop(0, 12, 4)
+            raise run_loop.StepInterrupted(completed=False)
+    loop = run_loop.TimeLoop(0, 12, 4)
     loop.run(grid.append, advance, stop, beside.append)
     assert grid == [0, 4] and beside == [6] and loop.step == 6 and not loop.complete
 

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import utils
-from multi_bodies.run import run_output
+from multi_bodies.run import run_loop, run_output
 from multi_bodies.files.input_options import OPTION_TABLE, parse_input_text
 from multi_bodies.files.snapshots import read_clones_file
 
@@ -438,7 +438,7 @@ class _Terminal(io.StringIO):
 def test_progress_on_a_terminal_uses_tqdm_with_rate_and_eta():
     pytest.importorskip('tqdm')
     stream = _Terminal()
-    progress = run_output.Progress('deterministic_forward_euler', 0, 10, stream=stream)
+    progress = run_loop.Progress('deterministic_forward_euler', 0, 10, stream=stream)
     assert progress.bar is not None
     for step in range(4):
         progress.after_step(step, iterations=3)
@@ -451,7 +451,7 @@ def test_progress_on_a_terminal_uses_tqdm_with_rate_and_eta():
 
 def test_progress_in_a_log_writes_lines_between_saves():
     stream = io.StringIO()
-    progress = run_output.Progress('deterministic_forward_euler', 0, 1000, log_interval=0.0, stream=stream)
+    progress = run_loop.Progress('deterministic_forward_euler', 0, 1000, log_interval=0.0, stream=stream)
     progress.at_save(0, 0)
     for step in range(3):
         progress.after_step(step, iterations=2)
