@@ -54,6 +54,8 @@ import math
 
 import numpy as np
 
+from stochastic_forcing.stochastic_forcing import vector_norm
+
 REORTHOGONALISE_AGAIN = 1.0 / math.sqrt(2.0)
 ROUNDING_GUARD = 1e3  # tolerances below ROUNDING_GUARD * eps (2.2e-13) are checked with a true residual product
 
@@ -80,22 +82,22 @@ def residual_after(r, y, products):
     """``(r - products^T y (n,), its norm)``: the cycle's residual for the coefficients ``y`` (k,) of its kept
     products ``A v_j`` (k, n), with no new product."""
     trial = r - y @ products
-    return trial, float(np.linalg.norm(trial))
+    return trial, float(vector_norm(trial))
 
 
 def orthonormalise_against(basis, w):
     """``(coefficients (j,), |w|, |w'|, w')``: ``w`` (n,) less its projection on the orthonormal rows of
     ``basis`` (j, n) by classical Gram-Schmidt, repeated once when the first pass removed more than
     ``1 - 1/sqrt(2)`` of its norm (DGKS); ``w`` is changed in place and returned as ``w'``."""
-    h0 = float(np.linalg.norm(w))
+    h0 = float(vector_norm(w))
     h = basis @ w
     w -= h @ basis
-    h1 = float(np.linalg.norm(w))
+    h1 = float(vector_norm(w))
     if h1 < REORTHOGONALISE_AGAIN * h0:
         again = basis @ w
         w -= again @ basis
         h += again
-        h1 = float(np.linalg.norm(w))
+        h1 = float(vector_norm(w))
     return h, h0, h1, w
 
 
@@ -127,7 +129,7 @@ class LeastTrueResidual:
         c = float(self.Q[j] @ self.residual)
         self.coefficients.append(c)
         self.residual -= c * self.Q[j]
-        return float(np.linalg.norm(self.residual))
+        return float(vector_norm(self.residual))
 
     def solution(self, k):
         """``y`` (k,) of the least true residual over ``v_0 .. v_{k-1}``."""
@@ -157,7 +159,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
     """
     b = np.asarray(b, dtype=float).reshape(-1)
     n = b.size
-    bnorm = float(np.linalg.norm(b))
+    bnorm = float(vector_norm(b))
     if bnorm == 0.0:
         return np.zeros(n), 0, 0, b.copy()
     if psolve is None:
@@ -171,11 +173,11 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
     else:
         x = np.zeros(n)
         r = b.copy()
-    rnorm = float(np.linalg.norm(r))
+    rnorm = float(vector_norm(r))
     if rnorm < atol:
         return x, 0, 0, r
     ptol_max_factor = 1.0
-    ptol = float(np.linalg.norm(psolve(b))) * min(ptol_max_factor, atol / bnorm)
+    ptol = float(vector_norm(psolve(b))) * min(ptol_max_factor, atol / bnorm)
     trust_update = atol >= ROUNDING_GUARD * eps * bnorm  # the updated residual r - (A V) y is good to rounding
     restart = max(1, min(restart, n))
     V = np.empty((restart + 1, n))
@@ -186,7 +188,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
     breakdown = False
     while True:
         z = np.asarray(psolve(r), dtype=float).reshape(-1)
-        beta = float(np.linalg.norm(z))
+        beta = float(vector_norm(z))
         V[0] = z / beta
         g = [beta]  # the rotated right-hand side of the small least-squares problem
         cosines, sines = [], []
@@ -263,7 +265,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
             # tolerance is so close to rounding that the updated residual, which keeps shrinking where the
             # true one stagnates, could pass it falsely.
             r = initial_residual(matvec, b, x)
-            rnorm = float(np.linalg.norm(r))
+            rnorm = float(vector_norm(r))
         if rnorm <= atol or breakdown or inner == maxiter:
             break
         if presid <= ptol:  # the inner estimate passed but the true residual did not: ask more of the next cycle
