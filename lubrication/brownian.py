@@ -49,6 +49,7 @@ from .problem import LubricationProblem, far_field_mobility, far_field_product, 
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
 PUBLISHED_RFD_DELTA = DEFAULTS.rf_delta  # the RFD step of the published lubrication code: rf_delta's default
+_FAR_FIELDS = {}  # (eta, a, periodic_length, wall, implementation) -> the far-field BlobMobility
 
 
 class LubricationSettings(namedtuple('LubricationSettings', [
@@ -64,8 +65,15 @@ class LubricationSettings(namedtuple('LubricationSettings', [
     """
 
     def far_field(self):
-        """The far-field ``mobility.interface.BlobMobility`` (``lubrication.problem.far_field_mobility``)."""
-        return far_field_mobility(self.eta, self.a, self.periodic_length, self.wall, self.implementation)
+        """The far-field ``mobility.interface.BlobMobility`` (``lubrication.problem.far_field_mobility``), made
+        once per set of its parameters (a step asks for it four times; the mobility holds no configuration)."""
+        key = (float(self.eta), float(self.a), tuple(float(x) for x in np.ravel(self.periodic_length)),
+               bool(self.wall), self.implementation)
+        mobility = _FAR_FIELDS.get(key)
+        if mobility is None:
+            mobility = _FAR_FIELDS[key] = far_field_mobility(self.eta, self.a, self.periodic_length, self.wall,
+                                                             self.implementation)
+        return mobility
 
     def problem(self, locations, matrices=None):
         """The :class:`LubricationProblem` at locations (N, 3)."""
