@@ -107,9 +107,11 @@ class Lub_Solver:
         return np.array([b.orientation.entries for b in self.bodies], dtype=float).reshape(-1, 4)
 
     def _place(self, locations, orientations):
+        locations = np.array(locations, dtype=float).reshape(-1, 3)  # one copy; each body gets its own row
+        orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)  # Quaternion copies its entries
         for b, location, orientation in zip(self.bodies, locations, orientations):
-            b.location = np.array(location, dtype=float)
-            b.orientation = Quaternion(np.array(orientation, dtype=float))
+            b.location = location.copy()
+            b.orientation = Quaternion(orientation)
 
     def Set_R_Mats(self, r_vecs_np=None):
         """Build ``Delta_R``, ``R_Sup``, ``R_MB`` at the bodies' locations (or at r_vecs_np (N, 3))."""
@@ -164,7 +166,7 @@ class Lub_Solver:
         def force_torque_at(locations, orientations):
             self._place(locations, orientations)
             # as published: FT_calc gets the sphere centres put in the periodic box (put_r_vecs_in_periodic_box)
-            r_vectors = in_periodic_box(self.locations(), self.periodic_length)
+            r_vectors = in_periodic_box(locations, self.periodic_length)
             return np.asarray(FT_calc(self.bodies, r_vectors), dtype=float).reshape(-1, 6)
         return force_torque_at
 
