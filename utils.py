@@ -377,3 +377,23 @@ def prepare_script_path(script_file):
     module = sys.modules.get(package)
     if module is not None and not hasattr(module, '__path__'):
         del sys.modules[package]
+
+
+def terminal_progress_bar(stream, total, unit, **options):
+    """A tqdm bar of ``total`` ``unit``s on ``stream`` when it is a terminal and tqdm is installed, else None
+    (progress then goes to ``stream`` as plain lines: :func:`write_progress_line`)."""
+    if not getattr(stream, 'isatty', lambda: False)():
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, unit=unit, file=stream, dynamic_ncols=True, **options)
+
+
+def write_progress_line(bar, stream, text):
+    """One line of progress: through the bar (kept below the line) when there is one, else printed."""
+    if bar is not None:
+        bar.write(text, file=stream)
+    else:
+        print(text, file=stream, flush=True)

@@ -37,6 +37,7 @@ import traceback
 
 
 from mobility.threads import available_cores
+import utils
 from utils import UserInputError
 # The plan and manifest (ensemble_plan); re-exported here for the callers of the runner.
 from multi_bodies.ensembles.ensemble_plan import LOCK_NAME, LOCK_WRITE_SECONDS  # noqa: F401
@@ -207,19 +208,10 @@ class EnsembleProgress:
         self.start = time.perf_counter()
         self.last_line = -float('inf')
         self.counts = (0, 0, 0)
-        self.bar = None
-        if getattr(self.stream, 'isatty', lambda: False)():
-            try:
-                from tqdm import tqdm
-                self.bar = tqdm(total=total, unit='replica', file=self.stream, dynamic_ncols=True)
-            except ImportError:
-                self.bar = None
+        self.bar = utils.terminal_progress_bar(self.stream, total, 'replica')
 
     def write(self, text):
-        if self.bar is not None:
-            self.bar.write(text, file=self.stream)
-        else:
-            print(text, file=self.stream, flush=True)
+        utils.write_progress_line(self.bar, self.stream, text)
 
     def line(self):
         if self.total == 0:

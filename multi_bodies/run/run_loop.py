@@ -338,20 +338,10 @@ class Progress:
         self.log_interval = float(log_interval)
         self.start = self.mark = self.last_line = time.perf_counter()
         self.steps_since, self.iterations_since = 0, 0
-        self.bar = None
-        if getattr(self.stream, 'isatty', lambda: False)():
-            try:
-                from tqdm import tqdm
-                self.bar = tqdm(total=max(0, last_step - first_step), unit='step', file=self.stream,
-                                dynamic_ncols=True, leave=False)
-            except ImportError:
-                self.bar = None
+        self.bar = utils.terminal_progress_bar(self.stream, max(0, last_step - first_step), 'step', leave=False)
 
     def _write(self, text):
-        if self.bar is not None:
-            self.bar.write(text, file=self.stream)
-        else:
-            print(text, file=self.stream, flush=True)
+        utils.write_progress_line(self.bar, self.stream, text)
 
     def after_step(self, step, iterations=0, invalid=0):
         """Called after every step ``step`` (0-based index of the step just done)."""
