@@ -23,6 +23,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -33,10 +34,14 @@ using IndexArray = py::array_t<std::int64_t, py::array::c_style | py::array::for
 
 namespace {
 
+// A table read in place from the arrays of lubrication.compiled._tables (kept alive by the Array handles; the
+// call that makes the Model holds them, so the data outlive the computation, GIL released or not): no copy per
+// assembly.
 struct Table {
-  std::vector<double> x, values;
-  long k = 0;
-  long n() const { return static_cast<long>(x.size()); }
+  Array x_array, values_array;
+  const double *x = nullptr, *values = nullptr;
+  long size = 0, k = 0;
+  long n() const { return size; }
 };
 
 Table make_table(const Array &x, const Array &values, long k, const char *name) {
@@ -45,8 +50,9 @@ Table make_table(const Array &x, const Array &values, long k, const char *name) 
                                 std::to_string(k) + ") with n >= 2");
   Table t;
   t.k = k;
-  t.x.assign(x.data(), x.data() + x.shape(0));
-  t.values.assign(values.data(), values.data() + values.size());
+  t.size = static_cast<long>(x.shape(0));
+  t.x_array = x, t.values_array = values;
+  t.x = t.x_array.data(), t.values = t.values_array.data();
   return t;
 }
 
@@ -54,7 +60,7 @@ Table make_table(const Array &x, const Array &values, long k, const char *name) 
 // x[-1] the last row (above = true), else y_L + (y_R - y_L) / (x_R - x_L) * (p - x_L), x_L < p <= x_R.
 bool interpolate(const Table &t, double p, double *out) {
   const long n = t.n();
-  const long upper = std::lower_bound(t.x.begin(), t.x.end(), p) - t.x.begin();
+  const long upper = std::lower_bound(t.x, t.x + n, p) - t.x;
   if (upper == 0 || upper == n) {
     const double *row = &t.values[(upper == 0 ? 0 : n - 1) * t.k];
     for (long c = 0; c < t.k; ++c) out[c] = row[c];
@@ -378,11 +384,15 @@ py::tuple assemble(py::dict tables, const Array &factors, double firm_delta, int
         (p > 0 && (pr[2 * p - 2] > i || (pr[2 * p - 2] == i && pr[2 * p - 1] >= j))))
       throw std::invalid_argument("pairs must hold i < j < N, sorted by i then j");
   }
-  std::vector<double> pair_sup(144 * P), pair_mb(144 * P), diag_sup(36 * n, 0.0), diag_mb(36 * n, 0.0);
+  // storage every entry of which is written below is left uninitialised (no zero fill of ~1 MB per call)
+  const auto uninitialised = [](long size) { return std::unique_ptr<double[]>(new double[std::max(size, 1L)]); };
+  std::unique_ptr<double[]> pair_sup = uninitialised(144 * P), pair_mb = uninitialised(144 * P);
+  std::vector<double> diag_sup(36 * n, 0.0), diag_mb(36 * n, 0.0);
   std::vector<long> row_start(n + 1, 0), block_col(n + 2 * P);
   std::vector<const double *> sup_blocks(n + 2 * P), mb_blocks(n + 2 * P), delta_blocks(n + 2 * P);
   // off-diagonal blocks copied into 6 x 6 storage: (i, j) = rows 0..5, cols 6..11 of the pair block
-  std::vector<double> off_sup(72 * P), off_mb(72 * P), off_delta(72 * P), diag_delta(36 * n);
+  std::unique_ptr<double[]> off_sup = uninitialised(72 * P), off_mb = uninitialised(72 * P),
+                            off_delta = uninitialised(72 * P), diag_delta = uninitialised(36 * n);
   py::tuple result;
   {
     py::gil_scoped_release release;
