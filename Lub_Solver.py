@@ -45,6 +45,14 @@ def in_periodic_box(locations, periodic_length):
             x += L * np.where(x < 0, np.ceil(-x / L), np.where(x > L, -np.ceil((x - L) / L), 0.0))
     return r
 
+def _quaternion_of_row(entries):
+    """A ``Quaternion`` holding ``entries`` (4,) itself (a row of an array made for it), without the constructor's
+    checks and copy: the face places every sphere two or three times a step."""
+    quaternion = Quaternion.__new__(Quaternion)
+    quaternion.entries = entries
+    return quaternion
+
+
 class Lub_Solver:
     """Lubrication-corrected hydrodynamics of spheres of radius ``a`` above a wall (the published driver API).
 
@@ -107,11 +115,13 @@ class Lub_Solver:
         return np.array([b.orientation.entries for b in self.bodies], dtype=float).reshape(-1, 4)
 
     def _place(self, locations, orientations):
-        locations = np.array(locations, dtype=float).reshape(-1, 3)  # one copy; each body gets its own row
-        orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)  # Quaternion copies its entries
-        for b, location, orientation in zip(self.bodies, locations, orientations):
-            b.location = location.copy()
-            b.orientation = Quaternion(orientation)
+        """Move the bodies to locations (N, 3) and orientations (N, 4): one copy of each array, whose rows the bodies
+        get (each body its own row, shared with no other body and not with the caller's arrays)."""
+        locations = np.array(locations, dtype=float).reshape(-1, 3)
+        entries = np.array(orientations, dtype=float).reshape(-1, 4)
+        for b, location, quaternion in zip(self.bodies, locations, entries):
+            b.location = location
+            b.orientation = _quaternion_of_row(quaternion)
 
     def Set_R_Mats(self, r_vecs_np=None):
         """Build ``Delta_R``, ``R_Sup``, ``R_MB`` at the bodies' locations (or at r_vecs_np (N, 3))."""
@@ -120,8 +130,9 @@ class Lub_Solver:
         self._matrices_at = locations.copy()
         self.R_Sup, self.R_MB, self.Delta_R = self._matrices.R_sup, self._matrices.R_MB, self._matrices.Delta_R
 
-    def _current_matrices(self):
-        locations = self.locations()
+    def _current_matrices(self, locations=None):
+        """The near-field matrices at the bodies' locations (N, 3) (``locations``: read from them already)."""
+        locations = self.locations() if locations is None else locations
         if self.Delta_R is None or not np.array_equal(self._matrices_at, locations):
             self.Set_R_Mats()
         return self._matrices
@@ -162,9 +173,12 @@ class Lub_Solver:
         return integrators.torque_from_omega(self._problem(), forces, Om, self.tolerance, None, self.counts)
 
     # -- time steps ------------------------------------------------------------------------------------------
-    def _force_torque_at(self, FT_calc):
+    def _force_torque_at(self, FT_calc, start_locations, start_orientations):
+        """The steps' force function: FT_calc with the bodies moved to the configuration asked, unless they are at
+        it already (the step's start, ``start_locations`` (N, 3) and ``start_orientations`` (N, 4), read from them)."""
         def force_torque_at(locations, orientations):
-            self._place(locations, orientations)
+            if not (np.array_equal(locations, start_locations) and np.array_equal(orientations, start_orientations)):
+                self._place(locations, orientations)
             # as published: FT_calc gets the sphere centres put in the periodic box (put_r_vecs_in_periodic_box)
             r_vectors = in_periodic_box(locations, self.periodic_length)
             return np.asarray(FT_calc(self.bodies, r_vectors), dtype=float).reshape(-1, 6)
@@ -175,10 +189,11 @@ class Lub_Solver:
         self.num_rejections_wall += step.rejected_wall
         self.num_rejections_jump += step.rejected_jump
         if step.rejected_wall or step.rejected_jump:
-            self._place(old_locations, old_orientations)
+            locations, orientations = old_locations, old_orientations
         else:
-            self._place(step.locations, step.orientations)
-        self.Set_R_Mats()
+            locations, orientations = step.locations, step.orientations
+        self._place(locations, orientations)
+        self.Set_R_Mats(locations)  # where the bodies now are
         return step.rejected_wall, step.rejected_jump
 
     def Update_Bodies_Trap(self, FT_calc, Omega=None, Out_Torque=False, Cut_Torque=None):
@@ -189,9 +204,10 @@ class Lub_Solver:
         and the torques used (3N,) as a third value when ``Out_Torque``.
         """
         locations, orientations = self.locations(), self.orientations()
-        step = integrators.trapezoidal_step(self.settings(), locations, orientations, self._force_torque_at(FT_calc),
-                                            self.kT, self.dt, np.random, self.tolerance, Omega, Cut_Torque,
-                                            self._current_matrices(), kept=self.kept_solves())
+        force_torque_at = self._force_torque_at(FT_calc, locations, orientations)
+        step = integrators.trapezoidal_step(self.settings(), locations, orientations, force_torque_at, self.kT, self.dt,
+                                            np.random, self.tolerance, Omega, Cut_Torque,
+                                            self._current_matrices(locations), kept=self.kept_solves())
         rejected = self._finish(step, locations, orientations)
         if Out_Torque:
             torques = np.zeros((len(self.bodies), 3)) if step.torques is None else step.torques
@@ -202,14 +218,15 @@ class Lub_Solver:
         """One Euler-Maruyama step with the RFD drift of M_lub; returns ``(reject_wall, reject_jump)``."""
         locations, orientations = self.locations(), self.orientations()
         step = integrators.euler_maruyama_step(self.settings(), locations, orientations,
-                                               self._force_torque_at(FT_calc), self.kT, self.dt, np.random,
-                                               self.tolerance, matrices=self._current_matrices(),
-                                               kept=self.kept_solves())
+                                               self._force_torque_at(FT_calc, locations, orientations), self.kT,
+                                               self.dt, np.random, self.tolerance,
+                                               matrices=self._current_matrices(locations), kept=self.kept_solves())
         return self._finish(step, locations, orientations)
 
     def Update_Bodies_no_lub(self, FT_calc):
         """One Euler-Maruyama step of the plain RPB model (no lubrication); returns ``(reject_wall, reject_jump)``."""
         locations, orientations = self.locations(), self.orientations()
-        step = integrators.rpb_step(self.settings(), locations, orientations, self._force_torque_at(FT_calc),
-                                    self.kT, self.dt, np.random, self.tolerance)
+        step = integrators.rpb_step(self.settings(), locations, orientations,
+                                    self._force_torque_at(FT_calc, locations, orientations), self.kT, self.dt,
+                                    np.random, self.tolerance)
         return self._finish(step, locations, orientations)

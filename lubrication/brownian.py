@@ -45,7 +45,7 @@ from stochastic_forcing import lanczos_square_root
 from utils import UserInputError
 
 from . import assembly, resistance
-from .problem import LubricationProblem, far_field_mobility, far_field_product, solver_and_tolerance
+from .problem import LubricationProblem, csr_times, far_field_mobility, far_field_product, solver_and_tolerance
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
 PUBLISHED_RFD_DELTA = DEFAULTS.rf_delta  # the RFD step of the published lubrication code: rf_delta's default
@@ -160,7 +160,7 @@ class NearFieldRoot:
 
     def _product(self, x):
         self.products += 1
-        return self.Delta_R @ x
+        return csr_times(self.Delta_R, x)
 
 
 class TransposedLubricationProblem(LinearProblem):
@@ -176,7 +176,7 @@ class TransposedLubricationProblem(LinearProblem):
 
     def matvec(self, x):
         x = np.asarray(x, dtype=float).reshape(-1)
-        return x + self.problem.Delta_R @ self.problem.mobility_product(x)
+        return x + csr_times(self.problem.Delta_R, self.problem.mobility_product(x))
 
     def prepare_rhs(self, rhs):
         return rhs
@@ -194,9 +194,11 @@ class TransposedLubricationProblem(LinearProblem):
             x = np.asarray(x, dtype=float).reshape(-1)
             if forward.factor is None:
                 return x.copy()
+            if not forward.any_isolated:
+                return csr_times(forward.R_MB, forward.factor.solve(x))
             rhs = x.copy()
             rhs[isolated] = 0.0
-            y = forward.R_MB @ forward.factor.solve(rhs)
+            y = csr_times(forward.R_MB, forward.factor.solve(rhs))
             y[isolated] = x[isolated]
             return y
         return FunctionMap(self.size, apply)

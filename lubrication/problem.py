@@ -25,6 +25,24 @@ from utils import UserInputError
 
 from . import assembly, resistance, sparse_factor
 
+try:  # SciPy's own CSR kernel (what ``csr_matrix @ vector`` calls), reached without the operator's argument handling
+    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
+except ImportError:  # pragma: no cover - a SciPy without it: the operator is used
+    _csr_matvec = None
+
+
+def csr_times(matrix, x):
+    """``matrix @ x`` (m,) for a sparse matrix (m, n) and a vector x (n,): for a float64 CSR matrix and a contiguous
+    float64 vector SciPy's kernel is called directly (the same kernel and numbers as ``@``, without its dozen Python
+    calls of argument handling: a Krylov iteration of a step makes several such products); else ``matrix @ x``."""
+    if (_csr_matvec is None or getattr(matrix, 'format', None) != 'csr' or matrix.dtype != np.float64
+            or not isinstance(x, np.ndarray) or x.dtype != np.float64 or x.shape != (matrix.shape[1],)
+            or not x.flags.c_contiguous):
+        return matrix @ x
+    out = np.zeros(matrix.shape[0])
+    _csr_matvec(matrix.shape[0], matrix.shape[1], matrix.indptr, matrix.indices, matrix.data, x, out)
+    return out
+
 
 def far_field_implementation(implementation, wall):
     """The implementation name for ``implementation`` (a backend of the registry that sums blob pairs: 'python',
@@ -60,12 +78,8 @@ def far_field_product(r_vectors, mobility):
 
     def apply(x):
         ft = np.asarray(x, dtype=float).reshape(n, 6)
-        F, T = np.ascontiguousarray(ft[:, :3]).reshape(-1), np.ascontiguousarray(ft[:, 3:]).reshape(-1)
-        U, W = mobility.product(r_vectors, F, T)
-        out = np.empty((n, 6))
-        out[:, :3] = U.reshape(-1, 3)
-        out[:, 3:] = W.reshape(-1, 3)
-        return out.reshape(-1)
+        U, W = mobility.product(r_vectors, ft[:, :3].ravel(), ft[:, 3:].ravel())  # contiguous copies
+        return np.concatenate((U.reshape(n, 3), W.reshape(n, 3)), axis=1).reshape(-1)
     return apply
 
 
@@ -82,6 +96,7 @@ class LubricationPreconditioner(LinearMap):
         size = matrices.R_sup.shape[0]
         self.R_MB = matrices.R_MB
         self.isolated_rows = np.repeat(np.asarray(matrices.isolated, dtype=bool), 6)
+        self.any_isolated = bool(self.isolated_rows.any())  # the masks below are skipped when none is
         # R_sup + s I is symmetric positive definite: LDL^T without pivoting (SuperLU where not built)
         self.factor = sparse_factor.factorise(matrices.R_sup, float(shift), block=6) if size else None
         self.size = size
@@ -90,7 +105,9 @@ class LubricationPreconditioner(LinearMap):
         x = np.asarray(x, dtype=float).reshape(-1)
         if self.factor is None:
             return x.copy()
-        rhs = self.R_MB @ x
+        rhs = csr_times(self.R_MB, x)
+        if not self.any_isolated:
+            return self.factor.solve(rhs)
         rhs[self.isolated_rows] = 0.0
         y = self.factor.solve(rhs)
         y[self.isolated_rows] = x[self.isolated_rows]
@@ -141,7 +158,7 @@ class LubricationProblem(LinearProblem):
     def matvec(self, x):
         """``(I + M Delta_R) x`` for x (6N,)."""
         x = np.asarray(x, dtype=float).reshape(-1)
-        return x + self.mobility_product(self.Delta_R @ x)
+        return x + self.mobility_product(csr_times(self.Delta_R, x))
 
     def rhs(self, force_torque=None, velocity=None):
         """``X + M F`` (6N,): force_torque F (N, 6) or (6N,) [F T per sphere], velocity X likewise (either None)."""
