@@ -145,3 +145,56 @@ def test_law_with_a_bad_cutoff_is_refused():
     law.cutoff = -1.0
     with pytest.raises(UserInputError, match='cutoff'):
         mbf.blob_blob_force_calculator('python', pair_force=law)
+
+
+# ------------------------------------------------------------------ body pairs with a cutoff
+def rollers_law(r, repulsion_strength=1.0, debye_length=1.0, **kw):
+    """The spectral roller example's body law: Yukawa-like push along the line of centres, none beyond 3.5 R
+    (R = 1.0155), no torque."""
+    R = 1.0155
+    distance = np.maximum(np.linalg.norm(r, axis=-1), np.finfo(float).eps)
+    magnitude = np.where(distance > 2 * R, (repulsion_strength / debye_length) * np.exp(-(distance - 2 * R) /
+                                                                                         debye_length),
+                         repulsion_strength / debye_length)
+    magnitude = np.where(distance < 3.5 * R, magnitude, 0.0)
+    force = -(magnitude / distance)[..., None] * r
+    return force, np.zeros_like(force)
+
+
+@pytest.mark.parametrize('periodic_length', [(0.0, 0.0, 0.0), (40.0, 40.0, 0.0), (40.0, 9.0, 0.0)])
+def test_body_pairs_with_a_cutoff_equal_every_pair(periodic_length):
+    """A body law with an attribute ``cutoff`` (doc/overrides.md): the user hook visits only the pairs within it
+    (every r the law receives is shorter), and the sum equals the all-pairs sum (the law is zero beyond; the
+    pairs are taken in the all-pairs order, so to the last bit), also in periodic boxes with a side shorter
+    than three cutoffs; Newton's third law holds."""
+    from multi_bodies.solver.user_hooks import PhysicsHooks
+    seen = []
+
+    def law(r, **kw):
+        seen.append(np.linalg.norm(r, axis=-1).max(initial=0.0))
+        return rollers_law(r, **kw)
+    law.cutoff = 3.5 * 1.0155
+    rng = np.random.default_rng(7)
+    locations = rng.uniform(0, 1, size=(300, 3)) * np.array([40.0, 40.0, 3.0])
+    L = np.array(periodic_length)
+    keywords = dict(repulsion_strength=0.3, debye_length=0.5, periodic_length=L)
+    near = PhysicsHooks._body_pairs_adapter(law, False)(locations, None, **keywords)
+    assert max(seen) <= law.cutoff
+    every = mbf.calc_body_body_forces_torques(locations, pair_force_torque=rollers_law, **keywords)
+    assert np.max(np.abs(every)) > 0.1            # pushes within the cutoff
+    np.testing.assert_array_equal(near, every)
+    assert np.max(np.abs(near[0::2].sum(axis=0))) < 1e-12 * np.max(np.abs(near))
+
+
+def test_body_law_with_a_bad_cutoff_is_refused():
+    from multi_bodies.solver.user_hooks import PhysicsHooks
+
+    def law(r, **kw):
+        return rollers_law(r, **kw)
+    law.cutoff = 0.0
+    with pytest.raises(UserInputError, match='cutoff'):
+        PhysicsHooks._body_pairs_adapter(law, False)
+    law.cutoff = lambda **kw: float('nan')
+    hook = PhysicsHooks._body_pairs_adapter(law, False)
+    with pytest.raises(UserInputError, match='cutoff'):
+        hook(np.zeros((2, 3)), None, periodic_length=np.zeros(3))

@@ -180,16 +180,32 @@ def body_body_potential(r, quaternion_i=None, quaternion_j=None, repulsion_stren
     return eps * np.exp(-distance / b) / distance
 
 
-def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), pair_force_torque=None, **kwargs):
+def calc_body_body_forces_torques(locations, periodic_length=(0.0, 0.0, 0.0), pair_force_torque=None, cutoff=None,
+                                  **kwargs):
     """Force and torque of all body pairs (the ``body_body_force_torque`` hook), shape (2 Nb, 3).
 
     Body j receives the opposite of the force and torque body i receives from
     the pair.  ``pair_force_torque`` (default: this module's
-    ``body_body_force_torque``) is vectorised over pairs.
+    ``body_body_force_torque``) is vectorised over pairs.  ``cutoff`` (a length,
+    or None: every pair): the law vanishes beyond it (its ``cutoff`` attribute,
+    doc/overrides.md), so only the pairs closer than it are visited
+    (:func:`pairs_within`, O(Nb)); the sum is the all-pairs one over them.
     """
     pair_force_torque = body_body_force_torque if pair_force_torque is None else pair_force_torque
     locations = np.asarray(locations, dtype=float).reshape(-1, 3)
     nb = locations.shape[0]
+    if cutoff is not None:
+        i_index, j_index = pairs_within(locations, cutoff, periodic_length)
+        result = np.zeros((nb, 2, 3))
+        if i_index.size == 0:
+            return result.reshape(2 * nb, 3)
+        r = minimum_image(locations[j_index] - locations[i_index], periodic_length)
+        force, torque = pair_force_torque(r, periodic_length=periodic_length, **kwargs)
+        np.add.at(result[:, 0], i_index, force)
+        np.add.at(result[:, 0], j_index, -force)
+        np.add.at(result[:, 1], i_index, torque)
+        np.add.at(result[:, 1], j_index, -torque)
+        return result.reshape(2 * nb, 3)
     r = minimum_image(locations[None, :, :] - locations[:, None, :], periodic_length)
     upper = np.triu(np.ones((nb, nb), dtype=bool), k=1)
     force, torque = pair_force_torque(r[upper], periodic_length=periodic_length, **kwargs)
@@ -269,37 +285,58 @@ def default_blob_blob_cutoff(blob_radius=DEFAULTS.blob_radius, debye_length=DEFA
     return 2.0 * float(blob_radius) + 30.0 * float(debye_length)
 
 
+def pairs_within(positions, cutoff, periodic_length=(0.0, 0.0, 0.0)):
+    """``(i, j)``: the index pairs (i < j, each (P,) int) of the points ``positions`` (N, 3) closer than ``cutoff``
+    (minimum image on the periodic axes), found in O(N) by ``scipy.spatial.cKDTree`` on a box that is periodic on
+    the periodic axes and, on the others, wider than the points' extent plus the cutoff (so no pair wraps there)."""
+    from scipy.spatial import cKDTree
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    L = np.asarray(periodic_length, dtype=float).reshape(3)
+    shifted = positions.copy()
+    box = np.empty(3)
+    for d in range(3):
+        if L[d] > 0:
+            shifted[:, d] = np.mod(shifted[:, d], L[d])
+            shifted[:, d][shifted[:, d] >= L[d]] = 0.0
+            box[d] = L[d]
+        else:
+            shifted[:, d] -= shifted[:, d].min()
+            box[d] = shifted[:, d].max() + 2.0 * cutoff + 1.0
+    pairs = cKDTree(shifted, boxsize=box).query_pairs(float(cutoff), output_type='ndarray')
+    if pairs.size == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]   # the all-pairs order (i, then j)
+    return pairs[:, 0], pairs[:, 1]
+
+
+def cutoff_length(cutoff, keywords, name):
+    """The length of a pair law's ``cutoff`` attribute (a positive length, or a function of the physics keywords
+    returning one); None for a law without one.  ``name``: the law, for the one-line error."""
+    if cutoff is None:
+        return None
+    length = cutoff(**keywords) if callable(cutoff) else cutoff
+    if isinstance(length, bool) or not isinstance(length, (int, float, np.floating, np.integer)) \
+            or not (np.isfinite(length) and length > 0):
+        raise UserInputError('%s.cutoff must be a positive length (or a function of the physics keywords returning '
+                             'one), got %r' % (name, length))
+    return float(length)
+
+
 def calc_blob_blob_forces_cell_list(r_vectors, cutoff, pair_force, periodic_length=(0.0, 0.0, 0.0), **kwargs):
     """Forces (N, 3) of the pairs closer than ``cutoff`` (minimum image on periodic axes), O(N) neighbours.
 
     ``pair_force(r (P, 3), **kwargs) -> (P, 3)`` is the law of one pair (force on i, r from i to j),
     vectorised over pairs (a law of one pair only, r (3,) -> (3,), is called pair by pair).  The pairs come
-    from ``scipy.spatial.cKDTree`` on a box that is periodic on the periodic axes and, on the others, wider
-    than the blobs' extent plus the cutoff (so no pair wraps there).
+    from :func:`pairs_within`.
     """
-    from scipy.spatial import cKDTree
     r_vectors = np.asarray(r_vectors, dtype=float).reshape(-1, 3)
-    n = r_vectors.shape[0]
     forces = np.zeros_like(r_vectors)
-    if n < 2:
+    if r_vectors.shape[0] < 2:
         return forces
     L = np.asarray(periodic_length, dtype=float).reshape(3)
-    periodic = L > 0
-    shifted = r_vectors.copy()
-    box = np.empty(3)
-    for d in range(3):
-        if periodic[d]:
-            shifted[:, d] = np.mod(shifted[:, d], L[d])
-            shifted[:, d][shifted[:, d] >= L[d]] = 0.0
-            box[d] = L[d]
-        else:
-            low = shifted[:, d].min()
-            shifted[:, d] -= low
-            box[d] = shifted[:, d].max() + 2.0 * cutoff + 1.0
-    pairs = cKDTree(shifted, boxsize=box).query_pairs(float(cutoff), output_type='ndarray')
-    if pairs.size == 0:
+    i, j = pairs_within(r_vectors, cutoff, L)
+    if i.size == 0:
         return forces
-    i, j = pairs[:, 0], pairs[:, 1]
     r = minimum_image(r_vectors[j] - r_vectors[i], L)
     try:
         on_i = np.asarray(pair_force(r, periodic_length=periodic_length, **kwargs), dtype=float)
@@ -354,12 +391,11 @@ def blob_blob_force_calculator(implementation, pair_force=None, pycuda_forces=No
     if implementation == 'python':
         cutoff = getattr(pair_force, 'cutoff', None)
         if cutoff is not None:
-            if not (callable(cutoff) or (isinstance(cutoff, (int, float)) and cutoff > 0 and np.isfinite(cutoff))):
-                raise UserInputError('blob_blob_force.cutoff must be a positive length (or a function of the '
-                                     'physics keywords returning one), got %r' % (cutoff,))
+            if not callable(cutoff):
+                cutoff_length(cutoff, {}, 'blob_blob_force')   # refused at set-up
 
             def cell_list_forces(r_vectors, **kw):
-                length = float(cutoff(**kw)) if callable(cutoff) else float(cutoff)
+                length = cutoff_length(cutoff, kw, 'blob_blob_force')
                 return calc_blob_blob_forces_cell_list(r_vectors, length, pair_force, **kw)
             return cell_list_forces
         if python_forces is not None:
@@ -444,14 +480,17 @@ def physics_keywords(options):
     ``PACKAGE_HOOK_KEYWORDS``: ``top_wall``, the height of the top wall of a spectral slit (None otherwise,
     doc/periodic.md).
     """
-    from multi_bodies.solver.periodic import top_wall_height
+    top_wall = None
+    if options.mobility_vector_prod_implementation == 'spectral':  # a slit (a top wall) only with the spectral product
+        from multi_bodies.solver.periodic import top_wall_height
+        top_wall = top_wall_height(options)
     return dict(g=options.g, repulsion_strength_wall=options.repulsion_strength_wall,
                 debye_length_wall=options.debye_length_wall, repulsion_strength=options.repulsion_strength,
                 debye_length=options.debye_length, periodic_length=np.array(options.periodic_length, dtype=float),
                 blob_radius=options.blob_radius, blob_mass=1.0, eta=options.eta, a=options.blob_radius,
                 particle_radius=options.particle_radius,
                 omega_one_roller=np.array(options.omega_one_roller, dtype=float),
-                tilt_angle=options.tilt_angle, kT=options.kT, top_wall=top_wall_height(options))
+                tilt_angle=options.tilt_angle, kT=options.kT, top_wall=top_wall)
 
 
 def force_torque_calculator_sort_by_bodies(bodies, body_arrays, r_vectors, blob_blob_forces=None,

@@ -361,8 +361,11 @@ class PhysicsHooks:
                     value = np.stack([np.asarray(v, dtype=float) for v in value])
                 return checked_array(value, [(2,) + r.shape], function, hook,
                                      '(force on i, torque on i) of every pair')
+            cutoff = getattr(function, 'cutoff', None)   # the law vanishes beyond it: the near pairs only
+            if cutoff is not None and not callable(cutoff):
+                mbf.cutoff_length(cutoff, {}, hook)       # refused at set-up
             return lambda locations, orientations=None, **kw: mbf.calc_body_body_forces_torques(
-                locations, pair_force_torque=law, **kw)
+                locations, pair_force_torque=law, cutoff=mbf.cutoff_length(cutoff, kw, hook), **kw)
 
         def body_pairs(locations, orientations=None, periodic_length=(0.0, 0.0, 0.0), **kw):
             locations = np.asarray(locations, dtype=float).reshape(-1, 3)
