@@ -17,6 +17,7 @@
 // The spreading, interpolation and solves, compiled once per vector path (the chosen one runs:
 // simd_dispatch.h).
 #define RMB_SIMD_KERNELS "spectral_kernels.inc"
+#include "fast_exp.h"   // rmb::exp_nonpositive: the wall corrections of the solve
 #include "pair_laws.h"
 #include "simd_targets.h"
 

@@ -73,6 +73,7 @@ class CompiledEngine:
         self._grid = None
         self._monopole = None
         self._dipole = None
+        self._planes = slice(0, parameters.Nz)   # the z planes the transforms cover (prepare narrows it)
         self.z_quadrature = p.z_weights()
         Nxh = self.Nxh
         if p.geometry == 'TP':
@@ -109,9 +110,16 @@ class CompiledEngine:
 
     # -------------------------------------------------------------- state
     def prepare(self, monopole, dipole):
-        """Keep the stencils of the current positions in the compiled layout."""
+        """Keep the stencils of the current positions in the compiled layout, and the z planes they touch."""
         self._monopole = _PreparedStencil(self.p, monopole, self.z_quadrature)
         self._dipole = None if dipole is None else _PreparedStencil(self.p, dipole, self.z_quadrature)
+        self._planes = slice(0, self.p.Nz)
+        if self.p.geometry != 'TP' and self._monopole.iz.size:
+            # Doubly periodic: the z planes are not transformed, so a plane no blob spreads to is zero before the
+            # forward transform (it stays zero), and a plane no blob interpolates from is not read after the
+            # backward one: both transforms skip the planes outside the stencils' band of nodes.
+            touched = [self._monopole.iz] + ([] if self._dipole is None else [self._dipole.iz])
+            self._planes = slice(int(min(t.min() for t in touched)), int(max(t.max() for t in touched)) + 1)
 
     def release(self):
         """Free the grid (it is made again by the next product)."""
@@ -131,42 +139,46 @@ class CompiledEngine:
 
     # -------------------------------------------------------------- transforms
     def _rows(self, component):
+        """The rows along x of the planes that are transformed, (planes * Ny, row) real."""
         p = self.p
-        return self._grid[component].reshape(p.Nz * p.Ny, self.row)
+        planes = self._grid[component][self._planes]
+        return planes.reshape(planes.shape[0] * p.Ny, self.row)
 
-    def _row_blocks(self):
-        p = self.p
+    def _row_blocks(self, total):
         per_block = max(1, BLOCK_BYTES // (16 * self.Nxh))
-        total = p.Nz * p.Ny
         return [slice(start, min(start + per_block, total)) for start in range(0, total, per_block)]
 
     def forward(self):
-        """Real grid -> its Fourier transform in x and y (TP: also z), in place."""
+        """Real grid -> its Fourier transform in x and y (TP: also z), in place (DP geometries: the planes of
+        ``_planes``; the others are zero and stay zero)."""
         p = self.p
         spectrum = self._grid.view(np.complex128)
         for c in range(3):
             rows = self._rows(c)
             crows = rows.view(np.complex128)
-            for block in self._row_blocks():
+            for block in self._row_blocks(rows.shape[0]):
                 crows[block] = fft.rfft(rows[block, :p.Nx], axis=-1, workers=self.workers)
             axes = (0, 1) if p.geometry == 'TP' else (1,)
-            out = fft.fftn(spectrum[c], axes=axes, overwrite_x=True, workers=self.workers)
-            if not np.shares_memory(out, spectrum[c]):
-                spectrum[c][...] = out
+            planes = spectrum[c][self._planes]
+            out = fft.fftn(planes, axes=axes, overwrite_x=True, workers=self.workers)
+            if not np.shares_memory(out, planes):
+                planes[...] = out
         return spectrum
 
     def backward(self):
-        """Inverse of :meth:`forward`, in place (the real grid then holds the field)."""
+        """Inverse of :meth:`forward`, in place (the real grid then holds the field; DP geometries: in the planes
+        of ``_planes`` only, the ones the interpolation reads; the others keep spectral values)."""
         p = self.p
         spectrum = self._grid.view(np.complex128)
         for c in range(3):
             axes = (0, 1) if p.geometry == 'TP' else (1,)
-            out = fft.ifftn(spectrum[c], axes=axes, overwrite_x=True, workers=self.workers)
-            if not np.shares_memory(out, spectrum[c]):
-                spectrum[c][...] = out
+            planes = spectrum[c][self._planes]
+            out = fft.ifftn(planes, axes=axes, overwrite_x=True, workers=self.workers)
+            if not np.shares_memory(out, planes):
+                planes[...] = out
             rows = self._rows(c)
             crows = rows.view(np.complex128)
-            for block in self._row_blocks():
+            for block in self._row_blocks(rows.shape[0]):
                 rows[block, :p.Nx] = fft.irfft(crows[block], n=p.Nx, axis=-1, workers=self.workers)
 
     # -------------------------------------------------------------- solves
