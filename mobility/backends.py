@@ -21,6 +21,8 @@ cannot run here (extension not built, no CuPy, no GPU), raises
 ``utils.UserInputError`` naming the available implementations.
 """
 import importlib
+import importlib.util
+import sys
 
 from utils import UserInputError
 
@@ -29,6 +31,10 @@ from .product_names import PRODUCT_KINDS as _PRODUCT_KINDS
 _BACKEND_MODULES = {'python': 'mobility.python_backend',
                     'C++': 'mobility.cpp_backend',
                     'pycuda': 'mobility.cuda_backend'}
+# Third-party packages a backend module imports first: where one is not installed, the backend is refused with the
+# error its import would raise, without running the module (asking whether the GPU backend runs on a machine
+# without CuPy enters no file of it).
+_REQUIRED_PACKAGES = {'pycuda': 'cupy'}
 BACKEND_NAMES = tuple(_BACKEND_MODULES)  # the backends these names select (mobility.interface registers them)
 _ALIASES = {'numba': 'C++'}
 # domain suffix -> domain
@@ -74,10 +80,23 @@ def all_names():
     return names + list(RADII_NAMES)
 
 
+def _not_installed(package):
+    """True when the top-level ``package`` is neither imported nor found on the path (its import would fail)."""
+    if package in sys.modules:
+        return False
+    try:
+        return importlib.util.find_spec(package) is None
+    except (ImportError, ValueError):
+        return False  # let the import itself say what is wrong
+
+
 def load_backend(backend):
     """Import and return the module of ``backend`` ('python', 'C++' or 'pycuda')."""
     if backend in _loaded:
         return _loaded[backend]
+    required = _REQUIRED_PACKAGES.get(backend)
+    if backend not in _failures and required is not None and _not_installed(required):
+        _failures[backend] = "ModuleNotFoundError: No module named '%s'" % required
     if backend not in _failures:
         try:
             module = importlib.import_module(_BACKEND_MODULES[backend])

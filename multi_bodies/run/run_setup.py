@@ -414,12 +414,15 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
     import and a ``set_slip_by_ID`` that fails.
     """
     check_options(options, PROGRAM_OF_SCRIPT[script])
-    run_output.check_periodic_length(options)
+    if any(options.periodic_length):  # a box to check (all zeros: no periodic axis)
+        run_output.check_periodic_length(options)
     if script == 'mcmc' and options.articulated:
         raise utils.UserInputError("%s: the Monte Carlo sampler has no joints; remove the 'articulated' line or run "
                                    "it with multi_bodies.py and an articulated scheme" % options.articulated[0].where)
     published = None
-    if script != 'mcmc':  # the published spectral form (doc/periodic.md): options with the derived blob radius
+    # the spectral product's input: read in the published form or the package's (doc/periodic.md)
+    spectral_input = script != 'mcmc' and options.mobility_vector_prod_implementation == published_spectral.SPECTRAL
+    if spectral_input:  # the published spectral form: options with the derived blob radius
         options, published = published_spectral.published_options(options)
     directory = os.getcwd() if directory is None else directory
     if hook_loader is None:
@@ -434,7 +437,7 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
                                     vertex_scale=1.0 if published is None else published.vertex_scale)
     except user_hooks.UserFunctionError as err:
         raise utils.UserInputError(str(err))
-    if script != 'mcmc':
+    if spectral_input:
         apply_spectral_reading(options, published, bodies, log)
     if articulated is not None:
         if getattr(hooks, 'published_constraint_class', None) is not None \
@@ -461,10 +464,12 @@ def prepare(options, script, print_residual=False, log=print, directory=None, re
         return RunSetup(hooks, bodies, types, body_arrays, None)
     system = make_model(options, bodies, body_arrays, hooks, script=script, articulated=articulated,
                         print_residual=print_residual, log=log)
-    surface = read_surface(options, all_structure_specs(options), types, body_arrays.type_blobs,
-                           options.domain == 'single_wall', system.check_wall)  # .Laplace, .slip_length files
-    if surface is not None:
-        system = system.replace(surface=surface)
+    specs = all_structure_specs(options)
+    if options.save_concentration or any(s.laplace_file or s.slip_length_file for s in specs):
+        surface = read_surface(options, specs, types, body_arrays.type_blobs,
+                               options.domain == 'single_wall', system.check_wall)  # .Laplace, .slip_length files
+        if surface is not None:
+            system = system.replace(surface=surface)
     log('mobility_vector_prod_implementation = %s, mobility_blobs_implementation = %s, '
         'blob_blob_force_implementation = %s, body_body_force_torque_implementation = %s'
         % (system.vector_product_name, system.blobs_name, system.blob_blob_name, system.body_body_name))

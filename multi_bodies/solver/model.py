@@ -228,7 +228,10 @@ class Model:
         set_(self, 'body_lengths', np.array([1.0 if b.body_length is None else b.body_length for b in bodies],
                                             dtype=float))
         # Bodies of prescribed kinematics (obstacles, velocity files): (Nb,) bool and (Nb, 6) lab-frame [v, w].
-        fixed_bodies, prescribed_velocities = obstacles.fixed_bodies_of(bodies)
+        if any(getattr(b, 'prescribed_velocity', None) is not None for b in bodies):
+            fixed_bodies, prescribed_velocities = obstacles.fixed_bodies_of(bodies)
+        else:  # every body free
+            fixed_bodies, prescribed_velocities = np.zeros(len(bodies), dtype=bool), np.zeros((len(bodies), 6))
         set_(self, 'fixed_bodies', fixed_bodies)
         set_(self, 'prescribed_velocities', prescribed_velocities)
         # The last preconditioner build's blocks of the bodies of prescribed kinematics, keyed by their exact blob
@@ -710,7 +713,8 @@ def make_model(options, bodies, body_arrays, hooks, script='dynamics', articulat
                                 lambda: user_hooks.load_user_pycuda_forces(hooks.pycuda_file))
         if log is not None:
             log('  calc_blob_blob_forces_pycuda replaced by %s (the GPU blob-blob forces)' % hooks.pycuda_file)
-    periodic.check_spectral_options(options)
+    if any(options.is_set(name) for name in periodic.SPECTRAL_OPTIONS):
+        periodic.check_spectral_options(options)  # refuses them without the spectral product
     spectral = None
     check_wall = wall_is_seen(options, product, blobs, script)
     if product == periodic.SPECTRAL:  # doc/periodic.md
