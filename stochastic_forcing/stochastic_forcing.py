@@ -95,22 +95,25 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
     # The approximation is y_i = beta0 V_i c_i with V_i the orthonormal Krylov basis (rows of ``basis``) and
     # c_i = f(T_i) e_1, f = sqrt; so |y_i - y_{i-1}| = beta0 |c_i - (c_{i-1}, 0)| and |y_{i-1}| = beta0 |c_{i-1}|
     # (V_i^T V_i = I to rounding, by the full re-orthogonalisation), and y is formed once, at the end.
+    # The vectors are 1-d and contiguous: their norms are ``sqrt(w . w)``, as vector_norm computes them, without
+    # its call; the loop makes as few NumPy calls as it can (it runs tens of times per step of a small system).
     for i in range(min(max_iterations, n)):
         w = np.array(matvec(basis[i]), dtype=float).reshape(-1)
+        current = basis[i]
         if i > 0:
             w -= betas[i - 1] * basis[i - 1]
-        alpha = float(np.dot(w, basis[i]))
-        w -= alpha * basis[i]
+        alpha = float(w.dot(current))
+        w -= alpha * current
         # Full re-orthogonalisation against every stored vector; a second pass only when the first removed
         # more than 1 - 1/sqrt(2) of the norm (the DGKS criterion: Daniel, Gragg, Kaufman and Stewart 1976;
         # twice is enough, Giraud et al. 2005).
         stored = basis[:i + 1]
-        before = float(vector_norm(w))
+        before = math.sqrt(w.dot(w))
         w -= stored.T @ (stored @ w)
-        beta = float(vector_norm(w))
+        beta = math.sqrt(w.dot(w))
         if beta < REORTHOGONALISE_AGAIN * before:
             w -= stored.T @ (stored @ w)
-            beta = float(vector_norm(w))
+            beta = math.sqrt(w.dot(w))
         alphas.append(alpha)
         if i == 0:
             eigenvalues, Q = np.array([alpha]), np.ones((1, 1))
@@ -121,7 +124,7 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
         if previous is not None:
             step = coefficients.copy()
             step[:-1] -= previous
-            change = float(vector_norm(step) / max(vector_norm(previous), tiny))
+            change = float(math.sqrt(step.dot(step)) / max(math.sqrt(previous.dot(previous)), tiny))
             if print_residual:
                 print('lanczos = %d %s' % (i + 1, change))
             if change < tolerance:
@@ -130,7 +133,7 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
             converged = True
             iterations = i + 1
             break
-        basis[i + 1] = w / beta
+        np.divide(w, beta, out=basis[i + 1])
         betas.append(beta)
         previous = coefficients
     else:

@@ -335,34 +335,34 @@ py::tuple wall_blocks(py::dict tables, const Array &factors, double firm_delta, 
 }
 
 // One CSR matrix (6N x 6N) from blocks in BSR order (block_start, block_col, block data of 36), exact zeros out.
+// One pass: every entry is written at the next free place and the place advances past the nonzero ones only (no
+// branch, no counting pass); the arrays are made for every entry of every block and returned as views of their
+// first nnz entries (the rest, the room the zeros would have taken, stays unused).
 py::tuple to_csr(long n, const std::vector<long> &row_start, const std::vector<long> &block_col,
                  const std::vector<const double *> &block_data) {
-  const long rows = 6 * n;
-  std::vector<std::int64_t> counts(rows + 1, 0);  // int64 while counting; the CSR holds int32
-  for (long row = 0; row < rows; ++row) {
-    const long i = row / 6, a = row % 6;
-    std::int64_t c = 0;
-    for (long k = row_start[i]; k < row_start[i + 1]; ++k)
-      for (int b = 0; b < 6; ++b) c += block_data[k][6 * a + b] != 0.0;
-    counts[row + 1] = c;
-  }
-  for (long row = 0; row < rows; ++row) counts[row + 1] += counts[row];
-  if (counts[rows] > 2147483647L) throw std::length_error("more than 2^31 nonzeros in a lubrication matrix");
-  py::array_t<double> data(counts[rows]);
-  py::array_t<std::int32_t> indices(counts[rows]), indptr(rows + 1);
+  const long rows = 6 * n, capacity = 36 * row_start[n];
+  py::array_t<double> data(std::max(capacity, 1L));
+  py::array_t<std::int32_t> indices(std::max(capacity, 1L)), indptr(rows + 1);
   double *D = data.mutable_data();
   std::int32_t *I = indices.mutable_data(), *Q = indptr.mutable_data();
-  for (long row = 0; row <= rows; ++row) Q[row] = static_cast<std::int32_t>(counts[row]);
+  std::int64_t c = 0;  // int64 while filling; the CSR holds int32
   for (long row = 0; row < rows; ++row) {
+    if (c > 2147483647L) throw std::length_error("more than 2^31 nonzeros in a lubrication matrix");
+    Q[row] = static_cast<std::int32_t>(c);
     const long i = row / 6, a = row % 6;
-    std::int64_t c = counts[row];
-    for (long k = row_start[i]; k < row_start[i + 1]; ++k)
+    for (long k = row_start[i]; k < row_start[i + 1]; ++k) {
+      const double *v = block_data[k] + 6 * a;
+      const std::int32_t column = static_cast<std::int32_t>(6 * block_col[k]);
       for (int b = 0; b < 6; ++b) {
-        const double v = block_data[k][6 * a + b];
-        if (v != 0.0) D[c] = v, I[c] = static_cast<std::int32_t>(6 * block_col[k] + b), ++c;
+        D[c] = v[b], I[c] = column + b;
+        c += v[b] != 0.0;
       }
+    }
   }
-  return py::make_tuple(data, indices, indptr);
+  if (c > 2147483647L) throw std::length_error("more than 2^31 nonzeros in a lubrication matrix");
+  Q[rows] = static_cast<std::int32_t>(c);
+  const py::slice used(0, static_cast<py::ssize_t>(c), 1);
+  return py::make_tuple(data[used], indices[used], indptr);
 }
 
 // R_sup, R_MB and Delta_R of N spheres as CSR triples (data, indices, indptr), from the pairs (P, 2)

@@ -89,15 +89,15 @@ def orthonormalise_against(basis, w):
     """``(coefficients (j,), |w|, |w'|, w')``: ``w`` (n,) less its projection on the orthonormal rows of
     ``basis`` (j, n) by classical Gram-Schmidt, repeated once when the first pass removed more than
     ``1 - 1/sqrt(2)`` of its norm (DGKS); ``w`` is changed in place and returned as ``w'``."""
-    h0 = float(vector_norm(w))
+    h0 = math.sqrt(w.dot(w))  # vector_norm of the 1-d w, without its call (the Krylov loops call this often)
     h = basis @ w
     w -= h @ basis
-    h1 = float(vector_norm(w))
+    h1 = math.sqrt(w.dot(w))
     if h1 < REORTHOGONALISE_AGAIN * h0:
         again = basis @ w
         w -= again @ basis
         h += again
-        h1 = float(vector_norm(w))
+        h1 = math.sqrt(w.dot(w))
     return h, h0, h1, w
 
 
@@ -125,11 +125,11 @@ class LeastTrueResidual:
         if h1 <= np.finfo(float).eps * h0:  # also a zero product (h0 = h1 = 0)
             self.usable = False
             return float('inf')
-        self.Q[j] = q / h1
-        c = float(self.Q[j] @ self.residual)
+        direction = np.divide(q, h1, out=self.Q[j])
+        c = float(direction @ self.residual)
         self.coefficients.append(c)
-        self.residual -= c * self.Q[j]
-        return float(vector_norm(self.residual))
+        self.residual -= c * direction
+        return math.sqrt(self.residual.dot(self.residual))
 
     def solution(self, k):
         """``y`` (k,) of the least true residual over ``v_0 .. v_{k-1}``."""
@@ -199,7 +199,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
         for j in range(restart):
             AV[j] = np.asarray(matvec(V[j]), dtype=float).reshape(-1)
             w = np.asarray(psolve(AV[j]), dtype=float).reshape(-1)
-            if np.shares_memory(w, AV[j]):
+            if np.may_share_memory(w, AV[j]):  # (bounds only: a copy where unsure changes no number)
                 w = w.copy()
             h, h0, h1, w = orthonormalise_against(V[:j + 1], w)
             if h1 <= eps * h0:
@@ -207,7 +207,7 @@ def gmres(matvec, b, rtol, psolve=None, x0=None, restart=60, maxiter=1000, callb
                 h1 = 0.0
                 V[j + 1] = 0.0
             else:
-                V[j + 1] = w / h1
+                np.divide(w, h1, out=V[j + 1])
             column = h.tolist() + [h1]
             for k in range(j):  # the earlier rotations
                 c, s = cosines[k], sines[k]
