@@ -32,6 +32,7 @@ equations (not the published code):
 Vector layout ``[F1 T1 F2 T2 ...]`` / ``[U1 W1 U2 W2 ...]``; velocities (N, 6) rows ``[U W]``.
 """
 from collections import namedtuple
+from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -45,7 +46,8 @@ from stochastic_forcing import lanczos_square_root
 from utils import UserInputError
 
 from . import assembly, resistance
-from .problem import LubricationProblem, csr_times, far_field_mobility, far_field_product, solver_and_tolerance
+from .problem import (LubricationProblem, compressed_rows_times, csr_times, far_field_mobility, far_field_product,
+                      solver_and_tolerance)
 
 NEAR_FIELD_ROOTS = ('cholesky', 'lanczos')
 PUBLISHED_RFD_DELTA = DEFAULTS.rf_delta  # the RFD step of the published lubrication code: rf_delta's default
@@ -237,22 +239,67 @@ def wall_self_mobility_blocks(heights, a, eta, wall=True):
 class BlockRoot:
     """``L = blockdiag(C_1 .. C_N)`` (6N, 6N) with ``C_i C_i^T`` the i-th sphere's wall self-mobility
     (:func:`wall_self_mobility_blocks`): the preconditioner of the far-field Lanczos root.  ``apply(x) = L x``,
-    ``apply_inverse(x) = L^-1 x``, ``apply_inverse_transpose(x) = L^-T x`` for x (6N,)."""
+    ``apply_inverse(x) = L^-1 x``, ``apply_inverse_transpose(x) = L^-T x`` for x (6N,).
+
+    ``factor`` (N, 6, 6) holds the lower Cholesky factors C_i and ``inverse`` (N, 6, 6) their inverses, both in
+    closed form: a self-mobility couples only the pairs (U_x, W_y) and (U_y, W_x) (``[[t, c], [c, r]]`` and
+    ``[[t, -c], [-c, r]]``) and leaves U_z and W_z alone, so ``C_i`` has the diagonal ``sqrt`` of the first pivots,
+    ``c / sqrt(t)`` below them and ``sqrt(r - c^2 / t)`` after them (the Cholesky factor, to rounding; no LAPACK
+    call per sphere)."""
 
     def __init__(self, locations, a, eta, wall=True):
         blocks = wall_self_mobility_blocks(np.asarray(locations, dtype=float).reshape(-1, 3)[:, 2], a, eta, wall)
-        self.factor = np.linalg.cholesky(blocks)
-        self.inverse = np.linalg.inv(self.factor)
-        self.num_bodies = blocks.shape[0]
+        n = blocks.shape[0]
+        factor = np.zeros((n, 6, 6))
+        inverse = np.zeros((n, 6, 6))
+        diagonal = np.sqrt(blocks[:, (0, 1, 2, 5), (0, 1, 2, 5)])  # U_x, U_y, U_z, W_z: their own pivots
+        factor[:, (0, 1, 2, 5), (0, 1, 2, 5)] = diagonal
+        below = blocks[:, (4, 3), (0, 1)] / diagonal[:, :2]  # W_y from U_x, W_x from U_y
+        rotation = np.sqrt(blocks[:, (4, 3), (4, 3)] - below * below)
+        factor[:, (4, 3), (0, 1)] = below
+        factor[:, (4, 3), (4, 3)] = rotation
+        inverse[:, (0, 1, 2, 5), (0, 1, 2, 5)] = 1.0 / diagonal
+        inverse[:, (4, 3), (4, 3)] = 1.0 / rotation
+        inverse[:, (4, 3), (0, 1)] = -below / (diagonal[:, :2] * rotation)
+        self.factor, self.inverse, self.num_bodies = factor, inverse, n
+        # the three maps as sparse matrices of the entries above (8 per sphere; the patterns made once per N): one
+        # compiled product each, where a batched (N, 6, 6) product iterates over 6 x 6 blocks
+        lower, upper = _block_diagonal_pattern(n, False), _block_diagonal_pattern(n, True)
+        self._L = lower + (factor[:, _LOWER_ROWS, _LOWER_COLUMNS].reshape(-1),)
+        self._L_inverse = lower + (inverse[:, _LOWER_ROWS, _LOWER_COLUMNS].reshape(-1),)
+        # entry (r, c) of a transposed block is entry (c, r) of the block
+        self._L_inverse_transpose = upper + (inverse[:, _UPPER_COLUMNS, _UPPER_ROWS].reshape(-1),)
+
+    def _times(self, matrix, x):
+        indptr, indices, data = matrix
+        return compressed_rows_times(6 * self.num_bodies, indptr, indices, data,
+                                     np.ascontiguousarray(x, dtype=float).reshape(-1))
 
     def apply(self, x):
-        return np.einsum('nij,nj->ni', self.factor, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+        return self._times(self._L, x)
 
     def apply_inverse(self, x):
-        return np.einsum('nij,nj->ni', self.inverse, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+        return self._times(self._L_inverse, x)
 
     def apply_inverse_transpose(self, x):
-        return np.einsum('nji,nj->ni', self.inverse, np.reshape(x, (self.num_bodies, 6))).reshape(-1)
+        return self._times(self._L_inverse_transpose, x)
+
+
+# (row, column) of the entries of a lower triangular block C_i or C_i^-1 and of an upper one (their transposes),
+# sorted by row, then column
+_LOWER_ROWS, _LOWER_COLUMNS = np.array([0, 1, 2, 3, 3, 4, 4, 5]), np.array([0, 1, 2, 1, 3, 0, 4, 5])
+_UPPER_ROWS, _UPPER_COLUMNS = np.array([0, 0, 1, 1, 2, 3, 4, 5]), np.array([0, 4, 1, 3, 2, 3, 4, 5])
+
+
+@lru_cache(maxsize=16)
+def _block_diagonal_pattern(n, upper):
+    """(indptr (6N + 1,), indices (8N,)), int32 and read-only (shared): the CSR pattern of N diagonal 6 x 6 blocks
+    with the entries of :data:`_UPPER_ROWS`, :data:`_UPPER_COLUMNS` (``upper``) or of the lower ones."""
+    rows, columns = (_UPPER_ROWS, _UPPER_COLUMNS) if upper else (_LOWER_ROWS, _LOWER_COLUMNS)
+    indptr = np.concatenate(([0], np.cumsum(np.tile(np.bincount(rows, minlength=6), n)))).astype(np.int32)
+    indices = (6 * np.arange(n)[:, None] + columns).reshape(-1).astype(np.int32)
+    indptr.flags.writeable = indices.flags.writeable = False
+    return indptr, indices
 
 
 def far_field_root(problem, W, tolerance, factor=1.0, preconditioned=True):

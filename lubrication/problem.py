@@ -14,6 +14,7 @@ Vector layout ``[F1 T1 F2 T2 ...]`` (forces, torques) and ``[U1 W1 U2 W2 ...]`` 
 velocities); the problem's ``solution`` gives velocities (N, 6) rows ``[U W]``.
 """
 import numpy as np
+import scipy.sparse as sp
 
 from mobility.interface import (Geometry, from_implementation_name, implementation_geometry, implementation_name,
                                 preferred_backend)
@@ -29,6 +30,18 @@ try:  # SciPy's own CSR kernel (what ``csr_matrix @ vector`` calls), reached wit
     from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
 except ImportError:  # pragma: no cover - a SciPy without it: the operator is used
     _csr_matvec = None
+
+
+def compressed_rows_times(size, indptr, indices, data, x):
+    """``A @ x`` (size,) of the square CSR matrix A (size, size) given by its arrays (int32 ``indptr``, ``indices``,
+    float64 ``data``) and x (size,) float64, by SciPy's kernel (a ``csr_matrix`` where it cannot be reached)."""
+    if x.shape != (size,):
+        raise ValueError('a vector of %d entries was expected, got shape %s' % (size, x.shape))
+    if _csr_matvec is None or x.dtype != np.float64 or not x.flags.c_contiguous:
+        return sp.csr_matrix((data, indices, indptr), shape=(size, size)) @ x
+    out = np.zeros(size)
+    _csr_matvec(size, size, indptr, indices, data, x, out)
+    return out
 
 
 def csr_times(matrix, x):

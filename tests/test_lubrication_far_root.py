@@ -49,3 +49,26 @@ def test_preconditioned_root_takes_fewer_products_at_spread_heights():
     plain = far_field_root(problem, W, 1e-8, preconditioned=False)
     preconditioned = far_field_root(problem, W, 1e-8)
     assert preconditioned.iterations < plain.iterations
+
+
+@pytest.mark.parametrize('wall', [True, False])
+def test_block_root_is_the_cholesky_factor_of_the_self_mobilities(wall):
+    """BlockRoot's closed-form factors: lower triangular C_i with C_i C_i^T the wall self-mobility (the law of a
+    Cholesky factor, and LAPACK's factor to rounding), C_i^-1 its inverse, and the three sparse maps apply them."""
+    heights = np.array([0.6, 1.0, 1.001, 1.3, 2.0, 4.5, 40.0]) * A  # below a (raised to a), near and far
+    locations = np.column_stack((np.arange(heights.size) * 3.0 * A, np.zeros(heights.size), heights))
+    blocks = wall_self_mobility_blocks(heights, A, ETA, wall)
+    root = BlockRoot(locations, A, ETA, wall)
+    scale = np.abs(blocks).max()
+    assert np.all(np.triu(root.factor, 1) == 0.0)
+    np.testing.assert_allclose(root.factor @ np.swapaxes(root.factor, 1, 2), blocks, rtol=0, atol=1e-14 * scale)
+    np.testing.assert_allclose(root.factor, np.linalg.cholesky(blocks), rtol=0,
+                               atol=1e-14 * np.abs(root.factor).max())
+    np.testing.assert_allclose(root.inverse @ root.factor, np.broadcast_to(np.eye(6), blocks.shape), rtol=0, atol=1e-13)
+    x = np.random.default_rng(3).standard_normal((heights.size, 6))
+    for apply, matrices in ((root.apply, root.factor), (root.apply_inverse, root.inverse),
+                            (root.apply_inverse_transpose, np.swapaxes(root.inverse, 1, 2))):
+        expected = np.einsum('nij,nj->ni', matrices, x).reshape(-1)
+        np.testing.assert_allclose(apply(x.reshape(-1)), expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+    with pytest.raises(ValueError):
+        root.apply(np.ones(6 * heights.size + 1))
