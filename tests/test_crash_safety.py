@@ -78,7 +78,7 @@ def mcmc_scene(folder, n_steps=400, n_save=40, save_clones='one_file_per_step', 
 def phoretic_scene(folder, n_steps=40, n_save=4, save_clones='one_file_per_step', **extra):
     """A Janus sphere (12 blobs, a .Laplace file) in a background gradient, Adams-Bashforth, writing
     ``.concentration``: the solute's warm start and the history matter."""
-    from test_data_safety import surface_scene
+    from safety_scenes import surface_scene
     values = dict(scheme='deterministic_adams_bashforth', n_steps=n_steps, n_save=n_save, save_clones=save_clones,
                   save_concentration=True, dt=0.05)
     values.update(extra)
@@ -149,7 +149,7 @@ CHAIN_KINDS = ('dynamic', 'mcmc', 'replica', 'phoretic', 'articulated', 'driven'
 
 def obstacle_scene(folder, **options):
     """A free one-blob body with an active slip beside an obstacle (deterministic Adams-Bashforth)."""
-    from test_data_safety import driven_scene
+    from safety_scenes import driven_scene
     folder = driven_scene(folder, scheme='deterministic_adams_bashforth', kT=0, **options)
     text = (folder / 'input.dat').read_text().replace('structure blob.vertex b.clones None b.velocity',
                                                       'obstacle blob.vertex b.clones')
@@ -159,7 +159,7 @@ def obstacle_scene(folder, **options):
 
 def chain_scene(program):
     """(scene maker (folder, n_steps, n_save, save_clones), script, structure IDs) of a kind of chain."""
-    from test_data_safety import articulated_scene, driven_scene, surface_scene
+    from safety_scenes import articulated_scene, driven_scene, surface_scene
     return {'dynamic': (dynamic_scene, DYNAMIC, ('a', 'b')),
             'mcmc': (mcmc_scene, MCMC, ('a',)),
             'phoretic': (phoretic_scene, DYNAMIC, ('a',)),
@@ -1033,7 +1033,7 @@ def test_a_process_that_lives_on_after_its_run_is_not_taken_for_a_writer(tmp_pat
     that lives on after its run (a notebook, an ensemble worker: here this test's own process) marks its segment
     ended when it lets the lock go, so a restart from another process is not refused."""
     import json
-    from test_data_safety import run_dynamic
+    from safety_scenes import run_dynamic
     folder = dynamic_scene(tmp_path / 'run', n_steps=8, n_save=4)
     assert run_dynamic(folder)[0] == 0  # in this process, which lives on
     segment = json.loads((folder / 'data' / 'run.run').read_text())['segments'][-1]

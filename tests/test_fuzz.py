@@ -598,7 +598,7 @@ RECORD_SCENES = ('driven', 'one_file', 'articulated', 'mcmc', 'adams_bashforth',
 def recorded_runs(tmp_path_factory):
     """{scene: (folder, restart step)}: finished runs whose record of the restart step the fuzzer forges."""
     from test_crash_safety import mcmc_scene
-    from test_data_safety import articulated_scene, driven_scene
+    from safety_scenes import articulated_scene, driven_scene
     root = tmp_path_factory.mktemp('records')
     from test_crash_safety import dynamic_scene, phoretic_scene
     scenes = {'driven': (driven_scene(root / 'driven', n_steps=6), 3),
@@ -623,7 +623,7 @@ def test_forged_restart_records_never_make_a_traceback(recorded_runs, tmp_path_f
     """Issue 27: any field of a restart record (dynamic, save_clones one_file, articulated, Monte Carlo) replaced
     with a value of another type, sign or size, the checksum recomputed: one-line refusal or a run, never a
     traceback.  (A value of the right kind cannot be told from the original: the checksum guards damage only.)"""
-    from test_data_safety import forge_record, set_options_text
+    from safety_scenes import forge_record, set_options_text
     from multi_bodies.run.restart_records import restart_record
     base, step = recorded_runs[scene]
     folder = tmp_path_factory.mktemp('forged')
