@@ -597,10 +597,10 @@ RECORD_SCENES = ('driven', 'one_file', 'articulated', 'mcmc', 'adams_bashforth',
 @pytest.fixture(scope='module')
 def recorded_runs(tmp_path_factory):
     """{scene: (folder, restart step)}: finished runs whose record of the restart step the fuzzer forges."""
-    from test_crash_safety import mcmc_scene
+    from safety_scenes import mcmc_scene
     from safety_scenes import articulated_scene, driven_scene
     root = tmp_path_factory.mktemp('records')
-    from test_crash_safety import dynamic_scene, phoretic_scene
+    from safety_scenes import dynamic_scene, phoretic_scene
     scenes = {'driven': (driven_scene(root / 'driven', n_steps=6), 3),
               'one_file': (driven_scene(root / 'one_file', n_steps=6, save_clones='one_file'), 3),
               'articulated': (articulated_scene(root / 'articulated', n_steps=6), 3),

@@ -104,7 +104,7 @@ def test_an_override_source_that_is_not_a_file_is_refused(tmp_path, kind, progra
 
 
 def test_a_potential_source_that_is_not_a_file_is_refused(tmp_path, monkeypatch, capsys):
-    from test_crash_safety import mcmc_scene
+    from safety_scenes import mcmc_scene
     folder = mcmc_scene(tmp_path / 'run')
     os.mkfifo(str(folder / 'user_defined_potentials.py'))
     monkeypatch.chdir(folder)
@@ -271,7 +271,7 @@ def test_a_full_disk_before_the_first_save_is_one_line_naming_the_file(tmp_path,
     traceback; now one line names the file (exit 1)."""
     import resource
     import signal
-    from test_crash_safety import mcmc_scene
+    from safety_scenes import mcmc_scene
     from run_scenes import child_environment
     folder = (mcmc_scene if program == 'mcmc' else driven_scene)(tmp_path / 'run')
     if program == 'static':

@@ -349,7 +349,7 @@ def test_a_record_that_does_not_fit_the_run_is_a_one_line_refusal(tmp_path, scen
     shape (a ValueError traceback in every Adams-Bashforth scene), zero quaternions (once used, and written to the
     snapshots), a configuration that is not the snapshot's (once silently replaced by it), required fields
     absent (a record without fingerprint, state or checksums was taken as exact)."""
-    from test_crash_safety import dynamic_scene
+    from safety_scenes import dynamic_scene
     folder = dynamic_scene(tmp_path / 'run', n_steps=12, n_save=6,
                            **({'scheme': 'stochastic_adams_bashforth_rollers'} if scene == 'rollers' else {}))
     assert run_dynamic(folder)[0] == 0
