@@ -94,6 +94,7 @@ def set_options_text(folder, **values):
     return set_options((Path(folder) / 'input.dat').read_text(), **values)
 
 
+# ------------------------------------------------------------------ forged records (checksum recomputed)
 def forge_record(output_name, step, change):
     """Rewrite the record of ``step`` in ``output_name.restart`` with ``change(record)`` and a valid checksum."""
     import hashlib
@@ -112,7 +113,7 @@ def forge_record(output_name, step, change):
     Path(path).write_bytes(bytes(out))
 
 
-# ------------------------------------------------------------------ scenes
+# ------------------------------------------------------------------ crash-test scenes; runners that start, stop, compare
 def dynamic_scene(folder, n_steps=40, n_save=4, save_clones='one_file_per_step', **extra):
     """Two single-blob structures a and b (one body each), Brownian Adams-Bashforth: noise and history matter."""
     folder = Path(folder)
