@@ -141,8 +141,10 @@ def quaternions_from_rotations(rotation_vectors):
     phi = np.asarray(rotation_vectors, dtype=float).reshape(-1, 3)
     angle = np.sqrt(np.einsum('ij,ij->i', phi, phi))
     safe = np.where(angle > 0, angle, 1.0)
-    p = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
-    return np.column_stack((np.cos(0.5 * angle), p))
+    out = np.empty((phi.shape[0], 4))
+    out[:, 0] = np.cos(0.5 * angle)
+    out[:, 1:] = phi * np.where(angle > 0, np.sin(0.5 * angle) / safe, 0.0)[:, None]
+    return out
 
 
 def quaternion_products(left, right):
@@ -151,9 +153,22 @@ def quaternion_products(left, right):
     right = np.asarray(right, dtype=float).reshape(-1, 4)
     s, p = left[:, 0], left[:, 1:]
     t, v = right[:, 0], right[:, 1:]
-    scalar = s * t - np.einsum('ij,ij->i', p, v)
-    vector = s[:, None] * v + t[:, None] * p + np.cross(p, v)
-    return np.column_stack((scalar, vector))
+    out = np.empty((left.shape[0], 4))
+    out[:, 0] = s * t - np.einsum('ij,ij->i', p, v)
+    out[:, 1:] = s[:, None] * v + t[:, None] * p + _cross(p, v)
+    return out
+
+
+def _cross(a, b):
+    """``np.cross`` of (n, 3) stacks, by its own formulas (each component a product less a product, rounded as it
+    rounds them) without its general-purpose argument handling (a step of small systems turns every body)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def rotate_quaternions(orientations, rotation_vectors):

@@ -90,11 +90,13 @@ def neighbour_pairs(locations, a, cutoff=DEFAULT_CUTOFF, periodic_length=(0.0, 0
     tree = cKDTree(points, boxsize=np.where(periodic, L, 0.0) if np.any(periodic) else None)
     pairs = tree.query_pairs(r=cutoff * a, output_type='ndarray')
     pairs = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
-    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    # sorted by i, then j: one key i N + j per pair (the pairs are distinct, so the order is lexsort's)
+    pairs = pairs[np.argsort(pairs[:, 0] * locations.shape[0] + pairs[:, 1], kind='stable')]
     displacement = minimum_image(locations[pairs[:, 1]] - locations[pairs[:, 0]], L) / a
-    r_over_a = np.linalg.norm(displacement, axis=1)
+    r_over_a = np.sqrt(np.add.reduce(displacement * displacement, axis=1))  # np.linalg.norm(axis=1)'s own formula
     keep = r_over_a < cutoff
-    pairs, displacement, r_over_a = pairs[keep], displacement[keep], r_over_a[keep]
+    if not keep.all():
+        pairs, displacement, r_over_a = pairs[keep], displacement[keep], r_over_a[keep]
     if np.any(r_over_a == 0):
         i, j = pairs[np.argmax(r_over_a == 0)]
         raise UserInputError('lubrication: spheres %d and %d are at the same place; check the configuration' % (i, j))
