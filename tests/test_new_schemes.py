@@ -10,7 +10,7 @@ Numbers asserted come from outside the code under test:
 
 Statistical tolerances come from the spread of per-body values of many
 independent single blobs started from an exact equilibrium sample
-(helpers of tests/test_stochastic.py); every statistical check has a
+(helpers of tests/brownian_scene.py); every statistical check has a
 negative control (drift off or a wrong kT) that must fail it.
 """
 import os
@@ -21,8 +21,8 @@ import pytest
 
 import mobility
 from test_dynamics import boomerang_final_state, run_script
-from test_stochastic import (A, CPP, ETA, HIST_EDGES, KT, Opts, assert_gibbs_boltzmann, equilibrium_blobs,
-                             height_density, make_system)
+from brownian_scene import A, CPP, ETA, HIST_EDGES, KT, Opts, equilibrium_blobs, height_density, make_system
+from test_stochastic import assert_gibbs_boltzmann
 from quaternion_integrator.schemes import make_scheme
 from quaternion_integrator.stochastic_schemes import rigid_projection
 from stochastic_forcing import compat
@@ -118,7 +118,7 @@ def in_plane_score(displacement, n_steps, dt):
 
 
 def run_small_systems(scheme_name, n_systems, n_bodies, n_steps, dt, kT=KT, disable_drift=False):
-    """``run_heights`` of tests/test_stochastic.py on ``n_systems`` independent systems of ``n_bodies`` blobs.
+    """``run_heights`` of tests/brownian_scene.py on ``n_systems`` independent systems of ``n_bodies`` blobs.
 
     Returns per-body time averages of z (B,), of the histogram bins (B, 8) and the in-plane displacements (B, 2).
     The GDC correction factor ``1 + div dt/2`` is one number for a whole system (the divergence sums over all
@@ -220,7 +220,7 @@ def test_published_generator_state_round_trips_with_the_cached_gaussian(tmp_path
 def test_restart_with_the_published_generator_continues_bit_for_bit(tmp_path, monkeypatch):
     """``random_generator published``: 10 steps in one run equal 4 + 6 steps with initial_step 4 (the restart
     record holds the legacy state), and the run differs from the default generator's with the same seed."""
-    from test_stochastic import run_in, snapshots, write_scene
+    from test_stochastic_reproducibility import run_in, snapshots, write_scene
     whole, split, default = tmp_path / 'whole', tmp_path / 'split', tmp_path / 'default'
     for folder in (whole, split, default):
         folder.mkdir()

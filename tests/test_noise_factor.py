@@ -322,7 +322,8 @@ def clustered_run(lanczos_preconditioner, n_steps=250, seed=501):
     from multi_bodies import multi_bodies_functions as mbf
     from multi_bodies.files import structure_generators as gen
     from multi_bodies.solver.model import Model
-    from test_stochastic import BOOM_A, ETA, Opts, boomerang_keywords, boomerang_quadrature, brownian_averages
+    from brownian_scene import ETA, Opts
+    from test_boomerang_equilibrium import BOOM_A, boomerang_keywords, boomerang_quadrature, brownian_averages
     clusters, per_cluster, every = 10, 3, 10
     reference = gen.boomerang(spacing=2 * BOOM_A)
     pool, weights, h_grid, cdf, exact = boomerang_quadrature(reference)
@@ -357,7 +358,7 @@ def test_coupled_boomerangs_keep_gibbs_boltzmann_with_the_incomplete_cholesky_no
     values (the clusters, 14 apart, are the independent samples: SE from the spread of their 10 averages), and
     the bodies move at the fluctuation-dissipation rate (ratio within 4 SE of 1), a rate that a 25 % wrong kT
     fails (the control: an integrator that never moves would keep the exact start)."""
-    from test_stochastic import z_score
+    from brownian_scene import z_score
     by_cluster, exact, motion, first_pairs = clustered_boomerangs
     assert first_pairs.shape[0] >= 10  # the factor couples the bodies of every cluster
     scores = z_score(by_cluster, exact)
