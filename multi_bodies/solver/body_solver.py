@@ -575,6 +575,13 @@ def kept_fewest(fewest, iterations, margin):
     return None if iterations >= fewest + margin else fewest
 
 
+def _own_product(linear_map):
+    """True for a :class:`LinearMap` whose ``operator`` is the base's (a LinearOperator of its ``apply``): GMRES then
+    calls its ``matvec`` itself, the same products without the LinearOperator's argument checks (a solve of a small
+    system makes tens of them)."""
+    return isinstance(linear_map, LinearMap) and type(linear_map).operator is LinearMap.operator
+
+
 def solve(problem, rhs, preconditioner, x0=None, tolerance=None, restart=GMRES_RESTART, maxiter=GMRES_MAXITER,
           print_residual=False, minimal_residual=False):
     """Solve ``A x = rhs`` of any problem of the package by preconditioned GMRES: the one solve of the package.
@@ -615,10 +622,12 @@ def solve(problem, rhs, preconditioner, x0=None, tolerance=None, restart=GMRES_R
     if norm == 0.0:
         parts = problem.solution(np.zeros(problem.size))
         return SolveResult(parts.lambda_blobs, parts.velocities, 0, True, 0.0, None, parts.constraint)
-    preconditioner = getattr(preconditioner, 'operator', preconditioner)
+    preconditioner = preconditioner if _own_product(preconditioner) else getattr(preconditioner, 'operator',
+                                                                                 preconditioner)
     if x0 is not None and np.shape(x0) != rhs.shape:
         x0 = None
-    result = gmres_solve(problem.operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
+    operator = problem if _own_product(problem) else problem.operator
+    result = gmres_solve(operator, rhs / norm, tolerance, preconditioner=preconditioner, x0=x0,
                          restart=restart, maxiter=maxiter, print_residual=print_residual,
                          minimal_residual=minimal_residual)
     parts = problem.solution(result.x * norm)
