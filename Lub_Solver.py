@@ -45,14 +45,6 @@ def in_periodic_box(locations, periodic_length):
             x += L * np.where(x < 0, np.ceil(-x / L), np.where(x > L, -np.ceil((x - L) / L), 0.0))
     return r
 
-def _quaternion_of_row(entries):
-    """A ``Quaternion`` holding ``entries`` (4,) itself (a row of an array made for it), without the constructor's
-    checks and copy: the face places every sphere two or three times a step."""
-    quaternion = Quaternion.__new__(Quaternion)
-    quaternion.entries = entries
-    return quaternion
-
-
 class Lub_Solver:
     """Lubrication-corrected hydrodynamics of spheres of radius ``a`` above a wall (the published driver API).
 
@@ -119,9 +111,11 @@ class Lub_Solver:
         get (each body its own row, shared with no other body and not with the caller's arrays)."""
         locations = np.array(locations, dtype=float).reshape(-1, 3)
         entries = np.array(orientations, dtype=float).reshape(-1, 4)
+        new = Quaternion.__new__  # each body's Quaternion holds its row itself: no constructor's checks and copy
         for b, location, quaternion in zip(self.bodies, locations, entries):
             b.location = location
-            b.orientation = _quaternion_of_row(quaternion)
+            b.orientation = new(Quaternion)
+            b.orientation.entries = quaternion
 
     def Set_R_Mats(self, r_vecs_np=None):
         """Build ``Delta_R``, ``R_Sup``, ``R_MB`` at the bodies' locations (or at r_vecs_np (N, 3))."""

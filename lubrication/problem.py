@@ -30,6 +30,7 @@ try:  # SciPy's own CSR kernel (what ``csr_matrix @ vector`` calls), reached wit
     from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
 except ImportError:  # pragma: no cover - a SciPy without it: the operator is used
     _csr_matvec = None
+_CSR_TYPES = tuple(getattr(sp, name) for name in ('csr_matrix', 'csr_array') if hasattr(sp, name))
 
 
 def compressed_rows_times(size, indptr, indices, data, x):
@@ -48,12 +49,14 @@ def csr_times(matrix, x):
     """``matrix @ x`` (m,) for a sparse matrix (m, n) and a vector x (n,): for a float64 CSR matrix and a contiguous
     float64 vector SciPy's kernel is called directly (the same kernel and numbers as ``@``, without its dozen Python
     calls of argument handling: a Krylov iteration of a step makes several such products); else ``matrix @ x``."""
-    if (_csr_matvec is None or getattr(matrix, 'format', None) != 'csr' or matrix.dtype != np.float64
-            or not isinstance(x, np.ndarray) or x.dtype != np.float64 or x.shape != (matrix.shape[1],)
-            or not x.flags.c_contiguous):
+    if _csr_matvec is None or not isinstance(matrix, _CSR_TYPES) or not isinstance(x, np.ndarray):
         return matrix @ x
-    out = np.zeros(matrix.shape[0])
-    _csr_matvec(matrix.shape[0], matrix.shape[1], matrix.indptr, matrix.indices, matrix.data, x, out)
+    rows, columns = matrix.shape
+    data = matrix.data
+    if data.dtype != np.float64 or x.dtype != np.float64 or x.shape != (columns,) or not x.flags.c_contiguous:
+        return matrix @ x
+    out = np.zeros(rows)
+    _csr_matvec(rows, columns, matrix.indptr, matrix.indices, data, x, out)
     return out
 
 

@@ -55,8 +55,9 @@ def grand_product(r_vectors, forces, torques, eta, a, periodic_length=(0, 0, 0),
     periodic images of ``periodic_length`` as the other products take them.  The same numbers as the four
     coupling products summed, to rounding.
     """
-    return _ext.grand_product(r_vectors, np.ravel(forces), np.ravel(torques), float(eta), float(a),
-                              _L(periodic_length), bool(wall))
+    # asarray(..).ravel(): np.ravel's result without its two Python-level calls (a product of a small system)
+    return _ext.grand_product(r_vectors, np.asarray(forces).ravel(), np.asarray(torques).ravel(), float(eta),
+                              float(a), _L(periodic_length), bool(wall))
 
 
 def _source_target(source_r, target_r, force, radius_source, radius_target, eta, periodic_length, wall):

@@ -382,9 +382,10 @@ class DirectMobility(BlobMobility):
         couplings summed."""
         if self._grand is None or (forces is None and torques is None):
             return super().product(r_vectors, forces, torques)
-        n = np.size(r_vectors) // 3
-        forces = np.zeros(3 * n) if forces is None else forces
-        torques = np.zeros(3 * n) if torques is None else torques
+        if forces is None or torques is None:
+            n = np.size(r_vectors) // 3
+            forces = np.zeros(3 * n) if forces is None else forces
+            torques = np.zeros(3 * n) if torques is None else torques
         return self._grand(r_vectors, forces, torques, self.eta, self.blob_radius, self.periodic_length,
                            self.domain == 'single_wall')
 
