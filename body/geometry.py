@@ -16,6 +16,8 @@ The minimum image of pseudo-periodic boxes (:func:`minimum_image`,
 zero) on every axis with ``L > 0``; ``L <= 0`` is not periodic (SPEC
 section 8).  The compiled backends use their twin in
 ``mobility/cpp/pair_laws.h``.
+
+And :func:`smallest_distance` of a set of points (the blob spacing of a body).
 """
 import numpy as np
 
@@ -204,3 +206,14 @@ def minimum_image(displacements, periodic_length):
     for axis in np.nonzero(L > 0)[0]:
         wrap_axis(r[..., axis], L[axis])
     return r
+
+
+def smallest_distance(points):
+    """The smallest distance between two of ``points`` (n, 3); inf for fewer than two points.  A k-d tree
+    (``scipy.spatial.cKDTree``, imported here only), so any n fits in memory."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if points.shape[0] < 2:
+        return float('inf')
+    from scipy.spatial import cKDTree
+    distances, _ = cKDTree(points).query(points, k=2)
+    return float(np.min(distances[:, 1]))

@@ -36,13 +36,6 @@ from scipy.linalg import eigh_tridiagonal
 from scipy.linalg.lapack import dstev
 
 
-def vector_norm(x):
-    """``np.linalg.norm`` of a real vector (n,), bit for bit (the same ``sqrt(x . x)`` of the raveled vector),
-    without its argument handling: Krylov loops call it several times an iteration."""
-    x = x.ravel(order='K')
-    return math.sqrt(x.dot(x))
-
-
 LANCZOS_MAX_ITERATIONS = 1000
 REORTHOGONALISE_AGAIN = 1.0 / np.sqrt(2.0)
 
@@ -81,7 +74,7 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
     n = z.size
     if factor == 0.0 or n == 0:
         return LanczosResult(np.zeros(n), 0, True, 0.0)
-    beta0 = float(vector_norm(z))
+    beta0 = math.sqrt(z.ravel(order='K').dot(z.ravel(order='K')))  # np.linalg.norm(z), bit for bit
     if beta0 == 0.0:
         return LanczosResult(np.zeros(n), 0, True, 0.0)
     size = min(max_iterations, n) + 1
@@ -95,7 +88,7 @@ def lanczos_square_root(matvec, z, tolerance, max_iterations=LANCZOS_MAX_ITERATI
     # The approximation is y_i = beta0 V_i c_i with V_i the orthonormal Krylov basis (rows of ``basis``) and
     # c_i = f(T_i) e_1, f = sqrt; so |y_i - y_{i-1}| = beta0 |c_i - (c_{i-1}, 0)| and |y_{i-1}| = beta0 |c_{i-1}|
     # (V_i^T V_i = I to rounding, by the full re-orthogonalisation), and y is formed once, at the end.
-    # The vectors are 1-d and contiguous: their norms are ``sqrt(w . w)``, as vector_norm computes them, without
+    # The vectors are 1-d and contiguous: their norms are ``sqrt(w . w)``, as np.linalg.norm computes them, without
     # its call; the loop makes as few NumPy calls as it can (it runs tens of times per step of a small system).
     for i in range(min(max_iterations, n)):
         w = np.array(matvec(basis[i]), dtype=float).reshape(-1)

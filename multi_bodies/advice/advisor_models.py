@@ -25,7 +25,8 @@ from multi_bodies.advice import sphere_tables
 from multi_bodies.files.input_options import read_input_file
 from multi_bodies.files.scheme_table import dense_variants, moves_rollers, roller_variants, scheme_names
 from multi_bodies.run.run_setup import read_bodies
-from multi_bodies.files.structure_generators import calibrated_shell, icosahedral_shell, smallest_distance
+from body.geometry import smallest_distance
+from multi_bodies.files.structure_generators import calibrated_shell, icosahedral_shell
 
 SHELL_SIZES = (12, 42, 162, 642)
 RICHARDSON_LEVELS = (42, 162, 642)

@@ -10,7 +10,7 @@ The methods use the Advisor's scene, backend, accuracy and ``add``.
 import numpy as np
 
 from multi_bodies.advice import sphere_tables
-from multi_bodies.files.structure_generators import smallest_distance
+from body.geometry import smallest_distance
 from multi_bodies.advice.advisor_report import _percent
 from multi_bodies.advice.advisor_models import (DENSE_BLOB_LIMIT, RICHARDSON_LEVELS, SHELL_SIZES, bodies_mobility,
                                                 bulk_radius, calibrated_model, exact_diagonal, fixed_radius_model,

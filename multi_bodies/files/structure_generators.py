@@ -43,6 +43,7 @@ import numpy as np
 if __package__ in (None, ''):
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
+from body.geometry import smallest_distance  # noqa: E402,F401 (also the name users of this module import)
 from multi_bodies.files.snapshots import write_clones_file  # noqa: E402
 from multi_bodies.files.structure_files import write_vertex_file  # noqa: E402
 
@@ -105,14 +106,6 @@ def icosahedral_shell(num_blobs):
             new_faces += [(i, ij, ki), (j, jk, ij), (k, ki, jk), (ij, jk, ki)]
         faces = new_faces
     return np.array(vertices)
-
-
-def smallest_distance(points):
-    """Smallest distance between two of the points (shape (n, 3))."""
-    points = np.asarray(points, dtype=float)
-    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
-    dist[np.diag_indices_from(dist)] = np.inf
-    return float(np.min(dist))
 
 
 def bulk_translational_mobility(reference_blobs, blob_radius, eta=None):

@@ -54,7 +54,12 @@ import math
 
 import numpy as np
 
-from stochastic_forcing.stochastic_forcing import vector_norm
+def vector_norm(x):
+    """``np.linalg.norm`` of a real vector (n,), bit for bit (the same ``sqrt(x . x)`` of the raveled vector),
+    without its argument handling: the Krylov loops call it several times an iteration."""
+    x = x.ravel(order='K')
+    return math.sqrt(x.dot(x))
+
 
 REORTHOGONALISE_AGAIN = 1.0 / math.sqrt(2.0)
 ROUNDING_GUARD = 1e3  # tolerances below ROUNDING_GUARD * eps (2.2e-13) are checked with a true residual product

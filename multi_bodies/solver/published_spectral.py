@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from body.geometry import smallest_distance
 from multi_bodies.files.scheme_table import moves_rollers, scheme_has
 from multi_bodies.files.structure_files import read_vertex_file
 from multi_bodies.solver.periodic import SPECTRAL, SPECTRAL_OPTIONS
@@ -78,13 +79,6 @@ class PublishedReading:
                 'blob_radius %.10g is the particle radius, the vertex files %s are multiplied by it, blob radius '
                 '%.10g (half the smallest blob distance); spectral_reading package reads blob_radius as the blob '
                 'radius' % (self.particle_radius, files, self.blob_radius))
-
-
-def smallest_distance(points):
-    """The smallest distance between two of ``points`` (n, 3), n >= 2 (a k-d tree: any n)."""
-    from scipy.spatial import cKDTree
-    distances, _ = cKDTree(points).query(points, k=2)
-    return float(np.min(distances[:, 1]))
 
 
 def published_options(options):
