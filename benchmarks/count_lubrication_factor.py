@@ -15,9 +15,7 @@ phases by calling ``os.getppid`` before each: a phase's instructions are the tot
 repeats.  With ``--phases`` (what the child runs) it runs the phases and prints nothing.
 """
 import argparse
-import glob
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -26,6 +24,7 @@ import tempfile
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from callgrind_parts import part_totals  # noqa: E402
 from bench_lubrication import ETA, RADIUS, STEP_TOLERANCE, lattice  # noqa: E402
 from lubrication import assembly, integrators, problem as lub_problem, sparse_factor  # noqa: E402
 
@@ -90,14 +89,7 @@ def count(side, repeats):
         subprocess.run(['valgrind', '--tool=callgrind', '--dump-before=getppid', '--callgrind-out-file=' + out,
                         sys.executable, os.path.abspath(__file__), '--phases', '--sides', str(side),
                         '--repeats', str(repeats)], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        parts = {}
-        for name in glob.glob(out + '*'):
-            with open(name) as f:
-                text = f.read()
-            part = re.search(r'^part: (\d+)', text, re.M)
-            total = re.search(r'^(?:summary|totals): (\d+)', text, re.M)
-            parts[int(part.group(1)) if part else 0] = int(total.group(1))
-    ordered = [parts[k] for k in sorted(parts)]  # the start-up, then one part per label, then the end
+        ordered = part_totals(out)  # the start-up, then one part per label, then the end
     return {label: ordered[1 + k] / repeats for k, label in enumerate(labels()) if label != 'warm-up'}
 
 

@@ -27,10 +27,8 @@ keeps it equal changed only the instructions around it.  With ``--phases`` (what
 phases and prints the work.
 """
 import argparse
-import glob
 import json
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -41,6 +39,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [HERE, os.path.dirname(HERE)]
 import bench_lubrication  # noqa: E402
+from callgrind_parts import part_totals  # noqa: E402
 import lubrication_step_worker  # noqa: E402
 from lubrication import brownian, integrators  # noqa: E402
 
@@ -98,14 +97,7 @@ def count(path, side, warm_up, steps, keep=None):
                               sys.executable, os.path.abspath(__file__), '--phases', '--path', path, '--sides',
                               str(side), '--warm-up', str(warm_up), '--steps', str(steps)],
                              check=True, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        parts = {}
-        for name in glob.glob(out + '*'):
-            with open(name) as f:
-                text = f.read()
-            part = re.search(r'^part: (\d+)', text, re.M)
-            total = re.search(r'^(?:summary|totals): (\d+)', text, re.M)
-            parts[int(part.group(1)) if part else 0] = int(total.group(1))
-    ordered = [parts[k] for k in sorted(parts)]  # start-up and set-up, warm-up, counted steps, the end
+        ordered = part_totals(out)  # start-up and set-up, warm-up, counted steps, the end
     return ordered[2] / steps, json.loads(run.stdout.strip().splitlines()[-1])
 
 
