@@ -93,6 +93,19 @@ def import_failure(path, err, file_words='the user file', content_words='the use
                           % (path, line, content_words, type(err).__name__, err))
 
 
+def restore_modules(saved, added_root):
+    """Undo what reading a user's file changed: ``FACE_ROOT`` off ``sys.path`` when the reading added it
+    (``added_root``), and each entry of ``saved`` (module name -> the module before, or None) back in
+    ``sys.modules`` (None: removed)."""
+    if added_root:
+        sys.path.remove(FACE_ROOT)
+    for name, value in saved.items():
+        if value is None:
+            sys.modules.pop(name, None)
+        else:
+            sys.modules[name] = value
+
+
 def import_user_file(path):
     """Import the user's override file; returns (hook name -> function, notes for the log).
 
@@ -132,13 +145,7 @@ def import_user_file(path):
     finally:
         published_constraint = getattr(sys.modules.get('constraint.constraint'), 'Constraint', None)
         published_articulated = getattr(sys.modules.get('articulated.articulated'), 'Articulated', None)
-        if added_root:
-            sys.path.remove(FACE_ROOT)
-        for name, value in saved.items():
-            if value is None:
-                sys.modules.pop(name, None)
-            else:
-                sys.modules[name] = value
+        restore_modules(saved, added_root)
         this = sys.modules.get(PACKAGE_MODULE_NAME)
         rebound_here = {} if this is None else {name: value for name, value in _public_callables(this).items()
                                                 if before_this.get(name) is not value}

@@ -28,7 +28,7 @@ from utils import SimulationStopped, UserInputError
 from multi_bodies.solver.user_files import (  # noqa: F401 (re-exported: the reading of user files lives there)
     FACE_ROOT, FOLDER_MODULE_COPY, JOINT_FACE_MODULES, PACKAGE_MODULE_NAME, PUBLISHED_EXTRA_HOOKS, PUBLISHED_FACES,
     PUBLISHED_MODULE_FILE, PUBLISHED_TREE_MODULES, _fresh_copy_of_this_module, _public_callables, import_failure,
-    import_module_file, import_user_file, override_file)
+    import_module_file, import_user_file, override_file, restore_modules)
 
 
 class UserFunctionError(SimulationStopped):
@@ -501,13 +501,7 @@ def import_folder_module(path):
     finally:
         os.chdir(cwd)
         sys.path.remove(directory)
-        if added_root:
-            sys.path.remove(FACE_ROOT)
-        for name, value in saved.items():
-            if value is None:
-                sys.modules.pop(name, None)
-            else:
-                sys.modules[name] = value
+        restore_modules(saved, added_root)
     return module, user_module
 
 
