@@ -2,14 +2,25 @@
 
     python benchmarks/bench_published_steps.py --published-python /work/published_venv/bin/python \
         --published-tree /work/published_tree/RigidMultiblobsWall [--bodies 100] [--steps 5]
-        [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz] [--threads one default] [--keep]
+        [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz] [--threads one default] [--lead-in 1]
+        [--keep]
 
 What runs: one input file, written here into a temporary folder, read by both codes: the published script
 ``multi_bodies/multi_bodies.py`` of ``--published-tree`` under ``--published-python`` (a checkout of the
 published RigidMultiblobsWall and an interpreter with its numpy, scipy and numba), and this package's dynamic
 run under this interpreter, each in its own process and folder (``benchmarks/published_step_worker.py``).
 Each process takes one warm-up step (numba compiles there), then the steps are interleaved: one published step,
-one of the package, and so on, ``--steps`` of each; while one code steps the other waits on a pipe.  This is done
+one of the package, and so on, ``--steps`` timed steps of each; while one code steps the other waits on a pipe.
+Two things keep one code's conditions from leaking into the other's timings:
+
+* a code's turn starts only once the process that stepped before has stopped using the CPU
+  (``quiet_process.wait_until_idle``): the published numba threads (GNU OpenMP, spinning by default) keep
+  spinning for some 20 ms after a step, and took a core from the package's next step;
+* each timed step follows ``--lead-in`` untimed steps of the same code (default 1), as steps follow each other in
+  a run of its own.  A step that starts on a machine idle for a few tenths of a second is slower: on the 2-core
+  virtual machine of the developers the package's two-thread Adams-Bashforth step took 24 ms after 0.3 s idle
+  against 13 ms back to back, and 16 ms after 0.3 s idle with its OpenMP threads spinning (``RMB_ACTIVE_WAIT=1``)
+  in place of the package's default passive wait.  ``--lead-in 0`` times the steps as they come.  This is done
 once with one thread for each code (OMP_NUM_THREADS, NUMBA_NUM_THREADS, OPENBLAS_NUM_THREADS and MKL_NUM_THREADS
 set to 1 in both processes) and once with each code's default threads (those four variables removed).
 
@@ -45,6 +56,8 @@ import sys
 import tempfile
 
 import numpy as np
+
+from quiet_process import wait_until_idle
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 WORKER = os.path.join(HERE, 'published_step_worker.py')
@@ -215,7 +228,10 @@ def side_by_side(scheme, threads, args, folder):
         times = {'published': {'cpu': [], 'wall': []}, 'package': {'cpu': [], 'wall': []}}
         for step in range(1, args.steps + 1):
             for worker in workers:  # one published step, then one of the package
+                for _ in range(args.lead_in):  # as in a run of its own, the timed step follows a step
+                    worker.ask('untimed')
                 answer = worker.ask('step')
+                wait_until_idle(worker.process.pid)  # its threads' spin must not overlap the other's steps
                 times[worker.code]['cpu'].append(answer['cpu'])
                 times[worker.code]['wall'].append(answer['wall'])
             row = [times[c][k][-1] for c in ('published', 'package') for k in ('cpu', 'wall')]
@@ -228,8 +244,8 @@ def side_by_side(scheme, threads, args, folder):
         ends = [worker.ask('configuration') for worker in workers]
         locations = [np.array(end['locations']) for end in ends]
         orientations = [np.array(end['orientations']) for end in ends]
-        print('  apart after %d steps each (warm-up included): body centres %.3e, quaternions %.3e' % (
-            args.steps + 1, float(np.max(np.linalg.norm(locations[0] - locations[1], axis=1))),
+        print('  apart after %d steps each (warm-up and untimed included): body centres %.3e, quaternions %.3e' % (
+            args.steps * (args.lead_in + 1) + 1, float(np.max(np.linalg.norm(locations[0] - locations[1], axis=1))),
             quaternion_distance(orientations[0], orientations[1])))
         return medians
     finally:
@@ -252,19 +268,22 @@ def main(argv=None):
     parser.add_argument('--dt', type=float, default=0.01)
     parser.add_argument('--kT', type=float, default=1.0)
     parser.add_argument('--tolerance', type=float, default=1e-8)
+    parser.add_argument('--lead-in', type=int, default=1,
+                        help='untimed steps a code takes right before each timed one (0: none)')
     parser.add_argument('--keep', action='store_true', help='keep the folder of inputs, outputs and worker logs')
     args = parser.parse_args(argv)
-    if args.bodies < 1 or args.steps < 1:
-        parser.error('--bodies and --steps must be at least 1')
+    if args.bodies < 1 or args.steps < 1 or args.lead_in < 0:
+        parser.error('--bodies and --steps must be at least 1, --lead-in at least 0')
     if not os.path.isfile(os.path.join(args.published_tree, 'multi_bodies', 'multi_bodies.py')):
         parser.error('--published-tree %s has no multi_bodies/multi_bodies.py' % args.published_tree)
     args.published_tree = os.path.abspath(args.published_tree)
-    args.max_steps = 10 * (args.steps + 2)
+    args.max_steps = 10 * (args.steps * (args.lead_in + 1) + 2)
     model, cpus, flags = cpu_description()
     print('# bench_published_steps: the published step and the package\'s, side by side (ratio = published / '
           'package)')
     print('# CPU: %s; %s logical CPUs; vector extensions: %s' % (model, cpus, ' '.join(flags) or 'none found'))
-    print('# seconds per step, after one warm-up step of each code; %d steps each, interleaved' % args.steps)
+    print('# seconds per step, after one warm-up step of each code; %d timed steps each, interleaved, each right '
+          'after %d untimed step(s) of the same code' % (args.steps, args.lead_in))
     folder = tempfile.mkdtemp(prefix='bench_published_steps_')
     summary = []
     try:

@@ -19,7 +19,8 @@ Protocol (one JSON object per line on stdout; the codes' own prints go to /dev/n
 warm-up step (numba compiles its kernels there, the package fills its caches) it writes
 ``{"ready": code, "bodies": n, "blobs": n, "threads": text, "kernels": text}``; then for each line read from
 stdin: ``step`` -> ``{"cpu": s, "wall": s}`` (CPU seconds of the whole process, all its threads, and wall seconds
-of one step), ``configuration`` -> ``{"locations": (n, 3), "orientations": (n, 4)}``, ``quit`` -> exits.
+of one step), ``untimed`` -> ``{"untimed": true}`` (one step, not timed: the lead-in of a timed one),
+``configuration`` -> ``{"locations": (n, 3), "orientations": (n, 4)}``, ``quit`` -> exits.
 """
 import argparse
 import contextlib
@@ -63,6 +64,9 @@ def serve(protocol, step, configuration):
         if order == 'step':
             cpu, wall = timed(step)
             protocol.send(cpu=cpu, wall=wall)
+        elif order == 'untimed':
+            step()
+            protocol.send(untimed=True)
         elif order == 'configuration':
             locations, orientations = configuration()
             protocol.send(locations=locations, orientations=orientations)
@@ -97,6 +101,11 @@ def run_published(tree, input_file, protocol, quiet):
                 with contextlib.redirect_stdout(quiet):
                     cpu, wall = timed(lambda: published_step(integrator, dt, *args, **kwargs))
                 protocol.send(cpu=cpu, wall=wall)
+                return None
+            if order == 'untimed':
+                with contextlib.redirect_stdout(quiet):
+                    published_step(integrator, dt, *args, **kwargs)
+                protocol.send(untimed=True)
                 return None
             if order == 'configuration':
                 locations, orientations = configuration_of(integrator)
