@@ -241,22 +241,37 @@ def _dense_trans_trans(r_vectors, eta, a, wall, periodic_length):
     dy = wrap_axis(s[:, :, None, 1] - s[:, None, :, 1], La[1])
     dz = wrap_axis(s[:, :, None, 2] - s[:, None, :, 2], La[2])
     zt, zs = s[:, :, None, 2], s[:, None, :, 2]
-    eye = np.eye(3)
-    M = np.zeros((nb, n, n, 3, 3))
+    # the nine entries M[a][b] of every 3x3 pair block, each a contiguous (nb, n, n) array, then one
+    # transposed copy into (nb, n, 3, n, 3): fewer and smaller temporaries than outer products of stacked vectors
+    entries = np.zeros((3, 3, nb, n, n))
     for shift in image_shifts(La):
         rx, ry, rz = dx + shift[0], dy + shift[1], dz + shift[2]
         c_iso, c_rr = pf.rpy_trans_trans(rx, ry, rz)
-        rv = np.stack((rx, ry, rz), axis=-1)
-        M += c_iso[..., None, None] * eye + c_rr[..., None, None] * rv[..., :, None] * rv[..., None, :]
+        r = (rx, ry, rz)
         if wall:
             ex, ey, ez, f1, f2, f3, f4, f5 = pf.wall_trans_trans(rx, ry, zt, zs)
-            e = np.stack((ex, ey, ez), axis=-1)
-            M += f1[..., None, None] * eye + f2[..., None, None] * e[..., :, None] * e[..., None, :]
-            M[..., :, 2] += f3[..., None] * e
-            M[..., 2, :] += f4[..., None] * e
-            M[..., 2, 2] += f5
-    M *= (damping[:, :, None, None, None] * damping[:, None, :, None, None]) / (8.0 * np.pi * eta * a)
-    M = M.transpose(0, 1, 3, 2, 4).reshape(nb, 3 * n, 3 * n)
+            e = (ex, ey, ez)
+            c_iso = c_iso + f1
+        for row in range(3):
+            c_rr_r = c_rr * r[row]
+            if wall:
+                f2_e = f2 * e[row]
+            for col in range(3):
+                entry = entries[row, col]
+                entry += c_rr_r * r[col]
+                if row == col:
+                    entry += c_iso
+                if wall:
+                    entry += f2_e * e[col]
+                    if col == 2:
+                        entry += f3 * e[row]
+                    if row == 2:
+                        entry += f4 * e[col]
+                    if row == 2 and col == 2:
+                        entry += f5
+    M = np.ascontiguousarray(entries.transpose(2, 3, 0, 4, 1))
+    M *= (damping[:, :, None, None, None] * damping[:, None, None, :, None]) / (8.0 * np.pi * eta * a)
+    M = M.reshape(nb, 3 * n, 3 * n)
     return M if stacked else M[0]
 
 
