@@ -32,7 +32,7 @@ import numpy as np
 FLOPS_PER_PAIR = {
     'wall M f': 147,           # 3 differences, 8 distances, 2 x 1/sqrt (4), RPY 8, Swan-Brady P1..P5 57, block 7,
                                # two applications 2 x 30
-    'free-space M f': 54,      # 3 differences, 5 distance, 1/sqrt (2), RPY 7, two applications 2 x 18
+    'free-space M f': 54,      # 3 differences, 5 distance, 1/sqrt (2), RPY 8, two applications 2 x 18
     'wall rot x force': 99,    # free part 27 (distance, 1/sqrt, |r|^-3, cross product), wall part 72
     'wall trans x torque': 95,
     'wall rot x torque': 87,
