@@ -29,21 +29,24 @@ def process_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def wait_until_idle(pid, interval=0.03, limit=2.0, fallback=0.2):
+def wait_until_idle(pid, interval=0.03, limit=2.0, fallback=0.2, cpu_seconds=process_cpu_seconds):
     """Return once process ``pid`` used no CPU over one ``interval`` (s), or after ``limit`` s.
 
     The kernel counts CPU time in clock ticks (10 ms on most systems), so an interval of a few ticks with no
-    increase means the process's threads are asleep.  Returns the seconds waited.
+    increase means the process's threads are asleep.  ``cpu_seconds(pid)``: the reading of the process's CPU
+    time (None: unknown).  Returns (seconds waited, whether the process was seen idle).
     """
     start = time.perf_counter()
-    before = process_cpu_seconds(pid)
+    before = cpu_seconds(pid)
     if before is None:
         time.sleep(fallback)
-        return fallback
+        return fallback, False
     while time.perf_counter() - start < limit:
         time.sleep(interval)
-        now = process_cpu_seconds(pid)
-        if now is None or now == before:
+        now = cpu_seconds(pid)
+        if now is None:
             break
+        if now == before:
+            return time.perf_counter() - start, True
         before = now
-    return time.perf_counter() - start
+    return time.perf_counter() - start, False
