@@ -2,7 +2,7 @@
 
     python benchmarks/bench_published_steps.py --published-python /work/published_venv/bin/python \
         --published-tree /work/published_tree/RigidMultiblobsWall [--bodies 100] [--steps 5]
-        [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz] [--threads one default] [--lead-in 1]
+        [--schemes deterministic_adams_bashforth stochastic_Slip_Trapz] [--threads one default] [--lead-in 3]
         [--keep]
 
 What runs: one input file, written here into a temporary folder, read by both codes: the published script
@@ -16,11 +16,12 @@ Two things keep one code's conditions from leaking into the other's timings:
 * a code's turn starts only once the process that stepped before has stopped using the CPU
   (``quiet_process.wait_until_idle``): the published numba threads (GNU OpenMP, spinning by default) keep
   spinning for some 20 ms after a step, and took a core from the package's next step;
-* each timed step follows ``--lead-in`` untimed steps of the same code (default 1), as steps follow each other in
+* each timed step follows ``--lead-in`` untimed steps of the same code (default 3), as steps follow each other in
   a run of its own.  A step that starts on a machine idle for a few tenths of a second is slower: on the 2-core
   virtual machine of the developers the package's two-thread Adams-Bashforth step took 24 ms after 0.3 s idle
   against 13 ms back to back, and 16 ms after 0.3 s idle with its OpenMP threads spinning (``RMB_ACTIVE_WAIT=1``)
-  in place of the package's default passive wait.  ``--lead-in 0`` times the steps as they come.  This is done
+  in place of the package's default passive wait; side by side, its median was 16.5 ms with one untimed step
+  before each timed one and 11.7 ms with three.  ``--lead-in 0`` times the steps as they come.  This is done
 once with one thread for each code (OMP_NUM_THREADS, NUMBA_NUM_THREADS, OPENBLAS_NUM_THREADS and MKL_NUM_THREADS
 set to 1 in both processes) and once with each code's default threads (those four variables removed).
 
@@ -268,7 +269,7 @@ def main(argv=None):
     parser.add_argument('--dt', type=float, default=0.01)
     parser.add_argument('--kT', type=float, default=1.0)
     parser.add_argument('--tolerance', type=float, default=1e-8)
-    parser.add_argument('--lead-in', type=int, default=1,
+    parser.add_argument('--lead-in', type=int, default=3,
                         help='untimed steps a code takes right before each timed one (0: none)')
     parser.add_argument('--keep', action='store_true', help='keep the folder of inputs, outputs and worker logs')
     args = parser.parse_args(argv)
