@@ -7,8 +7,7 @@ kT = 1, rf_delta 1e-3.  Prints, per number of bodies, backend and scheme,
 the seconds per step (median of ``--repeats`` steps after one warm-up step;
 the schemes' steps are taken in turn, one of each per round, so that a
 drift in the machine's speed touches all of them alike), the ratio to the
-Adams-Bashforth step measured in the same run, the speed-up
-on the published figure, the products ``M f`` per step by where they go
+Adams-Bashforth step measured in the same run, the products ``M f`` per step by where they go
 (GMRES Krylov products, true residuals, Lanczos, random finite differences),
 the preconditioner applications per step and the share of the step spent in
 ``M f``.  The counts and the share come from a second, instrumented run of
@@ -22,10 +21,8 @@ the same steps (the counting itself costs time, so it is not timed).
 shares the cores; ``--large``: also one step of 1,000 boomerangs under
 Slip_Trapz and of 10,000 rollers under stochastic_adams_bashforth_rollers.
 
-The published code's figures on the same kind of 2-core machine (numba
-backends, 100 boomerangs): stochastic_Slip_Trapz 2.0 s per step,
-deterministic_adams_bashforth 1.35 s per step, 2.8 s with one busy process
-on the same 2 cores.  The published code is not run here.
+The published code is not run here, and no ratio to it is printed: its steps are timed side by side with
+this package's, on one machine, by ``bench_published_steps.py``.
 """
 import argparse
 import multiprocessing
@@ -49,9 +46,6 @@ PYTHON_LIMIT = 100  # bodies; above this the dense-chunked python M f takes minu
 DENSE_LIMIT = 10    # bodies; dense-algebra schemes above this take minutes per step
 DEFAULT_SCHEMES = ['deterministic_adams_bashforth', 'stochastic_Slip_Trapz', 'stochastic_first_order_RFD',
                    'stochastic_traction_EM', 'stochastic_adams_bashforth']
-PUBLISHED_100 = {'stochastic_Slip_Trapz': 2.0, 'deterministic_adams_bashforth': 1.35}
-# the published Adams-Bashforth step with one busy process on the same 2 cores (measured side by side)
-PUBLISHED_LOADED = {'deterministic_adams_bashforth': 2.8}
 
 
 def boomerang_system(num_bodies, backend, seed=1):
@@ -245,14 +239,13 @@ def counted_steps(maker, repeats):
     return per
 
 
-ROW = '%7d %7s %36s %9.4g %6s %9s %6.1f %6.1f %5.1f %5.1f %5.1f %6.1f %6.1f %5.0f%%'
+ROW = '%7d %7s %36s %9.4g %6s %6.1f %6.1f %5.1f %5.1f %5.1f %6.1f %6.1f %5.0f%%'
 
 
-def print_row(n, backend, scheme_name, seconds, reference, per, published):
+def print_row(n, backend, scheme_name, seconds, reference, per):
     total = sum(per[k] for k in PRODUCT_KINDS)
     ratio = '%.2f' % (seconds / reference) if reference else '-'
-    published_text = '%.1fx' % (published / seconds) if published else '-'
-    print(ROW % (n, backend, scheme_name, seconds, ratio, published_text, total, per['gmres'], per['residual'],
+    print(ROW % (n, backend, scheme_name, seconds, ratio, total, per['gmres'], per['residual'],
                  per['lanczos'], per['rfd'], per['paired'], per['pc'], 100.0 * per['kernel_share']), flush=True)
 
 
@@ -287,12 +280,10 @@ def run(args):
           % (os.environ.get('OMP_NUM_THREADS', '(unset)'), mobility_threads.describe(),
              'one busy process' if args.loaded else 'none', args.noise_tolerance or 'solver_tolerance 1e-8'))
     print('passes over the blob pairs per step (M f products; a paired pass gives two), the single products in '
-          'GMRES (Krylov), in residuals, in Lanczos, in RFD, the paired passes; pc = preconditioner applications; kernel = share of the step in M f; pub = speed-up on the published step (%s)'
-          % ', '.join('%s %.2f s' % item for item in (PUBLISHED_LOADED if args.loaded else PUBLISHED_100).items()))
-    header = ('bodies', 'backend', 'scheme', 's/step', 'x AB', 'pub', 'passes', 'gmres', 'resid', 'lancz', 'rfd',
+          'GMRES (Krylov), in residuals, in Lanczos, in RFD, the paired passes; pc = preconditioner applications; kernel = share of the step in M f')
+    header = ('bodies', 'backend', 'scheme', 's/step', 'x AB', 'passes', 'gmres', 'resid', 'lancz', 'rfd',
               'paired', 'pc', 'kernel')
-    print('%7s %7s %36s %9s %6s %9s %6s %6s %5s %5s %5s %6s %6s %6s' % header)
-    published_figures = PUBLISHED_LOADED if args.loaded else PUBLISHED_100
+    print('%7s %7s %36s %9s %6s %6s %6s %5s %5s %5s %6s %6s %6s' % header)
     for n in args.bodies:
         for backend in args.backends:
             if backend == 'python' and n > PYTHON_LIMIT:
@@ -308,8 +299,7 @@ def run(args):
                 if 'deterministic_adams_bashforth' in names else None
             for name, step_seconds in zip(names, seconds):
                 per = counted_steps(maker(name, counted=True), args.repeats)
-                published = published_figures.get(name) if n == 100 else None
-                print_row(n, backend, name, step_seconds, reference, per, published)
+                print_row(n, backend, name, step_seconds, reference, per)
     if args.large:
         large = (('stochastic_Slip_Trapz', 1000, lambda counted=False: boomerang_run(
                       1000, 'C++', 'stochastic_Slip_Trapz', args.noise_tolerance, counted)),

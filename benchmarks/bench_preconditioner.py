@@ -6,7 +6,7 @@ corrected for the couplings of neighbouring bodies, doc/preconditioners.md) and 
 correction where it is cheap to build), their steps alternating so that a drift of the machine's speed
 touches all alike.  Printed per run: GMRES iterations per solve (from the run's counters), ``M f`` passes
 per step (counted as in bench_dynamics.py), seconds per step (median), each with its ratio to
-block_diagonal, and the speed-up on the published step where there is one.
+block_diagonal (no ratio to the published code: ``bench_published_steps.py`` times its steps side by side).
 
 Scenes (C++ backends, solver_tolerance 1e-8):
 
@@ -55,7 +55,6 @@ from multi_bodies.solver.model import Model  # noqa: E402
 from quaternion_integrator.schemes import make_scheme  # noqa: E402
 
 PRECONDITIONERS = ('block_diagonal', 'neighbours', 'auto')
-PUBLISHED_100 = {'stochastic_Slip_Trapz': 2.0, 'deterministic_adams_bashforth': 1.35}
 PHYSICS = dict(g=1.0, repulsion_strength_wall=1.0, debye_length_wall=1.0, repulsion_strength=1.0,
                debye_length=1.0, periodic_length=np.zeros(3), blob_mass=1.0)
 
@@ -264,18 +263,16 @@ def lanczos_main(scenes, steps):
     stochastic_adams_bashforth_rollers of 4,000 rollers at area fraction 0.4 (``rollers_dense``)."""
     variants = {name: dict(preconditioner='auto', lanczos_preconditioner=name)
                 for name in ('block_diagonal', 'incomplete_cholesky')}
-    print('%-16s %-22s %9s %7s %9s %7s %9s %7s %6s' % (
-        'scene', 'lanczos_preconditioner', 'lanczos', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
+    print('%-16s %-22s %9s %7s %9s %7s %9s %7s' % (
+        'scene', 'lanczos_preconditioner', 'lanczos', 'ratio', 'passes', 'ratio', 's/step', 'ratio'))
     for scene in scenes:
         make, scheme_name = LANCZOS_SCENES[scene]
         r = run(make(), scheme_name, 1 if scene == 'boomerangs_1000' else steps, variants=variants)
         _, pb, sb, lb = r['block_diagonal']
         for name in variants:
             _, passes, seconds, lanczos = r[name]
-            published = PUBLISHED_100['stochastic_Slip_Trapz'] if scene == 'dilute' else None
-            print('%-16s %-22s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f %6s' % (
-                scene, name, lanczos, lanczos / lb, passes, passes / pb, seconds, seconds / sb,
-                '%.1f' % (published / seconds) if published else '-'), flush=True)
+            print('%-16s %-22s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f' % (
+                scene, name, lanczos, lanczos / lb, passes, passes / pb, seconds, seconds / sb), flush=True)
     return 0
 
 
@@ -338,8 +335,8 @@ def main(argv=None):
         return lanczos_main([scene for scene in (args.scenes or LANCZOS_SCENES) if scene in LANCZOS_SCENES],
                             args.steps)
     args.scenes = [scene for scene in (args.scenes or SCENES) if scene in SCENES]
-    print('%-16s %-36s %-15s %9s %7s %9s %7s %9s %7s %6s' % (
-        'scene', 'scheme', 'preconditioner', 'it/solve', 'ratio', 'passes', 'ratio', 's/step', 'ratio', 'pub x'))
+    print('%-16s %-36s %-15s %9s %7s %9s %7s %9s %7s' % (
+        'scene', 'scheme', 'preconditioner', 'it/solve', 'ratio', 'passes', 'ratio', 's/step', 'ratio'))
     for scene in args.scenes:
         with tempfile.TemporaryDirectory() as folder:
             model, options, schemes = scene_model(scene, folder, SCENES)
@@ -349,10 +346,9 @@ def main(argv=None):
                 ib, pb, sb, _ = r['block_diagonal']
                 for name in PRECONDITIONERS:
                     it, passes, seconds, _ = r[name]
-                    published = PUBLISHED_100.get(scheme_name) if scene == 'dilute' else None
-                    print('%-16s %-36s %-15s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f %6s' % (
-                        scene, scheme_name, name, it, it / ib, passes, passes / pb, seconds, seconds / sb,
-                        '%.1f' % (published / seconds) if published else '-'), flush=True)
+                    print('%-16s %-36s %-15s %9.1f %7.2f %9.1f %7.2f %9.4f %7.2f' % (
+                        scene, scheme_name, name, it, it / ib, passes, passes / pb, seconds, seconds / sb),
+                          flush=True)
     return 0
 
 
