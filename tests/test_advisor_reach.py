@@ -31,6 +31,8 @@ UNUSED_FEATURE_FILES = {
 SPECTRAL_FILES = (os.path.join('multi_bodies', 'solver', 'published_spectral.py'),
                   os.path.join('multi_bodies', 'solver', 'periodic.py'))
 CUDA_BACKEND = os.path.join('mobility', 'cuda_backend.py')
+# The lubrication topic compares models of spheres: entered only when every body is one.
+ADVISOR_LUBRICATION = os.path.join('multi_bodies', 'advice', 'advisor_lubrication.py')
 
 
 def plain_scene(folder):
@@ -47,7 +49,7 @@ def test_quick_advice_enters_no_file_of_an_unused_feature(tmp_path, monkeypatch)
     assert result.choices  # the advisor measured something
     entered = set(tracer.files)
     assert os.path.join('multi_bodies', 'advice', 'advisor.py') in entered  # the tracer sees the package
-    unused = set(UNUSED_FEATURE_FILES) | set(SPECTRAL_FILES)
+    unused = set(UNUSED_FEATURE_FILES) | set(SPECTRAL_FILES) | {ADVISOR_LUBRICATION}
     if importlib.util.find_spec('cupy') is None:  # no CuPy: the GPU backend is refused without running its module
         unused.add(CUDA_BACKEND)
     assert not entered & unused, 'files of features the input does not use: %s' % sorted(entered & unused)
@@ -89,3 +91,20 @@ def test_gpu_backend_refused_without_cupy_with_the_import_error_text():
         pytest.skip('CuPy is installed here: the GPU backend module is imported and checked')
     from mobility.interface import unusable_reason
     assert unusable_reason('pycuda') == expected
+
+
+def test_lubrication_topic_is_entered_for_spheres(tmp_path, monkeypatch):
+    """Control: the same scene with every body a single blob (a sphere) enters the lubrication topic's file."""
+    monkeypatch.chdir(tmp_path)
+    input_file = plain_scene(tmp_path)
+    with open(os.path.join(str(tmp_path), 'blob.vertex'), 'w') as f:
+        f.write('1\n0.0 0.0 0.0\n')
+    path = os.path.join(str(tmp_path), input_file)
+    lines = [line for line in open(path).read().splitlines() if not line.startswith('structure')]
+    with open(path, 'w') as f:
+        f.write('\n'.join(lines + ['structure blob.vertex boomerang.clones']) + '\n')
+    from multi_bodies.advice.advisor import advise
+    tracer = trace_step.Tracer()
+    result = tracer.run(advise, input_file, quick=True, log=lambda *_: None)
+    assert ADVISOR_LUBRICATION in tracer.files
+    assert any(choice[0] == 'lubrication' for choice in result.choices), 'the topic reported no row for spheres'

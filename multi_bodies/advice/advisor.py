@@ -51,7 +51,7 @@ import utils
 
 from mobility import choose
 from mobility.interface import Geometry, preferred_backend, registered_backends, unusable_reason
-from multi_bodies.files.scheme_table import moves_rollers, scheme_entry
+from multi_bodies.files.scheme_table import moves_rollers, scheme_entry, scheme_has
 from multi_bodies.solver import body_solver
 from multi_bodies.solver.solves import Solver
 
@@ -173,6 +173,8 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
                  ('rollers', self.measure_rollers), ('lubrication', self.measure_lubrication),
                  ('geometry', self.measure_geometry), ('dt', self.measure_dt),
                  ('scope', self.keep_to_program), ('check', self.keep_physics), ('dt bounds', self.recommend_dt)]
+        if not self.lubrication_applies():
+            steps = [step for step in steps if step[0] != 'lubrication']
         for index, (name, step) in enumerate(steps):
             self.log('advise: [%d/%d] %s ...' % (index + 1, len(steps), name))
             start = time.perf_counter()
@@ -180,6 +182,16 @@ class Advisor(ResolutionMeasurements, LubricationMeasurements, GeometryMeasureme
             self.log('advise: [%d/%d] %s done in %.2f s' % (index + 1, len(steps), name,
                                                             time.perf_counter() - start))
         return self
+
+    def lubrication_applies(self):
+        """Whether the lubrication topic (advisor_lubrication) has anything to say: a dynamic run whose bodies are
+        all spheres (the models it compares), or one with a lubrication scheme (its note then says why the bodies
+        are not compared).  Other inputs skip the topic, as they skip the files of features they do not use."""
+        if self.program != 'dynamic':
+            return False
+        structures = self.scene.structures
+        spheres = bool(structures) and all(s['sphere'] is not None for s in structures)
+        return spheres or scheme_has(self.scene.options.scheme, 'lubrication')
 
     def keep_to_program(self):
         """Recommend only options the input's program uses (advisor_physics.scope)."""
