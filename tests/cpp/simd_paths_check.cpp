@@ -2,6 +2,7 @@
 // same blobs, and the vector 1/sqrt against long double.  tests/test_simd_cross.py cross-compiles it for
 // AArch64 and runs it under an emulator (the NEON and SVE paths); it builds natively as well.
 // Output: one line per path, "<path> <worst relative difference to scalar> <worst 1/sqrt error in ulp>".
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -78,6 +79,14 @@ static std::vector<std::vector<double>> products(const Blobs &b, const Blobs &t)
   RMB_SIMD_DISPATCH(source_target_sum<rmb_blobs::kFreeSurface, false>(t, b, L0, ux, uy, uz));
   keep();
   RMB_SIMD_DISPATCH(trans_times_force_symmetric_two<true>(b, b, two));
+  out.push_back(two);
+  Blobs g = b;  // a second vector (the torques of the grand product): the first one reversed
+  std::reverse(g.vx.begin(), g.vx.end()), std::reverse(g.vy.begin(), g.vy.end()), std::reverse(g.vz.begin(), g.vz.end());
+  RMB_SIMD_DISPATCH(trans_times_force_symmetric_two<false>(b, g, two));
+  out.push_back(two);
+  RMB_SIMD_DISPATCH(grand_product_symmetric<true, false>(b, g, L0, two));
+  out.push_back(two);
+  RMB_SIMD_DISPATCH(grand_product_symmetric<false, true>(b, g, L, two));
   out.push_back(two);
   return out;
 }
