@@ -13,6 +13,7 @@
 #include "fast_exp.h"
 #include "openmp_threads.h"
 #include "pair_laws.h"
+#include "worst_difference.h"
 
 #define RMB_SIMD_KERNELS "forces_kernels.inc"
 #include "simd_targets.h"
@@ -58,15 +59,7 @@ int main() {
     setenv("RMB_SIMD", rmb_simd::path_name(path), 1);
     rmb_simd::choose_again();
     const std::vector<std::vector<double>> ours = all();
-    double worst = 0.0;
-    for (std::size_t k = 0; k < reference.size(); ++k) {
-      double scale = 1e-300, difference = 0.0;
-      for (std::size_t i = 0; i < reference[k].size(); ++i) {
-        scale = std::fmax(scale, std::fabs(reference[k][i]));
-        difference = std::fmax(difference, std::fabs(reference[k][i] - ours[k][i]));
-      }
-      worst = std::fmax(worst, difference / scale);
-    }
+    const double worst = worst_relative_difference(reference, ours);
     std::printf("%s %.3g 0\n", rmb_simd::path_name(path), worst);
   }
   return 0;

@@ -13,6 +13,7 @@
 
 #include "blob_pair_kernels.h"
 #include "openmp_threads.h"
+#include "worst_difference.h"
 
 // The few helpers of blob_arrays.h the kernels use, without pybind11.
 namespace rmb_blobs {
@@ -114,15 +115,7 @@ int main() {
     setenv("RMB_SIMD", rmb_simd::path_name(path), 1);
     rmb_simd::choose_again();
     const std::vector<std::vector<double>> ours = products(b, t);
-    double worst = 0.0;
-    for (std::size_t k = 0; k < reference.size(); ++k) {
-      double scale = 1e-300, difference = 0.0;
-      for (std::size_t i = 0; i < reference[k].size(); ++i) {
-        scale = std::fmax(scale, std::fabs(reference[k][i]));
-        difference = std::fmax(difference, std::fabs(reference[k][i] - ours[k][i]));
-      }
-      worst = std::fmax(worst, difference / scale);
-    }
+    const double worst = worst_relative_difference(reference, ours);
     RMB_SIMD_DISPATCH(math_check(x.data(), x.size(), 5.0, rsqrt.data(), image.data()));
     double ulps = 0.0;
     for (std::size_t i = 0; i < x.size(); ++i) {
