@@ -51,7 +51,7 @@ if sys.platform != 'win32':
 HEADERS = ['mobility/cpp/pair_laws.h', 'mobility/cpp/blob_pair_kernels.h', 'mobility/cpp/openmp_threads.h',
            'mobility/cpp/fast_exp.h', 'mobility/cpp/blob_arrays.h', 'mobility/cpp/dense_matrices.h',
            'mobility/cpp/blob_pair_formulas.inc', 'mobility/cpp/simd_dispatch.h', 'mobility/cpp/simd_targets.h',
-           'mobility/cpp/simd_vector.inc', 'mobility/cpp/mobility_kernels.inc']
+           'mobility/cpp/simd_vector.inc', 'mobility/cpp/simd_tiles.inc', 'mobility/cpp/mobility_kernels.inc']
 
 
 def extension(name, sources, include_dirs=(), depends=(), openmp=True, contract=True, extra_args=()):

@@ -4,7 +4,8 @@
 //   #define RMB_SIMD_KERNELS "mobility_kernels.inc"
 //   #include "simd_targets.h"
 // For each path this build holds, the kernel source is included inside namespace rmb_k_<path>, after the
-// path's vector type and math (simd_vector.inc) and the pair formulas (blob_pair_formulas.inc), between
+// path's vector type and math (simd_vector.inc), the tiled two-pass rows (simd_tiles.inc) and the pair formulas
+// (blob_pair_formulas.inc), between
 // `#pragma GCC push_options / target(...)` (Clang: `#pragma clang attribute`), so that every function defined
 // there is compiled for that instruction set and nothing else is: the standard library and pybind11 code stay
 // compiled for the baseline (an inline function compiled with AVX2 in one file and chosen by the linker for
@@ -33,6 +34,7 @@
 #define RMB_SIMD_KIND RMB_KIND_SCALAR
 namespace rmb_k_scalar {
 #include "simd_vector.inc"
+#include "simd_tiles.inc"
 #include "blob_pair_formulas.inc"
 #include RMB_SIMD_KERNELS
 #undef RMB_SIMD_ONE_LANE
@@ -49,6 +51,7 @@ namespace rmb_k_scalar {
 #endif
 namespace rmb_k_avx2 {
 #include "simd_vector.inc"
+#include "simd_tiles.inc"
 #include "blob_pair_formulas.inc"
 #include RMB_SIMD_KERNELS
 #undef RMB_SIMD_ONE_LANE
@@ -71,6 +74,7 @@ namespace rmb_k_avx2 {
 #endif
 namespace rmb_k_avx512 {
 #include "simd_vector.inc"
+#include "simd_tiles.inc"
 #include "blob_pair_formulas.inc"
 #include RMB_SIMD_KERNELS
 #undef RMB_SIMD_ONE_LANE
@@ -88,6 +92,7 @@ namespace rmb_k_avx512 {
 #define RMB_SIMD_KIND RMB_KIND_NEON
 namespace rmb_k_neon {
 #include "simd_vector.inc"
+#include "simd_tiles.inc"
 #include "blob_pair_formulas.inc"
 #include RMB_SIMD_KERNELS
 #undef RMB_SIMD_ONE_LANE
@@ -101,6 +106,7 @@ namespace rmb_k_neon {
 #pragma GCC target("+sve")
 namespace rmb_k_sve {
 #include "simd_vector.inc"
+#include "simd_tiles.inc"
 #include "blob_pair_formulas.inc"
 #include RMB_SIMD_KERNELS
 #undef RMB_SIMD_ONE_LANE
